@@ -1,0 +1,51 @@
+//! The ways a run can fail before it produces numbers.
+//!
+//! Every variant names the scene key (or flag) it is about, so the message a
+//! user sees points at the line to fix. Failures *inside* a lane (NaN,
+//! chattering) are not errors: they are reported per lane in the `status`
+//! column and never stop the other lanes.
+
+use std::path::PathBuf;
+
+/// An error that stops a run before anything is written.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The scene file could not be read.
+    #[error("cannot read scene {path}: {source}")]
+    ReadScene {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// The scene is not valid TOML, or a key has the wrong type or is unknown.
+    #[error("scene {path}: {message}")]
+    Syntax { path: String, message: String },
+    /// A key is present and well typed but its value is impossible.
+    #[error("{key}: {reason}")]
+    Invalid { key: String, reason: String },
+    /// The requested backend cannot run this scene.
+    #[error("run.backend = \"{backend}\": {reason}")]
+    Backend { backend: String, reason: String },
+    /// Writing the output failed.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+impl Error {
+    /// An impossible value for `key`.
+    pub fn invalid(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Error::Invalid {
+            key: key.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Whether the error is the user's input (exit code 2) rather than the machine's.
+    pub fn is_input_error(&self) -> bool {
+        !matches!(self, Error::Write { .. })
+    }
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

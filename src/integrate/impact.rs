@@ -1,0 +1,253 @@
+//! Wall impacts inside an RK4 step.
+//!
+//! A rigid wall at X = X_w acts on coordinate 0 (position X) of a flow whose
+//! coordinate 1 is the velocity V = X'. A step that reaches the wall is split:
+//! integrate to the impact time t_c, apply the reset V → -e·V with X = X_w
+//! exactly, then integrate the rest of the step, and look again, so several
+//! impacts in one step work and no step ends behind the wall.
+
+use serde::Deserialize;
+
+use super::{rk4, Flow};
+use crate::system::IterationStats;
+
+/// A rigid wall at `position`, approached from below, with coefficient of restitution `restitution`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wall {
+    pub position: f64,
+    pub restitution: f64,
+}
+
+/// How the impact time inside a crossing step is found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ImpactLocation {
+    /// The paper's recipe: linear interpolation of the state between the two
+    /// ends of the crossing step. Error O(h²) in t_c.
+    Linear,
+    /// Re-step to the event: Newton iteration on s ↦ X(RK4(t, y, s)) - X_w,
+    /// started from the root of the cubic Hermite interpolant, so the impact
+    /// lies on the RK4 solution itself (error O(h⁴), that of RK4). Also finds
+    /// an excursion past the wall between two step ends (a velocity sign
+    /// change with the Hermite maximum beyond the wall).
+    #[default]
+    Newton,
+}
+
+impl ImpactLocation {
+    pub fn name(self) -> &'static str {
+        match self {
+            ImpactLocation::Linear => "linear",
+            ImpactLocation::Newton => "newton",
+        }
+    }
+}
+
+/// More impacts than this inside one RK4 step mean impacts accumulate
+/// (chattering); the step then stops resolving them and flags the iteration.
+pub const MAX_IMPACTS_PER_STEP: u32 = 64;
+
+/// One RK4 step of size h from (t, y) with every impact inside it applied.
+pub fn step<const D: usize, F: Flow<D>>(
+    flow: &F,
+    wall: &Wall,
+    location: ImpactLocation,
+    t: f64,
+    y: &[f64; D],
+    h: f64,
+    stats: &mut IterationStats,
+) -> [f64; D] {
+    let t_end = t + h;
+    let (mut t0, mut y0) = (t, *y);
+    for _ in 0..MAX_IMPACTS_PER_STEP {
+        let rest = t_end - t0;
+        let y1 = rk4::step(flow, t0, &y0, rest);
+        let hit = match location {
+            ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
+            ImpactLocation::Newton => locate_newton(flow, wall, t0, &y0, rest, &y1),
+        };
+        let Some((s, mut yc)) = hit else {
+            return y1;
+        };
+        if yc[1] <= 0.0 {
+            // Reaching the wall without approaching it: the mass is pressed
+            // into the wall (sticking), which a velocity reset cannot model.
+            stats.chattering = true;
+            yc[0] = wall.position;
+            yc[1] = 0.0;
+            return clamp_to_wall(wall, rk4::step(flow, t0 + s, &yc, rest - s));
+        }
+        yc[0] = wall.position;
+        yc[1] *= -wall.restitution;
+        stats.impacts += 1;
+        t0 += s;
+        y0 = yc;
+    }
+    stats.chattering = true;
+    clamp_to_wall(wall, rk4::step(flow, t0, &y0, t_end - t0))
+}
+
+fn clamp_to_wall<const D: usize>(wall: &Wall, mut y: [f64; D]) -> [f64; D] {
+    if y[0] > wall.position {
+        y[0] = wall.position;
+        y[1] = y[1].min(0.0);
+    }
+    y
+}
+
+/// The paper's location: the crossing fraction of a straight line between the
+/// step's ends, and the state interpolated linearly there.
+fn locate_linear<const D: usize>(
+    wall: &Wall,
+    y0: &[f64; D],
+    h: f64,
+    y1: &[f64; D],
+) -> Option<(f64, [f64; D])> {
+    if y1[0] <= wall.position {
+        return None;
+    }
+    let theta = ((wall.position - y0[0]) / (y1[0] - y0[0])).clamp(0.0, 1.0);
+    Some((
+        theta * h,
+        std::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
+    ))
+}
+
+/// Re-steps RK4 from (t0, y0) to the impact: returns the offset s into the
+/// step and the state RK4 reaches there, X(s) = X_w to rounding.
+fn locate_newton<const D: usize, F: Flow<D>>(
+    flow: &F,
+    wall: &Wall,
+    t0: f64,
+    y0: &[f64; D],
+    h: f64,
+    y1: &[f64; D],
+) -> Option<(f64, [f64; D])> {
+    let xw = wall.position;
+    let hermite = Hermite::new(y0[0] - xw, y0[1], y1[0] - xw, y1[1], h);
+    // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = X(RK4(t0, y0, s)) - X_w.
+    let (lo, hi, guess) = if y1[0] > xw {
+        (0.0, h, hermite.first_root(0.0, 1.0))
+    } else if y0[1] > 0.0 && y1[1] < 0.0 {
+        // Both ends short of the wall, but the velocity turns inside the
+        // step: an excursion past the wall in between is a (near-grazing) impact.
+        let peak = hermite.peak()?;
+        if hermite.value(peak) <= 0.0 {
+            return None;
+        }
+        let y_peak = rk4::step(flow, t0, y0, peak * h);
+        if y_peak[0] <= xw {
+            return None;
+        }
+        (0.0, peak * h, hermite.first_root(0.0, peak))
+    } else {
+        return None;
+    };
+    Some(newton_in_bracket(flow, xw, t0, y0, lo, hi, guess * h))
+}
+
+/// Safeguarded Newton on g(s) = X(RK4(t0, y0, s)) - X_w with g'(s) ≈ V(s):
+/// bisects whenever Newton would leave the bracket.
+fn newton_in_bracket<const D: usize, F: Flow<D>>(
+    flow: &F,
+    xw: f64,
+    t0: f64,
+    y0: &[f64; D],
+    mut lo: f64,
+    mut hi: f64,
+    mut s: f64,
+) -> (f64, [f64; D]) {
+    let tolerance = 4.0 * f64::EPSILON * xw.abs().max(1.0);
+    let mut y = rk4::step(flow, t0, y0, s);
+    for _ in 0..32 {
+        let g = y[0] - xw;
+        if g.abs() <= tolerance {
+            break;
+        }
+        if g > 0.0 {
+            hi = s;
+        } else {
+            lo = s;
+        }
+        let newton = s - g / y[1];
+        s = if newton > lo && newton < hi && newton.is_finite() {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        if hi - lo <= f64::EPSILON * hi.abs() {
+            break;
+        }
+        y = rk4::step(flow, t0, y0, s);
+    }
+    (s, y)
+}
+
+/// The cubic Hermite interpolant of g = X - X_w over one step, in θ ∈ [0, 1],
+/// from the values and derivatives (velocities) at both ends.
+struct Hermite {
+    c: [f64; 4],
+}
+
+impl Hermite {
+    fn new(g0: f64, v0: f64, g1: f64, v1: f64, h: f64) -> Self {
+        let (d0, d1) = (v0 * h, v1 * h);
+        // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³
+        let c2 = 3.0 * (g1 - g0) - 2.0 * d0 - d1;
+        let c3 = 2.0 * (g0 - g1) + d0 + d1;
+        Hermite {
+            c: [g0, d0, c2, c3],
+        }
+    }
+
+    fn value(&self, th: f64) -> f64 {
+        let c = &self.c;
+        c[0] + th * (c[1] + th * (c[2] + th * c[3]))
+    }
+
+    fn slope(&self, th: f64) -> f64 {
+        let c = &self.c;
+        c[1] + th * (2.0 * c[2] + th * 3.0 * c[3])
+    }
+
+    /// Where the slope turns from positive to negative inside (0, 1), given
+    /// slope(0) > 0 > slope(1): the quadratic slope then has exactly one root
+    /// there, found by bisection (this runs once per oscillation, not per step).
+    fn peak(&self) -> Option<f64> {
+        let (mut a, mut b) = (0.0, 1.0);
+        if !(self.slope(a) > 0.0 && self.slope(b) < 0.0) {
+            return None;
+        }
+        for _ in 0..60 {
+            let m = 0.5 * (a + b);
+            if self.slope(m) > 0.0 {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        Some(0.5 * (a + b))
+    }
+
+    /// The first upward root of the cubic in [a, b] (g(a) <= 0 < g(b)), by
+    /// bisection refined with Newton; used only as Newton's starting guess.
+    fn first_root(&self, mut a: f64, mut b: f64) -> f64 {
+        let mut th =
+            a + (b - a) * (-self.value(a) / (self.value(b) - self.value(a))).clamp(0.0, 1.0);
+        for _ in 0..8 {
+            let g = self.value(th);
+            if g > 0.0 {
+                b = th;
+            } else {
+                a = th;
+            }
+            let next = th - g / self.slope(th);
+            th = if next > a && next < b {
+                next
+            } else {
+                0.5 * (a + b)
+            };
+        }
+        th
+    }
+}

@@ -1,0 +1,25 @@
+//! lyapsweep: the whole Lyapunov spectrum and the bifurcation diagram of
+//! non-smooth oscillators, swept over thousands of parameter values.
+//!
+//! The method is that of the seed paper: the flow is reduced to its Poincaré
+//! (stroboscopic) map U, whose Jacobian is estimated from small orthogonal
+//! perturbations integrated alongside the reference trajectory, so impacts
+//! need no special linearisation; the Jacobians feed the classical QR
+//! accumulation of exponents.
+//!
+//! Modules follow the mathematics: [`system`] (the models), [`integrate`]
+//! (RK4, impact location, the closed-form propagator), [`method`] (the
+//! perturbation Jacobian and the QR accumulation), [`backend`] (where lanes
+//! run), [`scene`] (the input contract) and [`output`] (the CSV files).
+
+pub mod backend;
+pub mod error;
+pub mod integrate;
+pub mod method;
+pub mod output;
+pub mod scene;
+pub mod system;
+
+pub use backend::{run, Report};
+pub use error::{Error, Result};
+pub use scene::Scene;

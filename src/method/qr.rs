@@ -1,0 +1,81 @@
+//! QR accumulation of Lyapunov exponents.
+//!
+//! With Q_0 = I, each iteration factors Q_n R_n = J_n Q_{n-1} (Householder,
+//! signs fixed so diag R > 0); then λ_i = Σ_n ln R_ii^(n) / (n·T). The columns
+//! of Q_n span the most expanding directions in order, so the exponents come
+//! out non-increasing once the accumulation has converged.
+
+use nalgebra::{Const, DimMin, SMatrix};
+
+/// QR factorisation with diag R > 0 (unique for invertible matrices).
+pub fn qr_positive<const D: usize>(
+    m: SMatrix<f64, D, D>,
+) -> (SMatrix<f64, D, D>, SMatrix<f64, D, D>)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let qr = m.qr();
+    let (mut q, mut r) = (qr.q(), qr.r());
+    for i in 0..D {
+        if r[(i, i)] < 0.0 {
+            // Q R = (Q S)(S R) with S = diag(±1): flip row i of R and column i of Q.
+            r.row_mut(i).neg_mut();
+            q.column_mut(i).neg_mut();
+        }
+    }
+    (q, r)
+}
+
+/// The running sums Σ ln R_ii and the current orthonormal frame Q_n.
+#[derive(Clone, Debug)]
+pub struct QrAccumulator<const D: usize> {
+    q: SMatrix<f64, D, D>,
+    log_r: [f64; D],
+    steps: usize,
+}
+
+impl<const D: usize> Default for QrAccumulator<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const D: usize> QrAccumulator<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    pub fn new() -> Self {
+        QrAccumulator {
+            q: SMatrix::identity(),
+            log_r: [0.0; D],
+            steps: 0,
+        }
+    }
+
+    /// Takes one Jacobian J_n; returns diag R_n (all of them finite and
+    /// positive unless J_n is singular or not finite).
+    pub fn push(&mut self, jacobian: &SMatrix<f64, D, D>) -> [f64; D] {
+        let (q, r) = qr_positive(jacobian * self.q);
+        self.q = q;
+        let diag: [f64; D] = std::array::from_fn(|i| r[(i, i)]);
+        for (sum, d) in self.log_r.iter_mut().zip(&diag) {
+            *sum += d.ln();
+        }
+        self.steps += 1;
+        diag
+    }
+
+    /// The current frame Q_n.
+    pub fn frame(&self) -> &SMatrix<f64, D, D> {
+        &self.q
+    }
+
+    /// λ_i = Σ ln R_ii / (steps · period), in the order of the frame's columns.
+    pub fn exponents(&self, period: f64) -> [f64; D] {
+        let time = self.steps as f64 * period;
+        self.log_r.map(|s| s / time)
+    }
+}

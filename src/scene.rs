@@ -1,0 +1,506 @@
+//! The scene file: the TOML contract between users, documentation, tests and
+//! outside checks.
+//!
+//! ```toml
+//! name = "seed-fig3"              # default: the scene file's stem; output goes to out/<name>/
+//! [system]                        # kind is the only required key
+//! kind = "impact-oscillator"      # or "henon", "lorenz"; then that system's parameters
+//! zeta = 0.05
+//! [sweep]
+//! parameter = "eta"               # default: the system's usual control parameter
+//! from = 0.5                      # from, to, count (inclusive, evenly spaced; count default 101)
+//! to = 1.5                        # ... or values = [..]; neither: the [system] value alone
+//! count = 4096
+//! [integration]
+//! steps_per_period = 1800         # RK4 steps per map period (flows)
+//! transient = 500                 # iterations discarded before averaging
+//! iterations = 1000               # iterations averaged
+//! initial_state = [0.0, 0.0]      # default: the system's (Lorenz: [1, 1, 1])
+//! perturbation = 1e-7             # δ of the perturbed copies
+//! impact_location = "newton"      # or "linear" (the paper's)
+//! [run]
+//! backend = "auto"                # "cpu", "gpu", "exact"
+//! precision = "f64"               # or "f32" (gpu only)
+//! [output]
+//! lyapunov = "spectrum"           # or "none"
+//! bifurcation_points = 0          # last reference points kept per parameter value
+//! ```
+//!
+//! Unknown keys, wrong types and impossible values are errors that name the key.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::error::{Error, Result};
+use crate::integrate::ImpactLocation;
+use crate::system::{self, Params, SystemInfo};
+
+/// Default RK4 steps per map period, as in the paper.
+pub const DEFAULT_STEPS_PER_PERIOD: usize = 1800;
+pub const DEFAULT_TRANSIENT: usize = 500;
+pub const DEFAULT_ITERATIONS: usize = 1000;
+/// Default δ in f64: large against the rounding of a state of order one
+/// (1e-16/δ = 1e-9 relative error per column) and small against the map's
+/// curvature (O(δ) truncation error).
+pub const DEFAULT_PERTURBATION_F64: f64 = 1e-7;
+/// Evenly spaced values when a sweep gives `from` and `to` but no `count`.
+pub const DEFAULT_COUNT: usize = 101;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// A hardware GPU when there is one, otherwise the CPU.
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+    /// The closed-form tangent map: the ground truth.
+    Exact,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Auto => "auto",
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+            Backend::Exact => "exact",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    #[default]
+    F64,
+    F32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Lyapunov {
+    #[default]
+    Spectrum,
+    None,
+}
+
+/// A scene, parsed, completed with defaults and checked.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub name: String,
+    pub system: &'static SystemInfo,
+    /// The `[system]` parameter values (the swept one at its scene value).
+    pub params: Params,
+    pub sweep: Sweep,
+    pub integration: Integration,
+    pub backend: Backend,
+    pub precision: Precision,
+    pub lyapunov: bool,
+    pub bifurcation_points: usize,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub parameter: String,
+    /// Index of the swept parameter in the system's list.
+    pub index: usize,
+    pub values: Vec<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Integration {
+    pub steps_per_period: usize,
+    pub transient: usize,
+    pub iterations: usize,
+    pub initial_state: Vec<f64>,
+    pub perturbation: f64,
+    pub impact_location: ImpactLocation,
+}
+
+impl Scene {
+    /// The parameter values of lane `i`.
+    pub fn lane_params(&self, i: usize) -> Params {
+        let mut p = self.params.clone();
+        p.set(self.sweep.index, self.sweep.values[i]);
+        p
+    }
+}
+
+// The file's shape. `[system]` is read by hand: its keys depend on `kind`.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    name: Option<String>,
+    system: toml::Table,
+    #[serde(default)]
+    sweep: RawSweep,
+    #[serde(default)]
+    integration: RawIntegration,
+    #[serde(default)]
+    run: RawRun,
+    #[serde(default)]
+    output: RawOutput,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSweep {
+    parameter: Option<String>,
+    from: Option<f64>,
+    to: Option<f64>,
+    count: Option<usize>,
+    values: Option<Vec<f64>>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawIntegration {
+    steps_per_period: Option<usize>,
+    transient: Option<usize>,
+    iterations: Option<usize>,
+    initial_state: Option<Vec<f64>>,
+    perturbation: Option<f64>,
+    impact_location: Option<ImpactLocation>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRun {
+    backend: Option<Backend>,
+    precision: Option<Precision>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawOutput {
+    lyapunov: Option<Lyapunov>,
+    bifurcation_points: Option<usize>,
+}
+
+/// Reads and checks a scene file, applying `--set key.path=value` overrides first.
+pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::ReadScene {
+        path: path.to_owned(),
+        source,
+    })?;
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
+    parse(&text, &path.display().to_string(), stem, overrides)
+}
+
+/// Parses scene text; `origin` names it in messages, `default_name` is the
+/// name when the scene gives none.
+pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String]) -> Result<Scene> {
+    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::Syntax {
+        path: origin.to_owned(),
+        message: e.to_string().trim_end().to_owned(),
+    })?;
+    for o in overrides {
+        apply_override(&mut table, o)?;
+    }
+    let raw: RawScene =
+        serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+            let path = e.path().to_string();
+            let key = if path == "." {
+                String::new()
+            } else {
+                format!("{path}: ")
+            };
+            Error::Syntax {
+                path: origin.to_owned(),
+                message: format!("{key}{}", e.inner()),
+            }
+        })?;
+    resolve(raw, default_name)
+}
+
+/// `--set integration.iterations=2000`: the value is read as TOML, or as a
+/// string when it is not valid TOML (so `--set run.backend=cpu` works).
+fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
+    let bad = |reason: &str| Error::invalid(format!("--set {assignment}"), reason);
+    let (path, value) = assignment
+        .split_once('=')
+        .ok_or_else(|| bad("expected key.path=value"))?;
+    let value: toml::Value = match format!("v = {value}").parse::<toml::Table>() {
+        Ok(mut t) => t.remove("v").expect("just parsed"),
+        Err(_) => toml::Value::String(value.to_owned()),
+    };
+    let keys: Vec<&str> = path.trim().split('.').collect();
+    if keys.iter().any(|k| k.is_empty()) {
+        return Err(bad("empty key in the path"));
+    }
+    let (last, parents) = keys.split_last().expect("split yields at least one key");
+    let mut node = table;
+    for key in parents {
+        let entry = node
+            .entry(key.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        node = entry
+            .as_table_mut()
+            .ok_or_else(|| bad(&format!("`{key}` is not a table")))?;
+    }
+    node.insert(last.to_string(), value);
+    Ok(())
+}
+
+fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
+    let (info, params) = resolve_system(&raw.system)?;
+    let sweep = resolve_sweep(info, &params, raw.sweep)?;
+
+    let i = raw.integration;
+    let integration = Integration {
+        steps_per_period: positive(
+            "integration.steps_per_period",
+            i.steps_per_period,
+            DEFAULT_STEPS_PER_PERIOD,
+        )?,
+        transient: i.transient.unwrap_or(DEFAULT_TRANSIENT),
+        iterations: positive("integration.iterations", i.iterations, DEFAULT_ITERATIONS)?,
+        initial_state: i
+            .initial_state
+            .unwrap_or_else(|| info.default_initial_state.to_vec()),
+        perturbation: i.perturbation.unwrap_or(DEFAULT_PERTURBATION_F64),
+        impact_location: i.impact_location.unwrap_or_default(),
+    };
+    let delta = integration.perturbation;
+    if !(delta.is_finite() && delta > 0.0) {
+        return Err(Error::invalid(
+            "integration.perturbation",
+            format!("must be a finite number > 0, got {delta}"),
+        ));
+    }
+    let state = &integration.initial_state;
+    if state.len() != info.dimension() {
+        return Err(Error::invalid(
+            "integration.initial_state",
+            format!(
+                "{} has a {}-dimensional state ({}), got {} numbers",
+                info.kind,
+                info.dimension(),
+                info.state_names.join(", "),
+                state.len()
+            ),
+        ));
+    }
+    if let Some(v) = state.iter().find(|v| !v.is_finite()) {
+        return Err(Error::invalid(
+            "integration.initial_state",
+            format!("must be finite, got {v}"),
+        ));
+    }
+    // The start must be admissible at every swept value (the wall may be swept).
+    for (k, value) in sweep.values.iter().enumerate() {
+        let mut p = params.clone();
+        p.set(sweep.index, *value);
+        (info.check_state)(&p, state).map_err(|reason| {
+            let at = if sweep.values.len() > 1 {
+                format!(" (at {} = {value}, sweep value {k})", sweep.parameter)
+            } else {
+                String::new()
+            };
+            Error::invalid("integration.initial_state", format!("{reason}{at}"))
+        })?;
+    }
+
+    let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
+    let bifurcation_points = raw.output.bifurcation_points.unwrap_or(0);
+    if bifurcation_points > integration.iterations {
+        return Err(Error::invalid(
+            "output.bifurcation_points",
+            format!(
+                "must not exceed integration.iterations ({}), got {bifurcation_points}",
+                integration.iterations
+            ),
+        ));
+    }
+    if !lyapunov && bifurcation_points == 0 {
+        return Err(Error::invalid(
+            "output.lyapunov",
+            "\"none\" with bifurcation_points = 0 leaves nothing to compute",
+        ));
+    }
+
+    let name = raw.name.unwrap_or_else(|| default_name.to_owned());
+    if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
+        return Err(Error::invalid(
+            "name",
+            format!("must be a plain folder name, got {name:?}"),
+        ));
+    }
+    Ok(Scene {
+        name,
+        system: info,
+        params,
+        sweep,
+        integration,
+        backend: raw.run.backend.unwrap_or_default(),
+        precision: raw.run.precision.unwrap_or_default(),
+        lyapunov,
+        bifurcation_points,
+    })
+}
+
+fn positive(key: &str, value: Option<usize>, default: usize) -> Result<usize> {
+    match value {
+        Some(0) => Err(Error::invalid(key, "must be at least 1, got 0")),
+        Some(v) => Ok(v),
+        None => Ok(default),
+    }
+}
+
+fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> {
+    let kinds = || {
+        system::SYSTEMS
+            .iter()
+            .map(|s| format!("\"{}\"", s.kind))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let kind = match table.get("kind") {
+        None => {
+            return Err(Error::invalid(
+                "system.kind",
+                format!("is required (one of {})", kinds()),
+            ))
+        }
+        Some(toml::Value::String(k)) => k,
+        Some(other) => {
+            return Err(Error::invalid(
+                "system.kind",
+                format!("expected a string, got {other}"),
+            ))
+        }
+    };
+    let info = system::by_kind(kind).ok_or_else(|| {
+        Error::invalid(
+            "system.kind",
+            format!("unknown system \"{kind}\" (known: {})", kinds()),
+        )
+    })?;
+    let mut params = Params::defaults(info);
+    for (key, value) in table {
+        if key == "kind" {
+            continue;
+        }
+        let index = info.parameter_index(key).ok_or_else(|| {
+            Error::invalid(
+                format!("system.{key}"),
+                format!(
+                    "{kind} has no parameter `{key}` (its parameters: {})",
+                    info.parameter_names()
+                ),
+            )
+        })?;
+        let number = match value {
+            toml::Value::Float(v) => *v,
+            toml::Value::Integer(v) => *v as f64,
+            other => {
+                return Err(Error::invalid(
+                    format!("system.{key}"),
+                    format!("expected a number, got {other}"),
+                ))
+            }
+        };
+        params.set(index, number);
+    }
+    (info.check)(&params)
+        .map_err(|(name, reason)| Error::invalid(format!("system.{name}"), reason))?;
+    Ok((info, params))
+}
+
+fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> Result<Sweep> {
+    let parameter = raw
+        .parameter
+        .unwrap_or_else(|| info.default_sweep.to_owned());
+    let index = info.parameter_index(&parameter).ok_or_else(|| {
+        Error::invalid(
+            "sweep.parameter",
+            format!(
+                "{} has no parameter `{parameter}` (its parameters: {})",
+                info.kind,
+                info.parameter_names()
+            ),
+        )
+    })?;
+    let (values, key) = match (raw.values, raw.from, raw.to) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return Err(Error::invalid(
+                "sweep.values",
+                "give either values or from/to/count, not both",
+            ))
+        }
+        (Some(_), None, None) if raw.count.is_some() => {
+            return Err(Error::invalid(
+                "sweep.count",
+                "goes with from and to, not with values",
+            ))
+        }
+        (Some(values), None, None) => {
+            if values.is_empty() {
+                return Err(Error::invalid(
+                    "sweep.values",
+                    "must hold at least one value",
+                ));
+            }
+            (values, "sweep.values")
+        }
+        (None, Some(from), Some(to)) => {
+            let count = positive("sweep.count", raw.count, DEFAULT_COUNT)?;
+            for (key, v) in [("sweep.from", from), ("sweep.to", to)] {
+                if !v.is_finite() {
+                    return Err(Error::invalid(key, format!("must be finite, got {v}")));
+                }
+            }
+            let values = if count == 1 {
+                vec![from]
+            } else {
+                (0..count)
+                    .map(|k| from + (to - from) * k as f64 / (count - 1) as f64)
+                    .collect()
+            };
+            (values, "sweep.from")
+        }
+        (None, Some(_), None) => {
+            return Err(Error::invalid("sweep.to", "is required with sweep.from"))
+        }
+        (None, None, Some(_)) => {
+            return Err(Error::invalid("sweep.from", "is required with sweep.to"))
+        }
+        (None, None, None) => {
+            if raw.count.is_some() {
+                return Err(Error::invalid(
+                    "sweep.count",
+                    "needs sweep.from and sweep.to",
+                ));
+            }
+            (vec![params.values[index]], "system")
+        }
+    };
+    for (k, value) in values.iter().enumerate() {
+        let mut p = params.clone();
+        p.set(index, *value);
+        (info.check)(&p).map_err(|(name, reason)| {
+            if name == parameter {
+                let key = if key == "sweep.from" && k + 1 == values.len() && values.len() > 1 {
+                    "sweep.to"
+                } else if key == "sweep.values" {
+                    "sweep.values"
+                } else {
+                    key
+                };
+                Error::invalid(key, format!("{parameter} = {value}: {parameter} {reason}"))
+            } else {
+                Error::invalid(
+                    format!("system.{name}"),
+                    format!("{reason} (with {parameter} = {value})"),
+                )
+            }
+        })?;
+    }
+    Ok(Sweep {
+        parameter,
+        index,
+        values,
+    })
+}

@@ -1,0 +1,155 @@
+//! The seed paper's impact oscillator (eq. 13–14):
+//!
+//! X'' = -2ζX' - X + f·cos(ητ), with a rigid wall at X = X_w where X' → -e·X'.
+//!
+//! The map is stroboscopic: the state (X, X') sampled at ητ ≡ 0 (mod 2π),
+//! period T = 2π/η. Each impact multiplies phase-space area by e² and the flow
+//! contracts it at rate 2ζ, so the exponents per unit time sum to
+//! -2ζ + 2·ln(e)·(impacts per unit time): -0.1 for the paper's parameters.
+
+use std::f64::consts::TAU;
+
+use nalgebra::SMatrix;
+
+use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
+use crate::integrate::{time_map, Flow, Wall};
+
+pub const INFO: SystemInfo = SystemInfo {
+    kind: "impact-oscillator",
+    parameters: &[
+        Parameter {
+            name: "zeta",
+            default: 0.05,
+            doc: "damping ratio ζ",
+        },
+        Parameter {
+            name: "f",
+            default: 1.0,
+            doc: "forcing amplitude f = F/(mω²)",
+        },
+        Parameter {
+            name: "wall",
+            default: 2.0,
+            doc: "wall position X_w",
+        },
+        Parameter {
+            name: "restitution",
+            default: 1.0,
+            doc: "coefficient of restitution e",
+        },
+        Parameter {
+            name: "eta",
+            default: 1.0,
+            doc: "forcing frequency η = Ω/ω",
+        },
+    ],
+    state_names: &["x", "v"],
+    default_sweep: "eta",
+    default_initial_state: &[0.0, 0.0],
+    is_flow: true,
+    has_exact: true,
+    check,
+    check_state,
+    expected_sum,
+    run_lane: crate::method::run_lane::<2, ImpactOscillator>,
+};
+
+/// The oscillator with its parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct ImpactOscillator {
+    pub zeta: f64,
+    pub f: f64,
+    pub wall: f64,
+    pub restitution: f64,
+    pub eta: f64,
+}
+
+fn check(p: &Params) -> Result<(), (&'static str, String)> {
+    check_finite(p)?;
+    if p.get("eta") <= 0.0 {
+        return Err(("eta", format!("must be > 0, got {}", p.get("eta"))));
+    }
+    if p.get("zeta") < 0.0 {
+        return Err(("zeta", format!("must be >= 0, got {}", p.get("zeta"))));
+    }
+    let e = p.get("restitution");
+    if !(0.0..=1.0).contains(&e) {
+        return Err(("restitution", format!("must lie in [0, 1], got {e}")));
+    }
+    if p.get("zeta") == 0.0 && p.get("eta") == 1.0 {
+        return Err((
+            "eta",
+            "η = 1 with ζ = 0 is undamped resonance: the response grows without bound".into(),
+        ));
+    }
+    Ok(())
+}
+
+fn check_state(p: &Params, x: &[f64]) -> Result<(), String> {
+    let wall = p.get("wall");
+    if x[0] > wall {
+        return Err(format!("x = {} lies behind the wall at {wall}", x[0]));
+    }
+    Ok(())
+}
+
+fn expected_sum(p: &Params, impacts_per_time: f64) -> f64 {
+    let restitution_term = if impacts_per_time == 0.0 {
+        0.0
+    } else {
+        2.0 * p.get("restitution").ln() * impacts_per_time
+    };
+    -2.0 * p.get("zeta") + restitution_term
+}
+
+impl Flow<2> for ImpactOscillator {
+    #[inline]
+    fn rhs(&self, t: f64, y: &[f64; 2]) -> [f64; 2] {
+        [
+            y[1],
+            -2.0 * self.zeta * y[1] - y[0] + self.f * (self.eta * t).cos(),
+        ]
+    }
+
+    fn wall(&self) -> Option<Wall> {
+        Some(Wall {
+            position: self.wall,
+            restitution: self.restitution,
+        })
+    }
+}
+
+impl System<2> for ImpactOscillator {
+    fn new(p: &Params) -> Self {
+        ImpactOscillator {
+            zeta: p.get("zeta"),
+            f: p.get("f"),
+            wall: p.get("wall"),
+            restitution: p.get("restitution"),
+            eta: p.get("eta"),
+        }
+    }
+
+    fn period(&self) -> f64 {
+        TAU / self.eta
+    }
+
+    fn iterate(&self, x: &[f64; 2], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 2] {
+        time_map(self, x, self.period(), flow, stats)
+    }
+
+    fn iterate_exact(
+        &self,
+        x: &[f64; 2],
+        stats: &mut IterationStats,
+    ) -> Option<([f64; 2], SMatrix<f64, 2, 2>)> {
+        let exact =
+            ForcedImpactOscillator::new(self.zeta, self.f, self.eta, self.wall, self.restitution)
+                .ok()?;
+        let it = exact.iterate(*x);
+        stats.impacts += it.impacts;
+        stats.chattering |= it.status != ExactStatus::Ok;
+        Some((it.state, it.jacobian))
+    }
+}

@@ -1,0 +1,92 @@
+//! The Lorenz flow, the engine's check at three dimensions:
+//!
+//! x' = σ(y - x),  y' = x(ρ - z) - y,  z' = xy - βz.
+//!
+//! The map is the time-`period` map of the flow (state (x, y, z), three
+//! exponents, one of them zero: the flow direction). The divergence is the
+//! constant -(σ + 1 + β), so the exponents sum to it exactly.
+
+use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use crate::integrate::{time_map, Flow};
+
+pub const INFO: SystemInfo = SystemInfo {
+    kind: "lorenz",
+    parameters: &[
+        Parameter {
+            name: "sigma",
+            default: 10.0,
+            doc: "Prandtl number σ",
+        },
+        Parameter {
+            name: "rho",
+            default: 28.0,
+            doc: "Rayleigh number ρ",
+        },
+        Parameter {
+            name: "beta",
+            default: 8.0 / 3.0,
+            doc: "geometric factor β",
+        },
+        Parameter {
+            name: "period",
+            default: 1.0,
+            doc: "time of one map iteration",
+        },
+    ],
+    state_names: &["x", "y", "z"],
+    default_sweep: "rho",
+    default_initial_state: &[1.0, 1.0, 1.0],
+    is_flow: true,
+    has_exact: false,
+    check,
+    check_state: |_, _| Ok(()),
+    expected_sum: |p, _| -(p.get("sigma") + 1.0 + p.get("beta")),
+    run_lane: crate::method::run_lane::<3, Lorenz>,
+};
+
+#[derive(Clone, Copy, Debug)]
+pub struct Lorenz {
+    pub sigma: f64,
+    pub rho: f64,
+    pub beta: f64,
+    pub period: f64,
+}
+
+fn check(p: &Params) -> Result<(), (&'static str, String)> {
+    check_finite(p)?;
+    if p.get("period") <= 0.0 {
+        return Err(("period", format!("must be > 0, got {}", p.get("period"))));
+    }
+    Ok(())
+}
+
+impl Flow<3> for Lorenz {
+    #[inline]
+    fn rhs(&self, _t: f64, s: &[f64; 3]) -> [f64; 3] {
+        let [x, y, z] = *s;
+        [
+            self.sigma * (y - x),
+            x * (self.rho - z) - y,
+            x * y - self.beta * z,
+        ]
+    }
+}
+
+impl System<3> for Lorenz {
+    fn new(p: &Params) -> Self {
+        Lorenz {
+            sigma: p.get("sigma"),
+            rho: p.get("rho"),
+            beta: p.get("beta"),
+            period: p.get("period"),
+        }
+    }
+
+    fn period(&self) -> f64 {
+        self.period
+    }
+
+    fn iterate(&self, x: &[f64; 3], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 3] {
+        time_map(self, x, self.period, flow, stats)
+    }
+}

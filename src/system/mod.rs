@@ -1,0 +1,164 @@
+//! The dynamical systems, one file each, behind one trait.
+//!
+//! A system is what the method needs to know about a model: how one map
+//! iteration x_{n+1} = U(x_n) is computed (a map formula, or a flow integrated
+//! over one period with an optional wall), the period T of that iteration,
+//! the sum of exponents the divergence theorem predicts, and, when a closed
+//! form exists, the exact tangent map. Adding a system means adding its file
+//! here (and, for the GPU backend, its WGSL twin in `shaders/`) and one line in
+//! [`SYSTEMS`].
+
+pub mod henon;
+pub mod impact_oscillator;
+pub mod lorenz;
+
+use nalgebra::SMatrix;
+
+use crate::integrate::ImpactLocation;
+use crate::method::Lane;
+
+/// Every system the tool knows, by its scene `kind`.
+pub static SYSTEMS: &[&SystemInfo] = &[&impact_oscillator::INFO, &henon::INFO, &lorenz::INFO];
+
+/// Looks a system up by its scene `kind`.
+pub fn by_kind(kind: &str) -> Option<&'static SystemInfo> {
+    SYSTEMS.iter().copied().find(|s| s.kind == kind)
+}
+
+/// One named parameter of a system, with the value a scene gets when it omits it.
+#[derive(Debug)]
+pub struct Parameter {
+    pub name: &'static str,
+    pub default: f64,
+    pub doc: &'static str,
+}
+
+/// The type-erased description of a system: everything the scene parser,
+/// the output writers and the backends need without knowing its dimension.
+pub struct SystemInfo {
+    /// The scene's `[system] kind`.
+    pub kind: &'static str,
+    pub parameters: &'static [Parameter],
+    /// Names of the map's state coordinates (the bifurcation CSV's columns).
+    pub state_names: &'static [&'static str],
+    /// The parameter swept when a scene's `[sweep]` names none.
+    pub default_sweep: &'static str,
+    pub default_initial_state: &'static [f64],
+    /// Whether one iteration integrates a flow (so `steps_per_period` matters).
+    pub is_flow: bool,
+    /// Whether the `exact` backend (closed-form tangent map) exists for it.
+    pub has_exact: bool,
+    /// Checks parameter values; on failure names the parameter and the reason.
+    pub check: fn(&Params) -> Result<(), (&'static str, String)>,
+    /// Checks an initial state against the parameters (e.g. not behind a wall).
+    pub check_state: fn(&Params, &[f64]) -> Result<(), String>,
+    /// The exponent sum the phase-space volume law predicts, per unit time,
+    /// given the measured impacts per unit time.
+    pub expected_sum: fn(&Params, f64) -> f64,
+    /// Runs one lane on the dimension-specific code path.
+    pub run_lane: fn(&Lane) -> crate::method::LaneResult,
+}
+
+impl SystemInfo {
+    /// The dimension of the map (number of exponents).
+    pub fn dimension(&self) -> usize {
+        self.state_names.len()
+    }
+
+    pub fn parameter_index(&self, name: &str) -> Option<usize> {
+        self.parameters.iter().position(|p| p.name == name)
+    }
+
+    pub fn parameter_names(&self) -> String {
+        let names: Vec<_> = self.parameters.iter().map(|p| p.name).collect();
+        names.join(", ")
+    }
+}
+
+impl std::fmt::Debug for SystemInfo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SystemInfo")
+            .field("kind", &self.kind)
+            .finish()
+    }
+}
+
+/// Parameter values of one system, in the order of its [`SystemInfo::parameters`].
+#[derive(Clone, Debug)]
+pub struct Params {
+    pub info: &'static SystemInfo,
+    pub values: Vec<f64>,
+}
+
+impl Params {
+    /// The system's defaults.
+    pub fn defaults(info: &'static SystemInfo) -> Self {
+        Params {
+            info,
+            values: info.parameters.iter().map(|p| p.default).collect(),
+        }
+    }
+
+    /// The value of a parameter. Panics on a name the system does not have,
+    /// which is a programming error: scene names are checked on parsing.
+    pub fn get(&self, name: &str) -> f64 {
+        let i = self
+            .info
+            .parameter_index(name)
+            .unwrap_or_else(|| panic!("{} has no parameter {name}", self.info.kind));
+        self.values[i]
+    }
+
+    pub fn set(&mut self, index: usize, value: f64) {
+        self.values[index] = value;
+    }
+}
+
+/// How one flow iteration is integrated (the part of `[integration]` a system sees).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FlowSettings {
+    pub steps_per_period: usize,
+    pub impact_location: ImpactLocation,
+}
+
+/// What happened during one map iteration of one trajectory.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct IterationStats {
+    /// Wall impacts during the iteration.
+    pub impacts: u32,
+    /// An integration step needed more impacts than the bound allows, or the
+    /// mass was pressed into the wall: the iteration is not trustworthy.
+    pub chattering: bool,
+}
+
+/// A system of map dimension `D`.
+pub trait System<const D: usize>: Sized + Send + Sync {
+    /// Builds the system from checked parameter values.
+    fn new(params: &Params) -> Self;
+
+    /// The time T of one map iteration (exponents are per unit time: ln R_ii / T).
+    fn period(&self) -> f64;
+
+    /// One map iteration x_{n+1} = U(x_n).
+    fn iterate(&self, x: &[f64; D], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; D];
+
+    /// One map iteration with its exact Jacobian DU(x_n), where a closed form
+    /// exists (`SystemInfo::has_exact`).
+    fn iterate_exact(
+        &self,
+        _x: &[f64; D],
+        _stats: &mut IterationStats,
+    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
+        None
+    }
+}
+
+/// Checks that every parameter is a finite number.
+pub fn check_finite(params: &Params) -> Result<(), (&'static str, String)> {
+    for (p, v) in params.info.parameters.iter().zip(&params.values) {
+        if !v.is_finite() {
+            return Err((p.name, format!("must be a finite number, got {v}")));
+        }
+    }
+    Ok(())
+}
