@@ -192,9 +192,15 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
 /// Parses scene text; `origin` names it in messages, `default_name` is the
 /// name when the scene gives none.
 pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String]) -> Result<Scene> {
-    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| Error::Syntax {
-        path: origin.to_owned(),
-        message: e.to_string().trim_end().to_owned(),
+    let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let at = e.span().map(|span| {
+            let line = text[..span.start].matches('\n').count() + 1;
+            format!("line {line}: ")
+        });
+        Error::Syntax {
+            path: origin.to_owned(),
+            message: format!("{}{}", at.unwrap_or_default(), e.message().trim()),
+        }
     })?;
     for o in overrides {
         apply_override(&mut table, o)?;
@@ -207,9 +213,13 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
             } else {
                 format!("{path}: ")
             };
+            // The value deserializer appends "in `path`" on a second line;
+            // the path is already in front.
+            let inner = e.inner().to_string();
+            let first_line = inner.lines().next().unwrap_or_default().trim();
             Error::Syntax {
                 path: origin.to_owned(),
-                message: format!("{key}{}", e.inner()),
+                message: format!("{key}{first_line}"),
             }
         })?;
     resolve(raw, default_name)

@@ -35,7 +35,24 @@ pub struct MethodSettings {
     pub lyapunov: bool,
     /// How many of the last reference points to keep.
     pub bifurcation_points: usize,
+    /// Rounding operations that accumulate in one iteration's image (the RK4
+    /// steps of a flow, 1 for a map): sets the smallest contraction the
+    /// finite difference resolves.
+    pub steps_per_iteration: usize,
 }
+
+impl MethodSettings {
+    /// The noise in a finite-difference column: the rounding of an image of
+    /// size `scale`, accumulated over the steps of one iteration, over δ.
+    /// An R_ii near it is mostly rounding.
+    pub fn difference_noise(&self, scale: f64) -> f64 {
+        f64::EPSILON * scale.max(1.0) * (self.steps_per_iteration as f64).sqrt() / self.perturbation
+    }
+}
+
+/// The estimated exponent error per unit time from finite-difference noise
+/// (see [`LaneStatus::Unresolved`]) above which a lane is flagged.
+pub const RESOLUTION_BOUND: f64 = 1e-4;
 
 /// One parameter value of a sweep.
 #[derive(Clone, Debug)]
@@ -45,7 +62,7 @@ pub struct Lane<'a> {
 }
 
 /// Why a lane's numbers should not be trusted, if they should not.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum LaneStatus {
     Ok,
     /// The state or a Jacobian became NaN or infinite; the lane stopped.
@@ -58,6 +75,13 @@ pub enum LaneStatus {
     Chattering {
         iterations: usize,
     },
+    /// A direction contracts, in one iteration, to near the rounding noise of
+    /// the finite difference, so the most negative exponents are not to be
+    /// trusted: `bound` estimates their error per unit time (mean over
+    /// iterations of noise / min R_ii, over T). Shorten the map period.
+    Unresolved {
+        bound: f64,
+    },
 }
 
 impl std::fmt::Display for LaneStatus {
@@ -68,6 +92,7 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::Chattering { iterations } => {
                 write!(f, "chattering(iterations={iterations})")
             }
+            LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
         }
     }
 }
@@ -126,7 +151,7 @@ where
     let mut qr = QrAccumulator::<D>::new();
     let mut bifurcation = Vec::with_capacity(settings.bifurcation_points * D);
     let first_kept = settings.iterations - settings.bifurcation_points.min(settings.iterations);
-    let (mut impacts, mut chattering) = (0u64, 0usize);
+    let (mut impacts, mut chattering, mut noise_over_r) = (0u64, 0usize, 0.0);
     for n in 0..settings.iterations {
         let mut stats = IterationStats::default();
         let (next, jacobian) = step::<D, S>(&system, flow, settings, &x, &mut stats);
@@ -144,6 +169,11 @@ where
                 // rounding can resolve in one iteration.
                 return failed(settings.transient + n, bifurcation);
             }
+            if settings.tangent == Tangent::FiniteDifference {
+                let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+                let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
+                noise_over_r += settings.difference_noise(scale) / smallest;
+            }
         }
         impacts += u64::from(stats.impacts);
         chattering += usize::from(stats.chattering);
@@ -153,6 +183,7 @@ where
         x = next;
     }
 
+    let resolution_bound = noise_over_r / (settings.iterations as f64 * period);
     let exponents = if settings.lyapunov {
         let mut e = qr.exponents(period).to_vec();
         e.sort_by(|a, b| b.total_cmp(a));
@@ -168,6 +199,10 @@ where
         status: if chattering > 0 {
             LaneStatus::Chattering {
                 iterations: chattering,
+            }
+        } else if resolution_bound > RESOLUTION_BOUND {
+            LaneStatus::Unresolved {
+                bound: resolution_bound,
             }
         } else {
             LaneStatus::Ok

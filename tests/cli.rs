@@ -1,0 +1,260 @@
+//! The `lyapsweep` binary: bad input is refused with exit code 2, a message
+//! naming the key, and nothing written; good input writes whole CSV files.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+const BASE: &str = r#"
+[system]
+kind = "impact-oscillator"
+eta = 0.8
+[integration]
+steps_per_period = 200
+transient = 5
+iterations = 10
+"#;
+
+fn lyapsweep(dir: &Path, scene: &str, extra: &[&str]) -> Output {
+    let path = dir.join("scene.toml");
+    std::fs::write(&path, scene).unwrap();
+    Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .arg("run")
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .args(extra)
+        .output()
+        .expect("the binary runs")
+}
+
+/// Runs a bad scene and checks exit code 2, `key` in the message, no output.
+fn refused(scene: &str, extra: &[&str], key: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = lyapsweep(dir.path(), scene, extra);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "exit code for {key}; stderr: {stderr}"
+    );
+    assert!(
+        stderr.contains(key),
+        "message does not name {key}: {stderr}"
+    );
+    assert_eq!(
+        stderr.trim().lines().count(),
+        1,
+        "one message expected: {stderr}"
+    );
+    assert!(!dir.path().join("out").exists(), "output written for {key}");
+}
+
+fn with(section_line: &str) -> String {
+    format!("{BASE}{section_line}\n")
+}
+
+#[test]
+fn impossible_values_name_their_key() {
+    refused(&BASE.replace("eta = 0.8", "eta = -1.0"), &[], "system.eta");
+    refused(&BASE.replace("eta = 0.8", "eta = 0.0"), &[], "system.eta");
+    refused(
+        &BASE.replace("eta = 0.8", "eta = 0.8\nrestitution = 1.5"),
+        &[],
+        "system.restitution",
+    );
+    refused(
+        &BASE.replace("eta = 0.8", "eta = 0.8\nrestitution = -0.1"),
+        &[],
+        "system.restitution",
+    );
+    refused(&BASE.replace("eta = 0.8", "eta = nan"), &[], "system.eta");
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\nperturbation = 0.0"),
+        &[],
+        "integration.perturbation",
+    );
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\nperturbation = -1e-7"),
+        &[],
+        "integration.perturbation",
+    );
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\nperturbation = nan"),
+        &[],
+        "integration.perturbation",
+    );
+    refused(
+        &BASE.replace("steps_per_period = 200", "steps_per_period = 0"),
+        &[],
+        "integration.steps_per_period",
+    );
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 0"),
+        &[],
+        "integration.iterations",
+    );
+    refused(
+        &with("[sweep]\nfrom = 0.5\nto = 1.5\ncount = 0"),
+        &[],
+        "sweep.count",
+    );
+    refused(
+        &with("[sweep]\nfrom = -0.5\nto = 1.5\ncount = 3"),
+        &[],
+        "sweep.from",
+    );
+    refused(&with("[sweep]\nvalues = [0.5, 0.0]"), &[], "sweep.values");
+    refused(&with("[sweep]\nvalues = []"), &[], "sweep.values");
+    refused(&with("[sweep]\nfrom = 0.5\nto = nan"), &[], "sweep.to");
+    refused(
+        &BASE.replace(
+            "iterations = 10",
+            "iterations = 10\ninitial_state = [2.5, 0.0]",
+        ),
+        &[],
+        "integration.initial_state",
+    );
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\ninitial_state = [0.0]"),
+        &[],
+        "integration.initial_state",
+    );
+    refused(
+        &BASE.replace(
+            "iterations = 10",
+            "iterations = 10\ninitial_state = [nan, 0.0]",
+        ),
+        &[],
+        "integration.initial_state",
+    );
+    refused(
+        &with("[output]\nbifurcation_points = 11"),
+        &[],
+        "output.bifurcation_points",
+    );
+}
+
+#[test]
+fn unknown_keys_and_parameters_are_refused() {
+    refused(
+        &BASE.replace("eta = 0.8", "eta = 0.8\nmass = 2.0"),
+        &[],
+        "system.mass",
+    );
+    refused(
+        &with("[sweep]\nparameter = \"sigma\"\nfrom = 1.0\nto = 2.0"),
+        &[],
+        "sweep.parameter",
+    );
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\nstepz = 3"),
+        &[],
+        "stepz",
+    );
+    refused(&with("[colours]\nred = 1"), &[], "colours");
+    refused(
+        &BASE.replace("impact-oscillator", "pendulum"),
+        &[],
+        "system.kind",
+    );
+    refused("[integration]\niterations = 3\n", &[], "system");
+}
+
+#[test]
+fn wrong_types_are_refused() {
+    refused(
+        &BASE.replace("steps_per_period = 200", "steps_per_period = \"many\""),
+        &[],
+        "integration.steps_per_period",
+    );
+    refused(
+        &BASE.replace("steps_per_period = 200", "steps_per_period = -3"),
+        &[],
+        "integration.steps_per_period",
+    );
+    refused(
+        &BASE.replace("eta = 0.8", "eta = \"fast\""),
+        &[],
+        "system.eta",
+    );
+    refused(&with("[run]\nbackend = \"quantum\""), &[], "run.backend");
+    refused(&with("[run]\nprecision = \"f16\""), &[], "run.precision");
+    refused(&with("[integration.extra]\nx = 1"), &[], "integration");
+    refused(&format!("{BASE}\nthis is not toml"), &[], "scene");
+}
+
+#[test]
+fn flags_and_overrides_are_checked_like_the_scene() {
+    refused(BASE, &["--set", "system.eta=-2"], "system.eta");
+    refused(
+        BASE,
+        &["--set", "integration.transient=\"x\""],
+        "integration.transient",
+    );
+    refused(BASE, &["--set", "nonsense"], "--set nonsense");
+    refused(
+        BASE,
+        &["--set", "system.kind.deep=1"],
+        "--set system.kind.deep=1",
+    );
+    refused(BASE, &["--backend", "gpu"], "run.backend");
+    refused(BASE, &["--precision", "f32"], "run.precision");
+    refused(
+        &BASE
+            .replace("impact-oscillator", "lorenz")
+            .replace("eta = 0.8", ""),
+        &["--backend", "exact"],
+        "run.backend",
+    );
+}
+
+#[test]
+fn a_good_run_writes_whole_files_with_the_documented_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = with("[sweep]\nfrom = 0.8\nto = 1.2\ncount = 3\n[output]\nbifurcation_points = 4");
+    let out = lyapsweep(dir.path(), &scene, &["--set", "integration.iterations=20"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = String::from_utf8_lossy(&out.stdout);
+    for needle in [
+        "backend",
+        "lanes",
+        "time",
+        "max |lambda_sum - expected_sum|",
+    ] {
+        assert!(
+            summary.contains(needle),
+            "summary lacks {needle}: {summary}"
+        );
+    }
+    let spectrum = std::fs::read_to_string(dir.path().join("out/spectrum.csv")).unwrap();
+    let mut lines = spectrum.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,status"
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 3);
+    for (row, eta) in rows.iter().zip(["0.8", "1", "1.2"]) {
+        assert_eq!(row[0], eta);
+        let l1: f64 = row[1].parse().unwrap();
+        let l2: f64 = row[2].parse().unwrap();
+        let sum: f64 = row[3].parse().unwrap();
+        assert_eq!(l1 + l2, sum);
+        assert!(l1 >= l2);
+        assert_eq!(row[4], "-0.1");
+        assert_eq!(row[6], "ok");
+    }
+    let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
+    assert!(bifurcation.starts_with("eta,x,v\n"));
+    assert_eq!(bifurcation.lines().count(), 1 + 3 * 4);
+    // No temporary files remain.
+    let names: Vec<_> = std::fs::read_dir(dir.path().join("out"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names.len(), 2, "{names:?}");
+}

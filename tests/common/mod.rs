@@ -1,0 +1,48 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)]
+
+use lyapsweep::method::LaneStatus;
+use lyapsweep::{scene, Report, Scene};
+
+/// Parses a scene from text, with `--set` style overrides.
+pub fn scene(text: &str, overrides: &[&str]) -> Scene {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    scene::parse(text, "test scene", "test", &overrides).expect("test scene is valid")
+}
+
+/// Loads a committed scene from scenes/.
+pub fn committed_scene(name: &str, overrides: &[&str]) -> Scene {
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(name);
+    scene::load(&path, &overrides).expect("committed scene is valid")
+}
+
+pub fn run(scene: &Scene) -> Report {
+    lyapsweep::run(scene).expect("scene runs")
+}
+
+/// The seed paper's oscillator: ζ = 0.05, f = 1, X_w = 2, e = 1, start
+/// (0, 0), transient 500, iterations 1000.
+pub const SEED: &str = r#"
+[system]
+kind = "impact-oscillator"
+zeta = 0.05
+f = 1.0
+wall = 2.0
+restitution = 1.0
+[integration]
+transient = 500
+iterations = 1000
+initial_state = [0.0, 0.0]
+"#;
+
+/// The η values at which the seed's oscillator settles on periodic orbits.
+pub const PERIODIC_ETAS: [f64; 5] = [0.8, 0.95, 1.1, 1.25, 1.5];
+
+pub fn assert_all_ok(report: &Report) {
+    for (k, lane) in report.lanes.iter().enumerate() {
+        assert_eq!(lane.status, LaneStatus::Ok, "lane {k} flagged");
+    }
+}
