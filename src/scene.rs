@@ -16,7 +16,7 @@
 //! transient = 500                 # iterations discarded before averaging
 //! iterations = 1000               # iterations averaged
 //! initial_state = [0.0, 0.0]      # default: the system's (Lorenz: [1, 1, 1])
-//! perturbation = 1e-7             # δ of the perturbed copies
+//! perturbation = 1e-8             # δ of the perturbed copies
 //! impact_location = "newton"      # or "linear" (the paper's)
 //! [run]
 //! backend = "auto"                # "cpu", "gpu", "exact"
@@ -40,10 +40,13 @@ use crate::system::{self, Params, SystemInfo};
 pub const DEFAULT_STEPS_PER_PERIOD: usize = 1800;
 pub const DEFAULT_TRANSIENT: usize = 500;
 pub const DEFAULT_ITERATIONS: usize = 1000;
-/// Default δ in f64: large against the rounding of a state of order one
-/// (1e-16/δ = 1e-9 relative error per column) and small against the map's
-/// curvature (O(δ) truncation error).
-pub const DEFAULT_PERTURBATION_F64: f64 = 1e-7;
+/// Default δ in f64, near the optimum √ε of a forward difference: the
+/// truncation error O(δ) grows fast near grazing impacts (it scales like
+/// δ/v⁻², v⁻ the impact velocity), the rounding error like ε·√steps/δ.
+/// Measured on the seed's oscillator at η = 0.708 (sporadic near-grazing
+/// impacts): sum-rule error 3.4e-5, 2.2e-5, 2.0e-6, 2.6e-7, 3.9e-6 at
+/// δ = 1e-6, 1e-7, 1e-8, 1e-9, 1e-10.
+pub const DEFAULT_PERTURBATION_F64: f64 = 1e-8;
 /// Evenly spaced values when a sweep gives `from` and `to` but no `count`.
 pub const DEFAULT_COUNT: usize = 101;
 

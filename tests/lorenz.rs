@@ -19,7 +19,7 @@ fn exponents_match_published_values() {
 #[test]
 fn a_period_too_long_for_the_difference_is_flagged_not_trusted() {
     // Over T = 1 the stable direction contracts by e^{-14.6} ≈ 5e-7, below the
-    // rounding noise of a forward difference at δ = 1e-7: the row must say so.
+    // rounding noise of a forward difference at δ = 1e-8: the row must say so.
     let scene = common::committed_scene(
         "lorenz.toml",
         &[

@@ -52,7 +52,7 @@ impl MethodSettings {
 
 /// The estimated exponent error per unit time from finite-difference noise
 /// (see [`LaneStatus::Unresolved`]) above which a lane is flagged.
-pub const RESOLUTION_BOUND: f64 = 1e-4;
+pub const RESOLUTION_BOUND: f64 = 1e-3;
 
 /// One parameter value of a sweep.
 #[derive(Clone, Debug)]
