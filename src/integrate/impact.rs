@@ -8,6 +8,7 @@
 
 use serde::Deserialize;
 
+use super::clock::{cos_sin, rotate, Phase};
 use super::{rk4, Flow};
 use crate::system::IterationStats;
 
@@ -47,44 +48,74 @@ impl ImpactLocation {
 /// (chattering); the step then stops resolving them and flags the iteration.
 pub const MAX_IMPACTS_PER_STEP: u32 = 64;
 
-/// One RK4 step of size h from (t, y) with every impact inside it applied.
+/// One RK4 step of size h from y at forcing phase `phase` (`half` rotates
+/// through ωh/2), with every impact inside it applied. Returns the state and
+/// the phase at the end of the step.
+#[allow(clippy::too_many_arguments)]
 pub fn step<const D: usize, F: Flow<D>>(
     flow: &F,
     wall: &Wall,
     location: ImpactLocation,
-    t: f64,
+    omega: f64,
+    phase: &Phase,
+    half: &Phase,
     y: &[f64; D],
     h: f64,
     stats: &mut IterationStats,
-) -> [f64; D] {
-    let t_end = t + h;
-    let (mut t0, mut y0) = (t, *y);
+) -> ([f64; D], Phase) {
+    let (y1, end) = rk4::step(flow, phase, half, y, h);
+    let reaches_wall = y1[0] > wall.position || (y[1] > 0.0 && y1[1] < 0.0);
+    if !reaches_wall {
+        // The common case: no impact can be in this step.
+        return (y1, end);
+    }
+    // Sub-steps from (phase0, y0), `done` into the step.
+    let sub = SubStep { flow, omega };
+    let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
-        let rest = t_end - t0;
-        let y1 = rk4::step(flow, t0, &y0, rest);
+        let rest = h - done;
         let hit = match location {
             ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
-            ImpactLocation::Newton => locate_newton(flow, wall, t0, &y0, rest, &y1),
+            ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
         };
         let Some((s, mut yc)) = hit else {
-            return y1;
+            return (y1, end);
         };
+        let phase_c = rotate(&phase0, &cos_sin(omega * s));
         if yc[1] <= 0.0 {
             // Reaching the wall without approaching it: the mass is pressed
             // into the wall (sticking), which a velocity reset cannot model.
             stats.chattering = true;
             yc[0] = wall.position;
             yc[1] = 0.0;
-            return clamp_to_wall(wall, rk4::step(flow, t0 + s, &yc, rest - s));
+            let (y, _) = sub.step(&phase_c, &yc, rest - s);
+            return (clamp_to_wall(wall, y), end);
         }
         yc[0] = wall.position;
         yc[1] *= -wall.restitution;
         stats.impacts += 1;
-        t0 += s;
+        done += s;
+        phase0 = phase_c;
         y0 = yc;
+        y1 = sub.step(&phase0, &y0, h - done).0;
     }
     stats.chattering = true;
-    clamp_to_wall(wall, rk4::step(flow, t0, &y0, t_end - t0))
+    (clamp_to_wall(wall, y1), end)
+}
+
+/// RK4 steps of any size s from a given phase: the re-steps of impact location.
+struct SubStep<'a, F> {
+    flow: &'a F,
+    omega: f64,
+}
+
+impl<F> SubStep<'_, F> {
+    fn step<const D: usize>(&self, phase: &Phase, y: &[f64; D], s: f64) -> ([f64; D], Phase)
+    where
+        F: Flow<D>,
+    {
+        rk4::step(self.flow, phase, &cos_sin(0.5 * self.omega * s), y, s)
+    }
 }
 
 fn clamp_to_wall<const D: usize>(wall: &Wall, mut y: [f64; D]) -> [f64; D] {
@@ -113,52 +144,51 @@ fn locate_linear<const D: usize>(
     ))
 }
 
-/// Re-steps RK4 from (t0, y0) to the impact: returns the offset s into the
-/// step and the state RK4 reaches there, X(s) = X_w to rounding.
+/// Re-steps RK4 from (phase0, y0) to the impact: returns the offset s into
+/// the step and the state RK4 reaches there, X(s) = X_w to rounding.
 fn locate_newton<const D: usize, F: Flow<D>>(
-    flow: &F,
+    sub: &SubStep<F>,
     wall: &Wall,
-    t0: f64,
+    phase0: &Phase,
     y0: &[f64; D],
     h: f64,
     y1: &[f64; D],
 ) -> Option<(f64, [f64; D])> {
     let xw = wall.position;
     let hermite = Hermite::new(y0[0] - xw, y0[1], y1[0] - xw, y1[1], h);
-    // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = X(RK4(t0, y0, s)) - X_w.
-    let (lo, hi, guess) = if y1[0] > xw {
-        (0.0, h, hermite.first_root(0.0, 1.0))
+    // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = X(RK4(y0, s)) - X_w.
+    let (hi, guess) = if y1[0] > xw {
+        (h, hermite.first_root(0.0, 1.0))
     } else if y0[1] > 0.0 && y1[1] < 0.0 {
         // Both ends short of the wall, but the velocity turns inside the
-        // step: an excursion past the wall in between is a (near-grazing) impact.
-        // The Hermite interpolant locates the peak well (X is flat there) but
-        // its value is off by O(h⁴); RK4 decides whether the peak is beyond
-        // the wall, at the cost of one step per oscillation.
+        // step: an excursion past the wall in between is a (near-grazing)
+        // impact. The Hermite interpolant locates the peak well (X is flat
+        // there) but its value is off by O(h⁴); RK4 decides whether the peak
+        // is beyond the wall, at the cost of one step per oscillation.
         let peak = hermite.peak()?;
-        let y_peak = rk4::step(flow, t0, y0, peak * h);
-        if y_peak[0] <= xw {
+        if sub.step(phase0, y0, peak * h).0[0] <= xw {
             return None;
         }
-        (0.0, peak * h, hermite.first_root(0.0, peak))
+        (peak * h, hermite.first_root(0.0, peak))
     } else {
         return None;
     };
-    Some(newton_in_bracket(flow, xw, t0, y0, lo, hi, guess * h))
+    Some(newton_in_bracket(sub, xw, phase0, y0, hi, guess * h))
 }
 
-/// Safeguarded Newton on g(s) = X(RK4(t0, y0, s)) - X_w with g'(s) ≈ V(s):
-/// bisects whenever Newton would leave the bracket.
+/// Safeguarded Newton on g(s) = X(RK4(y0, s)) - X_w with g'(s) ≈ V(s) in
+/// the bracket [0, hi]: bisects whenever Newton would leave the bracket.
 fn newton_in_bracket<const D: usize, F: Flow<D>>(
-    flow: &F,
+    sub: &SubStep<F>,
     xw: f64,
-    t0: f64,
+    phase0: &Phase,
     y0: &[f64; D],
-    mut lo: f64,
     mut hi: f64,
     mut s: f64,
 ) -> (f64, [f64; D]) {
     let tolerance = 4.0 * f64::EPSILON * xw.abs().max(1.0);
-    let mut y = rk4::step(flow, t0, y0, s);
+    let mut lo = 0.0;
+    let mut y = sub.step(phase0, y0, s).0;
     for _ in 0..32 {
         let g = y[0] - xw;
         if g.abs() <= tolerance {
@@ -178,7 +208,7 @@ fn newton_in_bracket<const D: usize, F: Flow<D>>(
         if hi - lo <= f64::EPSILON * hi.abs() {
             break;
         }
-        y = rk4::step(flow, t0, y0, s);
+        y = sub.step(phase0, y0, s).0;
     }
     (s, y)
 }
@@ -255,6 +285,30 @@ impl Hermite {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::integrate::clock::ZERO_PHASE;
+
+    /// An autonomous step: ω = 0, the phase never moves.
+    fn step_at<const D: usize, F: Flow<D>>(
+        flow: &F,
+        wall: &Wall,
+        location: ImpactLocation,
+        y: &[f64; D],
+        h: f64,
+        stats: &mut IterationStats,
+    ) -> [f64; D] {
+        step(
+            flow,
+            wall,
+            location,
+            0.0,
+            &ZERO_PHASE,
+            &ZERO_PHASE,
+            y,
+            h,
+            stats,
+        )
+        .0
+    }
 
     /// X'' = a > 0: a ball thrown at a ceiling by constant gravity. RK4 is
     /// exact on quadratics, so the only error left is the impact location.
@@ -263,7 +317,7 @@ mod tests {
     }
 
     impl Flow<2> for Gravity {
-        fn rhs(&self, _t: f64, y: &[f64; 2]) -> [f64; 2] {
+        fn rhs(&self, _phase: &Phase, y: &[f64; 2]) -> [f64; 2] {
             [y[1], self.a]
         }
     }
@@ -304,11 +358,10 @@ mod tests {
             "the test needs several impacts, got {impacts}"
         );
         let mut stats = IterationStats::default();
-        let y = step(
+        let y = step_at(
             &flow,
             &wall,
             ImpactLocation::Newton,
-            0.0,
             &[-d, 0.0],
             h,
             &mut stats,
@@ -332,7 +385,7 @@ mod tests {
                 let mut stats = IterationStats::default();
                 let h = 0.0137;
                 while t < 2.0 {
-                    y = step(&flow, &wall, location, t, &y, h, &mut stats);
+                    y = step_at(&flow, &wall, location, &y, h, &mut stats);
                     t += h;
                     assert!(
                         y[0] <= 0.0,
@@ -349,7 +402,7 @@ mod tests {
     struct Harmonic;
 
     impl Flow<2> for Harmonic {
-        fn rhs(&self, _t: f64, y: &[f64; 2]) -> [f64; 2] {
+        fn rhs(&self, _phase: &Phase, y: &[f64; 2]) -> [f64; 2] {
             [y[1], -y[0]]
         }
     }
@@ -365,11 +418,10 @@ mod tests {
         };
         let y0 = [0.1_f64.cos(), 0.1_f64.sin()];
         let mut stats = IterationStats::default();
-        let y = step(
+        let y = step_at(
             &Harmonic,
             &wall,
             ImpactLocation::Newton,
-            0.0,
             &y0,
             0.2,
             &mut stats,
@@ -378,11 +430,10 @@ mod tests {
         assert!(y[0] <= wall.position);
         // The paper's linear location only looks at the step ends and misses it.
         let mut linear = IterationStats::default();
-        step(
+        step_at(
             &Harmonic,
             &wall,
             ImpactLocation::Linear,
-            0.0,
             &y0,
             0.2,
             &mut linear,
@@ -399,11 +450,10 @@ mod tests {
             restitution: 0.0,
         };
         let mut stats = IterationStats::default();
-        let y = step(
+        let y = step_at(
             &Gravity { a: 1.0 },
             &wall,
             ImpactLocation::Newton,
-            0.0,
             &[-0.1, 0.0],
             2.0,
             &mut stats,

@@ -2,7 +2,7 @@
 //! wall impacts located inside the step that crosses the wall, and the
 //! closed-form propagator of the impact oscillator that serves as ground truth.
 
-#[path = "closed_form_stub.rs"]
+pub mod clock;
 pub mod closed_form;
 pub mod impact;
 pub mod rk4;
@@ -10,15 +10,21 @@ pub mod rk4;
 pub use impact::{ImpactLocation, Wall};
 
 use crate::system::{FlowSettings, IterationStats};
+use clock::{cos_sin, Phase, ZERO_PHASE};
 
-/// A flow y' = F(t, y) in D dimensions, possibly with a wall.
+/// A flow y' = F(t, y) in D dimensions, possibly forced, possibly with a wall.
 ///
-/// Time is local to the map iteration: every iteration starts at t = 0, which
-/// is exact for a forcing of period T and keeps the forcing phase from
-/// drifting over long runs.
+/// Time enters only through the forcing phase (cos ωt, sin ωt), which every
+/// map iteration restarts at ωt = 0 (see [`clock`]): exact for a forcing of
+/// period T, and no time variable can drift over long runs.
 pub trait Flow<const D: usize>: Sync {
-    /// The right-hand side F(t, y).
-    fn rhs(&self, t: f64, y: &[f64; D]) -> [f64; D];
+    /// The right-hand side F(t, y), given phase = (cos ωt, sin ωt).
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D];
+
+    /// ω of the forcing; 0 for an autonomous flow.
+    fn forcing_frequency(&self) -> f64 {
+        0.0
+    }
 
     /// The rigid wall acting on coordinate 0 (position) with coordinate 1 its
     /// velocity, if the system has one.
@@ -38,25 +44,20 @@ pub fn time_map<const D: usize, F: Flow<D>>(
 ) -> [f64; D] {
     let steps = settings.steps_per_period;
     let h = period / steps as f64;
-    let mut y = *x;
+    let omega = flow.forcing_frequency();
+    let half = cos_sin(0.5 * omega * h);
+    let (mut y, mut phase) = (*x, ZERO_PHASE);
     match flow.wall() {
         None => {
-            for k in 0..steps {
-                // t from k·h rather than by summation, so no rounding accumulates in it.
-                y = rk4::step(flow, k as f64 * h, &y, h);
+            for _ in 0..steps {
+                (y, phase) = rk4::step(flow, &phase, &half, &y, h);
             }
         }
         Some(wall) => {
-            for k in 0..steps {
-                y = impact::step(
-                    flow,
-                    &wall,
-                    settings.impact_location,
-                    k as f64 * h,
-                    &y,
-                    h,
-                    stats,
-                );
+            let location = settings.impact_location;
+            for _ in 0..steps {
+                (y, phase) =
+                    impact::step(flow, &wall, location, omega, &phase, &half, &y, h, stats);
             }
         }
     }

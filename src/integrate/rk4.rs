@@ -1,24 +1,32 @@
-//! The classical fourth-order Runge–Kutta step (the paper's integrator).
+//! The classical fourth-order Runge–Kutta step (the paper's integrator),
+//! twin of `shaders/shared/rk4.wgsl`.
 
+use super::clock::{rotate, Phase};
 use super::Flow;
 
-/// One RK4 step of size h from (t, y):
+/// One RK4 step of size h from y at forcing phase `phase` (= ωt), where
+/// `half` is the rotation through ωh/2:
 /// k1 = F(t, y), k2 = F(t + h/2, y + h/2·k1), k3 = F(t + h/2, y + h/2·k2),
 /// k4 = F(t + h, y + h·k3), y + h/6·(k1 + 2k2 + 2k3 + k4).
+/// Returns the new state and the phase at t + h.
 #[inline]
 pub fn step<const D: usize, F: Flow<D> + ?Sized>(
     flow: &F,
-    t: f64,
+    phase: &Phase,
+    half: &Phase,
     y: &[f64; D],
     h: f64,
-) -> [f64; D] {
-    let half = 0.5 * h;
-    let k1 = flow.rhs(t, y);
-    let k2 = flow.rhs(t + half, &axpy(y, half, &k1));
-    let k3 = flow.rhs(t + half, &axpy(y, half, &k2));
-    let k4 = flow.rhs(t + h, &axpy(y, h, &k3));
+) -> ([f64; D], Phase) {
+    let mid = rotate(phase, half);
+    let end = rotate(&mid, half);
+    let h2 = 0.5 * h;
+    let k1 = flow.rhs(phase, y);
+    let k2 = flow.rhs(&mid, &axpy(y, h2, &k1));
+    let k3 = flow.rhs(&mid, &axpy(y, h2, &k2));
+    let k4 = flow.rhs(&end, &axpy(y, h, &k3));
     let sixth = h / 6.0;
-    std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+    let next = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+    (next, end)
 }
 
 /// y + a·k
@@ -30,10 +38,11 @@ fn axpy<const D: usize>(y: &[f64; D], a: f64, k: &[f64; D]) -> [f64; D] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::integrate::clock::{cos_sin, ZERO_PHASE};
 
     struct Decay;
     impl Flow<1> for Decay {
-        fn rhs(&self, _t: f64, y: &[f64; 1]) -> [f64; 1] {
+        fn rhs(&self, _phase: &Phase, y: &[f64; 1]) -> [f64; 1] {
             [-y[0]]
         }
     }
@@ -43,6 +52,29 @@ mod tests {
         // For y' = -y, RK4's stability function is 1 - h + h²/2 - h³/6 + h⁴/24.
         let h = 0.1_f64;
         let expected = 1.0 - h + h * h / 2.0 - h.powi(3) / 6.0 + h.powi(4) / 24.0;
-        assert!((step(&Decay, 0.0, &[1.0], h)[0] - expected).abs() < 1e-16);
+        let (y, _) = step(&Decay, &ZERO_PHASE, &cos_sin(0.0), &[1.0], h);
+        assert!(
+            (y[0] - expected).abs() <= 2.0 * f64::EPSILON,
+            "{} vs {expected}",
+            y[0]
+        );
+    }
+
+    /// y' = cos(ωt): the forcing alone, integrated through the phase.
+    struct Forcing;
+    impl Flow<1> for Forcing {
+        fn rhs(&self, phase: &Phase, _y: &[f64; 1]) -> [f64; 1] {
+            [phase[0]]
+        }
+    }
+
+    #[test]
+    fn the_phase_is_the_forcing_at_the_stage_times() {
+        // ∫ cos(ωt) over [0, h] is sin(ωh)/ω; RK4 is Simpson's rule here.
+        let (omega, h) = (0.8_f64, 0.05);
+        let (y, end) = step(&Forcing, &ZERO_PHASE, &cos_sin(omega * h / 2.0), &[0.0], h);
+        let simpson = h / 6.0 * (1.0 + 4.0 * (omega * h / 2.0).cos() + (omega * h).cos());
+        assert!((y[0] - simpson).abs() < 1e-17);
+        assert!((end[0] - (omega * h).cos()).abs() < 1e-16);
     }
 }

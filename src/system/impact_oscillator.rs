@@ -12,6 +12,7 @@ use std::f64::consts::TAU;
 use nalgebra::SMatrix;
 
 use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use crate::integrate::clock::Phase;
 use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
 use crate::integrate::{time_map, Flow, Wall};
 
@@ -104,12 +105,14 @@ fn expected_sum(p: &Params, impacts_per_time: f64) -> f64 {
 }
 
 impl Flow<2> for ImpactOscillator {
+    /// X' = V, V' = -2ζV - X + f·cos(ητ), with phase = (cos ητ, sin ητ).
     #[inline]
-    fn rhs(&self, t: f64, y: &[f64; 2]) -> [f64; 2] {
-        [
-            y[1],
-            -2.0 * self.zeta * y[1] - y[0] + self.f * (self.eta * t).cos(),
-        ]
+    fn rhs(&self, phase: &Phase, y: &[f64; 2]) -> [f64; 2] {
+        [y[1], -2.0 * self.zeta * y[1] - y[0] + self.f * phase[0]]
+    }
+
+    fn forcing_frequency(&self) -> f64 {
+        self.eta
     }
 
     fn wall(&self) -> Option<Wall> {

@@ -7,6 +7,7 @@
 //! constant -(σ + 1 + β), so the exponents sum to it exactly.
 
 use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use crate::integrate::clock::Phase;
 use crate::integrate::{time_map, Flow};
 
 pub const INFO: SystemInfo = SystemInfo {
@@ -62,7 +63,7 @@ fn check(p: &Params) -> Result<(), (&'static str, String)> {
 
 impl Flow<3> for Lorenz {
     #[inline]
-    fn rhs(&self, _t: f64, s: &[f64; 3]) -> [f64; 3] {
+    fn rhs(&self, _phase: &Phase, s: &[f64; 3]) -> [f64; 3] {
         let [x, y, z] = *s;
         [
             self.sigma * (y - x),
