@@ -106,6 +106,7 @@ pub fn method_settings(scene: &Scene, backend: Backend) -> MethodSettings {
         },
         lyapunov: scene.lyapunov,
         bifurcation_points: scene.bifurcation_points,
+        rounding_unit: f64::EPSILON,
         steps_per_iteration: if scene.system.is_flow {
             i.steps_per_period
         } else {

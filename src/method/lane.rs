@@ -39,15 +39,16 @@ pub struct MethodSettings {
     /// steps of a flow, 1 for a map): sets the smallest contraction the
     /// finite difference resolves.
     pub steps_per_iteration: usize,
+    /// The unit roundoff of the arithmetic the images are computed in
+    /// (f64::EPSILON, or f32::EPSILON on the GPU's f32 path).
+    pub rounding_unit: f64,
 }
 
-impl MethodSettings {
-    /// The noise in a finite-difference column: the rounding of an image of
-    /// size `scale`, accumulated over the steps of one iteration, over δ.
-    /// An R_ii near it is mostly rounding.
-    pub fn difference_noise(&self, scale: f64) -> f64 {
-        f64::EPSILON * scale.max(1.0) * (self.steps_per_iteration as f64).sqrt() / self.perturbation
-    }
+/// The noise in a finite-difference column: the rounding of an image of
+/// size `scale`, accumulated over the `steps` of one iteration, over δ.
+/// An R_ii near it is mostly rounding.
+pub fn difference_noise(unit: f64, scale: f64, steps: usize, delta: f64) -> f64 {
+    unit * scale.max(1.0) * (steps as f64).sqrt() / delta
 }
 
 /// The estimated exponent error per unit time from finite-difference noise
@@ -125,80 +126,153 @@ where
 {
     let settings = lane.settings;
     let system = S::new(&lane.params);
-    let period = system.period();
     let flow = &settings.flow;
-    let failed = |iteration: usize, bifurcation: Vec<f64>| LaneResult {
-        exponents: if settings.lyapunov {
-            vec![f64::NAN; D]
-        } else {
-            Vec::new()
-        },
-        impacts_per_period: f64::NAN,
-        period,
-        bifurcation,
-        status: LaneStatus::NonFinite { iteration },
-    };
+    let mut acc = LaneAccumulator::<D>::new(settings, system.period());
 
     let mut x: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
         x = system.iterate(&x, flow, &mut discard);
         if !all_finite(&x) {
-            return failed(n, Vec::new());
+            return acc.failed(n);
         }
     }
-
-    let mut qr = QrAccumulator::<D>::new();
-    let mut bifurcation = Vec::with_capacity(settings.bifurcation_points * D);
-    let first_kept = settings.iterations - settings.bifurcation_points.min(settings.iterations);
-    let (mut impacts, mut chattering, mut noise_over_r) = (0u64, 0usize, 0.0);
-    for n in 0..settings.iterations {
+    for _ in 0..settings.iterations {
         let mut stats = IterationStats::default();
         let (next, jacobian) = step::<D, S>(&system, flow, settings, &x, &mut stats);
-        let healthy = all_finite(&next)
-            && jacobian
-                .as_ref()
-                .is_none_or(|j| j.iter().all(|v| v.is_finite()));
-        if !healthy {
-            return failed(settings.transient + n, bifurcation);
-        }
-        if let Some(j) = jacobian {
-            let diag = qr.push(&j);
-            if !diag.iter().all(|r| r.ln().is_finite()) {
-                // A singular Jacobian: a direction contracted below what δ and
-                // rounding can resolve in one iteration.
-                return failed(settings.transient + n, bifurcation);
-            }
-            if settings.tangent == Tangent::FiniteDifference {
-                let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-                let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
-                noise_over_r += settings.difference_noise(scale) / smallest;
-            }
-        }
-        impacts += u64::from(stats.impacts);
-        chattering += usize::from(stats.chattering);
-        if n >= first_kept {
-            bifurcation.extend_from_slice(&next);
+        if !acc.push(&next, jacobian.as_ref(), &stats) {
+            break;
         }
         x = next;
     }
+    acc.finish()
+}
 
-    let resolution_bound = noise_over_r / (settings.iterations as f64 * period);
-    let exponents = if settings.lyapunov {
-        let mut e = qr.exponents(period).to_vec();
-        e.sort_by(|a, b| b.total_cmp(a));
-        e
-    } else {
-        Vec::new()
-    };
-    LaneResult {
-        exponents,
-        impacts_per_period: impacts as f64 / settings.iterations as f64,
-        period,
-        bifurcation,
-        status: if chattering > 0 {
+/// Everything a lane accumulates over its averaging iterations, whichever
+/// backend produced the iterations: the QR sums, the impact count, the
+/// health counters and the kept bifurcation points.
+#[derive(Clone, Debug)]
+pub struct LaneAccumulator<const D: usize> {
+    qr: QrAccumulator<D>,
+    period: f64,
+    transient: usize,
+    iterations: usize,
+    lyapunov: bool,
+    first_kept: usize,
+    /// Rounding unit and δ of the run, for the resolution bound.
+    noise: Option<(f64, f64, usize)>,
+    done: usize,
+    impacts: u64,
+    chattering: usize,
+    noise_over_r: f64,
+    bifurcation: Vec<f64>,
+    failed_at: Option<usize>,
+}
+
+impl<const D: usize> LaneAccumulator<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    pub fn new(settings: &MethodSettings, period: f64) -> Self {
+        let kept = settings.bifurcation_points.min(settings.iterations);
+        LaneAccumulator {
+            qr: QrAccumulator::new(),
+            period,
+            transient: settings.transient,
+            iterations: settings.iterations,
+            lyapunov: settings.lyapunov,
+            first_kept: settings.iterations - kept,
+            noise: (settings.tangent == Tangent::FiniteDifference).then_some((
+                settings.rounding_unit,
+                settings.perturbation,
+                settings.steps_per_iteration,
+            )),
+            done: 0,
+            impacts: 0,
+            chattering: 0,
+            noise_over_r: 0.0,
+            bifurcation: Vec::with_capacity(kept * D),
+            failed_at: None,
+        }
+    }
+
+    /// Takes one averaging iteration: the reference's new point, the
+    /// Jacobian of the map at the old one (when exponents are wanted) and
+    /// what happened on the way. Returns false once the lane has failed.
+    pub fn push(
+        &mut self,
+        next: &[f64; D],
+        jacobian: Option<&SMatrix<f64, D, D>>,
+        stats: &IterationStats,
+    ) -> bool {
+        if self.failed_at.is_some() {
+            return false;
+        }
+        let n = self.done;
+        let healthy = all_finite(next) && jacobian.is_none_or(|j| j.iter().all(|v| v.is_finite()));
+        if !healthy {
+            self.failed_at = Some(self.transient + n);
+            return false;
+        }
+        if let Some(j) = jacobian {
+            let diag = self.qr.push(j);
+            if !diag.iter().all(|r| r.ln().is_finite()) {
+                // A singular Jacobian: a direction contracted below what δ and
+                // rounding can resolve in one iteration.
+                self.failed_at = Some(self.transient + n);
+                return false;
+            }
+            if let Some((unit, delta, steps)) = self.noise {
+                let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+                let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
+                self.noise_over_r += difference_noise(unit, scale, steps, delta) / smallest;
+            }
+        }
+        self.impacts += u64::from(stats.impacts);
+        self.chattering += usize::from(stats.chattering);
+        if n >= self.first_kept {
+            self.bifurcation.extend_from_slice(next);
+        }
+        self.done += 1;
+        true
+    }
+
+    /// Marks the lane failed at `iteration` (counted from the start of the transient).
+    pub fn fail(&mut self, iteration: usize) {
+        self.failed_at.get_or_insert(iteration);
+    }
+
+    fn failed(mut self, iteration: usize) -> LaneResult {
+        self.fail(iteration);
+        self.finish()
+    }
+
+    /// The lane's result after all its iterations.
+    pub fn finish(self) -> LaneResult {
+        if let Some(iteration) = self.failed_at {
+            return LaneResult {
+                exponents: if self.lyapunov {
+                    vec![f64::NAN; D]
+                } else {
+                    Vec::new()
+                },
+                impacts_per_period: f64::NAN,
+                period: self.period,
+                bifurcation: self.bifurcation,
+                status: LaneStatus::NonFinite { iteration },
+            };
+        }
+        let resolution_bound = self.noise_over_r / (self.iterations as f64 * self.period);
+        let exponents = if self.lyapunov {
+            let mut e = self.qr.exponents(self.period).to_vec();
+            e.sort_by(|a, b| b.total_cmp(a));
+            e
+        } else {
+            Vec::new()
+        };
+        let status = if self.chattering > 0 {
             LaneStatus::Chattering {
-                iterations: chattering,
+                iterations: self.chattering,
             }
         } else if resolution_bound > RESOLUTION_BOUND {
             LaneStatus::Unresolved {
@@ -206,7 +280,14 @@ where
             }
         } else {
             LaneStatus::Ok
-        },
+        };
+        LaneResult {
+            exponents,
+            impacts_per_period: self.impacts as f64 / self.iterations as f64,
+            period: self.period,
+            bifurcation: self.bifurcation,
+            status,
+        }
     }
 }
 

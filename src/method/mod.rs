@@ -6,4 +6,4 @@ pub mod jacobian;
 pub mod lane;
 pub mod qr;
 
-pub use lane::{run_lane, Lane, LaneResult, LaneStatus, MethodSettings, Tangent};
+pub use lane::{run_lane, Lane, LaneAccumulator, LaneResult, LaneStatus, MethodSettings, Tangent};
