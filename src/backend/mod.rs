@@ -2,6 +2,7 @@
 //! the exact closed-form tangent map, and (next) the GPU ensemble.
 
 pub mod cpu;
+pub mod gpu;
 
 use std::time::{Duration, Instant};
 

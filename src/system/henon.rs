@@ -31,6 +31,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| p.get("b").abs().ln(),
     run_lane: crate::method::run_lane::<2, Henon>,
+    wgsl: Some(include_str!("../../shaders/system/henon.wgsl")),
+    wall_reachable: None,
 };
 
 #[derive(Clone, Copy, Debug)]

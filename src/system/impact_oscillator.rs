@@ -54,6 +54,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check_state,
     expected_sum,
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
+    wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
+    wall_reachable: Some(wall_reachable),
 };
 
 /// The oscillator with its parameters.
@@ -93,6 +95,19 @@ fn check_state(p: &Params, x: &[f64]) -> Result<(), String> {
         return Err(format!("x = {} lies behind the wall at {wall}", x[0]));
     }
     Ok(())
+}
+
+/// Between impacts X = X_p + u with X_p = A cos ητ + B sin ητ the harmonic
+/// response and u'' + 2ζu' + u = 0, whose energy u² + u'² never grows
+/// (d/dt = -4ζu'²). So X never exceeds |X_p| + √(u(0)² + u'(0)²) before the
+/// first impact: a wall beyond that bound is never reached.
+fn wall_reachable(p: &Params, x: &[f64]) -> bool {
+    let (zeta, f, eta) = (p.get("zeta"), p.get("f"), p.get("eta"));
+    let d = (1.0 - eta * eta).powi(2) + (2.0 * zeta * eta).powi(2);
+    let (a, b) = (f * (1.0 - eta * eta) / d, f * 2.0 * zeta * eta / d);
+    let (u, du) = (x[0] - a, x[1] - eta * b);
+    let bound = (a * a + b * b).sqrt() + (u * u + du * du).sqrt();
+    !(p.get("wall") > bound * (1.0 + 1e-9))
 }
 
 fn expected_sum(p: &Params, impacts_per_time: f64) -> f64 {

@@ -43,6 +43,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| -(p.get("sigma") + 1.0 + p.get("beta")),
     run_lane: crate::method::run_lane::<3, Lorenz>,
+    wgsl: Some(include_str!("../../shaders/system/lorenz.wgsl")),
+    wall_reachable: None,
 };
 
 #[derive(Clone, Copy, Debug)]

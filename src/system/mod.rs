@@ -57,6 +57,16 @@ pub struct SystemInfo {
     pub expected_sum: fn(&Params, f64) -> f64,
     /// Runs one lane on the dimension-specific code path.
     pub run_lane: fn(&Lane) -> crate::method::LaneResult,
+    /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
+    /// struct (fields in the order of `parameters`) and `rhs` for a flow
+    /// (with `wall_position`/`wall_restitution` when it has a wall) or
+    /// `map_step` for a map. `None`: no GPU backend for this system.
+    pub wgsl: Option<&'static str>,
+    /// Whether the trajectory from this start can reach the system's wall at
+    /// these parameters (a conservative bound: `true` when unsure); `None`
+    /// for a system without a wall. A sweep that cannot reach it runs GPU
+    /// kernels compiled without impact code.
+    pub wall_reachable: Option<fn(&Params, &[f64]) -> bool>,
 }
 
 impl SystemInfo {

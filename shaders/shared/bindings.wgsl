@@ -1,0 +1,72 @@
+// The buffers both kernels share. Host twins: src/backend/gpu/sweep.rs.
+//
+// A lane is one parameter value; it owns TRAJ trajectories (the reference,
+// then one perturbed copy per coordinate when exponents are wanted), stored
+// lane-major so a lane's trajectories sit side by side and take the same
+// branches (impacts) together.
+
+struct Control {
+    // Lanes in this batch.
+    lane_count: u32,
+    // RK4 steps per map period (1 for a map).
+    steps_per_period: u32,
+    // RK4 steps per integrate dispatch, bounding each dispatch's work.
+    chunk_steps: u32,
+    // 1 while discarding the transient: references only, nothing recorded.
+    transient: u32,
+    // Iteration slots in the output ring.
+    ring: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
+}
+
+// Per lane: the system's parameters, then h, cos(ωh/2), sin(ωh/2), ω, δ.
+const LANE_H: u32 = PARAM_COUNT;
+const LANE_HALF: u32 = PARAM_COUNT + 1u;
+const LANE_OMEGA: u32 = PARAM_COUNT + 3u;
+const LANE_DELTA: u32 = PARAM_COUNT + 4u;
+const LANE_STRIDE: u32 = PARAM_COUNT + 5u;
+
+// Per trajectory: y (DIM), the compensation of y (DIM), the phase (2).
+const TRAJ_STRIDE: u32 = 2u * DIM + 2u;
+
+// counts[t]: (step within the period, impacts this iteration, flags, iteration).
+const FLAG_CHATTERING: u32 = 1u;
+const FLAG_NONFINITE: u32 = 2u;
+
+@group(0) @binding(0) var<uniform> control: Control;
+@group(0) @binding(1) var<storage, read> lanes: array<real>;
+@group(0) @binding(2) var<storage, read_write> traj: array<real>;
+@group(0) @binding(3) var<storage, read_write> counts: array<vec4<u32>>;
+// Per ring slot and lane: (impacts, flags, bits of the f32 max |y|, 0).
+@group(0) @binding(4) var<storage, read_write> summary: array<vec4<u32>>;
+#ifdef LYAPUNOV
+// Per lane: the perturbation actually taken per coordinate, (x_i + δ) - x_i.
+@group(0) @binding(5) var<storage, read_write> deltas: array<real>;
+// Per ring slot and lane: the estimated Jacobian, row-major.
+@group(0) @binding(6) var<storage, read_write> jac: array<real>;
+#endif
+#ifdef POINTS
+// Per ring slot and lane: the reference's Poincaré point.
+@group(0) @binding(7) var<storage, read_write> points: array<real>;
+#endif
+
+fn load_state(base: u32) -> State {
+    var y: State;
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        y[k] = traj[base + k];
+    }
+    return y;
+}
+
+fn store_state(base: u32, y: State) {
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        traj[base + k] = y[k];
+    }
+}
+
+fn is_finite(y: State) -> bool {
+    // NaN fails every comparison; infinity exceeds the largest real.
+    return all(abs(y) <= State(MAX_REAL));
+}

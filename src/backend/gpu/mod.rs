@@ -1,0 +1,6 @@
+//! The GPU ensemble backend: WGSL compute kernels through wgpu integrate the
+//! reference and the perturbed trajectories of thousands of parameter values
+//! at once, each lane locating its own impacts; the host reads the Jacobians
+//! back in chunks and accumulates QR while the next chunk computes.
+
+pub mod shader;

@@ -1,0 +1,224 @@
+//! Composing the WGSL kernels: a generated prelude (the `real` type, the
+//! state dimension, which parts are present), the shared files, the system's
+//! own file and the kernel, through a small preprocessor (`#include`,
+//! `#ifdef`/`#ifndef`/`#else`/`#endif`) in the manner of vello's.
+
+use std::collections::BTreeSet;
+
+use crate::integrate::ImpactLocation;
+use crate::scene::Precision;
+use crate::system::SystemInfo;
+
+/// The WGSL sources, by the path kernels include them with.
+const SOURCES: &[(&str, &str)] = &[
+    (
+        "shared/bindings.wgsl",
+        include_str!("../../../shaders/shared/bindings.wgsl"),
+    ),
+    (
+        "shared/clock.wgsl",
+        include_str!("../../../shaders/shared/clock.wgsl"),
+    ),
+    (
+        "shared/rk4.wgsl",
+        include_str!("../../../shaders/shared/rk4.wgsl"),
+    ),
+    (
+        "shared/impact.wgsl",
+        include_str!("../../../shaders/shared/impact.wgsl"),
+    ),
+    (
+        "integrate.wgsl",
+        include_str!("../../../shaders/integrate.wgsl"),
+    ),
+    ("finish.wgsl", include_str!("../../../shaders/finish.wgsl")),
+];
+
+/// The two kernels of a sweep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// Advance trajectories by a bounded number of RK4 steps.
+    Integrate,
+    /// End a map iteration: Jacobian, point, summary, re-seeding.
+    Finish,
+}
+
+impl Kernel {
+    pub const ALL: [Kernel; 2] = [Kernel::Integrate, Kernel::Finish];
+
+    fn file(self) -> &'static str {
+        match self {
+            Kernel::Integrate => "integrate.wgsl",
+            Kernel::Finish => "finish.wgsl",
+        }
+    }
+}
+
+/// What a scene needs compiled in; everything else is left out.
+#[derive(Clone, Copy, Debug)]
+pub struct Variant {
+    pub system: &'static SystemInfo,
+    pub precision: Precision,
+    /// Perturbed copies and the Jacobian buffer (`[output] lyapunov`).
+    pub lyapunov: bool,
+    /// Impact code: the system has a wall the sweep can reach.
+    pub wall: bool,
+    /// The Poincaré point buffer (`bifurcation_points > 0`).
+    pub points: bool,
+    pub impact_location: ImpactLocation,
+}
+
+impl Variant {
+    /// Trajectories per lane: the reference and one copy per coordinate.
+    pub fn trajectories(&self) -> usize {
+        1 + if self.lyapunov {
+            self.system.dimension()
+        } else {
+            0
+        }
+    }
+
+    /// A short name for the summary, e.g. `impact-oscillator/f64/wall+newton/jacobian/points`.
+    pub fn name(&self) -> String {
+        let mut parts = vec![
+            self.system.kind.to_owned(),
+            self.precision_name().to_owned(),
+        ];
+        if self.wall {
+            parts.push(format!("wall+{}", self.impact_location.name()));
+        } else if self.system.is_flow {
+            parts.push("no-wall".into());
+        }
+        parts.push(
+            if self.lyapunov {
+                "jacobian"
+            } else {
+                "reference-only"
+            }
+            .into(),
+        );
+        if self.points {
+            parts.push("points".into());
+        }
+        parts.join("/")
+    }
+
+    fn precision_name(&self) -> &'static str {
+        match self.precision {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        }
+    }
+
+    /// The names `#ifdef` tests.
+    pub fn defines(&self) -> BTreeSet<&'static str> {
+        let mut d = BTreeSet::new();
+        if self.lyapunov {
+            d.insert("LYAPUNOV");
+        }
+        if self.wall {
+            d.insert("WALL");
+            if self.impact_location == ImpactLocation::Linear {
+                d.insert("IMPACT_LINEAR");
+            }
+        }
+        if self.points {
+            d.insert("POINTS");
+        }
+        if !self.system.is_flow {
+            d.insert("MAP");
+        }
+        if self.precision == Precision::F32 {
+            d.insert("COMPENSATED");
+        }
+        d
+    }
+
+    /// The generated prelude: types and sizes of this variant.
+    fn prelude(&self) -> String {
+        let dim = self.system.dimension();
+        let (real, epsilon, max) = match self.precision {
+            Precision::F64 => ("f64", "2.220446049250313e-16", "1.7976931348623157e308"),
+            Precision::F32 => ("f32", "1.1920929e-7", "3.4028235e38"),
+        };
+        let fields: Vec<String> = (0..self.system.parameters.len())
+            .map(|i| format!("lanes[b + {i}u]"))
+            .collect();
+        format!(
+            "// Generated prelude: variant {name}\n\
+             alias real = {real};\n\
+             alias State = vec{dim}<real>;\n\
+             const DIM: u32 = {dim}u;\n\
+             const TRAJ: u32 = {traj}u;\n\
+             const PARAM_COUNT: u32 = {params}u;\n\
+             const EPSILON: real = real({epsilon});\n\
+             const MAX_REAL: real = real({max});\n\
+             fn load_params(lane: u32) -> Params {{\n    let b = lane * LANE_STRIDE;\n    return Params({fields});\n}}\n",
+            name = self.name(),
+            traj = self.trajectories(),
+            params = self.system.parameters.len(),
+            fields = fields.join(", "),
+        )
+    }
+
+    /// The complete WGSL of one kernel of this variant.
+    pub fn source(&self, kernel: Kernel) -> String {
+        let system = self
+            .system
+            .wgsl
+            .expect("GPU variants exist only for systems with a WGSL twin");
+        let defines = self.defines();
+        let mut out = self.prelude();
+        out.push_str(&preprocess(system, &defines));
+        out.push_str(&preprocess(include("shared/clock.wgsl"), &defines));
+        if self.system.is_flow {
+            out.push_str(&preprocess(include("shared/rk4.wgsl"), &defines));
+        }
+        if self.wall {
+            out.push_str(&preprocess(include("shared/impact.wgsl"), &defines));
+        }
+        out.push_str(&preprocess(include(kernel.file()), &defines));
+        out
+    }
+}
+
+fn include(path: &str) -> &'static str {
+    SOURCES
+        .iter()
+        .find(|(p, _)| *p == path)
+        .map(|(_, s)| *s)
+        .unwrap_or_else(|| panic!("no shader source {path}"))
+}
+
+/// Expands `#include "path"` and keeps or drops lines by
+/// `#ifdef NAME` / `#ifndef NAME` / `#else` / `#endif` (nestable).
+pub fn preprocess(source: &str, defines: &BTreeSet<&str>) -> String {
+    let mut out = String::with_capacity(source.len());
+    // For each open #if: (whether its branch is kept, whether the enclosing ones are).
+    let mut stack: Vec<(bool, bool)> = Vec::new();
+    let active = |stack: &[(bool, bool)]| stack.last().is_none_or(|&(this, outer)| this && outer);
+    for line in source.lines() {
+        let trimmed = line.trim_start();
+        if let Some(name) = trimmed.strip_prefix("#ifdef ") {
+            let outer = active(&stack);
+            stack.push((defines.contains(name.trim()), outer));
+        } else if let Some(name) = trimmed.strip_prefix("#ifndef ") {
+            let outer = active(&stack);
+            stack.push((!defines.contains(name.trim()), outer));
+        } else if trimmed.starts_with("#else") {
+            let top = stack.last_mut().expect("#else without #ifdef");
+            top.0 = !top.0;
+        } else if trimmed.starts_with("#endif") {
+            stack.pop().expect("#endif without #ifdef");
+        } else if let Some(path) = trimmed.strip_prefix("#include ") {
+            if active(&stack) {
+                out.push_str(&preprocess(include(path.trim().trim_matches('"')), defines));
+            }
+        } else if active(&stack) {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(stack.is_empty(), "unterminated #ifdef");
+    out
+}

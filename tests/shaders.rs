@@ -1,0 +1,202 @@
+//! Every shader variant validates with naga, without an adapter; f64
+//! variants call no transcendental builtin; variants leave out what a scene
+//! does not need.
+
+use lyapsweep::backend::gpu::shader::{Kernel, Variant};
+use lyapsweep::integrate::ImpactLocation;
+use lyapsweep::scene::Precision;
+use lyapsweep::system::SYSTEMS;
+use naga::valid::{Capabilities, ValidationFlags, Validator};
+
+fn all_variants() -> Vec<Variant> {
+    let mut variants = Vec::new();
+    for &system in SYSTEMS {
+        for precision in [Precision::F64, Precision::F32] {
+            for lyapunov in [true, false] {
+                for points in [true, false] {
+                    let walls: &[bool] = if system.wall_reachable.is_some() {
+                        &[true, false]
+                    } else {
+                        &[false]
+                    };
+                    for &wall in walls {
+                        for impact_location in [ImpactLocation::Newton, ImpactLocation::Linear] {
+                            variants.push(Variant {
+                                system,
+                                precision,
+                                lyapunov,
+                                wall,
+                                points,
+                                impact_location,
+                            });
+                        }
+                    }
+                }
+            }
+        }
+    }
+    variants
+}
+
+fn module(variant: &Variant, kernel: Kernel) -> naga::Module {
+    let source = variant.source(kernel);
+    let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| {
+        panic!(
+            "{} {kernel:?}: {}",
+            variant.name(),
+            e.emit_to_string(&source)
+        )
+    });
+    Validator::new(ValidationFlags::all(), Capabilities::FLOAT64)
+        .validate(&module)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{} {kernel:?}: {}",
+                variant.name(),
+                e.emit_to_string(&source)
+            )
+        });
+    module
+}
+
+#[test]
+fn every_variant_validates() {
+    let variants = all_variants();
+    assert!(variants.len() >= 40);
+    for v in &variants {
+        for kernel in Kernel::ALL {
+            module(v, kernel);
+        }
+    }
+}
+
+#[test]
+fn no_variant_calls_a_transcendental_builtin() {
+    use naga::MathFunction as M;
+    // Undefined on f64 under Vulkan (SPIR-V GLSL.std.450 is 16/32-bit only).
+    let forbidden = [
+        M::Sin,
+        M::Cos,
+        M::Tan,
+        M::Asin,
+        M::Acos,
+        M::Atan,
+        M::Atan2,
+        M::Sinh,
+        M::Cosh,
+        M::Tanh,
+        M::Exp,
+        M::Exp2,
+        M::Log,
+        M::Log2,
+        M::Pow,
+    ];
+    for v in all_variants() {
+        for kernel in Kernel::ALL {
+            let m = module(&v, kernel);
+            let functions = m
+                .functions
+                .iter()
+                .map(|(_, f)| f)
+                .chain(m.entry_points.iter().map(|e| &e.function));
+            for f in functions {
+                for (_, e) in f.expressions.iter() {
+                    if let naga::Expression::Math { fun, .. } = e {
+                        assert!(
+                            !forbidden.contains(fun),
+                            "{} {kernel:?} calls {fun:?}",
+                            v.name()
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn has_function(m: &naga::Module, name: &str) -> bool {
+    m.functions
+        .iter()
+        .any(|(_, f)| f.name.as_deref() == Some(name))
+}
+
+fn has_global(m: &naga::Module, name: &str) -> bool {
+    m.global_variables
+        .iter()
+        .any(|(_, g)| g.name.as_deref() == Some(name))
+}
+
+#[test]
+fn variants_leave_out_what_the_scene_does_not_need() {
+    let oscillator = SYSTEMS[0];
+    let full = Variant {
+        system: oscillator,
+        precision: Precision::F64,
+        lyapunov: true,
+        wall: true,
+        points: true,
+        impact_location: ImpactLocation::Newton,
+    };
+    let integrate = module(&full, Kernel::Integrate);
+    let finish = module(&full, Kernel::Finish);
+    assert!(
+        has_function(&integrate, "resolve_impacts") && has_function(&integrate, "locate_newton")
+    );
+    assert!(
+        has_global(&finish, "jac")
+            && has_global(&finish, "deltas")
+            && has_global(&finish, "points")
+    );
+    assert_eq!(full.trajectories(), 3);
+
+    // A wall the sweep cannot reach: no impact code at all.
+    let no_wall = Variant {
+        wall: false,
+        ..full
+    };
+    let m = module(&no_wall, Kernel::Integrate);
+    for f in [
+        "resolve_impacts",
+        "locate_newton",
+        "locate_linear",
+        "hermite_peak",
+    ] {
+        assert!(!has_function(&m, f), "{f} compiled without a wall");
+    }
+    assert!(!no_wall
+        .source(Kernel::Integrate)
+        .contains("wall_position(p)"));
+
+    // The paper's linear location compiles no Newton search.
+    let linear = Variant {
+        impact_location: ImpactLocation::Linear,
+        ..full
+    };
+    let m = module(&linear, Kernel::Integrate);
+    assert!(has_function(&m, "locate_linear") && !has_function(&m, "locate_newton"));
+
+    // No exponents: no perturbed copies, no Jacobian or perturbation buffers.
+    let reference_only = Variant {
+        lyapunov: false,
+        ..full
+    };
+    assert_eq!(reference_only.trajectories(), 1);
+    let m = module(&reference_only, Kernel::Finish);
+    assert!(!has_global(&m, "jac") && !has_global(&m, "deltas"));
+
+    // No bifurcation points: no point buffer.
+    let no_points = Variant {
+        points: false,
+        ..full
+    };
+    assert!(!has_global(&module(&no_points, Kernel::Finish), "points"));
+
+    // f32 compensates the state update; f64 does not need to.
+    assert!(Variant {
+        precision: Precision::F32,
+        ..full
+    }
+    .source(Kernel::Integrate)
+    .contains("comp = (y1 - y) - corrected"));
+    assert!(!full.source(Kernel::Integrate).contains("corrected"));
+}
