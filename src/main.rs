@@ -37,11 +37,17 @@ enum Command {
         #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
         sets: Vec<String>,
     },
+    /// List the GPU adapters wgpu finds (honours WGPU_BACKEND and WGPU_ADAPTER_NAME for runs).
+    Devices,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Devices => {
+            print_devices();
+            ExitCode::SUCCESS
+        }
         Command::Run {
             scene,
             out,
@@ -80,15 +86,24 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     if let Some(choice) = &report.choice {
         println!("  {choice}");
     }
-    let precision = match scene.precision {
+    let precision = match report.precision {
         Precision::F64 => "f64",
         Precision::F32 => "f32",
     };
-    println!(
-        "  backend      {} ({precision}, {} threads)",
-        report.backend.name(),
-        report.threads
-    );
+    match &report.gpu {
+        Some(gpu) => {
+            println!(
+                "  backend      gpu ({precision}) on {} ({})",
+                gpu.adapter, gpu.adapter_backend
+            );
+            println!("  kernels      {}", gpu.variant);
+        }
+        None => println!(
+            "  backend      {} ({precision}, {} threads)",
+            report.backend.name(),
+            report.threads
+        ),
+    }
     let (lo, hi) = values
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -101,7 +116,7 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     );
     let mut method = format!("transient {}, iterations {}", i.transient, i.iterations);
     if report.backend != Backend::Exact && scene.lyapunov {
-        method += &format!(", δ = {:e}", i.perturbation);
+        method += &format!(", δ = {:e}", scene.perturbation());
     }
     if scene.system.is_flow && report.backend != Backend::Exact {
         method += &format!(", RK4 {} steps/period", i.steps_per_period);
@@ -111,6 +126,27 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     }
     println!("  method       {method}");
     println!("  time         {:.3} s", report.elapsed.as_secs_f64());
+    if let Some(gpu) = &report.gpu {
+        let t = &gpu.timings;
+        println!(
+            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch",
+            t.setup.as_secs_f64(),
+            t.transient.as_secs_f64(),
+            t.averaging.as_secs_f64(),
+            t.readback.as_secs_f64(),
+            t.host_qr.as_secs_f64(),
+            gpu.batches,
+            gpu.chunk_steps
+        );
+        if let Some(v) = &gpu.validation {
+            println!(
+                "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",
+                v.lanes.len(),
+                v.max_difference,
+                v.tolerance
+            );
+        }
+    }
     if let Some(err) = report.max_sum_error() {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }
@@ -121,5 +157,26 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     );
     for path in written {
         println!("  wrote        {}", path.display());
+    }
+}
+
+fn print_devices() {
+    let adapters = lyapsweep::backend::gpu::context::list();
+    if adapters.is_empty() {
+        println!("no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
+        return;
+    }
+    for a in adapters {
+        println!(
+            "{} [{}] {}: f64 {}, timestamps {}, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
+            a.name,
+            a.backend,
+            a.device_type,
+            if a.f64 { "yes" } else { "no" },
+            if a.timestamps { "yes" } else { "no" },
+            a.max_storage_binding >> 20,
+            a.max_buffer >> 20,
+            a.max_workgroups
+        );
     }
 }

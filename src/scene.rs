@@ -16,11 +16,12 @@
 //! transient = 500                 # iterations discarded before averaging
 //! iterations = 1000               # iterations averaged
 //! initial_state = [0.0, 0.0]      # default: the system's (Lorenz: [1, 1, 1])
-//! perturbation = 1e-8             # δ of the perturbed copies
+//! perturbation = 1e-8             # δ of the perturbed copies (f32: 1e-3)
 //! impact_location = "newton"      # or "linear" (the paper's)
 //! [run]
 //! backend = "auto"                # "cpu", "gpu", "exact"
 //! precision = "f64"               # or "f32" (gpu only)
+//! validate = 4                    # GPU runs: sweep values recomputed on the CPU
 //! [output]
 //! lyapunov = "spectrum"           # or "none"
 //! bifurcation_points = 0          # last reference points kept per parameter value
@@ -47,6 +48,12 @@ pub const DEFAULT_ITERATIONS: usize = 1000;
 /// impacts): sum-rule error 3.4e-5, 2.2e-5, 2.0e-6, 2.6e-7, 3.9e-6 at
 /// δ = 1e-6, 1e-7, 1e-8, 1e-9, 1e-10.
 pub const DEFAULT_PERTURBATION_F64: f64 = 1e-8;
+/// Default δ in f32 on the GPU: the compensated f32 images carry about
+/// 1e-7 relative error, so δ must be large; measured against the exact
+/// backend in docs/VALIDATION.md.
+pub const DEFAULT_PERTURBATION_F32: f64 = 1e-3;
+/// Default number of sweep values a GPU run recomputes on the CPU.
+pub const DEFAULT_VALIDATE: usize = 4;
 /// Evenly spaced values when a sweep gives `from` and `to` but no `count`.
 pub const DEFAULT_COUNT: usize = 101;
 
@@ -100,6 +107,8 @@ pub struct Scene {
     pub integration: Integration,
     pub backend: Backend,
     pub precision: Precision,
+    /// Sweep values a GPU run recomputes on the CPU to check itself.
+    pub validate: usize,
     pub lyapunov: bool,
     pub bifurcation_points: usize,
 }
@@ -118,11 +127,22 @@ pub struct Integration {
     pub transient: usize,
     pub iterations: usize,
     pub initial_state: Vec<f64>,
-    pub perturbation: f64,
+    /// δ as the scene gives it; [`Scene::perturbation`] applies the default.
+    pub perturbation: Option<f64>,
     pub impact_location: ImpactLocation,
 }
 
 impl Scene {
+    /// δ of the perturbed copies: the scene's, or the default for its precision.
+    pub fn perturbation(&self) -> f64 {
+        self.integration
+            .perturbation
+            .unwrap_or(match self.precision {
+                Precision::F64 => DEFAULT_PERTURBATION_F64,
+                Precision::F32 => DEFAULT_PERTURBATION_F32,
+            })
+    }
+
     /// The parameter values of lane `i`.
     pub fn lane_params(&self, i: usize) -> Params {
         let mut p = self.params.clone();
@@ -173,6 +193,7 @@ struct RawIntegration {
 struct RawRun {
     backend: Option<Backend>,
     precision: Option<Precision>,
+    validate: Option<usize>,
 }
 
 #[derive(Default, Deserialize)]
@@ -273,11 +294,13 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         initial_state: i
             .initial_state
             .unwrap_or_else(|| info.default_initial_state.to_vec()),
-        perturbation: i.perturbation.unwrap_or(DEFAULT_PERTURBATION_F64),
+        perturbation: i.perturbation,
         impact_location: i.impact_location.unwrap_or_default(),
     };
-    let delta = integration.perturbation;
-    if !(delta.is_finite() && delta > 0.0) {
+    if let Some(delta) = integration
+        .perturbation
+        .filter(|d| !(d.is_finite() && *d > 0.0))
+    {
         return Err(Error::invalid(
             "integration.perturbation",
             format!("must be a finite number > 0, got {delta}"),
@@ -349,6 +372,7 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         integration,
         backend: raw.run.backend.unwrap_or_default(),
         precision: raw.run.precision.unwrap_or_default(),
+        validate: raw.run.validate.unwrap_or(DEFAULT_VALIDATE),
         lyapunov,
         bifurcation_points,
     })

@@ -1,5 +1,5 @@
 //! Where the lanes run: the CPU reference path (the paper's method on RK4),
-//! the exact closed-form tangent map, and (next) the GPU ensemble.
+//! the exact closed-form tangent map, and the GPU ensemble.
 
 pub mod cpu;
 pub mod gpu;
@@ -7,15 +7,19 @@ pub mod gpu;
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::method::{LaneResult, MethodSettings, Tangent};
+use crate::method::{LaneResult, LaneStatus, MethodSettings, Tangent};
 use crate::scene::{Backend, Precision, Scene};
 use crate::system::FlowSettings;
+use gpu::context::{self, Want};
+use gpu::shader::Variant;
 
 /// The outcome of a sweep.
 #[derive(Clone, Debug)]
 pub struct Report {
     /// The backend that ran (never `Auto`).
     pub backend: Backend,
+    /// The precision the lanes were computed in.
+    pub precision: Precision,
     /// Why `auto` chose it, if it did.
     pub choice: Option<String>,
     /// One result per sweep value, in sweep order.
@@ -24,6 +28,32 @@ pub struct Report {
     pub expected_sums: Vec<f64>,
     pub elapsed: Duration,
     pub threads: usize,
+    /// What the GPU did, on a GPU run.
+    pub gpu: Option<GpuReport>,
+}
+
+/// The GPU part of a report.
+#[derive(Clone, Debug)]
+pub struct GpuReport {
+    pub adapter: String,
+    pub adapter_backend: String,
+    /// The kernel variant (what was compiled in).
+    pub variant: String,
+    pub timings: gpu::sweep::Timings,
+    pub batches: usize,
+    pub chunk_steps: usize,
+    pub validation: Option<Validation>,
+}
+
+/// The CPU recomputation of a few sweep values of a GPU run.
+#[derive(Clone, Debug)]
+pub struct Validation {
+    /// Indices of the recomputed sweep values.
+    pub lanes: Vec<usize>,
+    /// The largest difference found (see [`validation_difference`]).
+    pub max_difference: f64,
+    /// Above this a row is marked `gpu-mismatch`.
+    pub tolerance: f64,
 }
 
 impl Report {
@@ -42,60 +72,141 @@ impl Report {
     pub fn flagged(&self) -> usize {
         self.lanes
             .iter()
-            .filter(|l| l.status != crate::method::LaneStatus::Ok)
+            .filter(|l| l.status != LaneStatus::Ok)
             .count()
     }
 }
 
-/// Picks the backend a scene asks for; an error when it cannot run it.
-pub fn resolve(scene: &Scene) -> Result<(Backend, Option<String>)> {
-    let (backend, choice) = match scene.backend {
-        Backend::Auto => (
-            Backend::Cpu,
-            Some(
-                "auto: the GPU backend is not built yet, so the CPU reference path runs".to_owned(),
-            ),
-        ),
-        other => (other, None),
-    };
-    match backend {
-        Backend::Gpu => {
-            return Err(Error::Backend {
-                backend: "gpu".into(),
-                reason: "the GPU backend is not built yet; use \"cpu\" or \"auto\"".into(),
-            })
-        }
-        Backend::Exact if !scene.system.has_exact => {
-            return Err(Error::Backend {
-                backend: "exact".into(),
-                reason: format!(
-                    "{} has no closed-form tangent map; use \"cpu\"",
-                    scene.system.kind
-                ),
-            })
-        }
-        _ => {}
-    }
-    if scene.precision == Precision::F32 {
-        return Err(Error::invalid(
-            "run.precision",
-            format!(
-                "\"f32\" runs on the gpu backend only; the {} backend computes in f64",
-                backend.name()
-            ),
-        ));
-    }
-    Ok((backend, choice))
+/// Options of a run that are not part of a scene.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Split GPU sweeps into batches of at most this many lanes (the limits
+    /// of the device split them anyway; tests use this to exercise it).
+    pub max_batch_lanes: Option<usize>,
 }
 
-/// The per-lane settings a scene implies for a backend.
-pub fn method_settings(scene: &Scene, backend: Backend) -> MethodSettings {
+/// The per-precision tolerance of the GPU's validation against the CPU.
+pub fn validation_tolerance(precision: Precision) -> f64 {
+    match precision {
+        Precision::F64 => 1e-6,
+        Precision::F32 => 1e-3,
+    }
+}
+
+/// How far a GPU lane is from its CPU recomputation: the largest exponent
+/// difference on a regular lane; on a chaotic one (λ1 > 0), where rounding
+/// differences decorrelate the two trajectories within tens of iterations
+/// and the exponents then differ by their statistical error, the difference
+/// of the exponent sums (which is local to each iteration).
+pub fn validation_difference(gpu: &LaneResult, cpu: &LaneResult) -> f64 {
+    if cpu.exponents.first().is_some_and(|&l1| l1 > 0.0) {
+        (gpu.exponent_sum() - cpu.exponent_sum()).abs()
+    } else {
+        gpu.exponents
+            .iter()
+            .zip(&cpu.exponents)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Where a run goes.
+enum Plan {
+    Cpu,
+    Exact,
+    Gpu(wgpu::Adapter, context::AdapterSummary),
+}
+
+fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
+    match scene.backend {
+        Backend::Auto => {
+            let chosen = match context::choose(Want::Hardware, scene.precision) {
+                Ok(Some(pick)) => pick,
+                Ok(None) => {
+                    return Ok((
+                        Plan::Cpu,
+                        Precision::F64,
+                        Some(
+                            "auto: no hardware GPU found, so the CPU reference path runs (f64)"
+                                .into(),
+                        ),
+                    ))
+                }
+                Err(e @ Error::Invalid { .. }) => {
+                    return Ok((
+                        Plan::Cpu,
+                        Precision::F64,
+                        Some(format!("auto: CPU path, since {e}")),
+                    ));
+                }
+                Err(e) => return Err(e),
+            };
+            let why = format!(
+                "auto: hardware GPU {} ({}), {}",
+                chosen.1.name,
+                chosen.1.backend,
+                if scene.precision == Precision::F64 {
+                    "f64"
+                } else {
+                    "f32"
+                }
+            );
+            Ok((Plan::Gpu(chosen.0, chosen.1), scene.precision, Some(why)))
+        }
+        Backend::Gpu => {
+            if scene.system.wgsl.is_none() {
+                return Err(Error::Backend {
+                    backend: "gpu".into(),
+                    reason: format!("{} has no WGSL kernel", scene.system.kind),
+                });
+            }
+            let (adapter, summary) = context::choose(Want::Any, scene.precision)?
+                .expect("Want::Any yields an adapter or an error");
+            Ok((Plan::Gpu(adapter, summary), scene.precision, None))
+        }
+        Backend::Exact if !scene.system.has_exact => Err(Error::Backend {
+            backend: "exact".into(),
+            reason: format!(
+                "{} has no closed-form tangent map; use \"cpu\"",
+                scene.system.kind
+            ),
+        }),
+        cpu_side => {
+            if scene.precision == Precision::F32 {
+                return Err(Error::invalid(
+                    "run.precision",
+                    format!(
+                        "\"f32\" runs on the gpu backend only; the {} backend computes in f64",
+                        cpu_side.name()
+                    ),
+                ));
+            }
+            Ok((
+                if cpu_side == Backend::Exact {
+                    Plan::Exact
+                } else {
+                    Plan::Cpu
+                },
+                Precision::F64,
+                None,
+            ))
+        }
+    }
+}
+
+/// The per-lane settings a scene implies for a backend and precision.
+pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) -> MethodSettings {
     let i = &scene.integration;
+    let steps = if scene.system.is_flow {
+        i.steps_per_period
+    } else {
+        1
+    };
     MethodSettings {
         transient: i.transient,
         iterations: i.iterations,
         initial_state: i.initial_state.clone(),
-        perturbation: i.perturbation,
+        perturbation: scene.perturbation(),
         flow: FlowSettings {
             steps_per_period: i.steps_per_period,
             impact_location: i.impact_location,
@@ -107,22 +218,78 @@ pub fn method_settings(scene: &Scene, backend: Backend) -> MethodSettings {
         },
         lyapunov: scene.lyapunov,
         bifurcation_points: scene.bifurcation_points,
-        rounding_unit: f64::EPSILON,
-        steps_per_iteration: if scene.system.is_flow {
-            i.steps_per_period
-        } else {
+        // The f32 kernels compensate the state update (Kahan), so rounding
+        // does not accumulate over the steps of an iteration.
+        steps_per_iteration: if precision == Precision::F32 {
             1
+        } else {
+            steps
         },
+        rounding_unit: match precision {
+            Precision::F64 => f64::EPSILON,
+            Precision::F32 => f64::from(f32::EPSILON),
+        },
+    }
+}
+
+/// The kernel variant a scene needs: only the parts it uses.
+pub fn variant(scene: &Scene, precision: Precision) -> Variant {
+    let wall = scene.system.wall_reachable.is_some_and(|reachable| {
+        (0..scene.sweep.values.len())
+            .any(|k| reachable(&scene.lane_params(k), &scene.integration.initial_state))
+    });
+    Variant {
+        system: scene.system,
+        precision,
+        lyapunov: scene.lyapunov,
+        wall,
+        points: scene.bifurcation_points > 0,
+        impact_location: scene.integration.impact_location,
     }
 }
 
 /// Runs a whole sweep on the backend the scene asks for.
 pub fn run(scene: &Scene) -> Result<Report> {
-    let (backend, choice) = resolve(scene)?;
-    let settings = method_settings(scene, backend);
+    run_with(scene, &RunOptions::default())
+}
+
+/// [`run`] with options that are not part of the scene.
+pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
+    let (plan, precision, choice) = plan(scene)?;
     let start = Instant::now();
-    let lanes = cpu::sweep(scene, &settings);
+    let (backend, mut lanes, gpu_report) = match plan {
+        Plan::Cpu | Plan::Exact => {
+            let backend = if matches!(plan, Plan::Exact) {
+                Backend::Exact
+            } else {
+                Backend::Cpu
+            };
+            let settings = method_settings(scene, backend, Precision::F64);
+            (backend, cpu::sweep(scene, &settings), None)
+        }
+        Plan::Gpu(adapter, summary) => {
+            let settings = method_settings(scene, Backend::Gpu, precision);
+            let variant = variant(scene, precision);
+            let gpu = context::open(adapter, summary, precision)?;
+            let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options.max_batch_lanes)?;
+            let report = GpuReport {
+                adapter: gpu.summary.name.clone(),
+                adapter_backend: gpu.summary.backend.clone(),
+                variant: variant.name(),
+                timings: run.timings,
+                batches: run.batches,
+                chunk_steps: run.chunk_steps,
+                validation: None,
+            };
+            (Backend::Gpu, run.lanes, Some(report))
+        }
+    };
     let elapsed = start.elapsed();
+
+    let gpu_report = gpu_report.map(|mut report| {
+        report.validation = validate(scene, precision, &mut lanes);
+        report
+    });
     let expected_sums = lanes
         .iter()
         .enumerate()
@@ -133,10 +300,57 @@ pub fn run(scene: &Scene) -> Result<Report> {
         .collect();
     Ok(Report {
         backend,
+        precision,
         choice,
         lanes,
         expected_sums,
         elapsed,
         threads: rayon::current_num_threads(),
+        gpu: gpu_report,
+    })
+}
+
+/// Recomputes `scene.validate` sweep values, spread over the sweep, on the
+/// CPU path (f64) and marks GPU rows that differ beyond the tolerance.
+fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Option<Validation> {
+    if scene.validate == 0 || !scene.lyapunov || lanes.is_empty() {
+        return None;
+    }
+    let n = lanes.len();
+    let m = scene.validate.min(n);
+    let mut picks: Vec<usize> = (0..m)
+        .map(|k| {
+            if m == 1 {
+                0
+            } else {
+                (k * (n - 1) + (m - 1) / 2) / (m - 1)
+            }
+        })
+        .collect();
+    picks.dedup();
+    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
+    // The same δ as the GPU run, so the difference measures arithmetic only.
+    settings.perturbation = scene.perturbation();
+    let tolerance = validation_tolerance(precision);
+    let mut max_difference: f64 = 0.0;
+    for &k in &picks {
+        let lane = crate::method::Lane {
+            params: scene.lane_params(k),
+            settings: &settings,
+        };
+        let cpu = (scene.system.run_lane)(&lane);
+        if cpu.status != LaneStatus::Ok || lanes[k].status != LaneStatus::Ok {
+            continue;
+        }
+        let difference = validation_difference(&lanes[k], &cpu);
+        max_difference = max_difference.max(difference);
+        if difference > tolerance {
+            lanes[k].status = LaneStatus::Mismatch { difference };
+        }
+    }
+    Some(Validation {
+        lanes: picks,
+        max_difference,
+        tolerance,
     })
 }

@@ -83,6 +83,11 @@ pub enum LaneStatus {
     Unresolved {
         bound: f64,
     },
+    /// A GPU lane that its CPU recomputation contradicts (see
+    /// `backend::validation_difference`) beyond the precision's tolerance.
+    Mismatch {
+        difference: f64,
+    },
 }
 
 impl std::fmt::Display for LaneStatus {
@@ -94,6 +99,9 @@ impl std::fmt::Display for LaneStatus {
                 write!(f, "chattering(iterations={iterations})")
             }
             LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
+            LaneStatus::Mismatch { difference } => {
+                write!(f, "gpu-mismatch(difference={difference:.1e})")
+            }
         }
     }
 }
@@ -205,13 +213,30 @@ where
         jacobian: Option<&SMatrix<f64, D, D>>,
         stats: &IterationStats,
     ) -> bool {
+        if !all_finite(next) {
+            self.fail(self.transient + self.done);
+            return false;
+        }
+        let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        self.record(scale, Some(next), jacobian, stats)
+    }
+
+    /// [`push`](Self::push) for a backend that has checked the point itself
+    /// and reports only its size `scale` = max |x_i| (the noise estimate's
+    /// scale), and the point only when bifurcation points are wanted.
+    pub fn record(
+        &mut self,
+        scale: f64,
+        point: Option<&[f64; D]>,
+        jacobian: Option<&SMatrix<f64, D, D>>,
+        stats: &IterationStats,
+    ) -> bool {
         if self.failed_at.is_some() {
             return false;
         }
         let n = self.done;
-        let healthy = all_finite(next) && jacobian.is_none_or(|j| j.iter().all(|v| v.is_finite()));
-        if !healthy {
-            self.failed_at = Some(self.transient + n);
+        if jacobian.is_some_and(|j| !j.iter().all(|v| v.is_finite())) {
+            self.fail(self.transient + n);
             return false;
         }
         if let Some(j) = jacobian {
@@ -219,19 +244,18 @@ where
             if !diag.iter().all(|r| r.ln().is_finite()) {
                 // A singular Jacobian: a direction contracted below what δ and
                 // rounding can resolve in one iteration.
-                self.failed_at = Some(self.transient + n);
+                self.fail(self.transient + n);
                 return false;
             }
             if let Some((unit, delta, steps)) = self.noise {
-                let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
                 let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
                 self.noise_over_r += difference_noise(unit, scale, steps, delta) / smallest;
             }
         }
         self.impacts += u64::from(stats.impacts);
         self.chattering += usize::from(stats.chattering);
-        if n >= self.first_kept {
-            self.bifurcation.extend_from_slice(next);
+        if let (true, Some(point)) = (n >= self.first_kept, point) {
+            self.bifurcation.extend_from_slice(point);
         }
         self.done += 1;
         true

@@ -30,6 +30,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check,
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| p.get("b").abs().ln(),
+    period: |_| 1.0,
+    forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<2, Henon>,
     wgsl: Some(include_str!("../../shaders/system/henon.wgsl")),
     wall_reachable: None,

@@ -53,6 +53,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check,
     check_state,
     expected_sum,
+    period: |p| std::f64::consts::TAU / p.get("eta"),
+    forcing_frequency: |p| p.get("eta"),
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
     wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
     wall_reachable: Some(wall_reachable),

@@ -42,6 +42,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check,
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| -(p.get("sigma") + 1.0 + p.get("beta")),
+    period: |p| p.get("period"),
+    forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<3, Lorenz>,
     wgsl: Some(include_str!("../../shaders/system/lorenz.wgsl")),
     wall_reachable: None,

@@ -55,6 +55,10 @@ pub struct SystemInfo {
     /// The exponent sum the phase-space volume law predicts, per unit time,
     /// given the measured impacts per unit time.
     pub expected_sum: fn(&Params, f64) -> f64,
+    /// The time T of one map iteration at these parameters.
+    pub period: fn(&Params) -> f64,
+    /// ω of the forcing (cos ωt enters the right-hand side); 0 if autonomous.
+    pub forcing_frequency: fn(&Params) -> f64,
     /// Runs one lane on the dimension-specific code path.
     pub run_lane: fn(&Lane) -> crate::method::LaneResult,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`

@@ -3,4 +3,6 @@
 //! at once, each lane locating its own impacts; the host reads the Jacobians
 //! back in chunks and accumulates QR while the next chunk computes.
 
+pub mod context;
 pub mod shader;
+pub mod sweep;

@@ -1,0 +1,173 @@
+//! Adapters and devices: listing, choosing (honouring `WGPU_BACKEND` and
+//! `WGPU_ADAPTER_NAME`), and opening one with the features a sweep needs.
+
+use crate::error::{Error, Result};
+use crate::scene::Precision;
+
+/// What `lyapsweep devices` prints about an adapter.
+#[derive(Clone, Debug)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub f64: bool,
+    pub timestamps: bool,
+    pub max_storage_binding: u64,
+    pub max_buffer: u64,
+    pub max_workgroups: u32,
+}
+
+impl AdapterSummary {
+    fn of(adapter: &wgpu::Adapter) -> Self {
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let features = adapter.features();
+        AdapterSummary {
+            name: info.name,
+            backend: format!("{:?}", info.backend).to_lowercase(),
+            device_type: format!("{:?}", info.device_type),
+            f64: features.contains(wgpu::Features::SHADER_F64),
+            timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            max_storage_binding: limits.max_storage_buffer_binding_size,
+            max_buffer: limits.max_buffer_size,
+            max_workgroups: limits.max_compute_workgroups_per_dimension,
+        }
+    }
+
+    /// A hardware GPU (not a software rasteriser such as lavapipe or llvmpipe).
+    pub fn is_hardware(&self) -> bool {
+        matches!(
+            self.device_type.as_str(),
+            "DiscreteGpu" | "IntegratedGpu" | "VirtualGpu"
+        )
+    }
+}
+
+fn instance() -> wgpu::Instance {
+    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+}
+
+fn all_adapters() -> Vec<wgpu::Adapter> {
+    let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
+    pollster::block_on(instance().enumerate_adapters(backends))
+}
+
+/// Every adapter wgpu finds (after `WGPU_BACKEND`), for `lyapsweep devices`.
+pub fn list() -> Vec<AdapterSummary> {
+    all_adapters().iter().map(AdapterSummary::of).collect()
+}
+
+/// An opened device and what it is.
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub summary: AdapterSummary,
+    pub limits: wgpu::Limits,
+}
+
+/// Which adapters a request accepts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Want {
+    /// `backend = "gpu"`: any adapter, software ones included.
+    Any,
+    /// `backend = "auto"`: hardware only.
+    Hardware,
+}
+
+/// The adapter a run would use, or why there is none: `Ok(None)` when
+/// `want` is `Hardware` and there is no hardware GPU.
+pub fn choose(want: Want, precision: Precision) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
+    let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = all_adapters()
+        .into_iter()
+        .map(|a| {
+            let s = AdapterSummary::of(&a);
+            (a, s)
+        })
+        .collect();
+    let found = || {
+        let names: Vec<String> = list()
+            .iter()
+            .map(|s| format!("{} ({})", s.name, s.backend))
+            .collect();
+        if names.is_empty() {
+            "none".to_owned()
+        } else {
+            names.join(", ")
+        }
+    };
+    if let Ok(wanted) = std::env::var("WGPU_ADAPTER_NAME") {
+        let wanted_lower = wanted.to_lowercase();
+        candidates.retain(|(_, s)| s.name.to_lowercase().contains(&wanted_lower));
+        if candidates.is_empty() {
+            return Err(Error::Backend {
+                backend: "gpu".into(),
+                reason: format!(
+                    "WGPU_ADAPTER_NAME={wanted:?} matches no adapter (found: {})",
+                    found()
+                ),
+            });
+        }
+    }
+    if want == Want::Hardware {
+        candidates.retain(|(_, s)| s.is_hardware());
+        if candidates.is_empty() {
+            return Ok(None);
+        }
+    }
+    if candidates.is_empty() {
+        return Err(Error::Backend {
+            backend: "gpu".into(),
+            reason: "no GPU adapter found (install a Vulkan driver, e.g. mesa-vulkan-drivers)"
+                .into(),
+        });
+    }
+    if precision == Precision::F64 {
+        if !candidates.iter().any(|(_, s)| s.f64) {
+            let names: Vec<&str> = candidates.iter().map(|(_, s)| s.name.as_str()).collect();
+            return Err(Error::invalid(
+                "run.precision",
+                format!(
+                    "\"f64\" needs SHADER_F64, which no adapter here has ({}); use \"f32\"",
+                    names.join(", ")
+                ),
+            ));
+        }
+        candidates.retain(|(_, s)| s.f64);
+    }
+    // Prefer hardware, then discrete over integrated.
+    let rank = |s: &AdapterSummary| match s.device_type.as_str() {
+        "DiscreteGpu" => 0,
+        "IntegratedGpu" => 1,
+        "VirtualGpu" => 2,
+        _ => 3,
+    };
+    candidates.sort_by_key(|(_, s)| rank(s));
+    Ok(candidates.into_iter().next())
+}
+
+/// Opens a device on the adapter with the features and limits a sweep needs.
+pub fn open(adapter: wgpu::Adapter, summary: AdapterSummary, precision: Precision) -> Result<Gpu> {
+    let mut features = wgpu::Features::empty();
+    if precision == Precision::F64 {
+        features |= wgpu::Features::SHADER_F64;
+    }
+    // Ask for everything the adapter offers: large sweeps want its largest bindings.
+    let limits = adapter.limits();
+    let descriptor = wgpu::DeviceDescriptor {
+        label: Some("lyapsweep"),
+        required_features: features,
+        required_limits: limits.clone(),
+        ..Default::default()
+    };
+    let (device, queue) =
+        pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| Error::Backend {
+            backend: "gpu".into(),
+            reason: format!("cannot open {}: {e}", summary.name),
+        })?;
+    Ok(Gpu {
+        device,
+        queue,
+        summary,
+        limits,
+    })
+}

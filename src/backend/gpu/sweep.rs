@@ -1,0 +1,776 @@
+//! One GPU sweep: buffers, the dispatch schedule and the streaming readback.
+//!
+//! Per map iteration the host encodes `ceil(steps / chunk_steps)` integrate
+//! dispatches and one finish dispatch; nothing crosses back to the host per
+//! iteration. The transient runs references only, with no readback. While
+//! averaging, each chunk of iterations writes its Jacobians, points and
+//! summaries into a ring of slots that is copied to one of two staging
+//! buffers; the host maps and accumulates QR for one chunk while the GPU
+//! computes the next.
+
+use std::borrow::Cow;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use nalgebra::{Const, DimMin, SMatrix};
+use rayon::prelude::*;
+use wgpu::util::DeviceExt;
+
+use super::context::Gpu;
+use super::shader::{Kernel, Variant};
+use crate::error::{Error, Result};
+use crate::integrate::clock::cos_sin;
+use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
+use crate::scene::{Precision, Scene};
+use crate::system::IterationStats;
+
+/// Lane-steps (RK4 steps of one trajectory) per integrate dispatch: small
+/// enough that no dispatch trips a desktop driver's watchdog (~2 s), large
+/// enough to fill a GPU.
+const DISPATCH_LANE_STEPS: usize = 1 << 22;
+/// Lane-steps per transient submission, after which the host waits.
+const SUBMIT_LANE_STEPS: usize = 1 << 26;
+/// Bytes of Jacobians, points and summaries per chunk of iterations.
+const CHUNK_BYTES: u64 = 32 << 20;
+const WORKGROUP: usize = 64;
+
+/// Where a GPU run's wall time went.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Timings {
+    /// Buffers, pipelines (shader compilation) and uploads.
+    pub setup: Duration,
+    /// The transient on the GPU (no readback).
+    pub transient: Duration,
+    /// The averaging iterations, readback and host QR included.
+    pub averaging: Duration,
+    /// Waiting for and copying out the streamed chunks.
+    pub readback: Duration,
+    /// Host QR accumulation (overlapping GPU work).
+    pub host_qr: Duration,
+}
+
+impl Timings {
+    fn add(&mut self, other: &Timings) {
+        self.setup += other.setup;
+        self.transient += other.transient;
+        self.averaging += other.averaging;
+        self.readback += other.readback;
+        self.host_qr += other.host_qr;
+    }
+}
+
+/// The result of a GPU sweep.
+pub struct GpuRun {
+    pub lanes: Vec<LaneResult>,
+    pub timings: Timings,
+    /// How many batches the sweep was split into (buffer and dispatch limits).
+    pub batches: usize,
+    /// RK4 steps per integrate dispatch in the averaging phase.
+    pub chunk_steps: usize,
+}
+
+/// Runs the whole sweep, split into batches that fit the device's limits
+/// (at most `max_batch_lanes` lanes each when given).
+pub fn run(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    max_batch_lanes: Option<usize>,
+) -> Result<GpuRun> {
+    match scene.system.dimension() {
+        1 => run_dim::<1>(gpu, scene, variant, settings, max_batch_lanes),
+        2 => run_dim::<2>(gpu, scene, variant, settings, max_batch_lanes),
+        3 => run_dim::<3>(gpu, scene, variant, settings, max_batch_lanes),
+        4 => run_dim::<4>(gpu, scene, variant, settings, max_batch_lanes),
+        d => Err(Error::Backend {
+            backend: "gpu".into(),
+            reason: format!("maps of dimension {d} are not supported on the GPU (1 to 4 are)"),
+        }),
+    }
+}
+
+/// Sizes that depend on the variant, in bytes.
+struct Layout {
+    traj: usize,
+    real: u64,
+    lane_stride: usize,
+    traj_stride: usize,
+    /// Ring bytes per lane and iteration: summary, Jacobian, point.
+    summary: u64,
+    jacobian: u64,
+    point: u64,
+}
+
+impl Layout {
+    fn new(scene: &Scene, variant: &Variant) -> Self {
+        let dim = scene.system.dimension();
+        let real = match variant.precision {
+            Precision::F64 => 8,
+            Precision::F32 => 4,
+        };
+        Layout {
+            traj: variant.trajectories(),
+            real,
+            lane_stride: scene.system.parameters.len() + 5,
+            traj_stride: 2 * dim + 2,
+            summary: 16,
+            jacobian: if variant.lyapunov {
+                (dim * dim) as u64 * real
+            } else {
+                0
+            },
+            point: if variant.points { dim as u64 * real } else { 0 },
+        }
+    }
+
+    fn per_iteration(&self) -> u64 {
+        self.summary + self.jacobian + self.point
+    }
+}
+
+fn run_dim<const D: usize>(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    max_batch_lanes: Option<usize>,
+) -> Result<GpuRun>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let start = Instant::now();
+    let pipelines = Pipelines::new(gpu, variant);
+    let layout = Layout::new(scene, variant);
+    let limits = &gpu.limits;
+    let binding = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    // A batch must fit one dispatch (workgroups per dimension) and its
+    // trajectory buffer one binding; at least one ring slot must fit too.
+    let by_dispatch =
+        limits.max_compute_workgroups_per_dimension as usize * WORKGROUP / layout.traj;
+    let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
+    let by_ring = (binding / layout.jacobian.max(layout.point).max(layout.summary)) as usize;
+    let batch_lanes = by_dispatch
+        .min(by_binding)
+        .min(by_ring)
+        .min(max_batch_lanes.unwrap_or(usize::MAX))
+        .max(1);
+    let total = scene.sweep.values.len();
+    let mut lanes = Vec::with_capacity(total);
+    let mut timings = Timings {
+        setup: start.elapsed(),
+        ..Default::default()
+    };
+    let mut batches = 0;
+    let mut chunk_steps = 0;
+    for first in (0..total).step_by(batch_lanes) {
+        let count = batch_lanes.min(total - first);
+        let batch = Batch::<D>::new(
+            gpu, &pipelines, scene, variant, settings, &layout, first, count,
+        );
+        chunk_steps = batch.chunk_steps;
+        let (results, t) = batch.run(gpu, &pipelines)?;
+        timings.add(&t);
+        lanes.extend(results);
+        batches += 1;
+    }
+    Ok(GpuRun {
+        lanes,
+        timings,
+        batches,
+        chunk_steps,
+    })
+}
+
+/// The two compute pipelines of a variant over one bind group layout.
+struct Pipelines {
+    layout: wgpu::BindGroupLayout,
+    integrate: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
+    lyapunov: bool,
+    points: bool,
+}
+
+impl Pipelines {
+    fn new(gpu: &Gpu, variant: &Variant) -> Self {
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let mut entries = vec![
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            storage(1, true),
+            storage(2, false),
+            storage(3, false),
+            storage(4, false),
+        ];
+        if variant.lyapunov {
+            entries.extend([storage(5, false), storage(6, false)]);
+        }
+        if variant.points {
+            entries.push(storage(7, false));
+        }
+        let device = &gpu.device;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sweep"),
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("sweep"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = |kernel: Kernel| {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(&variant.name()),
+                source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(kernel))),
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(&variant.name()),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        Pipelines {
+            integrate: pipeline(Kernel::Integrate),
+            finish: pipeline(Kernel::Finish),
+            layout,
+            lyapunov: variant.lyapunov,
+            points: variant.points,
+        }
+    }
+}
+
+/// `Control` in shared/bindings.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Control {
+    lane_count: u32,
+    steps_per_period: u32,
+    chunk_steps: u32,
+    transient: u32,
+    ring: u32,
+    pad: [u32; 3],
+}
+
+/// Reals in the precision of the variant, as bytes.
+fn real_bytes(values: &[f64], precision: Precision) -> Vec<u8> {
+    match precision {
+        Precision::F64 => bytemuck::cast_slice(values).to_vec(),
+        Precision::F32 => {
+            let narrow: Vec<f32> = values.iter().map(|&v| v as f32).collect();
+            bytemuck::cast_slice(&narrow).to_vec()
+        }
+    }
+}
+
+fn reals_from(bytes: &[u8], precision: Precision) -> Vec<f64> {
+    match precision {
+        Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(bytes),
+        Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(bytes)
+            .into_iter()
+            .map(f64::from)
+            .collect(),
+    }
+}
+
+/// One batch of lanes with its buffers.
+struct Batch<'a, const D: usize> {
+    settings: &'a MethodSettings,
+    layout: &'a Layout,
+    precision: Precision,
+    count: usize,
+    steps: usize,
+    chunk_steps: usize,
+    transient_chunk_steps: usize,
+    ring: usize,
+    transient_control: wgpu::BindGroup,
+    averaging_control: wgpu::BindGroup,
+    summary: wgpu::Buffer,
+    jac: Option<wgpu::Buffer>,
+    points: Option<wgpu::Buffer>,
+    staging: [wgpu::Buffer; 2],
+    periods: Vec<f64>,
+}
+
+impl<'a, const D: usize> Batch<'a, D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        gpu: &Gpu,
+        pipelines: &Pipelines,
+        scene: &'a Scene,
+        variant: &Variant,
+        settings: &'a MethodSettings,
+        layout: &'a Layout,
+        first: usize,
+        count: usize,
+    ) -> Self {
+        let device = &gpu.device;
+        let precision = variant.precision;
+        let info = scene.system;
+        let steps = if info.is_flow {
+            settings.flow.steps_per_period
+        } else {
+            1
+        };
+        let traj = layout.traj;
+
+        // Per lane: parameters, h, cos(ωh/2), sin(ωh/2), ω, δ.
+        let mut lane_data = Vec::with_capacity(count * layout.lane_stride);
+        let mut periods = Vec::with_capacity(count);
+        for k in first..first + count {
+            let params = scene.lane_params(k);
+            let period = (info.period)(&params);
+            let omega = (info.forcing_frequency)(&params);
+            let h = period / steps as f64;
+            let half = cos_sin(0.5 * omega * h);
+            lane_data.extend_from_slice(&params.values);
+            lane_data.extend_from_slice(&[h, half[0], half[1], omega, settings.perturbation]);
+            periods.push(period);
+        }
+        // Trajectories: the reference at the initial state, copies at x0 + δe_i,
+        // with the perturbation actually taken in the variant's precision.
+        let x0 = &settings.initial_state;
+        let mut traj_data = Vec::with_capacity(count * traj * layout.traj_stride);
+        let mut deltas = Vec::with_capacity(count * D);
+        for _ in 0..count {
+            for t in 0..traj {
+                let mut y = x0.clone();
+                if t > 0 {
+                    let i = t - 1;
+                    let (shifted, step) = match precision {
+                        Precision::F64 => {
+                            let s = x0[i] + settings.perturbation;
+                            (s, s - x0[i])
+                        }
+                        Precision::F32 => {
+                            let (x, d) = (x0[i] as f32, settings.perturbation as f32);
+                            let s = x + d;
+                            (f64::from(s), f64::from(s - x))
+                        }
+                    };
+                    y[i] = shifted;
+                    deltas.push(step);
+                }
+                traj_data.extend_from_slice(&y);
+                traj_data.extend(std::iter::repeat_n(0.0, D));
+                traj_data.extend_from_slice(&[1.0, 0.0]);
+            }
+        }
+
+        let per_iteration = layout.per_iteration() * count as u64;
+        let binding = gpu
+            .limits
+            .max_storage_buffer_binding_size
+            .min(gpu.limits.max_buffer_size);
+        let ring_budget = CHUNK_BYTES.min(binding);
+        let ring_by_budget = (ring_budget / per_iteration.max(1)) as usize;
+        let ring_by_binding = (binding
+            / (layout.jacobian.max(layout.point).max(layout.summary) * count as u64))
+            as usize;
+        let ring = ring_by_budget
+            .min(ring_by_binding)
+            .clamp(1, settings.iterations.max(1));
+
+        let chunk =
+            |trajectories: usize| (DISPATCH_LANE_STEPS / trajectories.max(1)).clamp(1, steps);
+        let chunk_steps = chunk(count * traj);
+        let transient_chunk_steps = chunk(count);
+
+        let storage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let init = |label: &str, contents: &[u8], usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage,
+            })
+        };
+        let empty = |label: &str, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let control = |transient: bool, chunk_steps: usize| Control {
+            lane_count: count as u32,
+            steps_per_period: steps as u32,
+            chunk_steps: chunk_steps as u32,
+            transient: u32::from(transient),
+            ring: ring as u32,
+            pad: [0; 3],
+        };
+        let transient_uniform = init(
+            "control (transient)",
+            bytemuck::bytes_of(&control(true, transient_chunk_steps)),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let averaging_uniform = init(
+            "control (averaging)",
+            bytemuck::bytes_of(&control(false, chunk_steps)),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let lanes_buffer = init(
+            "lanes",
+            &real_bytes(&lane_data, precision),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let traj_buffer = init("trajectories", &real_bytes(&traj_data, precision), storage);
+        let counts = empty("counts", (count * traj * 16) as u64, storage);
+        let summary = empty("summary", layout.summary * (ring * count) as u64, storage);
+        let deltas_buffer = pipelines
+            .lyapunov
+            .then(|| init("deltas", &real_bytes(&deltas, precision), storage));
+        let jac = pipelines.lyapunov.then(|| {
+            empty(
+                "jacobians",
+                layout.jacobian * (ring * count) as u64,
+                storage,
+            )
+        });
+        let points = pipelines
+            .points
+            .then(|| empty("points", layout.point * (ring * count) as u64, storage));
+        let staging_size = per_iteration * ring as u64;
+        let staging = [0, 1].map(|_| {
+            empty(
+                "staging",
+                staging_size,
+                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            )
+        });
+
+        let bind_group = |uniform: &wgpu::Buffer| {
+            let mut entries = vec![
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: lanes_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: traj_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: counts.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: summary.as_entire_binding(),
+                },
+            ];
+            if let (Some(d), Some(j)) = (&deltas_buffer, &jac) {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: d.as_entire_binding(),
+                });
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: j.as_entire_binding(),
+                });
+            }
+            if let Some(p) = &points {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: p.as_entire_binding(),
+                });
+            }
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("sweep"),
+                layout: &pipelines.layout,
+                entries: &entries,
+            })
+        };
+        Batch {
+            settings,
+            layout,
+            precision,
+            count,
+            steps,
+            chunk_steps,
+            transient_chunk_steps,
+            ring,
+            transient_control: bind_group(&transient_uniform),
+            averaging_control: bind_group(&averaging_uniform),
+            summary,
+            jac,
+            points,
+            staging,
+            periods,
+        }
+    }
+
+    /// Encodes `iterations` map iterations: integrate dispatches in chunks of
+    /// `chunk_steps`, then the finish kernel.
+    fn encode_iterations(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        pipelines: &Pipelines,
+        transient: bool,
+        iterations: usize,
+    ) {
+        let (bind_group, chunk, invocations) = if transient {
+            (
+                &self.transient_control,
+                self.transient_chunk_steps,
+                self.count,
+            )
+        } else {
+            (
+                &self.averaging_control,
+                self.chunk_steps,
+                self.count * self.layout.traj,
+            )
+        };
+        let groups = |n: usize| n.div_ceil(WORKGROUP) as u32;
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(if transient { "transient" } else { "averaging" }),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, bind_group, &[]);
+        for _ in 0..iterations {
+            pass.set_pipeline(&pipelines.integrate);
+            for _ in 0..self.steps.div_ceil(chunk) {
+                pass.dispatch_workgroups(groups(invocations), 1, 1);
+            }
+            pass.set_pipeline(&pipelines.finish);
+            pass.dispatch_workgroups(groups(self.count), 1, 1);
+        }
+    }
+
+    fn run(self, gpu: &Gpu, pipelines: &Pipelines) -> Result<(Vec<LaneResult>, Timings)> {
+        let device = &gpu.device;
+        let queue = &gpu.queue;
+        let settings = self.settings;
+        let mut timings = Timings::default();
+        let wait = |index: Option<wgpu::SubmissionIndex>| {
+            device
+                .poll(wgpu::PollType::Wait {
+                    submission_index: index,
+                    timeout: None,
+                })
+                .map_err(|e| Error::Backend {
+                    backend: "gpu".into(),
+                    reason: format!("the device stopped responding: {e}"),
+                })
+        };
+
+        // The transient: references only, no readback.
+        let start = Instant::now();
+        let per_submit = (SUBMIT_LANE_STEPS / (self.count * self.steps).max(1)).max(1);
+        let mut done = 0;
+        while done < settings.transient {
+            let n = per_submit.min(settings.transient - done);
+            let mut encoder = device.create_command_encoder(&Default::default());
+            self.encode_iterations(&mut encoder, pipelines, true, n);
+            let index = queue.submit([encoder.finish()]);
+            wait(Some(index))?;
+            done += n;
+        }
+        timings.transient = start.elapsed();
+
+        // Averaging, streamed in chunks of `ring` iterations.
+        let start = Instant::now();
+        let mut accumulators: Vec<LaneAccumulator<D>> = self
+            .periods
+            .iter()
+            .map(|&period| LaneAccumulator::new(settings, period))
+            .collect();
+        let chunks: Vec<(usize, usize)> = (0..settings.iterations)
+            .step_by(self.ring)
+            .map(|first| (first, self.ring.min(settings.iterations - first)))
+            .collect();
+        let mut pending: Option<(
+            usize,
+            mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+            wgpu::SubmissionIndex,
+        )> = None;
+        for (c, &(_, n)) in chunks.iter().enumerate() {
+            let mut encoder = device.create_command_encoder(&Default::default());
+            self.encode_iterations(&mut encoder, pipelines, false, n);
+            self.copy_to_staging(&mut encoder, &self.staging[c % 2], n);
+            let index = queue.submit([encoder.finish()]);
+            let receiver = self.map_staging(c % 2);
+            if let Some((previous, rx, idx)) = pending.take() {
+                self.collect(
+                    gpu,
+                    &mut accumulators,
+                    &chunks,
+                    previous,
+                    rx,
+                    idx,
+                    &mut timings,
+                )?;
+            }
+            pending = Some((c, receiver, index));
+        }
+        if let Some((previous, rx, idx)) = pending.take() {
+            self.collect(
+                gpu,
+                &mut accumulators,
+                &chunks,
+                previous,
+                rx,
+                idx,
+                &mut timings,
+            )?;
+        }
+        timings.averaging = start.elapsed();
+        Ok((
+            accumulators
+                .into_iter()
+                .map(LaneAccumulator::finish)
+                .collect(),
+            timings,
+        ))
+    }
+
+    fn copy_to_staging(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        staging: &wgpu::Buffer,
+        iterations: usize,
+    ) {
+        let lanes = (iterations * self.count) as u64;
+        let mut offset = 0;
+        let mut copy = |source: &wgpu::Buffer, bytes: u64| {
+            if bytes > 0 {
+                encoder.copy_buffer_to_buffer(source, 0, staging, offset, bytes);
+                offset += bytes;
+            }
+        };
+        copy(&self.summary, self.layout.summary * lanes);
+        if let Some(jac) = &self.jac {
+            copy(jac, self.layout.jacobian * lanes);
+        }
+        if let Some(points) = &self.points {
+            copy(points, self.layout.point * lanes);
+        }
+    }
+
+    fn map_staging(
+        &self,
+        which: usize,
+    ) -> mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>> {
+        let (sender, receiver) = mpsc::channel();
+        self.staging[which].map_async(wgpu::MapMode::Read, .., move |result| {
+            let _ = sender.send(result);
+        });
+        receiver
+    }
+
+    /// Waits for chunk `c`'s staging copy, reads it and accumulates QR for every lane.
+    #[allow(clippy::too_many_arguments)]
+    fn collect(
+        &self,
+        gpu: &Gpu,
+        accumulators: &mut [LaneAccumulator<D>],
+        chunks: &[(usize, usize)],
+        c: usize,
+        receiver: mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+        index: wgpu::SubmissionIndex,
+        timings: &mut Timings,
+    ) -> Result<()> {
+        let gpu_error = |reason: String| Error::Backend {
+            backend: "gpu".into(),
+            reason,
+        };
+        let start = Instant::now();
+        gpu.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(index),
+                timeout: None,
+            })
+            .map_err(|e| gpu_error(format!("the device stopped responding: {e}")))?;
+        receiver
+            .recv()
+            .map_err(|_| gpu_error("readback was cancelled".into()))?
+            .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+        let (first_iteration, n) = chunks[c];
+        let staging = &self.staging[c % 2];
+        let lanes = (n * self.count) as u64;
+        let (summary, jac, points) = {
+            let view = staging
+                .get_mapped_range(..)
+                .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+            let bytes: &[u8] = &view;
+            let s_end = (self.layout.summary * lanes) as usize;
+            let j_end = s_end + (self.layout.jacobian * lanes) as usize;
+            let p_end = j_end + (self.layout.point * lanes) as usize;
+            (
+                bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(&bytes[..s_end]),
+                reals_from(&bytes[s_end..j_end], self.precision),
+                reals_from(&bytes[j_end..p_end], self.precision),
+            )
+        };
+        staging.unmap();
+        timings.readback += start.elapsed();
+
+        let start = Instant::now();
+        let count = self.count;
+        let transient = self.settings.transient;
+        let has_jac = self.jac.is_some();
+        let has_points = self.points.is_some();
+        accumulators
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(lane, acc)| {
+                for j in 0..n {
+                    let slot = j * count + lane;
+                    let [impacts, flags, scale_bits, _] = summary[slot];
+                    if flags & FLAG_NONFINITE != 0 {
+                        acc.fail(transient + first_iteration + j);
+                        break;
+                    }
+                    let stats = IterationStats {
+                        impacts,
+                        chattering: flags & FLAG_CHATTERING != 0,
+                    };
+                    let jacobian = has_jac.then(|| {
+                        SMatrix::<f64, D, D>::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D])
+                    });
+                    let point: Option<[f64; D]> =
+                        has_points.then(|| std::array::from_fn(|k| points[slot * D + k]));
+                    let scale = f64::from(f32::from_bits(scale_bits));
+                    if !acc.record(scale, point.as_ref(), jacobian.as_ref(), &stats) {
+                        break;
+                    }
+                }
+            });
+        timings.host_qr += start.elapsed();
+        Ok(())
+    }
+}
+
+const FLAG_CHATTERING: u32 = 1;
+const FLAG_NONFINITE: u32 = 2;
