@@ -24,10 +24,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var i = 0u; i < DIM; i = i + 1u) {
             let ci = counts[r + 1u + i];
             flags = flags | (ci.z & FLAG_CHATTERING);
-            let yi = load_state((r + 1u + i) * TRAJ_STRIDE);
+            let base_i = (r + 1u + i) * TRAJ_STRIDE;
+            // y_i - y is exact (the two are close); the copies differ from
+            // the reference by δ, so their low bits matter.
+            var difference = load_state(base_i) - y;
+#ifdef COMPENSATED
+            // Each compensation holds the rounding its state still owes
+            // (the exact sum is y - comp): without it, f32 would round every
+            // column by up to ulp(y)/δ.
+            difference = difference - (load_state(base_i + DIM) - load_state(r * TRAJ_STRIDE + DIM));
+#endif
             let d = deltas[lane * DIM + i];
             for (var k = 0u; k < DIM; k = k + 1u) {
-                jac[slot * DIM * DIM + k * DIM + i] = (yi[k] - y[k]) / d;
+                jac[slot * DIM * DIM + k * DIM + i] = difference[k] / d;
             }
         }
 #endif

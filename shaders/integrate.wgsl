@@ -47,7 +47,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // Kahan summation: the increment of one step is far smaller than y,
         // and f32 would drop its low bits every step.
         let corrected = inc.y - comp;
-        var y1 = y + corrected;
+        var y1 = select(y + corrected, y, control.opaque_zero != 0u);
         comp = (y1 - y) - corrected;
 #else
         var y1 = y + inc.y;

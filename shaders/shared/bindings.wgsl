@@ -16,7 +16,10 @@ struct Control {
     transient: u32,
     // Iteration slots in the output ring.
     ring: u32,
-    _pad0: u32,
+    // Always 0. Compensated (Kahan) sums must not be simplified algebraically,
+    // and WGSL cannot mark them exact (SPIR-V NoContraction): a select on a
+    // value the compiler cannot know hides the identity (y + c) - y = c.
+    opaque_zero: u32,
     _pad1: u32,
     _pad2: u32,
 }

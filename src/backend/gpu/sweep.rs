@@ -270,7 +270,9 @@ struct Control {
     chunk_steps: u32,
     transient: u32,
     ring: u32,
-    pad: [u32; 3],
+    /// Always 0; see `opaque_zero` in the WGSL.
+    opaque_zero: u32,
+    pad: [u32; 2],
 }
 
 /// Reals in the precision of the variant, as bytes.
@@ -424,7 +426,8 @@ where
             chunk_steps: chunk_steps as u32,
             transient: u32::from(transient),
             ring: ring as u32,
-            pad: [0; 3],
+            opaque_zero: 0,
+            pad: [0; 2],
         };
         let transient_uniform = init(
             "control (transient)",
