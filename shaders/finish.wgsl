@@ -1,7 +1,7 @@
 // Kernel: the end of a map iteration, one invocation per lane.
 //
 // Averaging: write the estimated Jacobian (column i = (U(x + δe_i) - U(x)) /
-// δ_i, the paper's eq. 6), the Poincaré point and a summary into this
+// δ_i, the paper's eq. 6, or the central (U(x + δe_i) - U(x - δe_i)) / 2δ), the Poincaré point and a summary into this
 // iteration's ring slot. Always: restart the reference at phase 0 and
 // re-seed the perturbed copies from its new point, so the next iteration
 // needs nothing from the host.
@@ -22,21 +22,43 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let slot = (cr.w % control.ring) * control.lane_count + lane;
 #ifdef LYAPUNOV
         for (var i = 0u; i < DIM; i = i + 1u) {
-            let ci = counts[r + 1u + i];
-            flags = flags | (ci.z & FLAG_CHATTERING);
-            let base_i = (r + 1u + i) * TRAJ_STRIDE;
-            // y_i - y is exact (the two are close); the copies differ from
-            // the reference by δ, so their low bits matter.
-            var difference = load_state(base_i) - y;
+            // Column i from the copy at x + δe_i and, for central
+            // differences, the one at x - δe_i (else the reference itself).
+            var plus = r + 1u + i;
+#ifdef CENTRAL
+            var minus = r + 1u + DIM + i;
+            let step_plus = deltas[lane * 2u * DIM + i];
+            let step_minus = deltas[lane * 2u * DIM + DIM + i];
+            flags = flags | ((counts[plus].z | counts[minus].z) & FLAG_CHATTERING);
+            // A copy that met the wall a different number of times than the
+            // reference crossed a grazing boundary: its difference is O(1)
+            // wrong. Difference on the other side, where the map is smooth.
+            let same_plus = counts[plus].y == cr.y;
+            let same_minus = counts[minus].y == cr.y;
+            var step = step_plus + step_minus;
+            if (!same_plus && same_minus) {
+                plus = r;
+                step = step_minus;
+            } else if (same_plus && !same_minus) {
+                minus = r;
+                step = step_plus;
+            }
+#else
+            let minus = r;
+            let step = deltas[lane * DIM + i];
+            flags = flags | (counts[plus].z & FLAG_CHATTERING);
+#endif
+            // The two images are close, so their difference is exact; their
+            // low bits are what the column is made of.
+            var difference = load_state(plus * TRAJ_STRIDE) - load_state(minus * TRAJ_STRIDE);
 #ifdef COMPENSATED
             // Each compensation holds the rounding its state still owes
             // (the exact sum is y - comp): without it, f32 would round every
             // column by up to ulp(y)/δ.
-            difference = difference - (load_state(base_i + DIM) - load_state(r * TRAJ_STRIDE + DIM));
+            difference = difference - (load_state(plus * TRAJ_STRIDE + DIM) - load_state(minus * TRAJ_STRIDE + DIM));
 #endif
-            let d = deltas[lane * DIM + i];
             for (var k = 0u; k < DIM; k = k + 1u) {
-                jac[slot * DIM * DIM + k * DIM + i] = difference[k] / d;
+                jac[slot * DIM * DIM + k * DIM + i] = difference[k] / step;
             }
         }
 #endif
@@ -58,13 +80,29 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     counts[r] = cr;
     restart(r * TRAJ_STRIDE, y);
 #ifdef LYAPUNOV
-    let delta = lanes[lane * LANE_STRIDE + LANE_DELTA];
+    // δ relative to the state's size, as on the CPU: δ·max(1, ‖y‖∞).
+    var size = real(1.0);
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        size = max(size, abs(y[k]));
+    }
+    let delta = lanes[lane * LANE_STRIDE + LANE_DELTA] * size;
     for (var i = 0u; i < DIM; i = i + 1u) {
         var yi = y;
         yi[i] = y[i] + delta;
+#ifdef CENTRAL
+        deltas[lane * 2u * DIM + i] = yi[i] - y[i];
+#else
         deltas[lane * DIM + i] = yi[i] - y[i];
+#endif
         restart((r + 1u + i) * TRAJ_STRIDE, yi);
         counts[r + 1u + i] = vec4<u32>(0u, 0u, cr.z, 0u);
+#ifdef CENTRAL
+        var ym = y;
+        ym[i] = y[i] - delta;
+        deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];
+        restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym);
+        counts[r + 1u + DIM + i] = vec4<u32>(0u, 0u, cr.z, 0u);
+#endif
     }
 #endif
 }

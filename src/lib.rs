@@ -20,6 +20,6 @@ pub mod output;
 pub mod scene;
 pub mod system;
 
-pub use backend::{run, Report};
+pub use backend::{run, run_with, Report, RunOptions};
 pub use error::{Error, Result};
 pub use scene::Scene;

@@ -197,8 +197,11 @@ fn flags_and_overrides_are_checked_like_the_scene() {
         &["--set", "system.kind.deep=1"],
         "--set system.kind.deep=1",
     );
-    refused(BASE, &["--backend", "gpu"], "run.backend");
-    refused(BASE, &["--precision", "f32"], "run.precision");
+    refused(
+        BASE,
+        &["--backend", "cpu", "--precision", "f32"],
+        "run.precision",
+    );
     refused(
         &BASE
             .replace("impact-oscillator", "lorenz")
@@ -257,4 +260,25 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(names.len(), 2, "{names:?}");
+}
+
+#[test]
+fn an_adapter_name_that_matches_nothing_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, BASE).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(["run", path.to_str().unwrap(), "--backend", "gpu", "--out"])
+        .arg(dir.path().join("out"))
+        .env("WGPU_ADAPTER_NAME", "no-such-adapter-anywhere")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("WGPU_ADAPTER_NAME") && stderr.contains("no-such-adapter-anywhere"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"));
+    assert!(!dir.path().join("out").exists());
 }

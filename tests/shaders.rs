@@ -4,6 +4,7 @@
 
 use lyapsweep::backend::gpu::shader::{Kernel, Variant};
 use lyapsweep::integrate::ImpactLocation;
+use lyapsweep::method::jacobian::Difference;
 use lyapsweep::scene::Precision;
 use lyapsweep::system::SYSTEMS;
 use naga::valid::{Capabilities, ValidationFlags, Validator};
@@ -21,14 +22,17 @@ fn all_variants() -> Vec<Variant> {
                     };
                     for &wall in walls {
                         for impact_location in [ImpactLocation::Newton, ImpactLocation::Linear] {
-                            variants.push(Variant {
-                                system,
-                                precision,
-                                lyapunov,
-                                wall,
-                                points,
-                                impact_location,
-                            });
+                            for difference in [Difference::Forward, Difference::Central] {
+                                variants.push(Variant {
+                                    system,
+                                    precision,
+                                    lyapunov,
+                                    difference,
+                                    wall,
+                                    points,
+                                    impact_location,
+                                });
+                            }
                         }
                     }
                 }
@@ -133,6 +137,7 @@ fn variants_leave_out_what_the_scene_does_not_need() {
         system: oscillator,
         precision: Precision::F64,
         lyapunov: true,
+        difference: Difference::Forward,
         wall: true,
         points: true,
         impact_location: ImpactLocation::Newton,
@@ -148,6 +153,14 @@ fn variants_leave_out_what_the_scene_does_not_need() {
             && has_global(&finish, "points")
     );
     assert_eq!(full.trajectories(), 3);
+    assert_eq!(
+        Variant {
+            difference: Difference::Central,
+            ..full
+        }
+        .trajectories(),
+        5
+    );
 
     // A wall the sweep cannot reach: no impact code at all.
     let no_wall = Variant {

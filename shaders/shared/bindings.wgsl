@@ -1,7 +1,8 @@
 // The buffers both kernels share. Host twins: src/backend/gpu/sweep.rs.
 //
 // A lane is one parameter value; it owns TRAJ trajectories (the reference,
-// then one perturbed copy per coordinate when exponents are wanted), stored
+// then the copies at x + δe_i, then for central differences those at
+// x - δe_i, when exponents are wanted), stored
 // lane-major so a lane's trajectories sit side by side and take the same
 // branches (impacts) together.
 
@@ -45,7 +46,8 @@ const FLAG_NONFINITE: u32 = 2u;
 // Per ring slot and lane: (impacts, flags, bits of the f32 max |y|, 0).
 @group(0) @binding(4) var<storage, read_write> summary: array<vec4<u32>>;
 #ifdef LYAPUNOV
-// Per lane: the perturbation actually taken per coordinate, (x_i + δ) - x_i.
+// Per lane: the perturbation actually taken per copy, (x_i + δ) - x_i
+// (then x_i - (x_i - δ) for central differences).
 @group(0) @binding(5) var<storage, read_write> deltas: array<real>;
 // Per ring slot and lane: the estimated Jacobian, row-major.
 @group(0) @binding(6) var<storage, read_write> jac: array<real>;

@@ -8,7 +8,7 @@
 
 use nalgebra::{Const, DimMin, SMatrix};
 
-use super::jacobian::forward_difference;
+use super::jacobian::{central_difference, forward_difference, Difference};
 use super::qr::QrAccumulator;
 use crate::system::{FlowSettings, IterationStats, Params, System};
 
@@ -27,8 +27,11 @@ pub struct MethodSettings {
     pub transient: usize,
     pub iterations: usize,
     pub initial_state: Vec<f64>,
-    /// δ of the perturbed copies.
+    /// δ of the perturbed copies, relative to the state's size: the copies
+    /// of x_n start at x_n ± δ·max(1, ‖x_n‖∞)·e_i (see [`perturbation_at`]).
     pub perturbation: f64,
+    /// Forward (the paper's) or central differences.
+    pub difference: Difference,
     pub flow: FlowSettings,
     pub tangent: Tangent,
     /// Whether to compute exponents at all (`[output] lyapunov`).
@@ -39,9 +42,18 @@ pub struct MethodSettings {
     /// steps of a flow, 1 for a map): sets the smallest contraction the
     /// finite difference resolves.
     pub steps_per_iteration: usize,
+    /// Keep every iteration's Jacobian in the result (for comparing backends).
+    pub keep_jacobians: bool,
     /// The unit roundoff of the arithmetic the images are computed in
     /// (f64::EPSILON, or f32::EPSILON on the GPU's f32 path).
     pub rounding_unit: f64,
+}
+
+/// The perturbation actually used at x: δ·max(1, ‖x‖∞). A relative δ keeps
+/// the balance of truncation and rounding error the same for a state of
+/// size 30 (Lorenz) as for one of size 1; f32 needs that.
+pub fn perturbation_at(delta: f64, x: &[f64]) -> f64 {
+    delta * x.iter().fold(1.0_f64, |m, v| m.max(v.abs()))
 }
 
 /// The noise in a finite-difference column: the rounding of an image of
@@ -78,8 +90,9 @@ pub enum LaneStatus {
     },
     /// A direction contracts, in one iteration, to near the rounding noise of
     /// the finite difference, so the most negative exponents are not to be
-    /// trusted: `bound` estimates their error per unit time (mean over
-    /// iterations of noise / min R_ii, over T). Shorten the map period.
+    /// trusted: `bound` estimates their error per unit time from the relative
+    /// noise ε = noise / min R_ii of each iteration, (⟨ε²⟩/2 + √(⟨ε²⟩/N)) / T.
+    /// Shorten the map period.
     Unresolved {
         bound: f64,
     },
@@ -118,6 +131,8 @@ pub struct LaneResult {
     pub period: f64,
     /// The last `bifurcation_points` reference points, D numbers each.
     pub bifurcation: Vec<f64>,
+    /// Every iteration's Jacobian, row-major, when `keep_jacobians` is set.
+    pub jacobians: Vec<f64>,
     pub status: LaneStatus,
 }
 
@@ -172,8 +187,9 @@ pub struct LaneAccumulator<const D: usize> {
     done: usize,
     impacts: u64,
     chattering: usize,
-    noise_over_r: f64,
+    noise_squares: f64,
     bifurcation: Vec<f64>,
+    jacobians: Option<Vec<f64>>,
     failed_at: Option<usize>,
 }
 
@@ -198,8 +214,9 @@ where
             done: 0,
             impacts: 0,
             chattering: 0,
-            noise_over_r: 0.0,
+            noise_squares: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
+            jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
         }
     }
@@ -239,6 +256,9 @@ where
             self.fail(self.transient + n);
             return false;
         }
+        if let (Some(j), Some(kept)) = (jacobian, self.jacobians.as_mut()) {
+            kept.extend(j.transpose().iter());
+        }
         if let Some(j) = jacobian {
             let diag = self.qr.push(j);
             if !diag.iter().all(|r| r.ln().is_finite()) {
@@ -249,7 +269,9 @@ where
             }
             if let Some((unit, delta, steps)) = self.noise {
                 let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
-                self.noise_over_r += difference_noise(unit, scale, steps, delta) / smallest;
+                let delta = delta * scale.max(1.0);
+                self.noise_squares +=
+                    (difference_noise(unit, scale, steps, delta) / smallest).powi(2);
             }
         }
         self.impacts += u64::from(stats.impacts);
@@ -283,10 +305,16 @@ where
                 impacts_per_period: f64::NAN,
                 period: self.period,
                 bifurcation: self.bifurcation,
+                jacobians: self.jacobians.unwrap_or_default(),
                 status: LaneStatus::NonFinite { iteration },
             };
         }
-        let resolution_bound = self.noise_over_r / (self.iterations as f64 * self.period);
+        // With relative noise ε_n in the smallest R_ii, ln R_ii is biased by
+        // about -ε_n²/2 and scattered by ε_n; over N iterations of period T
+        // that bounds the exponent error by (⟨ε²⟩/2 + √(⟨ε²⟩/N)) / T.
+        let mean_square = self.noise_squares / self.done.max(1) as f64;
+        let resolution_bound =
+            (0.5 * mean_square + (mean_square / self.done.max(1) as f64).sqrt()) / self.period;
         let exponents = if self.lyapunov {
             let mut e = self.qr.exponents(self.period).to_vec();
             e.sort_by(|a, b| b.total_cmp(a));
@@ -310,6 +338,7 @@ where
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
             period: self.period,
             bifurcation: self.bifurcation,
+            jacobians: self.jacobians.unwrap_or_default(),
             status,
         }
     }
@@ -333,9 +362,13 @@ fn step<const D: usize, S: System<D>>(
         }
         Tangent::FiniteDifference => {
             let next = system.iterate(x, flow, stats);
-            let j = settings
-                .lyapunov
-                .then(|| forward_difference(system, flow, x, &next, settings.perturbation, stats));
+            let delta = perturbation_at(settings.perturbation, x);
+            let j = settings.lyapunov.then(|| match settings.difference {
+                Difference::Forward => forward_difference(system, flow, x, &next, delta, stats),
+                Difference::Central => {
+                    central_difference(system, flow, x, &next, stats.impacts, delta, stats)
+                }
+            });
             (next, j)
         }
     }

@@ -46,3 +46,36 @@ pub fn assert_all_ok(report: &Report) {
         assert_eq!(lane.status, LaneStatus::Ok, "lane {k} flagged");
     }
 }
+
+/// Whether a missing GPU adapter must fail the GPU tests instead of skipping
+/// them (`.ci/run` sets it after installing Mesa's Vulkan driver).
+pub fn gpu_required() -> bool {
+    std::env::var("LYAPSWEEP_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+/// True when an adapter for `precision` exists; otherwise says SKIPPED
+/// loudly (or fails under LYAPSWEEP_REQUIRE_GPU=1).
+pub fn gpu_or_skip(test: &str, precision: lyapsweep::scene::Precision) -> bool {
+    let adapters = lyapsweep::backend::gpu::context::list();
+    if adapters
+        .iter()
+        .any(|a| precision == lyapsweep::scene::Precision::F32 || a.f64)
+    {
+        return true;
+    }
+    let found: Vec<String> = adapters
+        .iter()
+        .map(|a| format!("{} ({}, f64 {})", a.name, a.backend, a.f64))
+        .collect();
+    let message = format!(
+        "SKIPPED {test}: no GPU adapter for {precision:?} (found: [{}])",
+        found.join(", ")
+    );
+    assert!(
+        !gpu_required(),
+        "{message}, and LYAPSWEEP_REQUIRE_GPU=1 forbids skipping"
+    );
+    eprintln!("{message}");
+    println!("{message}");
+    false
+}

@@ -6,6 +6,7 @@
 use std::collections::BTreeSet;
 
 use crate::integrate::ImpactLocation;
+use crate::method::jacobian::Difference;
 use crate::scene::Precision;
 use crate::system::SystemInfo;
 
@@ -61,6 +62,8 @@ pub struct Variant {
     pub precision: Precision,
     /// Perturbed copies and the Jacobian buffer (`[output] lyapunov`).
     pub lyapunov: bool,
+    /// Forward (D copies) or central (2D copies) differences.
+    pub difference: Difference,
     /// Impact code: the system has a wall the sweep can reach.
     pub wall: bool,
     /// The Poincaré point buffer (`bifurcation_points > 0`).
@@ -69,10 +72,10 @@ pub struct Variant {
 }
 
 impl Variant {
-    /// Trajectories per lane: the reference and one copy per coordinate.
+    /// Trajectories per lane: the reference and its perturbed copies.
     pub fn trajectories(&self) -> usize {
         1 + if self.lyapunov {
-            self.system.dimension()
+            self.difference.copies(self.system.dimension())
         } else {
             0
         }
@@ -89,14 +92,11 @@ impl Variant {
         } else if self.system.is_flow {
             parts.push("no-wall".into());
         }
-        parts.push(
-            if self.lyapunov {
-                "jacobian"
-            } else {
-                "reference-only"
-            }
-            .into(),
-        );
+        parts.push(if self.lyapunov {
+            format!("jacobian-{}", self.difference.name())
+        } else {
+            "reference-only".into()
+        });
         if self.points {
             parts.push("points".into());
         }
@@ -115,6 +115,9 @@ impl Variant {
         let mut d = BTreeSet::new();
         if self.lyapunov {
             d.insert("LYAPUNOV");
+            if self.difference == Difference::Central {
+                d.insert("CENTRAL");
+            }
         }
         if self.wall {
             d.insert("WALL");

@@ -356,22 +356,28 @@ where
         // Trajectories: the reference at the initial state, copies at x0 + δe_i,
         // with the perturbation actually taken in the variant's precision.
         let x0 = &settings.initial_state;
+        let delta = crate::method::lane::perturbation_at(settings.perturbation, x0);
         let mut traj_data = Vec::with_capacity(count * traj * layout.traj_stride);
         let mut deltas = Vec::with_capacity(count * D);
         for _ in 0..count {
             for t in 0..traj {
                 let mut y = x0.clone();
                 if t > 0 {
-                    let i = t - 1;
+                    // Copies 1..=D at x + δe_i, then (central) D+1..=2D at x - δe_i.
+                    let i = (t - 1) % D;
+                    let sign = if t > D { -1.0 } else { 1.0 };
                     let (shifted, step) = match precision {
                         Precision::F64 => {
-                            let s = x0[i] + settings.perturbation;
-                            (s, s - x0[i])
+                            let s = x0[i] + sign * delta;
+                            (s, sign * (s - x0[i]))
                         }
                         Precision::F32 => {
-                            let (x, d) = (x0[i] as f32, settings.perturbation as f32);
-                            let s = x + d;
-                            (f64::from(s), f64::from(s - x))
+                            let (x, d) = (x0[i] as f32, delta as f32);
+                            let s = if sign > 0.0 { x + d } else { x - d };
+                            (
+                                f64::from(s),
+                                f64::from(if sign > 0.0 { s - x } else { x - s }),
+                            )
                         }
                     };
                     y[i] = shifted;

@@ -1,0 +1,261 @@
+//! The GPU backend against the CPU reference path and the exact backend, on
+//! whatever adapter exists (lavapipe in CI, where skipping is an error).
+
+mod common;
+
+use common::{gpu_or_skip, PERIODIC_ETAS, SEED};
+use lyapsweep::method::LaneStatus;
+use lyapsweep::scene::{Backend, Precision};
+use lyapsweep::{Report, RunOptions};
+
+fn values(v: &[f64]) -> String {
+    let list: Vec<String> = v.iter().map(|x| format!("{x}")).collect();
+    format!("sweep.values=[{}]", list.join(", "))
+}
+
+fn run(text: &str, overrides: &[String], options: RunOptions) -> Report {
+    let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
+    lyapsweep::run_with(&common::scene(text, &overrides), &options).expect("runs")
+}
+
+#[test]
+fn f64_matches_the_cpu_per_iteration_and_in_exponents() {
+    if !gpu_or_skip(
+        "f64_matches_the_cpu_per_iteration_and_in_exponents",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let keep = RunOptions {
+        keep_jacobians: true,
+        ..Default::default()
+    };
+    for location in ["newton", "linear"] {
+        let base = vec![
+            values(&PERIODIC_ETAS),
+            format!("integration.impact_location=\"{location}\""),
+        ];
+        let with = |backend: &str| {
+            let mut o = base.clone();
+            o.push(format!("run.backend=\"{backend}\""));
+            o
+        };
+        let cpu = run(SEED, &with("cpu"), keep);
+        let gpu = run(SEED, &with("gpu"), keep);
+        assert_eq!(gpu.backend, Backend::Gpu);
+        assert_eq!(gpu.precision, Precision::F64);
+        for (k, eta) in PERIODIC_ETAS.iter().enumerate() {
+            let (c, g) = (&cpu.lanes[k], &gpu.lanes[k]);
+            assert_eq!(g.status, LaneStatus::Ok, "{location} η = {eta}");
+            assert_eq!(c.jacobians.len(), 1000 * 4);
+            assert_eq!(g.jacobians.len(), c.jacobians.len());
+            // Rounding differences (a fused multiply-add here, an operation
+            // order there) are amplified by 1/δ = 1e8 in each column.
+            let mut worst: f64 = 0.0;
+            for (jc, jg) in c.jacobians.chunks(4).zip(g.jacobians.chunks(4)) {
+                let scale = jc.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+                let diff = jc
+                    .iter()
+                    .zip(jg)
+                    .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+                worst = worst.max(diff / scale);
+            }
+            assert!(
+                worst < 1e-6,
+                "{location} η = {eta}: Jacobians differ by {worst:e} of their scale"
+            );
+            for (a, b) in c.exponents.iter().zip(&g.exponents) {
+                assert!(
+                    (a - b).abs() < 1e-7,
+                    "{location} η = {eta}: CPU {:?} vs GPU {:?}",
+                    c.exponents,
+                    g.exponents
+                );
+            }
+            assert_eq!(c.impacts_per_period, g.impacts_per_period);
+        }
+        let v = gpu.gpu.as_ref().unwrap().validation.as_ref().unwrap();
+        assert!(v.max_difference < 1e-7, "validation {v:?}");
+    }
+}
+
+#[test]
+fn f32_matches_the_exact_backend_and_keeps_the_sum_rule() {
+    if !gpu_or_skip(
+        "f32_matches_the_exact_backend_and_keeps_the_sum_rule",
+        Precision::F32,
+    ) {
+        return;
+    }
+    let exact = run(
+        SEED,
+        &[values(&PERIODIC_ETAS), "run.backend=\"exact\"".into()],
+        RunOptions::default(),
+    );
+    let gpu = run(
+        SEED,
+        &[
+            values(&PERIODIC_ETAS),
+            "run.backend=\"gpu\"".into(),
+            "run.precision=\"f32\"".into(),
+        ],
+        RunOptions::default(),
+    );
+    assert_eq!(gpu.precision, Precision::F32);
+    for (k, eta) in PERIODIC_ETAS.iter().enumerate() {
+        let (e, g) = (&exact.lanes[k], &gpu.lanes[k]);
+        assert_eq!(g.status, LaneStatus::Ok);
+        for (a, b) in e.exponents.iter().zip(&g.exponents) {
+            assert!(
+                (a - b).abs() < 5e-4,
+                "η = {eta}: exact {:?} vs f32 {:?}",
+                e.exponents,
+                g.exponents
+            );
+        }
+    }
+    let sweep = run(
+        SEED,
+        &[
+            "sweep.from=0.5".into(),
+            "sweep.to=1.5".into(),
+            "sweep.count=101".into(),
+            "run.backend=\"gpu\"".into(),
+            "run.precision=\"f32\"".into(),
+        ],
+        RunOptions::default(),
+    );
+    for (lane, expected) in sweep.lanes.iter().zip(&sweep.expected_sums) {
+        assert_eq!(lane.status, LaneStatus::Ok);
+        assert!(
+            (lane.exponent_sum() - expected).abs() < 5e-4,
+            "sum {} vs {expected}",
+            lane.exponent_sum()
+        );
+    }
+}
+
+#[test]
+fn henon_and_lorenz_match_their_published_values_on_the_gpu() {
+    for precision in [Precision::F64, Precision::F32] {
+        if !gpu_or_skip(
+            "henon_and_lorenz_match_their_published_values_on_the_gpu",
+            precision,
+        ) {
+            continue;
+        }
+        let p = if precision == Precision::F64 {
+            "f64"
+        } else {
+            "f32"
+        };
+        let henon = lyapsweep::run(&common::committed_scene(
+            "henon.toml",
+            &["run.backend=\"gpu\"", &format!("run.precision=\"{p}\"")],
+        ))
+        .unwrap();
+        let l = &henon.lanes[0].exponents;
+        // f64 as on the CPU. In f32 a chaotic map's orbit is itself rounded at
+        // 6e-8 per step and settles on a slightly different (eventually
+        // periodic) orbit: measured λ1 = 0.41716 at 10⁵ and 0.41586 at 4·10⁵
+        // iterations, against 0.41801 and 0.41882 in f64. That is the
+        // arithmetic's orbit, not the method's error, so f32 gets 5e-3.
+        let (tolerance, sum_tolerance) = if precision == Precision::F64 {
+            // The sum is ln b up to the rounding of each difference column,
+            // about 1e-8 per iteration at δ = 1e-8. On the CPU it averages to
+            // 1e-11 over 10⁵ iterations; on lavapipe's f64 (contracted to
+            // fused multiply-adds) 1.5e-9, measured.
+            (2e-3, 1e-8)
+        } else {
+            // Measured 1.7e-5.
+            (5e-3, 5e-5)
+        };
+        assert!(
+            (l[0] - 0.41922).abs() < tolerance && (l[1] - -1.62319).abs() < tolerance,
+            "{p} Hénon {l:?}"
+        );
+        assert!(
+            (l[0] + l[1] - 0.3_f64.ln()).abs() < sum_tolerance,
+            "{p} Hénon sum {}",
+            l[0] + l[1]
+        );
+
+        let lorenz = lyapsweep::run(&common::committed_scene(
+            "lorenz.toml",
+            &["run.backend=\"gpu\"", &format!("run.precision=\"{p}\"")],
+        ))
+        .unwrap();
+        let l = &lorenz.lanes[0].exponents;
+        for (got, published) in l.iter().zip([0.9056, 0.0, -14.5723]) {
+            assert!((got - published).abs() < 0.02, "{p} Lorenz {l:?}");
+        }
+        let sum: f64 = l.iter().sum();
+        assert!(
+            (sum - -(10.0 + 1.0 + 8.0 / 3.0)).abs() < 1e-3,
+            "{p} Lorenz sum {sum}"
+        );
+    }
+}
+
+#[test]
+fn large_sweeps_split_into_batches_and_match_the_cpu() {
+    let precision = if gpu_or_skip("large_sweeps (f64)", Precision::F64) {
+        Precision::F64
+    } else if gpu_or_skip("large_sweeps (f32)", Precision::F32) {
+        Precision::F32
+    } else {
+        return;
+    };
+    let p = if precision == Precision::F64 {
+        "f64"
+    } else {
+        "f32"
+    };
+    for (count, steps, max_batch_lanes, batches) in
+        [(4096, 60, None, 1), (100_000, 20, Some(40_000), 3)]
+    {
+        let overrides = vec![
+            "sweep.from=0.5".to_owned(),
+            "sweep.to=1.5".to_owned(),
+            format!("sweep.count={count}"),
+            format!("integration.steps_per_period={steps}"),
+            "integration.transient=5".to_owned(),
+            "integration.iterations=10".to_owned(),
+            "output.bifurcation_points=2".to_owned(),
+            "run.backend=\"gpu\"".to_owned(),
+            format!("run.precision=\"{p}\""),
+            "run.validate=8".to_owned(),
+        ];
+        let report = run(
+            SEED,
+            &overrides,
+            RunOptions {
+                max_batch_lanes,
+                ..Default::default()
+            },
+        );
+        assert_eq!(report.lanes.len(), count);
+        let gpu = report.gpu.as_ref().unwrap();
+        assert_eq!(gpu.batches, batches, "{count} values");
+        let v = gpu.validation.as_ref().unwrap();
+        assert_eq!(v.lanes.len(), 8);
+        assert!(v.lanes.contains(&0) && v.lanes.contains(&(count - 1)));
+        let tolerance = if precision == Precision::F64 {
+            1e-7
+        } else {
+            1e-3
+        };
+        assert!(
+            v.max_difference < tolerance,
+            "{count} values: GPU vs CPU {:e}",
+            v.max_difference
+        );
+        assert!(report.lanes.iter().all(
+            |l| l.status == LaneStatus::Ok || matches!(l.status, LaneStatus::Unresolved { .. })
+        ));
+        assert!(report
+            .lanes
+            .iter()
+            .all(|l| l.bifurcation.len() == 4 && l.exponents.len() == 2));
+    }
+}
