@@ -129,10 +129,11 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     if let Some(gpu) = &report.gpu {
         let t = &gpu.timings;
         println!(
-            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch",
+            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch",
             t.setup.as_secs_f64(),
             t.transient.as_secs_f64(),
             t.averaging.as_secs_f64(),
+            t.gpu_wait.as_secs_f64(),
             t.readback.as_secs_f64(),
             t.host_qr.as_secs_f64(),
             gpu.batches,

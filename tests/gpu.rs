@@ -259,3 +259,51 @@ fn large_sweeps_split_into_batches_and_match_the_cpu() {
             .all(|l| l.bifurcation.len() == 4 && l.exponents.len() == 2));
     }
 }
+
+#[test]
+fn variants_without_wall_or_copies_match_the_cpu() {
+    if !gpu_or_skip(
+        "variants_without_wall_or_copies_match_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let base = [
+        values(&[0.8, 1.2]),
+        "integration.steps_per_period=200".to_owned(),
+        "integration.transient=20".to_owned(),
+        "integration.iterations=50".to_owned(),
+        "output.bifurcation_points=5".to_owned(),
+    ];
+    for extra in ["system.wall=30.0", "output.lyapunov=\"none\""] {
+        let with = |backend: &str| {
+            let mut o = base.to_vec();
+            o.push(extra.to_owned());
+            o.push(format!("run.backend=\"{backend}\""));
+            o
+        };
+        let cpu = run(SEED, &with("cpu"), RunOptions::default());
+        let gpu = run(SEED, &with("gpu"), RunOptions::default());
+        let name = &gpu.gpu.as_ref().unwrap().variant;
+        if extra.contains("wall") {
+            assert!(name.contains("no-wall"), "{name}");
+        } else {
+            assert!(name.contains("reference-only"), "{name}");
+            assert!(gpu.lanes.iter().all(|l| l.exponents.is_empty()));
+        }
+        for (c, g) in cpu.lanes.iter().zip(&gpu.lanes) {
+            for (a, b) in c.exponents.iter().zip(&g.exponents) {
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "{extra}: {:?} vs {:?}",
+                    c.exponents,
+                    g.exponents
+                );
+            }
+            assert_eq!(c.bifurcation.len(), g.bifurcation.len());
+            for (a, b) in c.bifurcation.iter().zip(&g.bifurcation) {
+                assert!((a - b).abs() < 1e-10, "{extra}: points {a} vs {b}");
+            }
+        }
+    }
+}

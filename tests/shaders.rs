@@ -213,3 +213,37 @@ fn variants_leave_out_what_the_scene_does_not_need() {
     .contains("comp = (y1 - y) - corrected"));
     assert!(!full.source(Kernel::Integrate).contains("corrected"));
 }
+
+#[test]
+fn a_scene_picks_only_the_parts_it_needs() {
+    use lyapsweep::backend::variant;
+    let scene = |extra: &str| {
+        let text = format!("[system]\nkind = \"impact-oscillator\"\n{extra}");
+        lyapsweep::scene::parse(&text, "test", "test", &[]).unwrap()
+    };
+    // The seed's wall at 2 is within reach of the forced response.
+    let seed = variant(
+        &scene("[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),
+        Precision::F64,
+    );
+    assert!(seed.wall && seed.lyapunov && !seed.points);
+    // A wall beyond |X_p| + √(u² + u'²) for every swept η is never reached.
+    let far = variant(
+        &scene("wall = 30.0\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),
+        Precision::F64,
+    );
+    assert!(!far.wall, "{}", far.name());
+    assert!(far.name().contains("no-wall"));
+    // ... but near resonance the response grows: η = 1 with ζ = 0.05 reaches 10.
+    let resonant = variant(
+        &scene("wall = 9.0\n[sweep]\nvalues = [1.0]"),
+        Precision::F64,
+    );
+    assert!(resonant.wall);
+    let bifurcation_only = variant(
+        &scene("[output]\nlyapunov = \"none\"\nbifurcation_points = 10"),
+        Precision::F32,
+    );
+    assert!(!bifurcation_only.lyapunov && bifurcation_only.points);
+    assert_eq!(bifurcation_only.trajectories(), 1);
+}

@@ -43,7 +43,9 @@ pub struct Timings {
     pub transient: Duration,
     /// The averaging iterations, readback and host QR included.
     pub averaging: Duration,
-    /// Waiting for and copying out the streamed chunks.
+    /// Host idle, waiting for the GPU to finish a streamed chunk.
+    pub gpu_wait: Duration,
+    /// Mapping and copying out the streamed chunks.
     pub readback: Duration,
     /// Host QR accumulation (overlapping GPU work).
     pub host_qr: Duration,
@@ -54,6 +56,7 @@ impl Timings {
         self.setup += other.setup;
         self.transient += other.transient;
         self.averaging += other.averaging;
+        self.gpu_wait += other.gpu_wait;
         self.readback += other.readback;
         self.host_qr += other.host_qr;
     }
@@ -619,11 +622,7 @@ where
             .step_by(self.ring)
             .map(|first| (first, self.ring.min(settings.iterations - first)))
             .collect();
-        let mut pending: Option<(
-            usize,
-            mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
-            wgpu::SubmissionIndex,
-        )> = None;
+        let mut pending: Option<(usize, MapReceiver, wgpu::SubmissionIndex)> = None;
         for (c, &(_, n)) in chunks.iter().enumerate() {
             let mut encoder = device.create_command_encoder(&Default::default());
             self.encode_iterations(&mut encoder, pipelines, false, n);
@@ -687,10 +686,7 @@ where
         }
     }
 
-    fn map_staging(
-        &self,
-        which: usize,
-    ) -> mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>> {
+    fn map_staging(&self, which: usize) -> MapReceiver {
         let (sender, receiver) = mpsc::channel();
         self.staging[which].map_async(wgpu::MapMode::Read, .., move |result| {
             let _ = sender.send(result);
@@ -706,7 +702,7 @@ where
         accumulators: &mut [LaneAccumulator<D>],
         chunks: &[(usize, usize)],
         c: usize,
-        receiver: mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>,
+        receiver: MapReceiver,
         index: wgpu::SubmissionIndex,
         timings: &mut Timings,
     ) -> Result<()> {
@@ -721,6 +717,8 @@ where
                 timeout: None,
             })
             .map_err(|e| gpu_error(format!("the device stopped responding: {e}")))?;
+        timings.gpu_wait += start.elapsed();
+        let start = Instant::now();
         receiver
             .recv()
             .map_err(|_| gpu_error("readback was cancelled".into()))?
@@ -780,6 +778,9 @@ where
         Ok(())
     }
 }
+
+/// Where a staging buffer's map_async reports.
+type MapReceiver = mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>;
 
 const FLAG_CHATTERING: u32 = 1;
 const FLAG_NONFINITE: u32 = 2;
