@@ -282,3 +282,28 @@ fn an_adapter_name_that_matches_nothing_is_a_clear_error() {
     assert!(!stderr.contains("panicked"));
     assert!(!dir.path().join("out").exists());
 }
+
+#[test]
+fn devices_lists_each_adapter_with_its_f64_support_and_limits() {
+    let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .arg("devices")
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let adapters = lyapsweep::backend::gpu::context::list();
+    if adapters.is_empty() {
+        assert!(stdout.contains("no GPU adapters found"), "{stdout}");
+    }
+    for a in adapters {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&a.name) && l.contains(&format!("[{}]", a.backend)))
+            .unwrap_or_else(|| panic!("{} missing from: {stdout}", a.name));
+        assert!(
+            line.contains(if a.f64 { "f64 yes" } else { "f64 no" }),
+            "{line}"
+        );
+        assert!(line.contains("max storage binding"), "{line}");
+    }
+}
