@@ -585,17 +585,6 @@ where
         let queue = &gpu.queue;
         let settings = self.settings;
         let mut timings = Timings::default();
-        let wait = |index: Option<wgpu::SubmissionIndex>| {
-            device
-                .poll(wgpu::PollType::Wait {
-                    submission_index: index,
-                    timeout: None,
-                })
-                .map_err(|e| Error::Backend {
-                    backend: "gpu".into(),
-                    reason: format!("the device stopped responding: {e}"),
-                })
-        };
 
         // The transient: references only, no readback.
         let start = Instant::now();
@@ -606,7 +595,7 @@ where
             let mut encoder = device.create_command_encoder(&Default::default());
             self.encode_iterations(&mut encoder, pipelines, true, n);
             let index = queue.submit([encoder.finish()]);
-            wait(Some(index))?;
+            wait_for(device, index)?;
             done += n;
         }
         timings.transient = start.elapsed();
@@ -622,36 +611,24 @@ where
             .step_by(self.ring)
             .map(|first| (first, self.ring.min(settings.iterations - first)))
             .collect();
-        let mut pending: Option<(usize, MapReceiver, wgpu::SubmissionIndex)> = None;
+        // Chunk c computes while the host reads and accumulates chunk c - 1.
+        let mut pending: Option<Pending> = None;
         for (c, &(_, n)) in chunks.iter().enumerate() {
             let mut encoder = device.create_command_encoder(&Default::default());
             self.encode_iterations(&mut encoder, pipelines, false, n);
             self.copy_to_staging(&mut encoder, &self.staging[c % 2], n);
             let index = queue.submit([encoder.finish()]);
-            let receiver = self.map_staging(c % 2);
-            if let Some((previous, rx, idx)) = pending.take() {
-                self.collect(
-                    gpu,
-                    &mut accumulators,
-                    &chunks,
-                    previous,
-                    rx,
-                    idx,
-                    &mut timings,
-                )?;
+            let submitted = Pending {
+                chunk: c,
+                receiver: self.map_staging(c % 2),
+                index,
+            };
+            if let Some(previous) = pending.replace(submitted) {
+                self.collect(gpu, &mut accumulators, &chunks, previous, &mut timings)?;
             }
-            pending = Some((c, receiver, index));
         }
-        if let Some((previous, rx, idx)) = pending.take() {
-            self.collect(
-                gpu,
-                &mut accumulators,
-                &chunks,
-                previous,
-                rx,
-                idx,
-                &mut timings,
-            )?;
+        if let Some(last) = pending {
+            self.collect(gpu, &mut accumulators, &chunks, last, &mut timings)?;
         }
         timings.averaging = start.elapsed();
         Ok((
@@ -694,35 +671,26 @@ where
         receiver
     }
 
-    /// Waits for chunk `c`'s staging copy, reads it and accumulates QR for every lane.
-    #[allow(clippy::too_many_arguments)]
+    /// Waits for a submitted chunk's staging copy, reads it and accumulates
+    /// QR for every lane.
     fn collect(
         &self,
         gpu: &Gpu,
         accumulators: &mut [LaneAccumulator<D>],
         chunks: &[(usize, usize)],
-        c: usize,
-        receiver: MapReceiver,
-        index: wgpu::SubmissionIndex,
+        pending: Pending,
         timings: &mut Timings,
     ) -> Result<()> {
-        let gpu_error = |reason: String| Error::Backend {
-            backend: "gpu".into(),
-            reason,
-        };
         let start = Instant::now();
-        gpu.device
-            .poll(wgpu::PollType::Wait {
-                submission_index: Some(index),
-                timeout: None,
-            })
-            .map_err(|e| gpu_error(format!("the device stopped responding: {e}")))?;
+        wait_for(&gpu.device, pending.index)?;
         timings.gpu_wait += start.elapsed();
         let start = Instant::now();
-        receiver
+        pending
+            .receiver
             .recv()
             .map_err(|_| gpu_error("readback was cancelled".into()))?
             .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+        let c = pending.chunk;
         let (first_iteration, n) = chunks[c];
         let staging = &self.staging[c % 2];
         let lanes = (n * self.count) as u64;
@@ -781,6 +749,31 @@ where
 
 /// Where a staging buffer's map_async reports.
 type MapReceiver = mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>;
+
+/// A chunk of averaging iterations submitted and being mapped.
+struct Pending {
+    chunk: usize,
+    receiver: MapReceiver,
+    index: wgpu::SubmissionIndex,
+}
+
+fn gpu_error(reason: String) -> Error {
+    Error::Backend {
+        backend: "gpu".into(),
+        reason,
+    }
+}
+
+/// Blocks until the submission `index` has finished on the device.
+fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<()> {
+    device
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(index),
+            timeout: None,
+        })
+        .map(|_| ())
+        .map_err(|e| gpu_error(format!("the device stopped responding: {e}")))
+}
 
 const FLAG_CHATTERING: u32 = 1;
 const FLAG_NONFINITE: u32 = 2;
