@@ -30,7 +30,7 @@ pub const INFO: SystemInfo = SystemInfo {
     check,
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| p.get("b").abs().ln(),
-    period: |_| 1.0,
+    period: super::period_of::<2, Henon>,
     forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<2, Henon>,
     wgsl: Some(include_str!("../../shaders/system/henon.wgsl")),
@@ -54,6 +54,13 @@ fn check(p: &Params) -> Result<(), (&'static str, String)> {
     Ok(())
 }
 
+impl Henon {
+    /// x' = 1 - a·x² + y, y' = b·x.
+    fn step(&self, x: &[f64; 2]) -> [f64; 2] {
+        [1.0 - self.a * x[0] * x[0] + x[1], self.b * x[0]]
+    }
+}
+
 impl System<2> for Henon {
     fn new(p: &Params) -> Self {
         Henon {
@@ -67,7 +74,7 @@ impl System<2> for Henon {
     }
 
     fn iterate(&self, x: &[f64; 2], _: &FlowSettings, _: &mut IterationStats) -> [f64; 2] {
-        [1.0 - self.a * x[0] * x[0] + x[1], self.b * x[0]]
+        self.step(x)
     }
 
     fn iterate_exact(
@@ -75,7 +82,8 @@ impl System<2> for Henon {
         x: &[f64; 2],
         _: &mut IterationStats,
     ) -> Option<([f64; 2], SMatrix<f64, 2, 2>)> {
+        // DU = [[-2ax, 1], [b, 0]] (the paper's eq. 8).
         let jacobian = SMatrix::<f64, 2, 2>::new(-2.0 * self.a * x[0], 1.0, self.b, 0.0);
-        Some(([1.0 - self.a * x[0] * x[0] + x[1], self.b * x[0]], jacobian))
+        Some((self.step(x), jacobian))
     }
 }

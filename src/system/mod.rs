@@ -167,6 +167,18 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     }
 }
 
+/// [`SystemInfo::period`] from the system's own [`System::period`].
+pub fn period_of<const D: usize, S: System<D>>(params: &Params) -> f64 {
+    S::new(params).period()
+}
+
+/// [`SystemInfo::forcing_frequency`] from the flow's own [`Flow::forcing_frequency`].
+pub fn forcing_of<const D: usize, S: System<D> + crate::integrate::Flow<D>>(
+    params: &Params,
+) -> f64 {
+    S::new(params).forcing_frequency()
+}
+
 /// Checks that every parameter is a finite number.
 pub fn check_finite(params: &Params) -> Result<(), (&'static str, String)> {
     for (p, v) in params.info.parameters.iter().zip(&params.values) {
