@@ -13,6 +13,7 @@
 //! run), [`scene`] (the input contract) and [`output`] (the CSV files).
 
 pub mod backend;
+pub mod bench;
 pub mod error;
 pub mod integrate;
 pub mod method;

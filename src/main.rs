@@ -39,6 +39,15 @@ enum Command {
     },
     /// List the GPU adapters wgpu finds (honours WGPU_BACKEND and WGPU_ADAPTER_NAME for runs).
     Devices,
+    /// Error against run time over a grid of configurations (writes bench.csv, bench.md, bench.png).
+    Bench {
+        /// A CI-sized grid: fewer configurations, shorter runs.
+        #[arg(long)]
+        quick: bool,
+        /// Output folder [default: out/bench].
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
 }
 
 fn main() -> ExitCode {
@@ -47,6 +56,15 @@ fn main() -> ExitCode {
         Command::Devices => {
             print_devices();
             ExitCode::SUCCESS
+        }
+        Command::Bench { quick, out } => {
+            match bench(quick, out.unwrap_or_else(|| PathBuf::from("out/bench"))) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(if e.is_input_error() { 2 } else { 1 })
+                }
+            }
         }
         Command::Run {
             scene,
@@ -180,4 +198,39 @@ fn print_devices() {
             a.max_workgroups
         );
     }
+}
+
+fn bench(quick: bool, out: PathBuf) -> Result<(), Error> {
+    use lyapsweep::bench;
+    let adapters = lyapsweep::backend::gpu::context::list();
+    let gpu_f64 = adapters.iter().any(|a| a.f64);
+    let plan = bench::Plan::new(quick, gpu_f64, !adapters.is_empty());
+    let measurements = bench::run(&plan)?;
+    let mut machine = format!(
+        "{} cores of {}",
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+        cpu_model()
+    );
+    if let Some(a) = adapters.iter().find(|a| a.f64).or(adapters.first()) {
+        machine += &format!("; GPU adapter {} ({})", a.name, a.backend);
+    }
+    let written = bench::write(&out, &plan, &measurements, &machine)?;
+    print!("{}", bench::markdown(&plan, &measurements, &machine));
+    for path in written {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The CPU's model name, for naming the machine in reports.
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|m| m.trim().to_owned())
+        })
+        .unwrap_or_else(|| std::env::consts::ARCH.to_owned())
 }

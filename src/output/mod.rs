@@ -3,6 +3,8 @@
 //! Each file is written under a temporary name in the output folder and
 //! renamed into place when complete, so a file appears whole or not at all.
 
+pub mod figure;
+
 use std::fs;
 use std::path::{Path, PathBuf};
 

@@ -1,0 +1,499 @@
+//! The error-against-time study (`lyapsweep bench`): a grid of
+//! configurations (backend and precision, RK4 steps, impact location, δ,
+//! difference scheme) on fixed parameter values of the seed's oscillator,
+//! each timed and compared with the exact backend.
+//!
+//! Error of a configuration: the largest of (a) |λ_i - λ_i,exact| at the
+//! periodic points, the exact backend run with the same transient,
+//! iterations and start, (b) |λ_sum - expected_sum| at the chaotic point and
+//! over a sweep. Time: the median wall time of several runs after a warm-up.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::backend::{self, RunOptions};
+use crate::error::{Error, Result};
+use crate::integrate::ImpactLocation;
+use crate::method::jacobian::Difference;
+use crate::scene::{self, Backend, Precision, Scene};
+
+/// Periodic points of the seed's oscillator (compared per exponent with exact).
+pub const PERIODIC: [f64; 5] = [0.8, 0.95, 1.1, 1.25, 1.5];
+/// A chaotic point in the window where impacts begin (compared by its sum).
+pub const CHAOTIC: f64 = 0.715;
+
+/// One configuration of the grid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Config {
+    pub backend: Backend,
+    pub precision: Precision,
+    pub steps: usize,
+    pub location: ImpactLocation,
+    pub perturbation: f64,
+    pub difference: Difference,
+}
+
+impl Config {
+    fn cpu(
+        steps: usize,
+        location: ImpactLocation,
+        perturbation: f64,
+        difference: Difference,
+    ) -> Self {
+        Config {
+            backend: Backend::Cpu,
+            precision: Precision::F64,
+            steps,
+            location,
+            perturbation,
+            difference,
+        }
+    }
+
+    /// `cpu-f64`, `gpu-f32`, `exact`.
+    pub fn path(&self) -> String {
+        match self.backend {
+            Backend::Exact => "exact".into(),
+            b => format!("{}-{}", b.name(), precision_name(self.precision)),
+        }
+    }
+
+    fn overrides(&self) -> Vec<String> {
+        vec![
+            format!("run.backend=\"{}\"", self.backend.name()),
+            format!("run.precision=\"{}\"", precision_name(self.precision)),
+            format!("integration.steps_per_period={}", self.steps),
+            format!("integration.impact_location=\"{}\"", self.location.name()),
+            format!("integration.perturbation={:e}", self.perturbation),
+            format!("integration.difference=\"{}\"", self.difference.name()),
+            "run.validate=0".into(),
+        ]
+    }
+}
+
+fn precision_name(p: Precision) -> &'static str {
+    match p {
+        Precision::F64 => "f64",
+        Precision::F32 => "f32",
+    }
+}
+
+/// The fixed part of a study: where and how long.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub transient: usize,
+    pub iterations: usize,
+    /// The sum-rule sweep over [0.5, 1.5].
+    pub sweep: Vec<f64>,
+    pub repeats: usize,
+    pub configs: Vec<Config>,
+}
+
+impl Plan {
+    /// The full study, or a CI-sized one with `quick`; GPU configurations
+    /// only for the precisions an adapter offers.
+    pub fn new(quick: bool, gpu_f64: bool, gpu_f32: bool) -> Self {
+        use Difference::{Central, Forward};
+        use ImpactLocation::{Linear, Newton};
+        let mut configs = Vec::new();
+        let (steps, deltas): (&[usize], &[f64]) = if quick {
+            (&[100, 400], &[1e-4, 1e-8])
+        } else {
+            (
+                &[100, 200, 450, 900, 1800, 3600],
+                &[1e-2, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12],
+            )
+        };
+        let reference_steps = if quick { 400 } else { 1800 };
+        // Steps against impact location at the default δ.
+        for &s in steps {
+            for location in [Linear, Newton] {
+                configs.push(Config::cpu(
+                    s,
+                    location,
+                    scene::DEFAULT_PERTURBATION_F64,
+                    Forward,
+                ));
+            }
+        }
+        // δ against the difference scheme at the reference step count.
+        for &d in deltas {
+            for difference in [Forward, Central] {
+                let c = Config::cpu(reference_steps, Newton, d, difference);
+                if !configs.contains(&c) {
+                    configs.push(c);
+                }
+            }
+        }
+        let gpu = |precision, steps, perturbation, difference| Config {
+            backend: Backend::Gpu,
+            precision,
+            steps,
+            location: Newton,
+            perturbation,
+            difference,
+        };
+        let gpu_steps: &[usize] = if quick { &[400] } else { &[450, 1800] };
+        for &s in gpu_steps {
+            if gpu_f64 {
+                configs.push(gpu(
+                    Precision::F64,
+                    s,
+                    scene::DEFAULT_PERTURBATION_F64,
+                    Forward,
+                ));
+            }
+            if gpu_f32 {
+                for d in [1e-3, scene::DEFAULT_PERTURBATION_F32] {
+                    configs.push(gpu(Precision::F32, s, d, Central));
+                }
+                configs.push(gpu(Precision::F32, s, 1e-3, Forward));
+            }
+        }
+        configs.push(Config {
+            backend: Backend::Exact,
+            ..Config::cpu(
+                reference_steps,
+                Newton,
+                scene::DEFAULT_PERTURBATION_F64,
+                Forward,
+            )
+        });
+        let (transient, iterations, count, repeats) = if quick {
+            (50, 100, 3, 1)
+        } else {
+            (500, 1000, 11, 3)
+        };
+        let sweep = (0..count)
+            .map(|k| 0.5 + k as f64 / (count - 1) as f64)
+            .collect();
+        Plan {
+            transient,
+            iterations,
+            sweep,
+            repeats,
+            configs,
+        }
+    }
+
+    /// The η values of one run: periodic points, the chaotic point, the sweep.
+    fn values(&self) -> Vec<f64> {
+        let mut v = PERIODIC.to_vec();
+        v.push(CHAOTIC);
+        v.extend(&self.sweep);
+        v
+    }
+
+    fn scene(&self, overrides: &[String]) -> Result<Scene> {
+        let values: Vec<String> = self.values().iter().map(|v| format!("{v}")).collect();
+        let text = format!(
+            "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\ninitial_state = [0.0, 0.0]\n",
+            values.join(", "),
+            self.transient,
+            self.iterations
+        );
+        scene::parse(&text, "bench", "bench", overrides)
+    }
+}
+
+/// What one configuration measured.
+#[derive(Clone, Debug)]
+pub struct Measurement {
+    pub config: Config,
+    /// Largest |λ_i - λ_i,exact| over the periodic points.
+    pub periodic_error: f64,
+    /// |λ_sum - expected_sum| at the chaotic point.
+    pub chaotic_sum_error: f64,
+    /// Largest |λ_sum - expected_sum| over the sweep.
+    pub sweep_sum_error: f64,
+    /// Median wall time of the repeats, seconds.
+    pub seconds: f64,
+    /// Lane-steps per repeat (RK4 steps of all trajectories).
+    pub lane_steps: f64,
+    /// On the Pareto front of (seconds, error).
+    pub pareto: bool,
+}
+
+impl Measurement {
+    /// The headline error: the largest of the three.
+    pub fn error(&self) -> f64 {
+        self.periodic_error
+            .max(self.chaotic_sum_error)
+            .max(self.sweep_sum_error)
+    }
+}
+
+/// Runs the study, reporting progress on stderr.
+pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
+    let exact_scene = plan.scene(&["run.backend=\"exact\"".into()])?;
+    let exact = backend::run(&exact_scene)?;
+    let n_periodic = PERIODIC.len();
+    let mut out = Vec::new();
+    for (k, config) in plan.configs.iter().enumerate() {
+        let scene = plan.scene(&config.overrides())?;
+        eprintln!(
+            "bench {}/{}: {}",
+            k + 1,
+            plan.configs.len(),
+            describe(config)
+        );
+        // The warm-up: shader compilation, thread pool, caches.
+        let mut report = backend::run_with(&scene, &RunOptions::default())?;
+        let mut times = Vec::new();
+        for _ in 0..plan.repeats {
+            let start = Instant::now();
+            report = backend::run_with(&scene, &RunOptions::default())?;
+            times.push(start.elapsed().as_secs_f64());
+        }
+        times.sort_by(f64::total_cmp);
+        let sum_error = |k: usize| (report.lanes[k].exponent_sum() - report.expected_sums[k]).abs();
+        let periodic_error = (0..n_periodic)
+            .flat_map(|k| {
+                report.lanes[k]
+                    .exponents
+                    .iter()
+                    .zip(&exact.lanes[k].exponents)
+                    .map(|(a, b)| (a - b).abs())
+            })
+            .fold(0.0, f64::max);
+        let trajectories = match config.backend {
+            Backend::Exact => 1,
+            _ => 1 + config.difference.copies(2),
+        };
+        let lane_steps = (report.lanes.len()
+            * config.steps
+            * (plan.transient + plan.iterations * trajectories)) as f64;
+        out.push(Measurement {
+            config: *config,
+            periodic_error,
+            chaotic_sum_error: sum_error(n_periodic),
+            sweep_sum_error: (n_periodic + 1..report.lanes.len())
+                .map(sum_error)
+                .fold(0.0, f64::max),
+            seconds: times[times.len() / 2],
+            lane_steps,
+            pareto: false,
+        });
+    }
+    mark_pareto(&mut out);
+    Ok(out)
+}
+
+fn describe(c: &Config) -> String {
+    if c.backend == Backend::Exact {
+        return "exact".into();
+    }
+    format!(
+        "{} steps={} {} δ={:e} {}",
+        c.path(),
+        c.steps,
+        c.location.name(),
+        c.perturbation,
+        c.difference.name()
+    )
+}
+
+/// Marks the measurements no other one beats in both time and error. The
+/// exact backend (error 0 by definition) does not compete.
+fn mark_pareto(ms: &mut [Measurement]) {
+    let points: Vec<Option<(f64, f64)>> = ms
+        .iter()
+        .map(|m| (m.config.backend != Backend::Exact).then(|| (m.seconds, m.error())))
+        .collect();
+    for (m, &point) in ms.iter_mut().zip(&points) {
+        m.pareto = point.is_some_and(|(t, e)| {
+            !points
+                .iter()
+                .flatten()
+                .any(|&(t2, e2)| t2 <= t && e2 <= e && (t2 < t || e2 < e))
+        });
+    }
+}
+
+/// The fastest configuration whose error is at most `target`.
+pub fn best_for(ms: &[Measurement], target: f64) -> Option<&Measurement> {
+    ms.iter()
+        .filter(|m| m.config.backend != Backend::Exact && m.error() <= target)
+        .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
+}
+
+/// Writes bench.csv, bench.md and bench.png into `dir`.
+pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Result<Vec<PathBuf>> {
+    let fail = |path: &Path, e: std::io::Error| Error::Write {
+        path: path.to_owned(),
+        source: e,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| fail(dir, e))?;
+    let csv_path = dir.join("bench.csv");
+    let mut csv = String::from(
+        "path,steps_per_period,impact_location,perturbation,difference,periodic_error,chaotic_sum_error,sweep_sum_error,error,seconds,lane_steps,pareto\n",
+    );
+    for m in ms {
+        let c = &m.config;
+        csv += &format!(
+            "{},{},{},{:e},{},{:e},{:e},{:e},{:e},{},{},{}\n",
+            c.path(),
+            c.steps,
+            c.location.name(),
+            c.perturbation,
+            c.difference.name(),
+            m.periodic_error,
+            m.chaotic_sum_error,
+            m.sweep_sum_error,
+            m.error(),
+            m.seconds,
+            m.lane_steps,
+            m.pareto
+        );
+    }
+    std::fs::write(&csv_path, csv).map_err(|e| fail(&csv_path, e))?;
+
+    let md_path = dir.join("bench.md");
+    std::fs::write(&md_path, markdown(plan, ms, machine)).map_err(|e| fail(&md_path, e))?;
+    let png_path = dir.join("bench.png");
+    plot(&png_path, ms).map_err(|e| fail(&png_path, std::io::Error::other(e)))?;
+    Ok(vec![csv_path, md_path, png_path])
+}
+
+/// The Markdown report: every configuration, then the best per error target.
+pub fn markdown(plan: &Plan, ms: &[Measurement], machine: &str) -> String {
+    let mut s = format!(
+        "Seed oscillator (ζ = 0.05, f = 1, X_w = 2, e = 1, start (0, 0)), transient {}, iterations {}; \
+         periodic points η = {:?}, chaotic η = {CHAOTIC}, sum-rule sweep of {} values over [0.5, 1.5]. \
+         Time: median of {} runs after a warm-up. Machine: {machine}.\n\n",
+        plan.transient,
+        plan.iterations,
+        PERIODIC,
+        plan.sweep.len(),
+        plan.repeats
+    );
+    s += "| path | steps | impacts | δ | difference | periodic \\|Δλ\\| | chaotic \\|Δsum\\| | sweep \\|Δsum\\| | time s | Pareto |\n";
+    s += "|---|---|---|---|---|---|---|---|---|---|\n";
+    for m in ms {
+        let c = &m.config;
+        s += &format!(
+            "| {} | {} | {} | {:.0e} | {} | {:.1e} | {:.1e} | {:.1e} | {:.3} | {} |\n",
+            c.path(),
+            c.steps,
+            c.location.name(),
+            c.perturbation,
+            c.difference.name(),
+            m.periodic_error,
+            m.chaotic_sum_error,
+            m.sweep_sum_error,
+            m.seconds,
+            if m.pareto { "★" } else { "" }
+        );
+    }
+    s += "\nFastest configuration per error target (error = the largest of the three columns):\n\n";
+    s += "| target | configuration | error | time s |\n|---|---|---|---|\n";
+    for target in [1e-3, 1e-5, 1e-7] {
+        match best_for(ms, target) {
+            Some(m) => {
+                s += &format!(
+                    "| {target:.0e} | {} | {:.1e} | {:.3} |\n",
+                    describe(&m.config),
+                    m.error(),
+                    m.seconds
+                )
+            }
+            None => s += &format!("| {target:.0e} | none reached it | | |\n"),
+        }
+    }
+    s
+}
+
+fn plot(path: &Path, ms: &[Measurement]) -> std::result::Result<(), String> {
+    use plotters::prelude::*;
+    crate::output::figure::register_font();
+    let points: Vec<&Measurement> = ms
+        .iter()
+        .filter(|m| m.config.backend != Backend::Exact)
+        .collect();
+    let smallest = ms
+        .iter()
+        .filter(|m| m.config.backend != Backend::Exact && m.error() > 0.0)
+        .fold(f64::INFINITY, |a, m| a.min(m.error()));
+    let floor: f64 = if smallest.is_finite() {
+        smallest / 3.0
+    } else {
+        1e-12
+    };
+    let (t_min, t_max) = points.iter().fold((f64::INFINITY, 0.0_f64), |(a, b), m| {
+        (a.min(m.seconds), b.max(m.seconds))
+    });
+    let e_max = points.iter().fold(floor, |a, m| a.max(m.error()));
+    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Error against run time (seed oscillator)",
+            ("sans-serif", 26),
+        )
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(
+            (t_min * 0.7..t_max * 1.4).log_scale(),
+            (floor..e_max * 3.0).log_scale(),
+        )
+        .map_err(|e| e.to_string())?;
+    chart
+        .configure_mesh()
+        .x_desc("median wall time per run [s]")
+        .y_desc("error (largest |Δλ| or |Δsum|)")
+        .x_labels(6)
+        .x_label_formatter(&|t| format!("{t:.2}"))
+        .y_label_formatter(&|e| format!("{e:.0e}"))
+        .label_style(("sans-serif", 16))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    let series = [
+        ("cpu-f64 linear", RGBColor(200, 80, 40)),
+        ("cpu-f64 newton", RGBColor(40, 90, 200)),
+        ("gpu-f64", RGBColor(30, 150, 60)),
+        ("gpu-f32", RGBColor(150, 60, 170)),
+    ];
+    for (name, color) in series {
+        let selected: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|m| {
+                let label = match (m.config.backend, m.config.location) {
+                    (Backend::Cpu, ImpactLocation::Linear) => "cpu-f64 linear".to_owned(),
+                    (Backend::Cpu, _) => "cpu-f64 newton".to_owned(),
+                    _ => m.config.path(),
+                };
+                label == name
+            })
+            .map(|m| (m.seconds, m.error().max(floor)))
+            .collect();
+        if selected.is_empty() {
+            continue;
+        }
+        chart
+            .draw_series(selected.iter().map(|&p| Circle::new(p, 5, color.filled())))
+            .map_err(|e| e.to_string())?
+            .label(name)
+            .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+    }
+    let mut front: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|m| m.pareto)
+        .map(|m| (m.seconds, m.error().max(floor)))
+        .collect();
+    front.sort_by(|a, b| a.0.total_cmp(&b.0));
+    chart
+        .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
+        .map_err(|e| e.to_string())?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::MiddleLeft)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 16))
+        .draw()
+        .map_err(|e| e.to_string())?;
+    root.present().map_err(|e| e.to_string())
+}
