@@ -3,8 +3,16 @@
 //! one trajectory (the reference or a perturbed copy).
 //!
 //! `cargo bench --bench lane_steps` (add `-- --quick` for fewer repeats).
-//! Prints a Markdown table of medians over the repeats, after a warm-up run
-//! (shader compilation, thread pool start).
+//! Prints Markdown tables of medians over the repeats, after a warm-up run
+//! (shader compilation, thread pool start):
+//!
+//! 1. CPU against GPU on a 4096-value sweep;
+//! 2. the CPU path against a plain scalar implementation of the paper's
+//!    recipe (RK4 with cos(ητ) in every stage, linear interpolation at
+//!    impacts, Gram–Schmidt), one thread each, with both errors against the
+//!    exact backend;
+//! 3. how throughput grows with the sweep (64 to 65 536 values) on one CPU
+//!    thread, all threads, and the GPU adapter.
 
 use std::time::Instant;
 
@@ -88,6 +96,194 @@ fn measure(name: &str, backend: &str, precision: &str, repeats: usize) -> Option
     })
 }
 
+/// The paper's recipe, written plainly as a researcher would: RK4 with the
+/// forcing cos(ητ) evaluated in every stage, impacts by linear interpolation
+/// of the crossing step, forward differences, Gram–Schmidt. One lane.
+mod paper {
+    const ZETA: f64 = 0.05;
+    const F: f64 = 1.0;
+    const WALL: f64 = 2.0;
+    const E: f64 = 1.0;
+
+    fn rhs(eta: f64, t: f64, y: [f64; 2]) -> [f64; 2] {
+        [y[1], -2.0 * ZETA * y[1] - y[0] + F * (eta * t).cos()]
+    }
+
+    fn rk4(eta: f64, t: f64, y: [f64; 2], h: f64) -> [f64; 2] {
+        let k1 = rhs(eta, t, y);
+        let k2 = rhs(eta, t + h / 2.0, [y[0] + h / 2.0 * k1[0], y[1] + h / 2.0 * k1[1]]);
+        let k3 = rhs(eta, t + h / 2.0, [y[0] + h / 2.0 * k2[0], y[1] + h / 2.0 * k2[1]]);
+        let k4 = rhs(eta, t + h, [y[0] + h * k3[0], y[1] + h * k3[1]]);
+        [
+            y[0] + h / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+            y[1] + h / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+        ]
+    }
+
+    fn period_map(eta: f64, steps: usize, x: [f64; 2]) -> [f64; 2] {
+        let h = std::f64::consts::TAU / eta / steps as f64;
+        let mut y = x;
+        for k in 0..steps {
+            let t = k as f64 * h;
+            let y1 = rk4(eta, t, y, h);
+            y = if y1[0] > WALL {
+                let s = (WALL - y[0]) / (y1[0] - y[0]);
+                let impact = [WALL, -E * (y[1] + s * (y1[1] - y[1]))];
+                rk4(eta, t + s * h, impact, (1.0 - s) * h)
+            } else {
+                y1
+            };
+        }
+        y
+    }
+
+    /// λ1, λ2 per unit time from (0, 0).
+    pub fn exponents(eta: f64, steps: usize, transient: usize, iterations: usize, delta: f64) -> [f64; 2] {
+        let mut x = [0.0, 0.0];
+        for _ in 0..transient {
+            x = period_map(eta, steps, x);
+        }
+        // Gram–Schmidt on the columns of J·Q, Q = [q1 q2].
+        let (mut q1, mut q2) = ([1.0, 0.0], [0.0, 1.0]);
+        let mut sums = [0.0, 0.0];
+        for _ in 0..iterations {
+            let next = period_map(eta, steps, x);
+            let column = |i: usize| {
+                let mut p = x;
+                p[i] += delta;
+                let moved = period_map(eta, steps, p);
+                [(moved[0] - next[0]) / delta, (moved[1] - next[1]) / delta]
+            };
+            let (c1, c2) = (column(0), column(1));
+            let apply = |q: [f64; 2]| [c1[0] * q[0] + c2[0] * q[1], c1[1] * q[0] + c2[1] * q[1]];
+            let (v1, v2) = (apply(q1), apply(q2));
+            let r11 = (v1[0] * v1[0] + v1[1] * v1[1]).sqrt();
+            q1 = [v1[0] / r11, v1[1] / r11];
+            let r12 = q1[0] * v2[0] + q1[1] * v2[1];
+            let w = [v2[0] - r12 * q1[0], v2[1] - r12 * q1[1]];
+            let r22 = (w[0] * w[0] + w[1] * w[1]).sqrt();
+            q2 = [w[0] / r22, w[1] / r22];
+            sums[0] += r11.ln();
+            sums[1] += r22.ln();
+            x = next;
+        }
+        let time = iterations as f64 * std::f64::consts::TAU / eta;
+        [sums[0] / time, sums[1] / time]
+    }
+}
+
+fn periodic_scene(backend: &str, steps: usize, transient: usize, iterations: usize) -> lyapsweep::Scene {
+    let text = format!(
+        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [0.8, 0.95, 1.1, 1.25, 1.5]\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\n"
+    );
+    scene::parse(&text, "bench", "bench", &[]).expect("bench scene")
+}
+
+/// The CPU path against the paper's recipe, one thread each.
+fn against_the_paper(repeats: usize) {
+    const ETAS: [f64; 5] = [0.8, 0.95, 1.1, 1.25, 1.5];
+    let (transient, iterations) = (100, 200);
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
+    let exact = lyapsweep::run(&periodic_scene("exact", 1800, transient, iterations)).expect("exact");
+    let error_of = |lanes: &[[f64; 2]]| {
+        lanes
+            .iter()
+            .zip(&exact.lanes)
+            .flat_map(|(l, e)| l.iter().zip(&e.exponents).map(|(a, b)| (a - b).abs()))
+            .fold(0.0, f64::max)
+    };
+    println!("\nThe CPU path against the paper's recipe (one thread each; η = {ETAS:?}; transient {transient}, iterations {iterations}; error = largest |λ - λ_exact|)\n");
+    println!("| implementation | steps/period | time s | lane-steps/s | error | vs paper: speed per lane-step | vs paper: error |");
+    println!("|---|---|---|---|---|---|---|");
+    let lane_steps = |steps: usize| (ETAS.len() * steps * (transient + 3 * iterations)) as f64;
+    let time = |f: &dyn Fn() -> Vec<[f64; 2]>| {
+        f();
+        let mut times = Vec::new();
+        let mut last = Vec::new();
+        for _ in 0..repeats {
+            let start = Instant::now();
+            last = f();
+            times.push(start.elapsed().as_secs_f64());
+        }
+        (median(times), last)
+    };
+    let (paper_time, paper_lanes) = time(&|| {
+        ETAS.iter()
+            .map(|&eta| paper::exponents(eta, 1800, transient, iterations, 1e-8))
+            .collect()
+    });
+    let paper_rate = lane_steps(1800) / paper_time;
+    let paper_error = error_of(&paper_lanes);
+    println!(
+        "| paper's recipe (cos per stage, linear, Gram–Schmidt) | 1800 | {paper_time:.3} | {paper_rate:.3e} | {paper_error:.1e} | 1.00× | 1× |"
+    );
+    for steps in [1800, 3600] {
+        let scene = periodic_scene("cpu", steps, transient, iterations);
+        let (t, lanes) = time(&|| {
+            one_thread.install(|| {
+                lyapsweep::run(&scene)
+                    .expect("runs")
+                    .lanes
+                    .iter()
+                    .map(|l| [l.exponents[0], l.exponents[1]])
+                    .collect()
+            })
+        });
+        let rate = lane_steps(steps) / t;
+        let error = error_of(&lanes);
+        println!(
+            "| lyapsweep cpu (rotation clock, newton location, Householder) | {steps} | {t:.3} | {rate:.3e} | {error:.1e} | {:.2}× | {:.0}× smaller |",
+            rate / paper_rate,
+            paper_error / error
+        );
+    }
+}
+
+/// Throughput as the sweep grows.
+fn scaling(quick: bool) {
+    let counts: &[usize] = if quick { &[64, 1024] } else { &[64, 256, 1024, 4096, 16384, 65536] };
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
+    println!("\nThroughput against sweep size (lane-steps/s, median of 3; 200 steps/period, 2 iterations, no transient)\n");
+    println!("| values | cpu 1 thread | cpu all threads | gpu f64 | gpu f32 |");
+    println!("|---|---|---|---|---|");
+    for &n in counts {
+        let rate = |backend: &str, precision: &str, one: bool| -> String {
+            let text = format!(
+                "[system]\nkind = \"impact-oscillator\"\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = {n}\n[integration]\nsteps_per_period = 200\ntransient = 0\niterations = 2\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
+            );
+            let scene = scene::parse(&text, "bench", "bench", &[]).expect("scene");
+            let go = || {
+                if one {
+                    one_thread.install(|| lyapsweep::run(&scene))
+                } else {
+                    lyapsweep::run(&scene)
+                }
+            };
+            if go().is_err() {
+                return "–".into();
+            }
+            let mut rates = Vec::new();
+            for _ in 0..3 {
+                let report = go().expect("runs");
+                let seconds = report
+                    .gpu
+                    .as_ref()
+                    .map_or(report.elapsed.as_secs_f64(), |g| g.timings.averaging.as_secs_f64());
+                let trajectories = if report.gpu.is_some() && report.precision == Precision::F32 { 5 } else { 3 };
+                rates.push((n * trajectories * 200 * 2) as f64 / seconds);
+            }
+            format!("{:.2e}", median(rates))
+        };
+        println!(
+            "| {n} | {} | {} | {} | {} |",
+            rate("cpu", "f64", true),
+            rate("cpu", "f64", false),
+            rate("gpu", "f64", false),
+            rate("gpu", "f32", false)
+        );
+    }
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let repeats = if quick { 3 } else { 7 };
@@ -116,4 +312,6 @@ fn main() {
             r.name, r.wall, r.compute, r.lane_steps, rate
         );
     }
+    against_the_paper(repeats);
+    scaling(quick);
 }
