@@ -111,8 +111,16 @@ mod paper {
 
     fn rk4(eta: f64, t: f64, y: [f64; 2], h: f64) -> [f64; 2] {
         let k1 = rhs(eta, t, y);
-        let k2 = rhs(eta, t + h / 2.0, [y[0] + h / 2.0 * k1[0], y[1] + h / 2.0 * k1[1]]);
-        let k3 = rhs(eta, t + h / 2.0, [y[0] + h / 2.0 * k2[0], y[1] + h / 2.0 * k2[1]]);
+        let k2 = rhs(
+            eta,
+            t + h / 2.0,
+            [y[0] + h / 2.0 * k1[0], y[1] + h / 2.0 * k1[1]],
+        );
+        let k3 = rhs(
+            eta,
+            t + h / 2.0,
+            [y[0] + h / 2.0 * k2[0], y[1] + h / 2.0 * k2[1]],
+        );
         let k4 = rhs(eta, t + h, [y[0] + h * k3[0], y[1] + h * k3[1]]);
         [
             y[0] + h / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
@@ -138,7 +146,13 @@ mod paper {
     }
 
     /// λ1, λ2 per unit time from (0, 0).
-    pub fn exponents(eta: f64, steps: usize, transient: usize, iterations: usize, delta: f64) -> [f64; 2] {
+    pub fn exponents(
+        eta: f64,
+        steps: usize,
+        transient: usize,
+        iterations: usize,
+        delta: f64,
+    ) -> [f64; 2] {
         let mut x = [0.0, 0.0];
         for _ in 0..transient {
             x = period_map(eta, steps, x);
@@ -172,7 +186,12 @@ mod paper {
     }
 }
 
-fn periodic_scene(backend: &str, steps: usize, transient: usize, iterations: usize) -> lyapsweep::Scene {
+fn periodic_scene(
+    backend: &str,
+    steps: usize,
+    transient: usize,
+    iterations: usize,
+) -> lyapsweep::Scene {
     let text = format!(
         "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [0.8, 0.95, 1.1, 1.25, 1.5]\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\n"
     );
@@ -183,8 +202,12 @@ fn periodic_scene(backend: &str, steps: usize, transient: usize, iterations: usi
 fn against_the_paper(repeats: usize) {
     const ETAS: [f64; 5] = [0.8, 0.95, 1.1, 1.25, 1.5];
     let (transient, iterations) = (100, 200);
-    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
-    let exact = lyapsweep::run(&periodic_scene("exact", 1800, transient, iterations)).expect("exact");
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    let exact =
+        lyapsweep::run(&periodic_scene("exact", 1800, transient, iterations)).expect("exact");
     let error_of = |lanes: &[[f64; 2]]| {
         lanes
             .iter()
@@ -241,8 +264,15 @@ fn against_the_paper(repeats: usize) {
 
 /// Throughput as the sweep grows.
 fn scaling(quick: bool) {
-    let counts: &[usize] = if quick { &[64, 1024] } else { &[64, 256, 1024, 4096, 16384, 65536] };
-    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool");
+    let counts: &[usize] = if quick {
+        &[64, 1024]
+    } else {
+        &[64, 256, 1024, 4096, 16384, 65536]
+    };
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
     println!("\nThroughput against sweep size (lane-steps/s, median of 3; 200 steps/period, 2 iterations, no transient)\n");
     println!("| values | cpu 1 thread | cpu all threads | gpu f64 | gpu f32 |");
     println!("|---|---|---|---|---|");
@@ -268,8 +298,14 @@ fn scaling(quick: bool) {
                 let seconds = report
                     .gpu
                     .as_ref()
-                    .map_or(report.elapsed.as_secs_f64(), |g| g.timings.averaging.as_secs_f64());
-                let trajectories = if report.gpu.is_some() && report.precision == Precision::F32 { 5 } else { 3 };
+                    .map_or(report.elapsed.as_secs_f64(), |g| {
+                        g.timings.averaging.as_secs_f64()
+                    });
+                let trajectories = if report.gpu.is_some() && report.precision == Precision::F32 {
+                    5
+                } else {
+                    3
+                };
                 rates.push((n * trajectories * 200 * 2) as f64 / seconds);
             }
             format!("{:.2e}", median(rates))

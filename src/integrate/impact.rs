@@ -64,11 +64,36 @@ pub fn step<const D: usize, F: Flow<D>>(
     stats: &mut IterationStats,
 ) -> ([f64; D], Phase) {
     let (y1, end) = rk4::step(flow, phase, half, y, h);
-    let reaches_wall = y1[0] > wall.position || (y[1] > 0.0 && y1[1] < 0.0);
-    if !reaches_wall {
-        // The common case: no impact can be in this step.
+    if !reaches_wall(wall, y, &y1) {
         return (y1, end);
     }
+    (
+        resolve(flow, wall, location, omega, phase, y, h, y1, stats),
+        end,
+    )
+}
+
+/// Whether a step from y to y1 may contain an impact: it ends beyond the
+/// wall, or the velocity turns inside it (an excursion between the ends).
+#[inline]
+pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], y1: &[f64; D]) -> bool {
+    y1[0] > wall.position || (y[1] > 0.0 && y1[1] < 0.0)
+}
+
+/// Applies every impact inside the step [0, h] from (phase, y), whose plain
+/// RK4 image y1 reaches the wall ([`reaches_wall`]).
+#[allow(clippy::too_many_arguments)]
+pub fn resolve<const D: usize, F: Flow<D>>(
+    flow: &F,
+    wall: &Wall,
+    location: ImpactLocation,
+    omega: f64,
+    phase: &Phase,
+    y: &[f64; D],
+    h: f64,
+    y1: [f64; D],
+    stats: &mut IterationStats,
+) -> [f64; D] {
     // Sub-steps from (phase0, y0), `done` into the step.
     let sub = SubStep { flow, omega };
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
@@ -79,7 +104,7 @@ pub fn step<const D: usize, F: Flow<D>>(
             ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
         };
         let Some((s, mut yc)) = hit else {
-            return (y1, end);
+            return y1;
         };
         let phase_c = rotate(&phase0, &cos_sin(omega * s));
         if yc[1] <= 0.0 {
@@ -89,7 +114,7 @@ pub fn step<const D: usize, F: Flow<D>>(
             yc[0] = wall.position;
             yc[1] = 0.0;
             let (y, _) = sub.step(&phase_c, &yc, rest - s);
-            return (clamp_to_wall(wall, y), end);
+            return clamp_to_wall(wall, y);
         }
         yc[0] = wall.position;
         yc[1] *= -wall.restitution;
@@ -100,7 +125,7 @@ pub fn step<const D: usize, F: Flow<D>>(
         y1 = sub.step(&phase0, &y0, h - done).0;
     }
     stats.chattering = true;
-    (clamp_to_wall(wall, y1), end)
+    clamp_to_wall(wall, y1)
 }
 
 /// RK4 steps of any size s from a given phase: the re-steps of impact location.

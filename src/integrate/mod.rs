@@ -42,24 +42,41 @@ pub fn time_map<const D: usize, F: Flow<D>>(
     settings: &FlowSettings,
     stats: &mut IterationStats,
 ) -> [f64; D] {
+    let mut ys = [*x];
+    time_map_many(flow, &mut ys, period, settings, std::slice::from_mut(stats));
+    ys[0]
+}
+
+/// [`time_map`] of several trajectories at once (a reference and its
+/// perturbed copies), in lockstep: each step's forcing phases are computed
+/// once, and the trajectories' independent RK4 chains interleave, which is
+/// what keeps a core busy (one chain alone waits on its own latencies). Each
+/// trajectory's arithmetic is exactly what it would be alone.
+pub fn time_map_many<const D: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &mut [[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    stats: &mut [IterationStats],
+) {
     let steps = settings.steps_per_period;
     let h = period / steps as f64;
     let omega = flow.forcing_frequency();
     let half = cos_sin(0.5 * omega * h);
-    let (mut y, mut phase) = (*x, ZERO_PHASE);
-    match flow.wall() {
-        None => {
-            for _ in 0..steps {
-                (y, phase) = rk4::step(flow, &phase, &half, &y, h);
-            }
+    let mut phase = ZERO_PHASE;
+    let wall = flow.wall();
+    let location = settings.impact_location;
+    for _ in 0..steps {
+        let phases = rk4::stage_phases(&phase, &half);
+        for (y, st) in ys.iter_mut().zip(stats.iter_mut()) {
+            let y1 = rk4::step_at(flow, &phases, y, h);
+            *y = match &wall {
+                Some(w) if impact::reaches_wall(w, y, &y1) => {
+                    impact::resolve(flow, w, location, omega, &phase, y, h, y1, st)
+                }
+                _ => y1,
+            };
         }
-        Some(wall) => {
-            let location = settings.impact_location;
-            for _ in 0..steps {
-                (y, phase) =
-                    impact::step(flow, &wall, location, omega, &phase, &half, &y, h, stats);
-            }
-        }
+        phase = phases[2];
     }
-    y
 }

@@ -17,16 +17,35 @@ pub fn step<const D: usize, F: Flow<D> + ?Sized>(
     y: &[f64; D],
     h: f64,
 ) -> ([f64; D], Phase) {
+    let phases = stage_phases(phase, half);
+    (step_at(flow, &phases, y, h), phases[2])
+}
+
+/// The forcing phases at t, t + h/2 and t + h, shared by every trajectory
+/// that takes the same step.
+#[inline]
+pub fn stage_phases(phase: &Phase, half: &Phase) -> [Phase; 3] {
     let mid = rotate(phase, half);
     let end = rotate(&mid, half);
+    [*phase, mid, end]
+}
+
+/// One RK4 step with the stage phases given.
+#[inline]
+pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
+    flow: &F,
+    phases: &[Phase; 3],
+    y: &[f64; D],
+    h: f64,
+) -> [f64; D] {
+    let [start, mid, end] = phases;
     let h2 = 0.5 * h;
-    let k1 = flow.rhs(phase, y);
-    let k2 = flow.rhs(&mid, &axpy(y, h2, &k1));
-    let k3 = flow.rhs(&mid, &axpy(y, h2, &k2));
-    let k4 = flow.rhs(&end, &axpy(y, h, &k3));
+    let k1 = flow.rhs(start, y);
+    let k2 = flow.rhs(mid, &axpy(y, h2, &k1));
+    let k3 = flow.rhs(mid, &axpy(y, h2, &k2));
+    let k4 = flow.rhs(end, &axpy(y, h, &k3));
     let sixth = h / 6.0;
-    let next = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
-    (next, end)
+    std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
 }
 
 /// y + a·k

@@ -9,32 +9,70 @@ use nalgebra::SMatrix;
 
 use crate::system::{FlowSettings, IterationStats, System};
 
-/// Estimates DU(x) by forward differences, given the reference image U(x).
+/// Trajectories an estimate integrates at most: the reference and 2D copies
+/// for central differences, D ≤ 4.
+const MAX_TRAJECTORIES: usize = 9;
+
+/// Integrates the reference from x and its perturbed copies together (in
+/// lockstep, see [`crate::integrate::time_map_many`]) and returns U(x) and
+/// the estimated DU(x).
 ///
-/// The step actually taken is (x_i + δ) - x_i, not δ: the two differ by the
-/// rounding of x_i + δ, which would otherwise bias every column by up to
-/// ulp(x_i)/δ.
-pub fn forward_difference<const D: usize, S: System<D>>(
+/// Forward (the paper's eq. 6): column i = (U(x + δe_i) - U(x)) / δ⁺_i.
+/// Central: column i = (U(x + δe_i) - U(x - δe_i)) / (δ⁺_i + δ⁻_i). The steps
+/// actually taken, δ⁺ = (x_i + δ) - x_i and δ⁻ = x_i - (x_i - δ), not δ: the
+/// two differ by the rounding of x_i ± δ, which would otherwise bias every
+/// column by up to ulp(x_i)/δ.
+///
+/// With central differences, a copy that met the wall a different number of
+/// times than the reference crossed a grazing boundary, where the map is not
+/// smooth and its difference is O(1) wrong: that column is then differenced
+/// on the other side, one-sided against the reference image.
+pub fn estimate<const D: usize, S: System<D>>(
     system: &S,
     flow: &FlowSettings,
     x: &[f64; D],
-    image: &[f64; D],
     delta: f64,
+    difference: Difference,
     stats: &mut IterationStats,
-) -> SMatrix<f64, D, D> {
+) -> ([f64; D], SMatrix<f64, D, D>) {
+    let copies = difference.copies(D);
+    assert!(
+        copies < MAX_TRAJECTORIES,
+        "dimension {D} is above the supported 4"
+    );
+    let mut ys = [*x; MAX_TRAJECTORIES];
+    let mut steps = [0.0; MAX_TRAJECTORIES];
+    for c in 0..copies {
+        let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
+        let y = &mut ys[1 + c];
+        y[i] += sign * delta;
+        steps[1 + c] = sign * (y[i] - x[i]);
+    }
+    let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
+    system.iterate_many(&mut ys[..1 + copies], flow, &mut st[..1 + copies]);
+    stats.impacts += st[0].impacts;
+    stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
+
+    let image = ys[0];
     let mut jacobian = SMatrix::<f64, D, D>::zeros();
     for i in 0..D {
-        let mut shifted = *x;
-        shifted[i] += delta;
-        let step = shifted[i] - x[i];
-        let mut copy_stats = IterationStats::default();
-        let moved = system.iterate(&shifted, flow, &mut copy_stats);
-        stats.chattering |= copy_stats.chattering;
+        let (plus, minus) = (1 + i, 1 + D + i);
+        let (a, b, step) = match difference {
+            Difference::Forward => (plus, 0, steps[plus]),
+            Difference::Central => {
+                let same = |t: usize| st[t].impacts == st[0].impacts;
+                match (same(plus), same(minus)) {
+                    (false, true) => (0, minus, steps[minus]),
+                    (true, false) => (plus, 0, steps[plus]),
+                    _ => (plus, minus, steps[plus] + steps[minus]),
+                }
+            }
+        };
         for k in 0..D {
-            jacobian[(k, i)] = (moved[k] - image[k]) / step;
+            jacobian[(k, i)] = (ys[a][k] - ys[b][k]) / step;
         }
     }
-    jacobian
+    (image, jacobian)
 }
 
 /// How the Jacobian's columns are differenced.
@@ -64,44 +102,4 @@ impl Difference {
             Difference::Central => 2 * dimension,
         }
     }
-}
-
-/// Estimates DU(x) by central differences:
-/// column i ≈ (U(x + δe_i) - U(x - δe_i)) / (δ⁺ + δ⁻), with the steps
-/// δ⁺ = (x_i + δ) - x_i and δ⁻ = x_i - (x_i - δ) actually taken.
-///
-/// A copy that met the wall a different number of times than the reference
-/// (`impacts`) crossed a grazing boundary, where the map is not smooth and
-/// its difference is O(1) wrong: that column is then differenced on the
-/// other side, one-sided against the reference image.
-pub fn central_difference<const D: usize, S: System<D>>(
-    system: &S,
-    flow: &FlowSettings,
-    x: &[f64; D],
-    image: &[f64; D],
-    impacts: u32,
-    delta: f64,
-    stats: &mut IterationStats,
-) -> SMatrix<f64, D, D> {
-    let mut jacobian = SMatrix::<f64, D, D>::zeros();
-    for i in 0..D {
-        let (mut plus, mut minus) = (*x, *x);
-        plus[i] += delta;
-        minus[i] -= delta;
-        let (step_plus, step_minus) = (plus[i] - x[i], x[i] - minus[i]);
-        let (mut up_stats, mut down_stats) = (IterationStats::default(), IterationStats::default());
-        let up = system.iterate(&plus, flow, &mut up_stats);
-        let down = system.iterate(&minus, flow, &mut down_stats);
-        stats.chattering |= up_stats.chattering || down_stats.chattering;
-        let (same_up, same_down) = (up_stats.impacts == impacts, down_stats.impacts == impacts);
-        let (a, b, step) = match (same_up, same_down) {
-            (false, true) => (image, &down, step_minus),
-            (true, false) => (&up, image, step_plus),
-            _ => (&up, &down, step_plus + step_minus),
-        };
-        for k in 0..D {
-            jacobian[(k, i)] = (a[k] - b[k]) / step;
-        }
-    }
-    jacobian
 }

@@ -8,7 +8,7 @@
 
 use nalgebra::{Const, DimMin, SMatrix};
 
-use super::jacobian::{central_difference, forward_difference, Difference};
+use super::jacobian;
 use super::qr::QrAccumulator;
 use crate::system::{FlowSettings, IterationStats, Params, System};
 
@@ -31,7 +31,7 @@ pub struct MethodSettings {
     /// of x_n start at x_n ± δ·max(1, ‖x_n‖∞)·e_i (see [`perturbation_at`]).
     pub perturbation: f64,
     /// Forward (the paper's) or central differences.
-    pub difference: Difference,
+    pub difference: jacobian::Difference,
     pub flow: FlowSettings,
     pub tangent: Tangent,
     /// Whether to compute exponents at all (`[output] lyapunov`).
@@ -369,17 +369,12 @@ fn step<const D: usize, S: System<D>>(
                 .expect("the exact backend is only offered for systems with a closed form");
             (next, settings.lyapunov.then_some(j))
         }
-        Tangent::FiniteDifference => {
-            let next = system.iterate(x, flow, stats);
+        Tangent::FiniteDifference if settings.lyapunov => {
             let delta = perturbation_at(settings.perturbation, x);
-            let j = settings.lyapunov.then(|| match settings.difference {
-                Difference::Forward => forward_difference(system, flow, x, &next, delta, stats),
-                Difference::Central => {
-                    central_difference(system, flow, x, &next, stats.impacts, delta, stats)
-                }
-            });
-            (next, j)
+            let (next, j) = jacobian::estimate(system, flow, x, delta, settings.difference, stats);
+            (next, Some(j))
         }
+        Tangent::FiniteDifference => (system.iterate(x, flow, stats), None),
     }
 }
 

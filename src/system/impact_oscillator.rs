@@ -14,7 +14,7 @@ use nalgebra::SMatrix;
 use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
 use crate::integrate::clock::Phase;
 use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
-use crate::integrate::{time_map, Flow, Wall};
+use crate::integrate::{time_map, time_map_many, Flow, Wall};
 
 pub const INFO: SystemInfo = SystemInfo {
     kind: "impact-oscillator",
@@ -158,6 +158,10 @@ impl System<2> for ImpactOscillator {
 
     fn iterate(&self, x: &[f64; 2], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 2] {
         time_map(self, x, self.period(), flow, stats)
+    }
+
+    fn iterate_many(&self, ys: &mut [[f64; 2]], flow: &FlowSettings, stats: &mut [IterationStats]) {
+        time_map_many(self, ys, self.period(), flow, stats)
     }
 
     fn iterate_exact(

@@ -8,7 +8,7 @@
 
 use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
 use crate::integrate::clock::Phase;
-use crate::integrate::{time_map, Flow};
+use crate::integrate::{time_map, time_map_many, Flow};
 
 pub const INFO: SystemInfo = SystemInfo {
     kind: "lorenz",
@@ -93,5 +93,9 @@ impl System<3> for Lorenz {
 
     fn iterate(&self, x: &[f64; 3], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 3] {
         time_map(self, x, self.period, flow, stats)
+    }
+
+    fn iterate_many(&self, ys: &mut [[f64; 3]], flow: &FlowSettings, stats: &mut [IterationStats]) {
+        time_map_many(self, ys, self.period, flow, stats)
     }
 }

@@ -156,6 +156,15 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     /// One map iteration x_{n+1} = U(x_n).
     fn iterate(&self, x: &[f64; D], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; D];
 
+    /// One map iteration of several trajectories (a reference and its
+    /// perturbed copies); a flow integrates them in lockstep
+    /// ([`crate::integrate::time_map_many`]).
+    fn iterate_many(&self, ys: &mut [[f64; D]], flow: &FlowSettings, stats: &mut [IterationStats]) {
+        for (y, st) in ys.iter_mut().zip(stats.iter_mut()) {
+            *y = self.iterate(y, flow, st);
+        }
+    }
+
     /// One map iteration with its exact Jacobian DU(x_n), where a closed form
     /// exists (`SystemInfo::has_exact`).
     fn iterate_exact(
