@@ -255,7 +255,7 @@ fn against_the_paper(repeats: usize) {
         let rate = lane_steps(steps) / t;
         let error = error_of(&lanes);
         println!(
-            "| lyapsweep cpu (rotation clock, newton location, Householder) | {steps} | {t:.3} | {rate:.3e} | {error:.1e} | {:.2}× | {:.0}× smaller |",
+            "| lyapsweep cpu (lockstep copies, rotation clock, newton location, Householder) | {steps} | {t:.3} | {rate:.3e} | {error:.1e} | {:.2}× | {:.0}× smaller |",
             rate / paper_rate,
             paper_error / error
         );

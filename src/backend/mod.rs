@@ -335,9 +335,9 @@ fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Op
         })
         .collect();
     picks.dedup();
-    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
-    // The same δ as the GPU run, so the difference measures arithmetic only.
-    settings.perturbation = scene.perturbation();
+    // The same δ and difference scheme as the GPU run (both follow the
+    // scene's precision), so the difference measures arithmetic only.
+    let settings = method_settings(scene, Backend::Cpu, Precision::F64);
     let tolerance = validation_tolerance(precision);
     let mut max_difference: f64 = 0.0;
     for &k in &picks {
