@@ -18,11 +18,12 @@ fn errors_are_measured_against_the_exact_backend() {
         .unwrap();
     let values: Vec<String> = PERIODIC.iter().map(|v| format!("{v}")).collect();
     let text = format!(
-        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\nsteps_per_period = {}\nimpact_location = \"linear\"\n",
+        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\nsteps_per_period = {}\nimpact_location = \"linear\"\ndifference = \"{}\"\n",
         values.join(", "),
         plan.transient,
         plan.iterations,
-        linear.config.steps
+        linear.config.steps,
+        linear.config.difference.name()
     );
     let run = |backend: &str| {
         let overrides = [format!("run.backend=\"{backend}\"")];
