@@ -51,6 +51,12 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Mesa's drivers print "error: XDG_RUNTIME_DIR is invalid or not set"
+    // while wgpu looks for adapters, which reads like one of ours; a headless
+    // compute run needs no runtime directory. Set before any thread starts.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+    }
     let cli = Cli::parse();
     match cli.command {
         Command::Devices => {
