@@ -325,28 +325,40 @@ pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Resu
     };
     std::fs::create_dir_all(dir).map_err(|e| fail(dir, e))?;
     let csv_path = dir.join("bench.csv");
-    let mut csv = String::from(
-        "path,steps_per_period,impact_location,perturbation,difference,periodic_error,chaotic_sum_error,sweep_sum_error,error,seconds,lane_steps,pareto\n",
-    );
-    for m in ms {
-        let c = &m.config;
-        csv += &format!(
-            "{},{},{},{:e},{},{:e},{:e},{:e},{:e},{},{},{}\n",
-            c.path(),
-            c.steps,
-            c.location.name(),
-            c.perturbation,
-            c.difference.name(),
-            m.periodic_error,
-            m.chaotic_sum_error,
-            m.sweep_sum_error,
-            m.error(),
-            m.seconds,
-            m.lane_steps,
-            m.pareto
-        );
-    }
-    std::fs::write(&csv_path, csv).map_err(|e| fail(&csv_path, e))?;
+    crate::output::write_atomically(&csv_path, |w| {
+        w.write_record([
+            "path",
+            "steps_per_period",
+            "impact_location",
+            "perturbation",
+            "difference",
+            "periodic_error",
+            "chaotic_sum_error",
+            "sweep_sum_error",
+            "error",
+            "seconds",
+            "lane_steps",
+            "pareto",
+        ])?;
+        for m in ms {
+            let c = &m.config;
+            w.write_record([
+                c.path(),
+                c.steps.to_string(),
+                c.location.name().to_owned(),
+                format!("{:e}", c.perturbation),
+                c.difference.name().to_owned(),
+                format!("{:e}", m.periodic_error),
+                format!("{:e}", m.chaotic_sum_error),
+                format!("{:e}", m.sweep_sum_error),
+                format!("{:e}", m.error()),
+                m.seconds.to_string(),
+                m.lane_steps.to_string(),
+                m.pareto.to_string(),
+            ])?;
+        }
+        Ok(())
+    })?;
 
     let md_path = dir.join("bench.md");
     std::fs::write(&md_path, markdown(plan, ms, machine)).map_err(|e| fail(&md_path, e))?;

@@ -63,15 +63,10 @@ fn main() -> ExitCode {
             print_devices();
             ExitCode::SUCCESS
         }
-        Command::Bench { quick, out } => {
-            match bench(quick, out.unwrap_or_else(|| PathBuf::from("out/bench"))) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    ExitCode::from(if e.is_input_error() { 2 } else { 1 })
-                }
-            }
-        }
+        Command::Bench { quick, out } => exit_code(bench(
+            quick,
+            out.unwrap_or_else(|| PathBuf::from("out/bench")),
+        )),
         Command::Run {
             scene,
             out,
@@ -83,13 +78,18 @@ fn main() -> ExitCode {
             // Flags are overrides of their scene keys, applied last.
             overrides.extend(backend.map(|b| format!("run.backend=\"{b}\"")));
             overrides.extend(precision.map(|p| format!("run.precision=\"{p}\"")));
-            match run(&scene, out, &overrides) {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    ExitCode::from(if e.is_input_error() { 2 } else { 1 })
-                }
-            }
+            exit_code(run(&scene, out, &overrides))
+        }
+    }
+}
+
+/// Success, or the error on stderr with exit code 2 for bad input, 1 otherwise.
+fn exit_code(result: Result<(), Error>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(if e.is_input_error() { 2 } else { 1 })
         }
     }
 }

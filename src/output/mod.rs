@@ -85,7 +85,8 @@ fn write_bifurcation(
     Ok(())
 }
 
-fn write_atomically(
+/// Writes a CSV file under a temporary name and renames it into place.
+pub(crate) fn write_atomically(
     path: &Path,
     fill: impl FnOnce(&mut csv::Writer<fs::File>) -> csv::Result<()>,
 ) -> Result<()> {

@@ -68,6 +68,8 @@ pub struct ImpactOscillator {
     pub wall: f64,
     pub restitution: f64,
     pub eta: f64,
+    /// The same oscillator in closed form (the exact backend), built once.
+    closed_form: Option<ForcedImpactOscillator>,
 }
 
 fn check(p: &Params) -> Result<(), (&'static str, String)> {
@@ -149,6 +151,14 @@ impl System<2> for ImpactOscillator {
             wall: p.get("wall"),
             restitution: p.get("restitution"),
             eta: p.get("eta"),
+            closed_form: ForcedImpactOscillator::new(
+                p.get("zeta"),
+                p.get("f"),
+                p.get("eta"),
+                p.get("wall"),
+                p.get("restitution"),
+            )
+            .ok(),
         }
     }
 
@@ -169,10 +179,7 @@ impl System<2> for ImpactOscillator {
         x: &[f64; 2],
         stats: &mut IterationStats,
     ) -> Option<([f64; 2], SMatrix<f64, 2, 2>)> {
-        let exact =
-            ForcedImpactOscillator::new(self.zeta, self.f, self.eta, self.wall, self.restitution)
-                .ok()?;
-        let it = exact.iterate(*x);
+        let it = self.closed_form.as_ref()?.iterate(*x);
         stats.impacts += it.impacts;
         stats.chattering |= it.status != ExactStatus::Ok;
         Some((it.state, it.jacobian))
