@@ -12,7 +12,12 @@
 //!    impacts, Gram–Schmidt), one thread each, with both errors against the
 //!    exact backend;
 //! 3. how throughput grows with the sweep (64 to 65 536 values) on one CPU
-//!    thread, all threads, and the GPU adapter.
+//!    thread, all threads, and the GPU adapter;
+//! 4. how a run's cost grows with iterations and with steps per period;
+//! 5. the GPU's workgroup size.
+//!
+//! GPU rows also give the device time of the compute passes where the
+//! adapter has timestamp queries.
 
 use std::time::Instant;
 
@@ -54,7 +59,17 @@ struct Row {
     name: String,
     wall: f64,
     compute: f64,
+    /// Device time from timestamp queries (GPU rows on adapters that have them).
+    device: Option<f64>,
     lane_steps: f64,
+}
+
+fn device_seconds(report: &Report) -> Option<f64> {
+    report
+        .gpu
+        .as_ref()
+        .and_then(|g| g.timings.gpu_busy)
+        .map(|d| d.as_secs_f64())
 }
 
 fn measure(name: &str, backend: &str, precision: &str, repeats: usize) -> Option<Row> {
@@ -64,12 +79,13 @@ fn measure(name: &str, backend: &str, precision: &str, repeats: usize) -> Option
         eprintln!("{name}: skipped ({e})");
         return None;
     }
-    let (mut walls, mut computes) = (Vec::new(), Vec::new());
+    let (mut walls, mut computes, mut devices) = (Vec::new(), Vec::new(), Vec::new());
     let mut last: Option<Report> = None;
     for _ in 0..repeats {
         let start = Instant::now();
         let report = run().expect("runs");
         walls.push(start.elapsed().as_secs_f64());
+        devices.extend(device_seconds(&report));
         // Compute time: the whole run on the CPU; on the GPU the averaging
         // phase (dispatches, streaming, host QR), without shader compilation.
         computes.push(match &report.gpu {
@@ -89,6 +105,7 @@ fn measure(name: &str, backend: &str, precision: &str, repeats: usize) -> Option
         name,
         wall: median(walls),
         compute: median(computes),
+        device: (!devices.is_empty()).then(|| median(devices)),
         lane_steps,
     })
 }
@@ -332,17 +349,125 @@ fn main() {
     println!(
         "{VALUES} values × {ITERATIONS} iterations × {STEPS} RK4 steps per period; medians of {repeats} runs after a warm-up\n"
     );
-    println!("| path | wall s | compute s | lane-steps | lane-steps/s | vs cpu |");
-    println!("|---|---|---|---|---|---|");
+    println!("| path | wall s | compute s | device s | lane-steps | lane-steps/s | vs cpu |");
+    println!("|---|---|---|---|---|---|---|");
     let cpu_rate = rows.first().map(|r| r.lane_steps / r.compute);
     for r in &rows {
         let rate = r.lane_steps / r.compute;
         let ratio = cpu_rate.map_or(String::from("-"), |c| format!("{:.2}×", rate / c));
         println!(
-            "| {} | {:.3} | {:.3} | {:.3e} | {:.3e} | {ratio} |",
-            r.name, r.wall, r.compute, r.lane_steps, rate
+            "| {} | {:.3} | {:.3} | {} | {:.3e} | {:.3e} | {ratio} |",
+            r.name,
+            r.wall,
+            r.compute,
+            r.device.map_or("–".into(), |d| format!("{d:.3}")),
+            r.lane_steps,
+            rate
         );
     }
     against_the_paper(repeats);
     scaling(quick);
+    cost_growth(quick);
+    workgroups(quick);
+}
+
+/// A sweep of `values` η in [0.5, 1.5] on the given path, no transient.
+fn sweep_scene(
+    values: usize,
+    steps: usize,
+    iterations: usize,
+    backend: &str,
+    precision: &str,
+) -> lyapsweep::Scene {
+    let text = format!(
+        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = 0\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
+    );
+    scene::parse(&text, "bench", "bench", &[]).expect("scene")
+}
+
+/// Median wall seconds of a whole run (setup included) and, on a GPU with
+/// timestamp queries, median device seconds; `None` when the path is absent.
+fn time_runs(
+    scene: &lyapsweep::Scene,
+    options: &lyapsweep::RunOptions,
+    repeats: usize,
+) -> Option<(f64, Option<f64>)> {
+    lyapsweep::run_with(scene, options).ok()?;
+    let (mut walls, mut devices) = (Vec::new(), Vec::new());
+    for _ in 0..repeats {
+        let report = lyapsweep::run_with(scene, options).expect("runs");
+        walls.push(report.elapsed.as_secs_f64());
+        devices.extend(device_seconds(&report));
+    }
+    Some((
+        median(walls),
+        (!devices.is_empty()).then(|| median(devices)),
+    ))
+}
+
+/// How a run's cost grows with iterations and steps per period: a fixed
+/// part (thread pool, buffers and shader compilation on the GPU) plus a part
+/// proportional to lane-steps.
+fn cost_growth(quick: bool) {
+    let values = 256;
+    let repeats = 3;
+    let (iterations, steps): (&[usize], &[usize]) = if quick {
+        (&[10, 100], &[100, 400])
+    } else {
+        (&[10, 100, 1000], &[100, 450, 1800])
+    };
+    println!(
+        "\nCost against iterations and steps ({values} values, no transient; whole-run wall s, median of {repeats}; ns per lane-step in brackets)\n"
+    );
+    println!("| iterations | steps | cpu f64 | gpu f64 | gpu f32 |");
+    println!("|---|---|---|---|---|");
+    let mut rows: Vec<(usize, usize)> = iterations.iter().map(|&i| (i, 200)).collect();
+    rows.extend(steps.iter().map(|&s| (100, s)));
+    for (iterations, steps) in rows {
+        let lane_steps = (values * 5 * steps * iterations) as f64;
+        let cell = |backend: &str, precision: &str| {
+            let scene = sweep_scene(values, steps, iterations, backend, precision);
+            match time_runs(&scene, &Default::default(), repeats) {
+                Some((wall, _)) => format!("{wall:.3} ({:.1})", wall / lane_steps * 1e9),
+                None => "–".into(),
+            }
+        };
+        println!(
+            "| {iterations} | {steps} | {} | {} | {} |",
+            cell("cpu", "f64"),
+            cell("gpu", "f64"),
+            cell("gpu", "f32")
+        );
+    }
+}
+
+/// The GPU's invocations per workgroup: lane-steps per second of the whole
+/// run and, with timestamp queries, of the device time alone.
+fn workgroups(quick: bool) {
+    let (values, steps, iterations) = (4096, 200, 3);
+    let repeats = if quick { 1 } else { 3 };
+    println!(
+        "\nGPU workgroup size ({values} values, {steps} steps/period, {iterations} iterations; lane-steps/s from wall time, and from device time; median of {repeats})\n"
+    );
+    println!("| workgroup | gpu f64 wall | gpu f64 device | gpu f32 wall | gpu f32 device |");
+    println!("|---|---|---|---|---|");
+    let lane_steps = (values * 5 * steps * iterations) as f64;
+    for size in [32, 64, 128, 256] {
+        let options = lyapsweep::RunOptions {
+            workgroup_size: Some(size),
+            ..Default::default()
+        };
+        let cells = |precision: &str| {
+            let scene = sweep_scene(values, steps, iterations, "gpu", precision);
+            match time_runs(&scene, &options, repeats) {
+                Some((wall, device)) => format!(
+                    "{:.2e} | {}",
+                    lane_steps / wall,
+                    device.map_or("–".into(), |d| format!("{:.2e}", lane_steps / d))
+                ),
+                None => "– | –".into(),
+            }
+        };
+        println!("| {size} | {} | {} |", cells("f64"), cells("f32"));
+    }
 }

@@ -8,7 +8,7 @@
 
 #include "shared/bindings.wgsl"
 
-@compute @workgroup_size(64)
+@compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let lane = gid.x;
     if (lane >= control.lane_count) {

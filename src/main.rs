@@ -163,6 +163,12 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
             gpu.batches,
             gpu.chunk_steps
         );
+        if let Some(busy) = t.gpu_busy {
+            println!(
+                "               device time of the compute passes (timestamp queries) {:.3} s",
+                busy.as_secs_f64()
+            );
+        }
         if let Some(v) = &gpu.validation {
             println!(
                 "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",

@@ -307,3 +307,54 @@ fn variants_without_wall_or_copies_match_the_cpu() {
         }
     }
 }
+
+#[test]
+fn workgroup_size_changes_no_digit_and_device_time_is_measured() {
+    if !gpu_or_skip(
+        "workgroup_size_changes_no_digit_and_device_time_is_measured",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // 100 values: no workgroup size divides the lane or trajectory count, so
+    // the idle invocations at each dispatch's end are exercised too.
+    let etas: Vec<f64> = (0..100).map(|k| 0.5 + k as f64 / 99.0).collect();
+    let overrides = vec![
+        values(&etas),
+        "run.backend=\"gpu\"".into(),
+        "integration.steps_per_period=200".into(),
+        "integration.transient=20".into(),
+        "integration.iterations=40".into(),
+    ];
+    let reports: Vec<Report> = [32, 64, 256]
+        .iter()
+        .map(|&size| {
+            let options = RunOptions {
+                workgroup_size: Some(size),
+                ..Default::default()
+            };
+            run(SEED, &overrides, options)
+        })
+        .collect();
+    for other in &reports[1..] {
+        for (a, b) in reports[0].lanes.iter().zip(&other.lanes) {
+            assert_eq!(a.exponents, b.exponents, "bit for bit");
+            assert_eq!(a.status, b.status);
+        }
+    }
+    // Where the adapter has timestamp queries (lavapipe does), the device
+    // time of the passes is reported, positive, and inside the wall time of
+    // the transient and averaging phases that contain them.
+    let summary = lyapsweep::backend::gpu::context::list();
+    if summary.iter().any(|s| s.timestamps) {
+        for r in &reports {
+            let t = r.gpu.as_ref().expect("gpu report").timings;
+            let busy = t.gpu_busy.expect("timestamp queries ran").as_secs_f64();
+            let wall = (t.transient + t.averaging).as_secs_f64();
+            assert!(
+                busy > 0.0 && busy <= wall * 1.05 + 1e-3,
+                "{busy} s of {wall} s"
+            );
+        }
+    }
+}

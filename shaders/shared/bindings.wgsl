@@ -35,6 +35,10 @@ const LANE_STRIDE: u32 = PARAM_COUNT + 5u;
 // Per trajectory: y (DIM), the compensation of y (DIM), the phase (2).
 const TRAJ_STRIDE: u32 = 2u * DIM + 2u;
 
+// Invocations per workgroup, set by the host when it builds the pipeline
+// (the benchmark measures several sizes).
+override WORKGROUP_SIZE: u32 = 64u;
+
 // counts[t]: (step within the period, impacts this iteration, flags, iteration).
 const FLAG_CHATTERING: u32 = 1u;
 const FLAG_NONFINITE: u32 = 2u;

@@ -85,6 +85,9 @@ pub struct RunOptions {
     pub max_batch_lanes: Option<usize>,
     /// Keep every iteration's Jacobian in the lane results.
     pub keep_jacobians: bool,
+    /// Invocations per GPU workgroup (default [`gpu::sweep::DEFAULT_WORKGROUP`]);
+    /// the benchmark varies it.
+    pub workgroup_size: Option<u32>,
 }
 
 /// The per-precision tolerance of the GPU's validation against the CPU.
@@ -278,7 +281,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             settings.keep_jacobians = options.keep_jacobians;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
-            let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options.max_batch_lanes)?;
+            let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
             let report = GpuReport {
                 adapter: gpu.summary.name.clone(),
                 adapter_backend: gpu.summary.backend.clone(),

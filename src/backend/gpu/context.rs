@@ -151,6 +151,10 @@ pub fn open(adapter: wgpu::Adapter, summary: AdapterSummary, precision: Precisio
     if precision == Precision::F64 {
         features |= wgpu::Features::SHADER_F64;
     }
+    // Device time per pass, reported beside wall time (see `stopwatch`).
+    if summary.timestamps {
+        features |= wgpu::Features::TIMESTAMP_QUERY;
+    }
     // Ask for everything the adapter offers: large sweeps want its largest bindings.
     let limits = adapter.limits();
     let descriptor = wgpu::DeviceDescriptor {

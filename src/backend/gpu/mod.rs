@@ -5,4 +5,5 @@
 
 pub mod context;
 pub mod shader;
+pub mod stopwatch;
 pub mod sweep;

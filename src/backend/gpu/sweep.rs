@@ -18,6 +18,8 @@ use wgpu::util::DeviceExt;
 
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
+use super::stopwatch::{self, Stopwatch};
+use crate::backend::RunOptions;
 use crate::error::{Error, Result};
 use crate::integrate::clock::cos_sin;
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
@@ -32,7 +34,9 @@ const DISPATCH_LANE_STEPS: usize = 1 << 22;
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
-const WORKGROUP: usize = 64;
+/// Invocations per workgroup unless the run asks otherwise: measured on
+/// lavapipe in docs/BENCHMARKS.md (sizes 32 to 256 within noise there).
+pub const DEFAULT_WORKGROUP: u32 = 64;
 
 /// Where a GPU run's wall time went.
 #[derive(Clone, Copy, Debug, Default)]
@@ -49,6 +53,9 @@ pub struct Timings {
     pub readback: Duration,
     /// Host QR accumulation (overlapping GPU work).
     pub host_qr: Duration,
+    /// Device time of the compute passes (transient and averaging), from
+    /// timestamp queries; `None` where the adapter has none.
+    pub gpu_busy: Option<Duration>,
 }
 
 impl Timings {
@@ -59,6 +66,10 @@ impl Timings {
         self.gpu_wait += other.gpu_wait;
         self.readback += other.readback;
         self.host_qr += other.host_qr;
+        self.gpu_busy = match (self.gpu_busy, other.gpu_busy) {
+            (Some(a), Some(b)) => Some(a + b),
+            (a, b) => a.or(b),
+        };
     }
 }
 
@@ -73,19 +84,19 @@ pub struct GpuRun {
 }
 
 /// Runs the whole sweep, split into batches that fit the device's limits
-/// (at most `max_batch_lanes` lanes each when given).
+/// (at most `options.max_batch_lanes` lanes each when given).
 pub fn run(
     gpu: &Gpu,
     scene: &Scene,
     variant: &Variant,
     settings: &MethodSettings,
-    max_batch_lanes: Option<usize>,
+    options: &RunOptions,
 ) -> Result<GpuRun> {
     match scene.system.dimension() {
-        1 => run_dim::<1>(gpu, scene, variant, settings, max_batch_lanes),
-        2 => run_dim::<2>(gpu, scene, variant, settings, max_batch_lanes),
-        3 => run_dim::<3>(gpu, scene, variant, settings, max_batch_lanes),
-        4 => run_dim::<4>(gpu, scene, variant, settings, max_batch_lanes),
+        1 => run_dim::<1>(gpu, scene, variant, settings, options),
+        2 => run_dim::<2>(gpu, scene, variant, settings, options),
+        3 => run_dim::<3>(gpu, scene, variant, settings, options),
+        4 => run_dim::<4>(gpu, scene, variant, settings, options),
         d => Err(Error::Backend {
             backend: "gpu".into(),
             reason: format!("maps of dimension {d} are not supported on the GPU (1 to 4 are)"),
@@ -137,13 +148,15 @@ fn run_dim<const D: usize>(
     scene: &Scene,
     variant: &Variant,
     settings: &MethodSettings,
-    max_batch_lanes: Option<usize>,
+    options: &RunOptions,
 ) -> Result<GpuRun>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
-    let pipelines = Pipelines::new(gpu, variant);
+    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let pipelines = Pipelines::new(gpu, variant, workgroup);
+    let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant);
     let limits = &gpu.limits;
     let binding = limits
@@ -152,13 +165,13 @@ where
     // A batch must fit one dispatch (workgroups per dimension) and its
     // trajectory buffer one binding; at least one ring slot must fit too.
     let by_dispatch =
-        limits.max_compute_workgroups_per_dimension as usize * WORKGROUP / layout.traj;
+        limits.max_compute_workgroups_per_dimension as usize * workgroup as usize / layout.traj;
     let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
     let by_ring = (binding / layout.jacobian.max(layout.point).max(layout.summary)) as usize;
     let batch_lanes = by_dispatch
         .min(by_binding)
         .min(by_ring)
-        .min(max_batch_lanes.unwrap_or(usize::MAX))
+        .min(options.max_batch_lanes.unwrap_or(usize::MAX))
         .max(1);
     let total = scene.sweep.values.len();
     let mut lanes = Vec::with_capacity(total);
@@ -171,7 +184,15 @@ where
     for first in (0..total).step_by(batch_lanes) {
         let count = batch_lanes.min(total - first);
         let batch = Batch::<D>::new(
-            gpu, &pipelines, scene, variant, settings, &layout, first, count,
+            gpu,
+            &pipelines,
+            stopwatch.as_ref(),
+            scene,
+            variant,
+            settings,
+            &layout,
+            first,
+            count,
         );
         chunk_steps = batch.chunk_steps;
         let (results, t) = batch.run(gpu, &pipelines)?;
@@ -194,10 +215,11 @@ struct Pipelines {
     finish: wgpu::ComputePipeline,
     lyapunov: bool,
     points: bool,
+    workgroup: u32,
 }
 
 impl Pipelines {
-    fn new(gpu: &Gpu, variant: &Variant) -> Self {
+    fn new(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
         let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
@@ -250,7 +272,10 @@ impl Pipelines {
                 layout: Some(&pipeline_layout),
                 module: &module,
                 entry_point: Some("main"),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
+                    ..Default::default()
+                },
                 cache: None,
             })
         };
@@ -260,6 +285,7 @@ impl Pipelines {
             layout,
             lyapunov: variant.lyapunov,
             points: variant.points,
+            workgroup,
         }
     }
 }
@@ -301,6 +327,7 @@ fn reals_from(bytes: &[u8], precision: Precision) -> Vec<f64> {
 
 /// One batch of lanes with its buffers.
 struct Batch<'a, const D: usize> {
+    stopwatch: Option<&'a Stopwatch>,
     settings: &'a MethodSettings,
     layout: &'a Layout,
     precision: Precision,
@@ -315,6 +342,10 @@ struct Batch<'a, const D: usize> {
     jac: Option<wgpu::Buffer>,
     points: Option<wgpu::Buffer>,
     staging: [wgpu::Buffer; 2],
+    /// Where the staging buffers hold the chunk's pass timestamps.
+    ticks_offset: u64,
+    /// The transient passes' timestamps, read back after each submission.
+    transient_ticks: Option<wgpu::Buffer>,
     periods: Vec<f64>,
 }
 
@@ -326,6 +357,7 @@ where
     fn new(
         gpu: &Gpu,
         pipelines: &Pipelines,
+        stopwatch: Option<&'a Stopwatch>,
         scene: &'a Scene,
         variant: &Variant,
         settings: &'a MethodSettings,
@@ -469,14 +501,15 @@ where
         let points = pipelines
             .points
             .then(|| empty("points", layout.point * (ring * count) as u64, storage));
-        let staging_size = per_iteration * ring as u64;
-        let staging = [0, 1].map(|_| {
-            empty(
-                "staging",
-                staging_size,
-                wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            )
-        });
+        let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let ticks_offset = per_iteration * ring as u64;
+        let ticks_bytes = if stopwatch.is_some() {
+            stopwatch::TICKS_BYTES
+        } else {
+            0
+        };
+        let staging = [0, 1].map(|_| empty("staging", ticks_offset + ticks_bytes, readable));
+        let transient_ticks = stopwatch.map(|_| empty("transient ticks", ticks_bytes, readable));
 
         let bind_group = |uniform: &wgpu::Buffer| {
             let mut entries = vec![
@@ -524,6 +557,7 @@ where
             })
         };
         Batch {
+            stopwatch,
             settings,
             layout,
             precision,
@@ -538,18 +572,21 @@ where
             jac,
             points,
             staging,
+            ticks_offset,
+            transient_ticks,
             periods,
         }
     }
 
     /// Encodes `iterations` map iterations: integrate dispatches in chunks of
-    /// `chunk_steps`, then the finish kernel.
+    /// `chunk_steps`, then the finish kernel; one pass, timed in `slot`.
     fn encode_iterations(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         pipelines: &Pipelines,
         transient: bool,
         iterations: usize,
+        slot: u32,
     ) {
         let (bind_group, chunk, invocations) = if transient {
             (
@@ -564,10 +601,10 @@ where
                 self.count * self.layout.traj,
             )
         };
-        let groups = |n: usize| n.div_ceil(WORKGROUP) as u32;
+        let groups = |n: usize| n.div_ceil(pipelines.workgroup as usize) as u32;
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(if transient { "transient" } else { "averaging" }),
-            timestamp_writes: None,
+            timestamp_writes: self.stopwatch.map(|s| s.writes(slot)),
         });
         pass.set_bind_group(0, bind_group, &[]);
         for _ in 0..iterations {
@@ -593,9 +630,17 @@ where
         while done < settings.transient {
             let n = per_submit.min(settings.transient - done);
             let mut encoder = device.create_command_encoder(&Default::default());
-            self.encode_iterations(&mut encoder, pipelines, true, n);
+            let slot = stopwatch::TRANSIENT_SLOT;
+            self.encode_iterations(&mut encoder, pipelines, true, n, slot);
+            if let (Some(s), Some(ticks)) = (self.stopwatch, &self.transient_ticks) {
+                s.copy_out(&mut encoder, slot, ticks, 0);
+            }
             let index = queue.submit([encoder.finish()]);
             wait_for(device, index)?;
+            if let (Some(s), Some(ticks)) = (self.stopwatch, &self.transient_ticks) {
+                let busy = read_back(device, ticks, |bytes| s.elapsed(bytes))?;
+                *timings.gpu_busy.get_or_insert_default() += busy;
+            }
             done += n;
         }
         timings.transient = start.elapsed();
@@ -615,8 +660,12 @@ where
         let mut pending: Option<Pending> = None;
         for (c, &(_, n)) in chunks.iter().enumerate() {
             let mut encoder = device.create_command_encoder(&Default::default());
-            self.encode_iterations(&mut encoder, pipelines, false, n);
+            let slot = (c % 2) as u32;
+            self.encode_iterations(&mut encoder, pipelines, false, n, slot);
             self.copy_to_staging(&mut encoder, &self.staging[c % 2], n);
+            if let Some(s) = self.stopwatch {
+                s.copy_out(&mut encoder, slot, &self.staging[c % 2], self.ticks_offset);
+            }
             let index = queue.submit([encoder.finish()]);
             let submitted = Pending {
                 chunk: c,
@@ -699,6 +748,10 @@ where
                 .get_mapped_range(..)
                 .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
             let bytes: &[u8] = &view;
+            if let Some(s) = self.stopwatch {
+                let busy = s.elapsed(&bytes[self.ticks_offset as usize..]);
+                *timings.gpu_busy.get_or_insert_default() += busy;
+            }
             let s_end = (self.layout.summary * lanes) as usize;
             let j_end = s_end + (self.layout.jacobian * lanes) as usize;
             let p_end = j_end + (self.layout.point * lanes) as usize;
@@ -762,6 +815,33 @@ fn gpu_error(reason: String) -> Error {
         backend: "gpu".into(),
         reason,
     }
+}
+
+/// Maps a small buffer whose copy has finished and reads it through `read`.
+fn read_back<T>(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    read: impl FnOnce(&[u8]) -> T,
+) -> Result<T> {
+    let (sender, receiver) = mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |result| {
+        let _ = sender.send(result);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| gpu_error(format!("the device stopped responding: {e}")))?;
+    receiver
+        .recv()
+        .map_err(|_| gpu_error("readback was cancelled".into()))?
+        .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+    let value = {
+        let view = buffer
+            .get_mapped_range(..)
+            .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+        read(&view)
+    };
+    buffer.unmap();
+    Ok(value)
 }
 
 /// Blocks until the submission `index` has finished on the device.
