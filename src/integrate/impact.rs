@@ -116,6 +116,7 @@ pub fn resolve<const D: usize, F: Flow<D>>(
             let (y, _) = sub.step(&phase_c, &yc, rest - s);
             return clamp_to_wall(wall, y);
         }
+        stats.slowest_impact = stats.slowest_impact.min(yc[1]);
         yc[0] = wall.position;
         yc[1] *= -wall.restitution;
         stats.impacts += 1;

@@ -54,24 +54,37 @@ pub fn estimate<const D: usize, S: System<D>>(
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
 
     let image = ys[0];
+    let same = |t: usize| st[t].impacts == st[0].impacts;
+    // How far a copy's impacts moved, relative to the reference's: near
+    // grazing, an impact at speed v moves by δ·a/v² of itself (a the
+    // acceleration at the wall), and so does the difference quotient.
+    let departure = |t: usize| {
+        if t == 0 || st[0].impacts == 0 {
+            0.0
+        } else if !same(t) {
+            f64::INFINITY
+        } else {
+            (st[t].slowest_impact - st[0].slowest_impact).abs() / st[0].slowest_impact
+        }
+    };
     let mut jacobian = SMatrix::<f64, D, D>::zeros();
+    stats.nonlinearity = 0.0;
     for i in 0..D {
         let (plus, minus) = (1 + i, 1 + D + i);
         let (a, b, step) = match difference {
             Difference::Forward => (plus, 0, steps[plus]),
-            Difference::Central => {
-                let same = |t: usize| st[t].impacts == st[0].impacts;
-                match (same(plus), same(minus)) {
-                    (false, true) => (0, minus, steps[minus]),
-                    (true, false) => (plus, 0, steps[plus]),
-                    _ => (plus, minus, steps[plus] + steps[minus]),
-                }
-            }
+            Difference::Central => match (same(plus), same(minus)) {
+                (false, true) => (0, minus, steps[minus]),
+                (true, false) => (plus, 0, steps[plus]),
+                _ => (plus, minus, steps[plus] + steps[minus]),
+            },
         };
+        stats.nonlinearity = stats.nonlinearity.max(departure(a)).max(departure(b));
         for k in 0..D {
             jacobian[(k, i)] = (ys[a][k] - ys[b][k]) / step;
         }
     }
+    stats.slowest_impact = stats.slowest_impact.min(st[0].slowest_impact);
     (image, jacobian)
 }
 

@@ -96,6 +96,13 @@ pub enum LaneStatus {
     Unresolved {
         bound: f64,
     },
+    /// Near-grazing iterations whose best finite difference still leaves
+    /// an estimated exponent error `bound` per unit time above the limit
+    /// (see [`estimate_resolving_grazing`]).
+    Grazing {
+        iterations: usize,
+        bound: f64,
+    },
     /// A GPU lane that its CPU recomputation contradicts (see
     /// `backend::validation_difference`) beyond the precision's tolerance.
     Mismatch {
@@ -112,6 +119,9 @@ impl std::fmt::Display for LaneStatus {
                 write!(f, "chattering(iterations={iterations})")
             }
             LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
+            LaneStatus::Grazing { iterations, bound } => {
+                write!(f, "grazing(iterations={iterations}, bound={bound:.1e})")
+            }
             LaneStatus::Mismatch { difference } => {
                 write!(f, "gpu-mismatch(difference={difference:.1e})")
             }
@@ -133,6 +143,12 @@ pub struct LaneResult {
     pub bifurcation: Vec<f64>,
     /// Every iteration's Jacobian, row-major, when `keep_jacobians` is set.
     pub jacobians: Vec<f64>,
+    /// Averaging iterations re-estimated as grazing (see
+    /// [`estimate_resolving_grazing`]).
+    pub grazing: usize,
+    /// Their estimated error per unit time in the exponents:
+    /// Σ (error in ln R_ii) / (N·T); 0 without grazing iterations.
+    pub grazing_bound: f64,
     pub status: LaneStatus,
 }
 
@@ -196,6 +212,8 @@ pub struct LaneAccumulator<const D: usize> {
     done: usize,
     impacts: u64,
     chattering: usize,
+    grazing: usize,
+    grazing_error: f64,
     noise_squares: f64,
     bifurcation: Vec<f64>,
     jacobians: Option<Vec<f64>>,
@@ -223,6 +241,8 @@ where
             done: 0,
             impacts: 0,
             chattering: 0,
+            grazing: 0,
+            grazing_error: 0.0,
             noise_squares: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
             jacobians: settings.keep_jacobians.then(Vec::new),
@@ -285,6 +305,8 @@ where
         }
         self.impacts += u64::from(stats.impacts);
         self.chattering += usize::from(stats.chattering);
+        self.grazing += usize::from(stats.grazing);
+        self.grazing_error += stats.grazing_error;
         if let (true, Some(point)) = (n >= self.first_kept, point) {
             self.bifurcation.extend_from_slice(point);
         }
@@ -315,6 +337,8 @@ where
                 period: self.period,
                 bifurcation: self.bifurcation,
                 jacobians: self.jacobians.unwrap_or_default(),
+                grazing: self.grazing,
+                grazing_bound: f64::NAN,
                 status: LaneStatus::NonFinite { iteration },
             };
         }
@@ -331,6 +355,7 @@ where
         } else {
             Vec::new()
         };
+        let grazing_bound = self.grazing_error / (self.done.max(1) as f64 * self.period);
         let status = if self.chattering > 0 {
             LaneStatus::Chattering {
                 iterations: self.chattering,
@@ -338,6 +363,11 @@ where
         } else if resolution_bound > RESOLUTION_BOUND {
             LaneStatus::Unresolved {
                 bound: resolution_bound,
+            }
+        } else if grazing_bound > RESOLUTION_BOUND {
+            LaneStatus::Grazing {
+                iterations: self.grazing,
+                bound: grazing_bound,
             }
         } else {
             LaneStatus::Ok
@@ -348,6 +378,8 @@ where
             period: self.period,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),
+            grazing: self.grazing,
+            grazing_bound,
             status,
         }
     }
@@ -361,7 +393,10 @@ fn step<const D: usize, S: System<D>>(
     settings: &MethodSettings,
     x: &[f64; D],
     stats: &mut IterationStats,
-) -> ([f64; D], Option<SMatrix<f64, D, D>>) {
+) -> ([f64; D], Option<SMatrix<f64, D, D>>)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
     match settings.tangent {
         Tangent::Exact => {
             let (next, j) = system
@@ -370,12 +405,109 @@ fn step<const D: usize, S: System<D>>(
             (next, settings.lyapunov.then_some(j))
         }
         Tangent::FiniteDifference if settings.lyapunov => {
-            let delta = perturbation_at(settings.perturbation, x);
-            let (next, j) = jacobian::estimate(system, flow, x, delta, settings.difference, stats);
+            let (next, j) = estimate_resolving_grazing(system, flow, settings, x, stats);
             (next, Some(j))
         }
         Tangent::FiniteDifference => (system.iterate(x, flow, stats), None),
     }
+}
+
+/// A grazing iteration: its estimated error in ln R_ii is above this. The
+/// estimate is the copies' nonlinearity (forward differences) or its square
+/// (central), times the Jacobian's Hadamard ratio Π‖column‖ / |det|: near
+/// grazing the Jacobian is nearly of rank one with large entries, and the
+/// contracting part, which sets the smallest exponents and the sum, is a
+/// small difference of large numbers.
+pub const GRAZING_ERROR: f64 = 1e-6;
+/// The δ ladder of a grazing iteration: rungs δ·10^(-k/2), k = 1..=RUNGS.
+const GRAZING_RUNGS: i32 = 8;
+
+/// ln R_ii of J's QR factorisation, and ln of J's Hadamard ratio.
+fn log_diagonal<const D: usize>(j: &SMatrix<f64, D, D>) -> ([f64; D], f64)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let (_, r) = super::qr::qr_positive(*j);
+    let log_r: [f64; D] = std::array::from_fn(|i| r[(i, i)].ln());
+    let log_columns: f64 = (0..D).map(|i| j.column(i).norm().ln()).sum();
+    (log_r, log_columns - log_r.iter().sum::<f64>())
+}
+
+/// The Jacobian estimate of one iteration; near grazing, the best of a
+/// ladder of smaller δ.
+///
+/// A slow impact at speed v bends the map on the scale δ·a/v² (a the
+/// acceleration at the wall), and a copy may meet the wall once more or
+/// less than the reference; the copies then leave the linear regime
+/// (`IterationStats::nonlinearity`). Such an iteration is re-estimated at
+/// δ·10^(-k/2) down to the rounding floor; the estimate kept is the one
+/// that changes least towards the next smaller δ (where truncation has
+/// stopped mattering and rounding has not started to), and that change is
+/// its error estimate. The reference image is the same whatever δ.
+pub fn estimate_resolving_grazing<const D: usize, S: System<D>>(
+    system: &S,
+    flow: &FlowSettings,
+    settings: &MethodSettings,
+    x: &[f64; D],
+    stats: &mut IterationStats,
+) -> ([f64; D], SMatrix<f64, D, D>)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let p = match settings.difference {
+        jacobian::Difference::Forward => 1,
+        jacobian::Difference::Central => 2,
+    };
+    let delta = perturbation_at(settings.perturbation, x);
+    let mut first = *stats;
+    let (image, j0) = jacobian::estimate(system, flow, x, delta, settings.difference, &mut first);
+    let (log0, log_hadamard) = log_diagonal(&j0);
+    let suspect = first.nonlinearity.powi(p) * log_hadamard.exp();
+    if suspect.is_nan() || suspect <= GRAZING_ERROR {
+        *stats = first;
+        return (image, j0);
+    }
+    // Rungs sit half a decade apart, so a plateau two rungs wide is a
+    // decade of δ. The rounding floor: relative noise u·√steps/δ of 1e-2 in an image-sized
+    // column; the ladder itself finds where rounding starts to matter.
+    let floor = perturbation_at(
+        settings.rounding_unit * (settings.steps_per_iteration as f64).sqrt() * 1e2,
+        x,
+    );
+    let mut rungs = vec![(j0, log0, first)];
+    for k in 1..=GRAZING_RUNGS {
+        let d = delta * 10f64.powf(-f64::from(k) / 2.0);
+        if d < floor {
+            break;
+        }
+        let mut st = *stats;
+        let (_, j) = jacobian::estimate(system, flow, x, d, settings.difference, &mut st);
+        let (log_r, _) = log_diagonal(&j);
+        rungs.push((j, log_r, st));
+    }
+    let change = |a: &[f64; D], b: &[f64; D]| {
+        let sum = (a.iter().sum::<f64>() - b.iter().sum::<f64>()).abs();
+        a.iter().zip(b).fold(sum, |m, (x, y)| m.max((x - y).abs()))
+    };
+    // A rung's error: its larger change towards either neighbour, so that
+    // two rungs agreeing by chance in the rounding noise do not pass for a
+    // plateau.
+    let (best, error) = (1..rungs.len().saturating_sub(1))
+        .map(|k| {
+            let left = change(&rungs[k - 1].1, &rungs[k].1);
+            let right = change(&rungs[k].1, &rungs[k + 1].1);
+            (k, left.max(right))
+        })
+        .filter(|(_, e)| !e.is_nan())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, f64::INFINITY));
+    let (j, _, st) = rungs.swap_remove(best);
+    *stats = IterationStats {
+        grazing: true,
+        grazing_error: error,
+        ..st
+    };
+    (image, j)
 }
 
 fn all_finite(x: &[f64]) -> bool {

@@ -13,11 +13,23 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 
 /// The header of `spectrum.csv`:
-/// `<parameter>,lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period,status`.
+/// `<parameter>,lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,status`:
+/// `grazing` counts the averaging iterations re-estimated near grazing and
+/// `grazing_bound` their estimated exponent error per unit time.
 pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     let mut header = vec![scene.sweep.parameter.clone()];
     header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-    header.extend(["lambda_sum", "expected_sum", "impacts_per_period", "status"].map(String::from));
+    header.extend(
+        [
+            "lambda_sum",
+            "expected_sum",
+            "impacts_per_period",
+            "grazing",
+            "grazing_bound",
+            "status",
+        ]
+        .map(String::from),
+    );
     header
 }
 
@@ -59,6 +71,8 @@ fn write_spectrum(
         row.push(number(lane.exponent_sum()));
         row.push(number(report.expected_sums[k]));
         row.push(number(lane.impacts_per_period));
+        row.push(lane.grazing.to_string());
+        row.push(number(lane.grazing_bound));
         row.push(lane.status.to_string());
         w.write_record(&row)?;
     }

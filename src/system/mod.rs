@@ -136,13 +136,44 @@ pub struct FlowSettings {
 }
 
 /// What happened during one map iteration of one trajectory.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationStats {
     /// Wall impacts during the iteration.
     pub impacts: u32,
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
+    /// The slowest approach speed of the iteration's impacts (infinite
+    /// without impacts): a slow impact is near grazing.
+    pub slowest_impact: f64,
+    /// Of a Jacobian estimate: how far the perturbed copies left the linear
+    /// regime, as the largest relative difference between a copy's slowest
+    /// impact speed and the reference's (infinite when a column's copies
+    /// met the wall a different number of times on both sides); 0 without
+    /// impacts. A finite difference is off by about this fraction (forward)
+    /// or its square (central).
+    pub nonlinearity: f64,
+    /// Of a Jacobian estimate: re-estimated over a ladder of smaller δ
+    /// because `nonlinearity` was too large for the Jacobian's conditioning
+    /// (a grazing iteration).
+    pub grazing: bool,
+    /// Of a grazing iteration: the error left in ln R_ii of the chosen
+    /// estimate, measured as the change between neighbouring rungs of the
+    /// ladder (0 for other iterations).
+    pub grazing_error: f64,
+}
+
+impl Default for IterationStats {
+    fn default() -> Self {
+        IterationStats {
+            impacts: 0,
+            chattering: false,
+            slowest_impact: f64::INFINITY,
+            nonlinearity: 0.0,
+            grazing: false,
+            grazing_error: 0.0,
+        }
+    }
 }
 
 /// A system of map dimension `D`.

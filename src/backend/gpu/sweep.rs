@@ -783,6 +783,7 @@ where
                     let stats = IterationStats {
                         impacts,
                         chattering: flags & FLAG_CHATTERING != 0,
+                        ..Default::default()
                     };
                     let jacobian = has_jac.then(|| {
                         SMatrix::<f64, D, D>::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D])
