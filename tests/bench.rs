@@ -84,7 +84,7 @@ fn the_quick_bench_command_writes_csv_markdown_and_plot() {
     );
     let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
     assert!(csv.starts_with(
-        "path,steps_per_period,impact_location,perturbation,difference,periodic_error,chaotic_sum_error,sweep_sum_error,error,seconds,lane_steps,pareto\n"
+        "path,steps_per_period,impact_location,perturbation,difference,periodic_error,chaotic_sum_error,grazing_sum_error,sweep_sum_error,error,seconds,device_seconds,lane_steps,pareto\n"
     ));
     assert!(csv.lines().count() > 8);
     let md = std::fs::read_to_string(dir.path().join("bench.md")).unwrap();

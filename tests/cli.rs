@@ -237,7 +237,7 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
     let mut lines = spectrum.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,status"
+        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,status"
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 3);
@@ -249,7 +249,9 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
         assert_eq!(l1 + l2, sum);
         assert!(l1 >= l2);
         assert_eq!(row[4], "-0.1");
-        assert_eq!(row[6], "ok");
+        assert_eq!(row[6], "0", "no grazing iteration at a periodic point");
+        assert_eq!(row[7], "0");
+        assert_eq!(row[8], "ok");
     }
     let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
     assert!(bifurcation.starts_with("eta,x,v\n"));

@@ -119,9 +119,8 @@ impl std::fmt::Display for LaneStatus {
                 write!(f, "chattering(iterations={iterations})")
             }
             LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
-            LaneStatus::Grazing { iterations, bound } => {
-                write!(f, "grazing(iterations={iterations}, bound={bound:.1e})")
-            }
+            // The count is in the `grazing` column; no comma in a CSV field.
+            LaneStatus::Grazing { bound, .. } => write!(f, "grazing(bound={bound:.1e})"),
             LaneStatus::Mismatch { difference } => {
                 write!(f, "gpu-mismatch(difference={difference:.1e})")
             }
