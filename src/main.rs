@@ -149,6 +149,34 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
+    if scene.system.is_flow && report.backend != Backend::Exact {
+        let requested = i.steps_per_period;
+        let raised: Vec<usize> = report
+            .lanes
+            .iter()
+            .map(|l| l.plan.steps_per_period)
+            .filter(|&s| s > requested)
+            .collect();
+        if let Some(most) = raised.iter().max() {
+            println!(
+                "  steps        raised in {} lanes, up to {most} per period: their fastest time scale needs RK4 step × rate ≤ {}",
+                raised.len(),
+                lyapsweep::method::lane::MAX_STEP_RATE
+            );
+        }
+    }
+    let cut: Vec<usize> = report
+        .lanes
+        .iter()
+        .map(|l| l.plan.parts)
+        .filter(|&p| p > 1)
+        .collect();
+    if let Some(most) = cut.iter().max() {
+        println!(
+            "  sub-maps     {} lanes cut each iteration into up to {most} parts: over a whole one the fastest contraction falls below what the finite difference resolves",
+            cut.len()
+        );
+    }
     println!("  time         {:.3} s", report.elapsed.as_secs_f64());
     if let Some(gpu) = &report.gpu {
         let t = &gpu.timings;

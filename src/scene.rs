@@ -12,13 +12,16 @@
 //! to = 1.5                        # ... or values = [..]; neither: the [system] value alone
 //! count = 4096
 //! [integration]
-//! steps_per_period = 1800         # RK4 steps per map period (flows)
+//! steps_per_period = 450          # RK4 steps per map period (flows; raised where a lane's
+//!                                 #   fastest time scale needs it, and the summary says so)
 //! transient = 500                 # iterations discarded before averaging
 //! iterations = 1000               # iterations averaged
 //! initial_state = [0.0, 0.0]      # default: the system's (Lorenz: [1, 1, 1])
-//! perturbation = 1e-8             # δ, relative to max(1, |x|) (f32: 2e-4)
+//! perturbation = 1e-6             # δ, relative to max(1, |x|) (f32: 2e-4)
 //! difference = "central"          # or "forward" (the paper's)
 //! impact_location = "newton"      # or "linear" (the paper's)
+//! submaps = 1                     # parts per iteration; default: as many as the
+//!                                 #   fastest contraction needs (CPU path)
 //! [run]
 //! backend = "auto"                # "cpu", "gpu", "exact"
 //! precision = "f64"               # or "f32" (gpu only)
@@ -39,17 +42,22 @@ use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
 use crate::system::{self, Params, SystemInfo};
 
-/// Default RK4 steps per map period, as in the paper.
-pub const DEFAULT_STEPS_PER_PERIOD: usize = 1800;
+/// Default RK4 steps per map period: the first step count on the measured
+/// Pareto front (docs/BENCHMARKS.md) below 1e-8 with newton location and
+/// central differences at δ = 1e-6, 2.3e-9 in 0.23 s on the bench's 17
+/// values; 1800, the paper's, is 3.7 times slower there for no gain (the
+/// seed's scene keeps it, to reproduce the paper). Lanes whose fastest time
+/// scale needs more get more (`method::lane::plan_lane`).
+pub const DEFAULT_STEPS_PER_PERIOD: usize = 450;
 pub const DEFAULT_TRANSIENT: usize = 500;
 pub const DEFAULT_ITERATIONS: usize = 1000;
-/// Default δ in f64, near the optimum √ε of a forward difference: the
-/// truncation error O(δ) grows fast near grazing impacts (it scales like
-/// δ/v⁻², v⁻ the impact velocity), the rounding error like ε·√steps/δ.
-/// Measured on the seed's oscillator at η = 0.708 (sporadic near-grazing
-/// impacts): sum-rule error 3.4e-5, 2.2e-5, 2.0e-6, 2.6e-7, 3.9e-6 at
-/// δ = 1e-6, 1e-7, 1e-8, 1e-9, 1e-10.
-pub const DEFAULT_PERTURBATION_F64: f64 = 1e-8;
+/// Default δ in f64, for central differences (error O(δ²) against rounding
+/// ε·√steps/δ, optimum near ε^(1/3)): on the measured front at 450 to 1800
+/// steps (docs/BENCHMARKS.md), 30 to 200 times more accurate on the periodic
+/// points than δ = 1e-8. Near-grazing iterations, where a large δ would
+/// leave the linear regime, are re-estimated down a ladder of smaller δ
+/// (`method::lane::estimate_resolving_grazing`).
+pub const DEFAULT_PERTURBATION_F64: f64 = 1e-6;
 /// Default δ in f32 (on the GPU, with central differences), relative to
 /// max(1, ‖x‖∞) like every δ: the compensated f32 images carry about 1e-7
 /// relative error, so δ must be large, and the O(δ²) error of central
@@ -137,6 +145,9 @@ pub struct Integration {
     /// As the scene gives it; [`Scene::difference`] applies the default.
     pub difference: Option<Difference>,
     pub impact_location: ImpactLocation,
+    /// Parts per iteration, when the scene fixes them; otherwise each lane
+    /// takes what its fastest contraction needs.
+    pub submaps: Option<usize>,
 }
 
 impl Scene {
@@ -205,6 +216,7 @@ struct RawIntegration {
     perturbation: Option<f64>,
     difference: Option<Difference>,
     impact_location: Option<ImpactLocation>,
+    submaps: Option<usize>,
 }
 
 #[derive(Default, Deserialize)]
@@ -316,6 +328,10 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         perturbation: i.perturbation,
         difference: i.difference,
         impact_location: i.impact_location.unwrap_or_default(),
+        submaps: match i.submaps {
+            Some(n) => Some(positive("integration.submaps", Some(n), 1)?),
+            None => None,
+        },
     };
     if let Some(delta) = integration
         .perturbation

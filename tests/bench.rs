@@ -18,12 +18,13 @@ fn errors_are_measured_against_the_exact_backend() {
         .unwrap();
     let values: Vec<String> = PERIODIC.iter().map(|v| format!("{v}")).collect();
     let text = format!(
-        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\nsteps_per_period = {}\nimpact_location = \"linear\"\ndifference = \"{}\"\n",
+        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\nsteps_per_period = {}\nimpact_location = \"linear\"\ndifference = \"{}\"\nperturbation = {:e}\n",
         values.join(", "),
         plan.transient,
         plan.iterations,
         linear.config.steps,
-        linear.config.difference.name()
+        linear.config.difference.name(),
+        linear.config.perturbation
     );
     let run = |backend: &str| {
         let overrides = [format!("run.backend=\"{backend}\"")];

@@ -3,9 +3,10 @@
 
 mod common;
 
+use lyapsweep::integrate::clock::ZERO_PHASE;
 use lyapsweep::method::jacobian::{estimate, Difference};
 use lyapsweep::system::henon::Henon;
-use lyapsweep::system::{FlowSettings, IterationStats};
+use lyapsweep::system::{FlowSettings, IterationStats, Part};
 
 #[test]
 fn exponents_match_published_values_and_sum_to_ln_b() {
@@ -35,6 +36,8 @@ fn estimated_jacobian_is_the_papers_eq_10() {
             let (image, j) = estimate(
                 &henon,
                 &settings,
+                Part::WHOLE,
+                &mut ZERO_PHASE.clone(),
                 &[x, y],
                 delta,
                 Difference::Forward,

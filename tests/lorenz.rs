@@ -19,13 +19,17 @@ fn exponents_match_published_values() {
 #[test]
 fn a_period_too_long_for_the_difference_is_flagged_not_trusted() {
     // Over T = 1 the stable direction contracts by e^{-14.6} ≈ 5e-7, below the
-    // rounding noise of a forward difference at δ = 1e-8: the row must say so.
+    // rounding noise of a forward difference at δ = 1e-8: taken whole (one
+    // part, as the scene forces here), the row must say so.
     let scene = common::committed_scene(
         "lorenz.toml",
         &[
             "system.period=1.0",
-            "integration.steps_per_period=100",
+            "integration.steps_per_period=250",
             "integration.iterations=2000",
+            "integration.difference=\"forward\"",
+            "integration.perturbation=1e-8",
+            "integration.submaps=1",
         ],
     );
     let report = common::run(&scene);
@@ -35,4 +39,33 @@ fn a_period_too_long_for_the_difference_is_flagged_not_trusted() {
         }
         other => panic!("expected unresolved, got {other}"),
     }
+}
+
+#[test]
+fn the_time_one_map_is_cut_into_parts_and_resolved() {
+    // The same scene without forcing one part: the lane cuts each iteration
+    // into sub-maps short enough for the difference, and λ3 comes out.
+    let scene = common::committed_scene(
+        "lorenz.toml",
+        &[
+            "system.period=1.0",
+            "integration.steps_per_period=250",
+            "integration.iterations=10000",
+            "integration.difference=\"forward\"",
+            "integration.perturbation=1e-8",
+        ],
+    );
+    let report = common::run(&scene);
+    let lane = &report.lanes[0];
+    assert_eq!(lane.status, lyapsweep::method::LaneStatus::Ok);
+    assert!(lane.plan.parts >= 2, "{:?}", lane.plan);
+    for (got, published) in lane.exponents.iter().zip([0.9056, 0.0, -14.5723]) {
+        assert!(
+            (got - published).abs() < 0.02,
+            "exponents {:?}",
+            lane.exponents
+        );
+    }
+    let sum: f64 = lane.exponents.iter().sum();
+    assert!((sum - -(10.0 + 1.0 + 8.0 / 3.0)).abs() < 1e-3, "sum {sum}");
 }

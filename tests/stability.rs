@@ -18,23 +18,28 @@ fn seed_sweep(from: f64, to: f64, count: usize, backend: &str) -> Report {
     common::run(&common::scene(SEED, &overrides))
 }
 
-/// η = 0.71172 (value 867 of the seed's 4096-value sweep): one iteration
-/// hits the wall at speed 1e-3, where the Jacobian is nearly of rank one
-/// (entries near 7000, determinant 0.41). At a fixed δ = 1e-8 its exponent
-/// sum missed the sum rule by 3.7e-4; the grazing re-estimate brings it to
-/// 1.6e-6 and reports a bound of the same size.
+/// η = 0.71172 (value 867 of the seed's 4096-value sweep, 1800 steps): one
+/// iteration hits the wall at speed 1e-3, where the Jacobian is nearly of
+/// rank one (entries near 7000, determinant 0.41). At a fixed δ = 1e-8 its
+/// exponent sum missed the sum rule by 3.7e-4; the grazing re-estimate
+/// brings it to 1.6e-6 (δ = 1e-8) or 1.1e-6 (δ = 1e-6, the default), with
+/// bounds of 1.3e-6 and 2.4e-5: an estimate from the ladder, not rigorous.
 #[test]
 fn a_near_grazing_impact_is_re_estimated_and_bounded() {
-    let overrides = ["sweep.values=[0.7117216117216117]"];
+    let overrides = [
+        "sweep.values=[0.7117216117216117]",
+        "integration.steps_per_period=1800",
+    ];
     let report = common::run(&common::scene(SEED, &overrides));
     let lane = &report.lanes[0];
     assert_eq!(lane.status, LaneStatus::Ok);
     let error = (lane.exponent_sum() - -0.1).abs();
     assert!(lane.grazing >= 1, "the slow impact is detected");
     assert!(error < 1e-5, "sum rule off by {error:e}");
-    // The bound estimates the error: same order of magnitude.
+    // The bound estimates the error, generously, and stays far below the
+    // 1e-3 at which the row would be flagged.
     assert!(
-        lane.grazing_bound > error / 10.0 && lane.grazing_bound < error * 10.0 + 1e-7,
+        lane.grazing_bound > error / 3.0 && lane.grazing_bound < 1e-4,
         "bound {:e} against error {error:e}",
         lane.grazing_bound
     );

@@ -125,6 +125,14 @@ enum Plan {
 fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
+            let gpu_settings = method_settings(scene, Backend::Gpu, scene.precision);
+            if let Err(Error::Invalid { reason, .. }) = gpu_steps(scene, &gpu_settings) {
+                return Ok((
+                    Plan::Cpu,
+                    Precision::F64,
+                    Some(format!("auto: CPU path, since {reason}")),
+                ));
+            }
             let chosen = match context::choose(Want::Hardware, scene.precision) {
                 Ok(Some(pick)) => pick,
                 Ok(None) => {
@@ -227,11 +235,8 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.
-        steps_per_iteration: if precision == Precision::F32 {
-            1
-        } else {
-            steps
-        },
+        rounding_accumulates: precision == Precision::F64 && steps > 1,
+        submaps: scene.integration.submaps,
         rounding_unit: match precision {
             Precision::F64 => f64::EPSILON,
             Precision::F32 => f64::from(f32::EPSILON),
@@ -254,6 +259,32 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
         points: scene.bifurcation_points > 0,
         impact_location: scene.integration.impact_location,
     }
+}
+
+/// The GPU integrates every lane of a batch with the same number of steps:
+/// the largest any lane's plan needs (see `method::lane::plan_lane`). Parts
+/// (sub-maps) are not on the GPU yet: a scene whose lanes need them is
+/// refused there, with the reason.
+fn gpu_steps(scene: &Scene, settings: &MethodSettings) -> Result<usize> {
+    let mut steps = settings.flow.steps_per_period;
+    for k in 0..scene.sweep.values.len() {
+        let plan = (scene.system.plan)(&scene.lane_params(k), settings);
+        if plan.parts > 1 {
+            return Err(Error::invalid(
+                "run.backend",
+                format!(
+                    "{} = {} contracts too strongly over one period for a single finite difference; \
+                     the CPU path cuts each iteration into {} sub-maps, the GPU path cannot yet: \
+                     use backend = \"cpu\" (\"auto\" does)",
+                    scene.sweep.parameter,
+                    scene.sweep.values[k],
+                    plan.parts
+                ),
+            ));
+        }
+        steps = steps.max(plan.steps_per_period);
+    }
+    Ok(steps)
 }
 
 /// Runs a whole sweep on the backend the scene asks for.
@@ -279,6 +310,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
         Plan::Gpu(adapter, summary) => {
             let mut settings = method_settings(scene, Backend::Gpu, precision);
             settings.keep_jacobians = options.keep_jacobians;
+            settings.flow.steps_per_period = gpu_steps(scene, &settings)?;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
             let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
@@ -340,7 +372,9 @@ fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Op
     picks.dedup();
     // The same δ and difference scheme as the GPU run (both follow the
     // scene's precision), so the difference measures arithmetic only.
-    let settings = method_settings(scene, Backend::Cpu, Precision::F64);
+    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
+    // The GPU ran every lane with the batch's steps.
+    settings.flow.steps_per_period = gpu_steps(scene, &settings).ok()?;
     let tolerance = validation_tolerance(precision);
     let mut max_difference: f64 = 0.0;
     for &k in &picks {

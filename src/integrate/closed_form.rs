@@ -213,8 +213,15 @@ impl ForcedImpactOscillator {
     ///
     /// No allocation: everything lives on the stack.
     pub fn iterate(&self, y0: [f64; 2]) -> ExactIteration {
-        let model = Model::new(self);
-        let mut segment = model.segment(0.0, y0);
+        self.iterate_span(y0, 0.0, self.period())
+    }
+
+    /// [`iterate`](Self::iterate) over the part [t0, t1] of a period (a
+    /// sub-map: see `system::Part`), from y0 at t0.
+    pub fn iterate_span(&self, y0: [f64; 2], t0: f64, t1: f64) -> ExactIteration {
+        let mut model = Model::new(self);
+        model.t_end = t1;
+        let mut segment = model.segment(t0, y0);
         let mut start = model.exact_point(&segment, y0);
         let mut jacobian = Matrix2::identity();
         let mut impacts = 0_u32;
@@ -367,7 +374,8 @@ struct Model {
     /// Particular solution X_p = a cos ηt + b sin ηt.
     a: f64,
     b: f64,
-    period: f64,
+    /// Where the iteration (or the part of it) ends: the period T unless set.
+    t_end: f64,
     /// √(A² + B²).
     particular_amplitude: f64,
     /// |X_p'''| ≤ η³ √(A² + B²).
@@ -398,7 +406,7 @@ impl Model {
             damping: Damping::new(zeta),
             a,
             b,
-            period,
+            t_end: period,
             particular_amplitude: a.hypot(b),
             particular_jerk: eta * eta * eta * a.hypot(b),
             energy_jerk: (2.0 * zeta).hypot(4.0 * zeta * zeta - 1.0),
@@ -492,7 +500,7 @@ impl Model {
     /// reaches h_min, where the ends decide (including a velocity maximum
     /// inside the step that reaches the wall).
     fn next_event(&self, segment: &Segment, start: Point, budget: &mut u32) -> Event {
-        let t_end = self.period;
+        let t_end = self.t_end;
         let mut a = start;
         let mut h = self.h_max;
         if start.x >= self.wall && start.v < 0.0 && start.acc > 0.0 {

@@ -9,7 +9,7 @@ pub mod rk4;
 
 pub use impact::{ImpactLocation, Wall};
 
-use crate::system::{FlowSettings, IterationStats};
+use crate::system::{FlowSettings, IterationStats, Part};
 use clock::{cos_sin, Phase, ZERO_PHASE};
 
 /// A flow y' = F(t, y) in D dimensions, possibly forced, possibly with a wall.
@@ -59,24 +59,40 @@ pub fn time_map_many<const D: usize, F: Flow<D>>(
     settings: &FlowSettings,
     stats: &mut [IterationStats],
 ) {
+    let mut phase = ZERO_PHASE;
+    part_map_many(flow, ys, period, settings, Part::WHOLE, &mut phase, stats);
+}
+
+/// Part `part` of the time-T map (its share of the period's RK4 steps),
+/// from the forcing phase `phase` at the part's start, which it advances to
+/// the part's end. The parts of a period, run in order with the phase
+/// passed on, do exactly the arithmetic of the whole [`time_map_many`].
+pub fn part_map_many<const D: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &mut [[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
+    stats: &mut [IterationStats],
+) {
     let steps = settings.steps_per_period;
     let h = period / steps as f64;
     let omega = flow.forcing_frequency();
     let half = cos_sin(0.5 * omega * h);
-    let mut phase = ZERO_PHASE;
     let wall = flow.wall();
     let location = settings.impact_location;
-    for _ in 0..steps {
-        let phases = rk4::stage_phases(&phase, &half);
+    for _ in part.steps(steps) {
+        let phases = rk4::stage_phases(phase, &half);
         for (y, st) in ys.iter_mut().zip(stats.iter_mut()) {
             let y1 = rk4::step_at(flow, &phases, y, h);
             *y = match &wall {
                 Some(w) if impact::reaches_wall(w, y, &y1) => {
-                    impact::resolve(flow, w, location, omega, &phase, y, h, y1, st)
+                    impact::resolve(flow, w, location, omega, phase, y, h, y1, st)
                 }
                 _ => y1,
             };
         }
-        phase = phases[2];
+        *phase = phases[2];
     }
 }

@@ -7,7 +7,8 @@
 
 use nalgebra::SMatrix;
 
-use crate::system::{FlowSettings, IterationStats, System};
+use crate::integrate::clock::Phase;
+use crate::system::{FlowSettings, IterationStats, Part, System};
 
 /// Trajectories an estimate integrates at most: the reference and 2D copies
 /// for central differences, D ≤ 4.
@@ -27,9 +28,15 @@ const MAX_TRAJECTORIES: usize = 9;
 /// times than the reference crossed a grazing boundary, where the map is not
 /// smooth and its difference is O(1) wrong: that column is then differenced
 /// on the other side, one-sided against the reference image.
+///
+/// `part` of the iteration (the whole one, or a sub-map) starts at the
+/// forcing phase `phase`, which is advanced to the part's end.
+#[allow(clippy::too_many_arguments)]
 pub fn estimate<const D: usize, S: System<D>>(
     system: &S,
     flow: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
     x: &[f64; D],
     delta: f64,
     difference: Difference,
@@ -49,7 +56,13 @@ pub fn estimate<const D: usize, S: System<D>>(
         steps[1 + c] = sign * (y[i] - x[i]);
     }
     let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
-    system.iterate_many(&mut ys[..1 + copies], flow, &mut st[..1 + copies]);
+    system.part_many(
+        &mut ys[..1 + copies],
+        flow,
+        part,
+        phase,
+        &mut st[..1 + copies],
+    );
     stats.impacts += st[0].impacts;
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
 

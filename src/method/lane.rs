@@ -10,7 +10,8 @@ use nalgebra::{Const, DimMin, SMatrix};
 
 use super::jacobian;
 use super::qr::QrAccumulator;
-use crate::system::{FlowSettings, IterationStats, Params, System};
+use crate::integrate::clock::{Phase, ZERO_PHASE};
+use crate::system::{FlowSettings, IterationStats, Params, Part, System};
 
 /// Where each iteration's Jacobian comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,10 +39,12 @@ pub struct MethodSettings {
     pub lyapunov: bool,
     /// How many of the last reference points to keep.
     pub bifurcation_points: usize,
-    /// Rounding operations that accumulate in one iteration's image (the RK4
-    /// steps of a flow, 1 for a map): sets the smallest contraction the
-    /// finite difference resolves.
-    pub steps_per_iteration: usize,
+    /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
+    pub submaps: Option<usize>,
+    /// Whether rounding accumulates over the RK4 steps of an iteration (f64),
+    /// or is compensated (the f32 kernels' Kahan update): with the number of
+    /// steps, sets the smallest contraction the finite difference resolves.
+    pub rounding_accumulates: bool,
     /// Keep every iteration's Jacobian in the result (for comparing backends).
     pub keep_jacobians: bool,
     /// The unit roundoff of the arithmetic the images are computed in
@@ -66,6 +69,68 @@ pub fn difference_noise(unit: f64, scale: f64, steps: usize, delta: f64) -> f64 
 /// The estimated exponent error per unit time from finite-difference noise
 /// (see [`LaneStatus::Unresolved`]) above which a lane is flagged.
 pub const RESOLUTION_BOUND: f64 = 1e-3;
+
+/// RK4 step times the system's stiffness above which a lane's steps are
+/// raised: RK4 is stable up to 2.78, and at 0.1 the fastest mode's
+/// per-step growth factor is right to a relative (0.1)⁴/120 ≈ 1e-6.
+pub const MAX_STEP_RATE: f64 = 0.1;
+/// Relative rounding noise allowed in a part's most contracted column.
+/// Its bias in an exponent is about PART_NOISE²/2 per part's time.
+const PART_NOISE: f64 = 1e-2;
+
+/// How one lane's iterations are cut, from its system's time scales.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LanePlan {
+    /// RK4 steps per period: the requested ones, or more where the
+    /// requested step would leave the fastest time scale unresolved (stiff
+    /// damping; a natural period far shorter than the forcing period).
+    pub steps_per_period: usize,
+    /// Parts per iteration (sub-maps, see [`Part`]): enough that the
+    /// fastest contraction over one part stays above the finite
+    /// difference's rounding noise by a factor 1/`PART_NOISE`.
+    pub parts: usize,
+}
+
+/// The plan of a lane of system `S` (see [`LanePlan`]).
+pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSettings) -> LanePlan {
+    let period = system.period();
+    let requested = settings.flow.steps_per_period;
+    let needed = (period * system.stiffness() / MAX_STEP_RATE).ceil();
+    let steps_per_period = if needed > requested as f64 && needed < u32::MAX as f64 {
+        needed as usize
+    } else {
+        requested
+    };
+    let contraction = period * system.contraction();
+    let parts = if let Some(fixed) = settings.submaps {
+        fixed.clamp(1, steps_per_period)
+    } else if settings.lyapunov && contraction > 0.0 {
+        let accumulated = if settings.rounding_accumulates {
+            steps_per_period as f64
+        } else {
+            1.0
+        };
+        let noise = settings.rounding_unit * accumulated.sqrt() / settings.perturbation;
+        // ln of the contraction one part may have; at least e, so that the
+        // parts never outnumber |λ_min|·T.
+        let allowed = (PART_NOISE / noise).ln().max(1.0);
+        ((contraction / allowed).ceil() as usize).clamp(1, steps_per_period)
+    } else {
+        1
+    };
+    LanePlan {
+        steps_per_period,
+        parts,
+    }
+}
+
+/// [`plan_lane`] from parameter values (`SystemInfo::plan`).
+pub fn plan_of<const D: usize, S: System<D>>(
+    params: &Params,
+    settings: &MethodSettings,
+) -> LanePlan {
+    plan_lane(&S::new(params), settings)
+}
 
 /// One parameter value of a sweep.
 #[derive(Clone, Debug)]
@@ -148,6 +213,8 @@ pub struct LaneResult {
     /// Their estimated error per unit time in the exponents:
     /// Σ (error in ln R_ii) / (N·T); 0 without grazing iterations.
     pub grazing_bound: f64,
+    /// How the lane's iterations were cut.
+    pub plan: LanePlan,
     pub status: LaneStatus,
 }
 
@@ -164,8 +231,12 @@ where
 {
     let settings = lane.settings;
     let system = S::new(&lane.params);
-    let flow = &settings.flow;
-    let mut acc = LaneAccumulator::<D>::new(settings, system.period());
+    let plan = plan_lane(&system, settings);
+    let flow = &FlowSettings {
+        steps_per_period: plan.steps_per_period,
+        ..settings.flow
+    };
+    let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
 
     let mut x: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
     let mut discard = IterationStats::default();
@@ -175,7 +246,7 @@ where
             Tangent::FiniteDifference => system.iterate(&x, flow, &mut discard),
             Tangent::Exact => {
                 system
-                    .iterate_exact(&x, &mut discard)
+                    .iterate_exact(&x, Part::WHOLE, &mut discard)
                     .expect("the exact backend is only offered for systems with a closed form")
                     .0
             }
@@ -184,10 +255,20 @@ where
             return acc.failed(n);
         }
     }
+    let mut jacobians = Vec::with_capacity(plan.parts);
     for _ in 0..settings.iterations {
         let mut stats = IterationStats::default();
-        let (next, jacobian) = step::<D, S>(&system, flow, settings, &x, &mut stats);
-        if !acc.push(&next, jacobian.as_ref(), &stats) {
+        jacobians.clear();
+        let next = step::<D, S>(
+            &system,
+            flow,
+            settings,
+            plan,
+            &x,
+            &mut stats,
+            &mut jacobians,
+        );
+        if !acc.push(&next, &jacobians, &stats) {
             break;
         }
         x = next;
@@ -202,6 +283,7 @@ where
 pub struct LaneAccumulator<const D: usize> {
     qr: QrAccumulator<D>,
     period: f64,
+    plan: LanePlan,
     transient: usize,
     iterations: usize,
     lyapunov: bool,
@@ -213,6 +295,8 @@ pub struct LaneAccumulator<const D: usize> {
     chattering: usize,
     grazing: usize,
     grazing_error: f64,
+    /// Jacobians taken (iterations × parts).
+    parts_done: usize,
     noise_squares: f64,
     bifurcation: Vec<f64>,
     jacobians: Option<Vec<f64>>,
@@ -223,11 +307,17 @@ impl<const D: usize> LaneAccumulator<D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    pub fn new(settings: &MethodSettings, period: f64) -> Self {
+    pub fn new(settings: &MethodSettings, period: f64, plan: LanePlan) -> Self {
         let kept = settings.bifurcation_points.min(settings.iterations);
+        let steps_per_part = if settings.rounding_accumulates {
+            plan.steps_per_period / plan.parts
+        } else {
+            1
+        };
         LaneAccumulator {
             qr: QrAccumulator::new(),
             period,
+            plan,
             transient: settings.transient,
             iterations: settings.iterations,
             lyapunov: settings.lyapunov,
@@ -235,13 +325,14 @@ where
             noise: (settings.tangent == Tangent::FiniteDifference).then_some((
                 settings.rounding_unit,
                 settings.perturbation,
-                settings.steps_per_iteration,
+                steps_per_part,
             )),
             done: 0,
             impacts: 0,
             chattering: 0,
             grazing: 0,
             grazing_error: 0.0,
+            parts_done: 0,
             noise_squares: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
             jacobians: settings.keep_jacobians.then(Vec::new),
@@ -250,12 +341,13 @@ where
     }
 
     /// Takes one averaging iteration: the reference's new point, the
-    /// Jacobian of the map at the old one (when exponents are wanted) and
-    /// what happened on the way. Returns false once the lane has failed.
+    /// Jacobians of the map's parts in order (none when exponents are not
+    /// wanted) and what happened on the way. Returns false once the lane
+    /// has failed.
     pub fn push(
         &mut self,
         next: &[f64; D],
-        jacobian: Option<&SMatrix<f64, D, D>>,
+        jacobians: &[SMatrix<f64, D, D>],
         stats: &IterationStats,
     ) -> bool {
         if !all_finite(next) {
@@ -263,7 +355,7 @@ where
             return false;
         }
         let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        self.record(scale, Some(next), jacobian, stats)
+        self.record(scale, Some(next), jacobians, stats)
     }
 
     /// [`push`](Self::push) for a backend that has checked the point itself
@@ -273,21 +365,23 @@ where
         &mut self,
         scale: f64,
         point: Option<&[f64; D]>,
-        jacobian: Option<&SMatrix<f64, D, D>>,
+        jacobians: &[SMatrix<f64, D, D>],
         stats: &IterationStats,
     ) -> bool {
         if self.failed_at.is_some() {
             return false;
         }
         let n = self.done;
-        if jacobian.is_some_and(|j| !j.iter().all(|v| v.is_finite())) {
+        if jacobians.iter().any(|j| !j.iter().all(|v| v.is_finite())) {
             self.fail(self.transient + n);
             return false;
         }
-        if let (Some(j), Some(kept)) = (jacobian, self.jacobians.as_mut()) {
-            kept.extend(j.transpose().iter());
+        if let Some(kept) = self.jacobians.as_mut() {
+            for j in jacobians {
+                kept.extend(j.transpose().iter());
+            }
         }
-        if let Some(j) = jacobian {
+        for j in jacobians {
             let diag = self.qr.push(j);
             if !diag.iter().all(|r| r.ln().is_finite()) {
                 // A singular Jacobian: a direction contracted below what δ and
@@ -302,6 +396,7 @@ where
                     (difference_noise(unit, scale, steps, delta) / smallest).powi(2);
             }
         }
+        self.parts_done += jacobians.len();
         self.impacts += u64::from(stats.impacts);
         self.chattering += usize::from(stats.chattering);
         self.grazing += usize::from(stats.grazing);
@@ -338,17 +433,20 @@ where
                 jacobians: self.jacobians.unwrap_or_default(),
                 grazing: self.grazing,
                 grazing_bound: f64::NAN,
+                plan: self.plan,
                 status: LaneStatus::NonFinite { iteration },
             };
         }
         // With relative noise ε_n in the smallest R_ii, ln R_ii is biased by
-        // about -ε_n²/2 and scattered by ε_n; over N iterations of period T
-        // that bounds the exponent error by (⟨ε²⟩/2 + √(⟨ε²⟩/N)) / T.
-        let mean_square = self.noise_squares / self.done.max(1) as f64;
-        let resolution_bound =
-            (0.5 * mean_square + (mean_square / self.done.max(1) as f64).sqrt()) / self.period;
+        // about -ε_n²/2 and scattered by ε_n; over N Jacobians (iterations ×
+        // parts) of time τ each that bounds the exponent error by
+        // (⟨ε²⟩/2 + √(⟨ε²⟩/N)) / τ.
+        let taken = self.parts_done.max(1) as f64;
+        let part_time = self.period / self.plan.parts as f64;
+        let mean_square = self.noise_squares / taken;
+        let resolution_bound = (0.5 * mean_square + (mean_square / taken).sqrt()) / part_time;
         let exponents = if self.lyapunov {
-            let mut e = self.qr.exponents(self.period).to_vec();
+            let mut e = self.qr.exponents(part_time).to_vec();
             e.sort_by(|a, b| b.total_cmp(a));
             e
         } else {
@@ -379,35 +477,61 @@ where
             jacobians: self.jacobians.unwrap_or_default(),
             grazing: self.grazing,
             grazing_bound,
+            plan: self.plan,
             status,
         }
     }
 }
 
-/// One averaging iteration: the reference image and, when exponents are
-/// wanted, the Jacobian there.
+/// One averaging iteration: the reference image, with the Jacobians of
+/// the iteration's parts pushed onto `jacobians` when exponents are wanted.
+#[allow(clippy::too_many_arguments)]
 fn step<const D: usize, S: System<D>>(
     system: &S,
     flow: &FlowSettings,
     settings: &MethodSettings,
+    plan: LanePlan,
     x: &[f64; D],
     stats: &mut IterationStats,
-) -> ([f64; D], Option<SMatrix<f64, D, D>>)
+    jacobians: &mut Vec<SMatrix<f64, D, D>>,
+) -> [f64; D]
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     match settings.tangent {
         Tangent::Exact => {
-            let (next, j) = system
-                .iterate_exact(x, stats)
-                .expect("the exact backend is only offered for systems with a closed form");
-            (next, settings.lyapunov.then_some(j))
+            let mut y = *x;
+            for part in Part::all(plan.parts) {
+                let (next, j) = system
+                    .iterate_exact(&y, part, stats)
+                    .expect("the exact backend is only offered for systems with a closed form");
+                if settings.lyapunov {
+                    jacobians.push(j);
+                }
+                y = next;
+            }
+            y
         }
         Tangent::FiniteDifference if settings.lyapunov => {
-            let (next, j) = estimate_resolving_grazing(system, flow, settings, x, stats);
-            (next, Some(j))
+            let (mut y, mut phase) = (*x, ZERO_PHASE);
+            for part in Part::all(plan.parts) {
+                let mut part_stats = IterationStats::default();
+                let (next, j) = estimate_resolving_grazing(
+                    system,
+                    flow,
+                    settings,
+                    part,
+                    &mut phase,
+                    &y,
+                    &mut part_stats,
+                );
+                stats.merge(&part_stats);
+                jacobians.push(j);
+                y = next;
+            }
+            y
         }
-        Tangent::FiniteDifference => (system.iterate(x, flow, stats), None),
+        Tangent::FiniteDifference => system.iterate(x, flow, stats),
     }
 }
 
@@ -447,6 +571,8 @@ pub fn estimate_resolving_grazing<const D: usize, S: System<D>>(
     system: &S,
     flow: &FlowSettings,
     settings: &MethodSettings,
+    part: Part,
+    phase: &mut Phase,
     x: &[f64; D],
     stats: &mut IterationStats,
 ) -> ([f64; D], SMatrix<f64, D, D>)
@@ -458,8 +584,18 @@ where
         jacobian::Difference::Central => 2,
     };
     let delta = perturbation_at(settings.perturbation, x);
+    let start = *phase;
     let mut first = *stats;
-    let (image, j0) = jacobian::estimate(system, flow, x, delta, settings.difference, &mut first);
+    let (image, j0) = jacobian::estimate(
+        system,
+        flow,
+        part,
+        phase,
+        x,
+        delta,
+        settings.difference,
+        &mut first,
+    );
     let (log0, log_hadamard) = log_diagonal(&j0);
     let suspect = first.nonlinearity.powi(p) * log_hadamard.exp();
     if suspect.is_nan() || suspect <= GRAZING_ERROR {
@@ -470,7 +606,7 @@ where
     // decade of δ. The rounding floor: relative noise u·√steps/δ of 1e-2 in an image-sized
     // column; the ladder itself finds where rounding starts to matter.
     let floor = perturbation_at(
-        settings.rounding_unit * (settings.steps_per_iteration as f64).sqrt() * 1e2,
+        settings.rounding_unit * (flow.steps_per_period as f64 / part.count as f64).sqrt() * 1e2,
         x,
     );
     let mut rungs = vec![(j0, log0, first)];
@@ -480,7 +616,17 @@ where
             break;
         }
         let mut st = *stats;
-        let (_, j) = jacobian::estimate(system, flow, x, d, settings.difference, &mut st);
+        let mut again = start;
+        let (_, j) = jacobian::estimate(
+            system,
+            flow,
+            part,
+            &mut again,
+            x,
+            d,
+            settings.difference,
+            &mut st,
+        );
         let (log_r, _) = log_diagonal(&j);
         rungs.push((j, log_r, st));
     }

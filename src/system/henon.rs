@@ -6,7 +6,9 @@
 
 use nalgebra::SMatrix;
 
-use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use super::{
+    check_finite, FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo,
+};
 
 pub const INFO: SystemInfo = SystemInfo {
     kind: "henon",
@@ -33,6 +35,7 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<2, Henon>,
     forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<2, Henon>,
+    plan: crate::method::lane::plan_of::<2, Henon>,
     wgsl: Some(include_str!("../../shaders/system/henon.wgsl")),
     wall_reachable: None,
 };
@@ -80,6 +83,7 @@ impl System<2> for Henon {
     fn iterate_exact(
         &self,
         x: &[f64; 2],
+        _: Part,
         _: &mut IterationStats,
     ) -> Option<([f64; 2], SMatrix<f64, 2, 2>)> {
         // DU = [[-2ax, 1], [b, 0]] (the paper's eq. 8).

@@ -11,10 +11,12 @@ use std::f64::consts::TAU;
 
 use nalgebra::SMatrix;
 
-use super::{check_finite, FlowSettings, IterationStats, Parameter, Params, System, SystemInfo};
+use super::{
+    check_finite, FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo,
+};
 use crate::integrate::clock::Phase;
 use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
-use crate::integrate::{time_map, time_map_many, Flow, Wall};
+use crate::integrate::{part_map_many, time_map, time_map_many, Flow, Wall};
 
 pub const INFO: SystemInfo = SystemInfo {
     kind: "impact-oscillator",
@@ -56,6 +58,7 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<2, ImpactOscillator>,
     forcing_frequency: super::forcing_of::<2, ImpactOscillator>,
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
+    plan: crate::method::lane::plan_of::<2, ImpactOscillator>,
     wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
     wall_reachable: Some(wall_reachable),
 };
@@ -174,14 +177,40 @@ impl System<2> for ImpactOscillator {
         time_map_many(self, ys, self.period(), flow, stats)
     }
 
+    fn part_many(
+        &self,
+        ys: &mut [[f64; 2]],
+        flow: &FlowSettings,
+        part: Part,
+        phase: &mut Phase,
+        stats: &mut [IterationStats],
+    ) {
+        part_map_many(self, ys, self.period(), flow, part, phase, stats)
+    }
+
     fn iterate_exact(
         &self,
         x: &[f64; 2],
+        part: Part,
         stats: &mut IterationStats,
     ) -> Option<([f64; 2], SMatrix<f64, 2, 2>)> {
-        let it = self.closed_form.as_ref()?.iterate(*x);
+        let (t0, t1) = part.span(self.period());
+        let it = self.closed_form.as_ref()?.iterate_span(*x, t0, t1);
         stats.impacts += it.impacts;
         stats.chattering |= it.status != ExactStatus::Ok;
         Some((it.state, it.jacobian))
+    }
+
+    /// The free oscillator's eigenvalues: modulus 1 when under-damped,
+    /// ζ ± √(ζ² - 1) when over-damped (the larger one).
+    fn stiffness(&self) -> f64 {
+        self.zeta + (self.zeta * self.zeta - 1.0).max(0.0).sqrt()
+    }
+
+    /// The free motion's most negative exponent, -ζ - √(ζ² - 1) (-ζ when
+    /// under-damped). Impacts with e < 1 contract further, by ln e each, but
+    /// at an instant: the parts are about the flow between them.
+    fn contraction(&self) -> f64 {
+        self.stiffness().max(self.zeta)
     }
 }

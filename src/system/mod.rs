@@ -14,6 +14,8 @@ pub mod lorenz;
 
 use nalgebra::SMatrix;
 
+use crate::integrate::clock::Phase;
+
 use crate::integrate::ImpactLocation;
 use crate::method::Lane;
 
@@ -61,6 +63,8 @@ pub struct SystemInfo {
     pub forcing_frequency: fn(&Params) -> f64,
     /// Runs one lane on the dimension-specific code path.
     pub run_lane: fn(&Lane) -> crate::method::LaneResult,
+    /// How a lane would be cut (`method::lane::plan_lane`), without running it.
+    pub plan: fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
     /// struct (fields in the order of `parameters`) and `rhs` for a flow
     /// (with `wall_position`/`wall_restitution` when it has a wall) or
@@ -135,6 +139,43 @@ pub struct FlowSettings {
     pub impact_location: ImpactLocation,
 }
 
+/// Part `index` of `count` equal parts of one map iteration: a sub-map.
+/// Over a long period a strongly contracting direction shrinks below what a
+/// finite difference (or even a product of exact tangent maps) resolves, so
+/// the method estimates the map as the composition of its parts, re-seeding
+/// the perturbations and accumulating QR at each (see `method::lane`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Part {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Part {
+    pub const WHOLE: Part = Part { index: 0, count: 1 };
+
+    /// This part's share of `total` RK4 steps.
+    pub fn steps(&self, total: usize) -> std::ops::Range<usize> {
+        total * self.index / self.count..total * (self.index + 1) / self.count
+    }
+
+    /// This part's time span within a period (the last one ends at `period` exactly).
+    pub fn span(&self, period: f64) -> (f64, f64) {
+        let at = |k: usize| {
+            if k == self.count {
+                period
+            } else {
+                period * k as f64 / self.count as f64
+            }
+        };
+        (at(self.index), at(self.index + 1))
+    }
+
+    /// The parts of one iteration, in order.
+    pub fn all(count: usize) -> impl Iterator<Item = Part> {
+        (0..count).map(move |index| Part { index, count })
+    }
+}
+
 /// What happened during one map iteration of one trajectory.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IterationStats {
@@ -161,6 +202,18 @@ pub struct IterationStats {
     /// estimate, measured as the change between neighbouring rungs of the
     /// ladder (0 for other iterations).
     pub grazing_error: f64,
+}
+
+impl IterationStats {
+    /// Adds a part's statistics to its iteration's.
+    pub fn merge(&mut self, part: &IterationStats) {
+        self.impacts += part.impacts;
+        self.chattering |= part.chattering;
+        self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
+        self.nonlinearity = self.nonlinearity.max(part.nonlinearity);
+        self.grazing |= part.grazing;
+        self.grazing_error += part.grazing_error;
+    }
 }
 
 impl Default for IterationStats {
@@ -196,14 +249,44 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         }
     }
 
-    /// One map iteration with its exact Jacobian DU(x_n), where a closed form
-    /// exists (`SystemInfo::has_exact`).
+    /// [`iterate_many`](Self::iterate_many) for one part of the iteration,
+    /// from the forcing phase `phase` at its start (advanced to its end).
+    /// Only flows have parts; a map is always whole.
+    fn part_many(
+        &self,
+        ys: &mut [[f64; D]],
+        flow: &FlowSettings,
+        part: Part,
+        _phase: &mut Phase,
+        stats: &mut [IterationStats],
+    ) {
+        assert_eq!(part, Part::WHOLE, "a map iteration has no parts");
+        self.iterate_many(ys, flow, stats);
+    }
+
+    /// One map iteration (or part of one) with its exact Jacobian, where a
+    /// closed form exists (`SystemInfo::has_exact`).
     fn iterate_exact(
         &self,
         _x: &[f64; D],
+        _part: Part,
         _stats: &mut IterationStats,
     ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
         None
+    }
+
+    /// The largest |eigenvalue| of the flow's linearisation, an estimate
+    /// over the region the orbit visits (0 for a map). RK4's step h must
+    /// keep h·rate small: stable below 2.78, accurate to a relative 1e-6 in
+    /// the fastest exponent near 0.1.
+    fn stiffness(&self) -> f64 {
+        0.0
+    }
+
+    /// An estimate of the fastest contraction rate, -λ_min (0 for a map):
+    /// sets how many parts an iteration needs (see [`Part`]).
+    fn contraction(&self) -> f64 {
+        0.0
     }
 }
 

@@ -22,6 +22,7 @@ use super::stopwatch::{self, Stopwatch};
 use crate::backend::RunOptions;
 use crate::error::{Error, Result};
 use crate::integrate::clock::cos_sin;
+use crate::method::lane::LanePlan;
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
 use crate::system::IterationStats;
@@ -647,10 +648,14 @@ where
 
         // Averaging, streamed in chunks of `ring` iterations.
         let start = Instant::now();
+        let plan = LanePlan {
+            steps_per_period: self.steps,
+            parts: 1,
+        };
         let mut accumulators: Vec<LaneAccumulator<D>> = self
             .periods
             .iter()
-            .map(|&period| LaneAccumulator::new(settings, period))
+            .map(|&period| LaneAccumulator::new(settings, period, plan))
             .collect();
         let chunks: Vec<(usize, usize)> = (0..settings.iterations)
             .step_by(self.ring)
@@ -785,13 +790,12 @@ where
                         chattering: flags & FLAG_CHATTERING != 0,
                         ..Default::default()
                     };
-                    let jacobian = has_jac.then(|| {
-                        SMatrix::<f64, D, D>::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D])
-                    });
+                    let jacobian: Option<SMatrix<f64, D, D>> = has_jac
+                        .then(|| SMatrix::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D]));
                     let point: Option<[f64; D]> =
                         has_points.then(|| std::array::from_fn(|k| points[slot * D + k]));
                     let scale = f64::from(f32::from_bits(scale_bits));
-                    if !acc.record(scale, point.as_ref(), jacobian.as_ref(), &stats) {
+                    if !acc.record(scale, point.as_ref(), jacobian.as_slice(), &stats) {
                         break;
                     }
                 }
