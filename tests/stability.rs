@@ -100,3 +100,90 @@ fn fine_sweeps_across_both_onsets_match_the_exact_backend() {
         "chaotic λ1: mean {mean:e}, max {max:e}"
     );
 }
+
+fn stiff_run(zeta: f64, wall: f64, backend: &str) -> Report {
+    let overrides = [
+        format!("system.zeta={zeta}"),
+        format!("system.wall={wall}"),
+        "sweep.values=[0.05, 0.1, 0.2]".to_owned(),
+        "integration.transient=5".to_owned(),
+        "integration.iterations=50".to_owned(),
+        format!("run.backend=\"{backend}\""),
+    ];
+    let overrides: Vec<&str> = overrides.iter().map(String::as_str).collect();
+    common::run(&common::scene(SEED, &overrides))
+}
+
+/// Over-damped, with a wall out of reach: the exponents are the free
+/// motion's, -ζ ± √(ζ² - 1), exactly. At the requested 450 steps RK4 would
+/// be unstable for ζ = 20 and 200 (h·ρ up to 70, against RK4's bound 2.78),
+/// and over one forcing period the fast direction shrinks by e^(λT), e^(-2500)
+/// at ζ = 20, η = 0.1: each lane raises its steps to h·ρ ≤ 0.1 and cuts the
+/// iteration into sub-maps, and both exponents come out.
+#[test]
+fn stiff_damping_without_impacts_gives_both_closed_form_exponents() {
+    for zeta in [2.0, 20.0, 200.0] {
+        let rk4 = stiff_run(zeta, 100.0, "cpu");
+        let exact = stiff_run(zeta, 100.0, "exact");
+        let kappa = f64::sqrt(zeta * zeta - 1.0);
+        let closed = [-zeta + kappa, -zeta - kappa];
+        for (k, eta) in [0.05, 0.1, 0.2].into_iter().enumerate() {
+            let (a, b) = (&rk4.lanes[k], &exact.lanes[k]);
+            assert_eq!(a.status, LaneStatus::Ok, "ζ = {zeta}, η = {eta}");
+            assert_eq!(a.impacts_per_period, 0.0);
+            let period = std::f64::consts::TAU / eta;
+            let rate = zeta + kappa;
+            assert!(
+                a.plan.steps_per_period as f64 >= period * rate / 0.1,
+                "steps raised: {:?}",
+                a.plan
+            );
+            assert!(a.plan.parts > 1, "ζ = {zeta}, η = {eta}: {:?}", a.plan);
+            // RK4 against exact, run the same way: the slow exponent to
+            // rounding, the fast one to RK4's relative (h·ρ)⁴/120 ≈ 1e-6.
+            assert!(
+                (a.exponents[0] - b.exponents[0]).abs() < 1e-9,
+                "ζ = {zeta}, η = {eta}: λ1 {} vs exact {}",
+                a.exponents[0],
+                b.exponents[0]
+            );
+            let relative = (a.exponents[1] - b.exponents[1]).abs() / b.exponents[1].abs();
+            assert!(relative < 2e-6, "ζ = {zeta}, η = {eta}: λ2 off by {relative:e}");
+            // Exact against the closed form: what is left is the QR's start
+            // (the first part's R11 is not yet the slow direction's), of
+            // order 1/(N·T) over N = 50 iterations.
+            for (got, want) in b.exponents.iter().zip(closed) {
+                assert!(
+                    (got - want).abs() < 1.0 / (50.0 * period),
+                    "ζ = {zeta}, η = {eta}: exact {got} vs closed form {want}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn without_sub_maps_the_fast_exponent_is_lost() {
+    // The same lane forced into one part: over T = 62.8 the fast direction
+    // contracts by e^(-2500), which underflows; the run does not return a
+    // confident wrong λ2, it stops the lane and says where.
+    let overrides = [
+        "system.zeta=20",
+        "system.wall=100",
+        "sweep.values=[0.1]",
+        "integration.transient=5",
+        "integration.iterations=50",
+        "integration.submaps=1",
+    ];
+    let report = common::run(&common::scene(SEED, &overrides));
+    let lane = &report.lanes[0];
+    assert!(
+        matches!(
+            lane.status,
+            LaneStatus::NonFinite { .. } | LaneStatus::Unresolved { .. }
+        ),
+        "{}: {:?}",
+        lane.status,
+        lane.exponents
+    );
+}
