@@ -267,8 +267,20 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
 /// refused there, with the reason.
 fn gpu_steps(scene: &Scene, settings: &MethodSettings) -> Result<usize> {
     let mut steps = settings.flow.steps_per_period;
+    // Whether the kernels would compile impact code (precision is irrelevant).
+    let wall = variant(scene, Precision::F64).wall;
     for k in 0..scene.sweep.values.len() {
-        let plan = (scene.system.plan)(&scene.lane_params(k), settings);
+        let params = scene.lane_params(k);
+        if let Some(reason) = (scene.system.gpu_refuses)(&params).filter(|_| wall) {
+            return Err(Error::invalid(
+                "run.backend",
+                format!(
+                    "{} = {}: {reason}: use backend = \"cpu\" (\"auto\" does)",
+                    scene.sweep.parameter, scene.sweep.values[k]
+                ),
+            ));
+        }
+        let plan = (scene.system.plan)(&params, settings);
         if plan.parts > 1 {
             return Err(Error::invalid(
                 "run.backend",

@@ -92,9 +92,8 @@ pub enum ExactStatus {
     /// its step budget: the iteration stopped early, at
     /// [`ExactIteration::time`].
     Chattering,
-    /// The mass came to rest on the wall (V = 0) with the net force pushing
-    /// it into the wall; sticking is not modelled, so the iteration stopped
-    /// there, at [`ExactIteration::time`].
+    /// Unused since sticking is modelled (see [`ExactIteration::rank_loss`]);
+    /// kept so that callers matching on the status stay exhaustive.
     Sticking,
 }
 
@@ -113,6 +112,11 @@ pub struct ExactIteration {
     /// Impacts with v⁻ < [`GRAZING_VELOCITY`]; their saltation matrices make
     /// the Jacobian meaningless (it may even be infinite or NaN).
     pub grazing: u32,
+    /// Dimensions the iteration collapsed: 1 after an impact with e = 0, 2
+    /// after sticking (the mass rests on the wall while the force presses it
+    /// there, and leaves when the force reverses, at a time set by the
+    /// forcing alone). The Jacobian has rank 2 - rank_loss.
+    pub rank_loss: u32,
     /// Local time reached: T, unless the status is not `Ok`.
     pub time: f64,
     /// How the period ended.
@@ -204,6 +208,25 @@ impl ForcedImpactOscillator {
         Matrix2::new(-e, 0.0, jump / v_minus, -e)
     }
 
+    /// When a mass at rest on the wall since `t` leaves it: the first time
+    /// after `t` at which the net force there, -X_w + f·cos(ηt), falls to
+    /// zero (∞ if it never does).
+    fn release_after(&self, t: f64) -> f64 {
+        let c = self.wall / self.f;
+        if !(-1.0..1.0).contains(&c) {
+            // f·cos never falls below X_w: pressed for ever (or never, but
+            // then the mass would not have stuck).
+            return f64::INFINITY;
+        }
+        let first = c.acos();
+        let turns = ((self.eta * t - first) / TAU).ceil().max(0.0);
+        let mut release = (first + turns * TAU) / self.eta;
+        if release <= t {
+            release += TAU / self.eta;
+        }
+        release
+    }
+
     /// One forcing period from phase 0, with the exact tangent map.
     ///
     /// Precondition: `y0[0] <= wall`. A start on the wall moving into it
@@ -227,19 +250,68 @@ impl ForcedImpactOscillator {
         let mut impacts = 0_u32;
         let mut grazing = 0_u32;
         let mut min_impact_velocity = f64::INFINITY;
+        let mut rank_loss = 0;
         let mut budget = MAX_SCAN_STEPS;
 
         let (end, status) = loop {
             match model.next_event(&segment, start, &mut budget) {
                 Event::End(p) => break (p, ExactStatus::Ok),
-                Event::Sticking(p) => break (p, ExactStatus::Sticking),
-                Event::Chattering(p) => break (p, ExactStatus::Chattering),
+                // At rest on the wall, or the tail of an accumulating
+                // sequence of bounces, under a force pressing into the wall:
+                // the mass sticks until the force reverses.
+                Event::Sticking(p) | Event::Chattering(p) if p.x >= self.wall && p.acc > 0.0 => {
+                    rank_loss = 2;
+                    jacobian = Matrix2::zeros();
+                    let y = [self.wall, 0.0];
+                    let release = self.release_after(p.t);
+                    if release >= t1 {
+                        let end = model.exact_point(&model.segment(t1, y), y);
+                        break (end, ExactStatus::Ok);
+                    }
+                    segment = model.segment(release, y);
+                    start = model.exact_point(&segment, y);
+                }
+                Event::Sticking(p) | Event::Chattering(p) => break (p, ExactStatus::Chattering),
                 Event::Impact(p) => {
                     if impacts == MAX_IMPACTS_PER_PERIOD {
+                        if p.acc > 0.0 {
+                            // Dense bounces under a pressing force: at rest.
+                            rank_loss = 2;
+                            jacobian = Matrix2::zeros();
+                            let y = [self.wall, 0.0];
+                            let release = self.release_after(p.t);
+                            if release >= t1 {
+                                let end = model.exact_point(&model.segment(t1, y), y);
+                                break (end, ExactStatus::Ok);
+                            }
+                            segment = model.segment(release, y);
+                            start = model.exact_point(&segment, y);
+                            continue;
+                        }
                         break (p, ExactStatus::Chattering);
                     }
                     // A root found with V ≤ 0 is a tangency lost in rounding.
                     let v_minus = p.v.max(0.0);
+                    if v_minus == 0.0 && (rank_loss == 2 || start.v == 0.0) {
+                        // Touching the wall at rest, right after a release
+                        // (the force there is zero to rounding): nothing to
+                        // reverse, and the Jacobian is already zero (or the
+                        // part began at rest after sticking), which a
+                        // singular saltation would only turn into NaN.
+                        let y = [self.wall, 0.0];
+                        segment = model.segment(p.t, y);
+                        start = model.exact_point(&segment, y);
+                        if p.acc > 0.0 {
+                            let release = self.release_after(p.t);
+                            if release >= t1 {
+                                let end = model.exact_point(&model.segment(t1, y), y);
+                                break (end, ExactStatus::Ok);
+                            }
+                            segment = model.segment(release, y);
+                            start = model.exact_point(&segment, y);
+                        }
+                        continue;
+                    }
                     impacts += 1;
                     min_impact_velocity = min_impact_velocity.min(v_minus);
                     if v_minus < GRAZING_VELOCITY {
@@ -247,6 +319,9 @@ impl ForcedImpactOscillator {
                     }
                     jacobian =
                         self.saltation(p.t, v_minus) * model.flow(p.t - segment.t0) * jacobian;
+                    if self.restitution == 0.0 {
+                        rank_loss = rank_loss.max(1);
+                    }
                     let y = [self.wall, -self.restitution * v_minus];
                     segment = model.segment(p.t, y);
                     start = model.exact_point(&segment, y);
@@ -261,6 +336,7 @@ impl ForcedImpactOscillator {
             impacts,
             min_impact_velocity,
             grazing,
+            rank_loss,
             time: end.t,
             status,
         }
@@ -1223,28 +1299,41 @@ mod tests {
         assert_eq!(it.jacobian, free.flow_matrix(free.period()));
         // X_p ≈ (f/2ζη) sin ηt reaches 3.1e-3, pressing the mass against a wall
         // at 1e-3: it impacts and then chatters (finite result, early stop).
+        // at 1e-3: it impacts, the bounces accumulate and it sticks (the
+        // state then forgets its start: rank 0).
         let pressed = oscillator(zeta, 1.0, 0.8, 1e-3, 0.7).iterate([0.0, 0.0]);
         assert!(pressed.impacts >= 1);
-        assert_eq!(pressed.status, ExactStatus::Chattering);
-        assert!(pressed.time < free.period());
+        assert_eq!(pressed.status, ExactStatus::Ok);
+        assert_eq!(pressed.rank_loss, 2);
+        assert_eq!(pressed.time, free.period());
         assert!(pressed.state.iter().all(|x| x.is_finite()));
-        assert!(pressed.jacobian.iter().all(|x| x.is_finite()));
+        assert_eq!(pressed.jacobian, Matrix2::zeros());
     }
 
     #[test]
-    fn sticking_and_chattering_stop_cleanly() {
-        // X_w = -2: the force -X_w + f cos ηt ≥ 1 always pushes into the wall.
+    fn sticking_and_accumulating_impacts_end_at_rest() {
+        // X_w = -2: the force -X_w + f cos ηt ≥ 1 always pushes into the
+        // wall: the mass sticks for the rest of the period and never leaves.
         let stick = oscillator(0.05, 1.0, 0.8, -2.0, 0.0).iterate([-3.0, 0.0]);
-        assert_eq!(stick.status, ExactStatus::Sticking);
-        assert_eq!(stick.impacts, 1);
+        assert_eq!(stick.status, ExactStatus::Ok);
+        assert_eq!((stick.impacts, stick.rank_loss), (1, 2));
         assert_eq!(stick.state, [-2.0, 0.0]);
-        assert!(stick.time > 0.0 && stick.time < TAU / 0.8);
+        assert_eq!(stick.time, TAU / 0.8);
 
+        // e = 0.5: a Zeno sequence of bounces, then the same rest.
         let chatter = oscillator(0.05, 1.0, 0.8, -2.0, 0.5).iterate([-3.0, 0.0]);
-        assert_eq!(chatter.status, ExactStatus::Chattering);
+        assert_eq!(chatter.status, ExactStatus::Ok);
+        assert_eq!(chatter.rank_loss, 2);
         assert!(chatter.impacts > 10 && chatter.impacts < 100);
-        assert!(chatter.time < TAU / 0.8);
-        assert_eq!(chatter.state[0], -2.0);
+        assert_eq!(chatter.state, [-2.0, 0.0]);
+
+        // f = 3 > X_w = 2 presses only while cos ηt > 2/3: stuck on the
+        // wall at ηt = 0, the mass leaves at ηt = arccos(2/3).
+        let osc = oscillator(0.05, 3.0, 0.8, 2.0, 0.5);
+        assert!((osc.release_after(0.0) - (2.0_f64 / 3.0).acos() / 0.8).abs() < 1e-15);
+        // Released already this period: the next release is a period on.
+        let next = ((2.0_f64 / 3.0).acos() + TAU) / 0.8;
+        assert!((osc.release_after(2.0) - next).abs() < 1e-14);
 
         // Elastic: bounces all period long but completes it.
         let bounce = oscillator(0.05, 1.0, 0.8, -2.0, 1.0).iterate([-3.0, 0.0]);

@@ -85,6 +85,10 @@ pub fn part_map_many<const D: usize, F: Flow<D>>(
     for _ in part.steps(steps) {
         let phases = rk4::stage_phases(phase, &half);
         for (y, st) in ys.iter_mut().zip(stats.iter_mut()) {
+            if let Some(w) = wall.as_ref().filter(|w| impact::at_rest_on(w, y)) {
+                *y = impact::stuck_step(flow, w, location, omega, phase, h, st);
+                continue;
+            }
             let y1 = rk4::step_at(flow, &phases, y, h);
             *y = match &wall {
                 Some(w) if impact::reaches_wall(w, y, &y1) => {

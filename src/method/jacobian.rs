@@ -64,6 +64,7 @@ pub fn estimate<const D: usize, S: System<D>>(
         &mut st[..1 + copies],
     );
     stats.impacts += st[0].impacts;
+    stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
 
     let image = ys[0];

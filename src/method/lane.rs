@@ -161,6 +161,11 @@ pub enum LaneStatus {
     Unresolved {
         bound: f64,
     },
+    /// Impacts with e = 0 (rank 1 lost) or sticking (all lost) collapse
+    /// phase space: the last `exponents` exponents are -∞, exactly.
+    Collapsed {
+        exponents: usize,
+    },
     /// Near-grazing iterations whose best finite difference still leaves
     /// an estimated exponent error `bound` per unit time above the limit
     /// (see [`estimate_resolving_grazing`]).
@@ -184,6 +189,7 @@ impl std::fmt::Display for LaneStatus {
                 write!(f, "chattering(iterations={iterations})")
             }
             LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
+            LaneStatus::Collapsed { exponents } => write!(f, "collapsed(exponents={exponents})"),
             // The count is in the `grazing` column; no comma in a CSV field.
             LaneStatus::Grazing { bound, .. } => write!(f, "grazing(bound={bound:.1e})"),
             LaneStatus::Mismatch { difference } => {
@@ -297,6 +303,8 @@ pub struct LaneAccumulator<const D: usize> {
     grazing_error: f64,
     /// Jacobians taken (iterations × parts).
     parts_done: usize,
+    /// The most dimensions any iteration collapsed.
+    rank_loss: usize,
     noise_squares: f64,
     bifurcation: Vec<f64>,
     jacobians: Option<Vec<f64>>,
@@ -333,6 +341,7 @@ where
             grazing: 0,
             grazing_error: 0.0,
             parts_done: 0,
+            rank_loss: 0,
             noise_squares: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
             jacobians: settings.keep_jacobians.then(Vec::new),
@@ -381,15 +390,23 @@ where
                 kept.extend(j.transpose().iter());
             }
         }
-        for j in jacobians {
+        // An iteration that collapsed phase space (an impact with e = 0,
+        // sticking) has a Jacobian of rank D - loss: its last `loss` R_ii are
+        // zero in exact arithmetic and rounding here, and the exponents they
+        // feed are -∞ (set in `finish`). When nothing is left (loss = D),
+        // the frame Q is kept as it is.
+        let loss = (stats.rank_loss as usize).min(D);
+        self.rank_loss = self.rank_loss.max(loss);
+        let kept = D - loss;
+        for j in jacobians.iter().filter(|_| kept > 0) {
             let diag = self.qr.push(j);
-            if !diag.iter().all(|r| r.ln().is_finite()) {
+            if !diag[..kept].iter().all(|r| r.ln().is_finite()) {
                 // A singular Jacobian: a direction contracted below what δ and
                 // rounding can resolve in one iteration.
                 self.fail(self.transient + n);
                 return false;
             }
-            if let Some((unit, delta, steps)) = self.noise {
+            if let (Some((unit, delta, steps)), 0) = (self.noise, loss) {
                 let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
                 let delta = delta * scale.max(1.0);
                 self.noise_squares +=
@@ -448,6 +465,9 @@ where
         let exponents = if self.lyapunov {
             let mut e = self.qr.exponents(part_time).to_vec();
             e.sort_by(|a, b| b.total_cmp(a));
+            for x in &mut e[D - self.rank_loss..] {
+                *x = f64::NEG_INFINITY;
+            }
             e
         } else {
             Vec::new()
@@ -460,6 +480,10 @@ where
         } else if resolution_bound > RESOLUTION_BOUND {
             LaneStatus::Unresolved {
                 bound: resolution_bound,
+            }
+        } else if self.rank_loss > 0 && self.lyapunov {
+            LaneStatus::Collapsed {
+                exponents: self.rank_loss,
             }
         } else if grazing_bound > RESOLUTION_BOUND {
             LaneStatus::Grazing {
@@ -598,7 +622,8 @@ where
     );
     let (log0, log_hadamard) = log_diagonal(&j0);
     let suspect = first.nonlinearity.powi(p) * log_hadamard.exp();
-    if suspect.is_nan() || suspect <= GRAZING_ERROR {
+    // A collapsed iteration's Jacobian is singular by nature, not by error.
+    if suspect.is_nan() || suspect <= GRAZING_ERROR || first.rank_loss > 0 {
         *stats = first;
         return (image, j0);
     }

@@ -63,6 +63,9 @@ pub struct SystemInfo {
     pub forcing_frequency: fn(&Params) -> f64,
     /// Runs one lane on the dimension-specific code path.
     pub run_lane: fn(&Lane) -> crate::method::LaneResult,
+    /// Why the GPU kernels cannot run a lane with these parameters, if
+    /// they cannot (what the CPU path models and the kernels do not yet).
+    pub gpu_refuses: fn(&Params) -> Option<String>,
     /// How a lane would be cut (`method::lane::plan_lane`), without running it.
     pub plan: fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
@@ -184,6 +187,11 @@ pub struct IterationStats {
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
+    /// Dimensions the iteration collapsed: 1 after an impact with e = 0 (the
+    /// velocity is forgotten), D after sticking (the state on release depends
+    /// on the forcing alone). The map's Jacobian then has rank D - rank_loss
+    /// and the last rank_loss exponents are -∞.
+    pub rank_loss: u32,
     /// The slowest approach speed of the iteration's impacts (infinite
     /// without impacts): a slow impact is near grazing.
     pub slowest_impact: f64,
@@ -209,6 +217,7 @@ impl IterationStats {
     pub fn merge(&mut self, part: &IterationStats) {
         self.impacts += part.impacts;
         self.chattering |= part.chattering;
+        self.rank_loss = self.rank_loss.max(part.rank_loss);
         self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
         self.nonlinearity = self.nonlinearity.max(part.nonlinearity);
         self.grazing |= part.grazing;
@@ -221,6 +230,7 @@ impl Default for IterationStats {
         IterationStats {
             impacts: 0,
             chattering: false,
+            rank_loss: 0,
             slowest_impact: f64::INFINITY,
             nonlinearity: 0.0,
             grazing: false,

@@ -35,9 +35,17 @@ const DISPATCH_LANE_STEPS: usize = 1 << 22;
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
-/// Invocations per workgroup unless the run asks otherwise: measured on
-/// lavapipe in docs/BENCHMARKS.md (sizes 32 to 256 within noise there).
+/// Invocations per workgroup on a hardware GPU unless the run asks
+/// otherwise (docs/BENCHMARKS.md measures sizes 32 to 256).
 pub const DEFAULT_WORKGROUP: u32 = 64;
+/// On a software adapter (lavapipe/llvmpipe): one invocation per
+/// workgroup. Measured: with more, lavapipe packs invocations into SIMD
+/// groups of 8 and one lane that chatters against the wall (f = 1e10 among
+/// f = 1) changed the results of the seven beside it, with newton impact
+/// location only; no rewrite of the kernels' loops and early exits cured it.
+/// Alone in its workgroup a lane cannot be touched; it costs 3.8 times the
+/// time on lavapipe (0.37 s against 1.40 s for 1024 lanes × 200 steps × 3).
+pub const SOFTWARE_WORKGROUP: u32 = 1;
 
 /// Where a GPU run's wall time went.
 #[derive(Clone, Copy, Debug, Default)]
@@ -155,7 +163,13 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
-    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let workgroup = options
+        .workgroup_size
+        .unwrap_or(if gpu.summary.is_hardware() {
+            DEFAULT_WORKGROUP
+        } else {
+            SOFTWARE_WORKGROUP
+        });
     let pipelines = Pipelines::new(gpu, variant, workgroup);
     let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant);
