@@ -452,7 +452,7 @@ fn workgroups(quick: bool) {
     println!("| workgroup | gpu f64 wall | gpu f64 device | gpu f32 wall | gpu f32 device |");
     println!("|---|---|---|---|---|");
     let lane_steps = (values * 5 * steps * iterations) as f64;
-    for size in [32, 64, 128, 256] {
+    for size in [1, 8, 32, 64, 256] {
         let options = lyapsweep::RunOptions {
             workgroup_size: Some(size),
             ..Default::default()
