@@ -17,7 +17,8 @@
 //! 5. the GPU's workgroup size.
 //!
 //! GPU rows also give the device time of the compute passes where the
-//! adapter has timestamp queries.
+//! adapter has timestamp queries. Name sections to run only those:
+//! `-- --quick paper cost` (first, paper, scaling, cost, workgroups).
 
 use std::time::Instant;
 
@@ -201,7 +202,8 @@ mod paper {
 }
 
 /// The paper's configuration apart from the method's improvements: forward
-/// differences, so both sides integrate three trajectories per value.
+/// differences at the paper's δ = 1e-8, so both sides integrate three
+/// trajectories per value.
 fn periodic_scene(
     backend: &str,
     steps: usize,
@@ -209,7 +211,7 @@ fn periodic_scene(
     iterations: usize,
 ) -> lyapsweep::Scene {
     let text = format!(
-        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [0.8, 0.95, 1.1, 1.25, 1.5]\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\ndifference = \"forward\"\n[run]\nbackend = \"{backend}\"\n"
+        "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [0.8, 0.95, 1.1, 1.25, 1.5]\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\ndifference = \"forward\"\nperturbation = 1e-8\n[run]\nbackend = \"{backend}\"\n"
     );
     scene::parse(&text, "bench", "bench", &[]).expect("bench scene")
 }
@@ -333,11 +335,37 @@ fn scaling(quick: bool) {
 }
 
 fn main() {
-    let quick = std::env::args().any(|a| a == "--quick");
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let quick = args.iter().any(|a| a == "--quick");
+    let named: Vec<&str> = args
+        .iter()
+        .map(String::as_str)
+        .filter(|a| !a.starts_with('-'))
+        .collect();
+    let wanted = |section: &str| named.is_empty() || named.contains(&section);
     let repeats = if quick { 3 } else { 7 };
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
     }
+    if wanted("first") {
+        cpu_against_gpu(repeats);
+    }
+    if wanted("paper") {
+        against_the_paper(repeats);
+    }
+    if wanted("scaling") {
+        scaling(quick);
+    }
+    if wanted("cost") {
+        cost_growth(quick);
+    }
+    if wanted("workgroups") {
+        workgroups(quick);
+    }
+}
+
+/// Section 1: CPU against GPU on the 4096-value sweep.
+fn cpu_against_gpu(repeats: usize) {
     let rows: Vec<Row> = [
         ("cpu f64", "cpu", "f64"),
         ("gpu f64", "gpu", "f64"),
@@ -365,10 +393,6 @@ fn main() {
             rate
         );
     }
-    against_the_paper(repeats);
-    scaling(quick);
-    cost_growth(quick);
-    workgroups(quick);
 }
 
 /// A sweep of `values` η in [0.5, 1.5] on the given path, no transient.
