@@ -400,6 +400,26 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
             format!("must be a plain folder name, got {name:?}"),
         ));
     }
+    let precision = raw.run.precision.unwrap_or_default();
+    // A δ below a few units of rounding starts the copies where the
+    // reference is: every column would be 0/0.
+    let unit = match precision {
+        Precision::F64 => f64::EPSILON,
+        Precision::F32 => f64::from(f32::EPSILON),
+    };
+    if let Some(delta) = integration.perturbation.filter(|&d| d < 4.0 * unit) {
+        return Err(Error::invalid(
+            "integration.perturbation",
+            format!(
+                "{delta:e} is below what {} resolves (x + δ·max(1, |x|) would round to x): it must be at least {:.1e}",
+                match precision {
+                    Precision::F64 => "f64",
+                    Precision::F32 => "f32",
+                },
+                4.0 * unit
+            ),
+        ));
+    }
     Ok(Scene {
         name,
         system: info,
@@ -407,7 +427,7 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         sweep,
         integration,
         backend: raw.run.backend.unwrap_or_default(),
-        precision: raw.run.precision.unwrap_or_default(),
+        precision,
         validate: raw.run.validate.unwrap_or(DEFAULT_VALIDATE),
         lyapunov,
         bifurcation_points,

@@ -212,16 +212,20 @@ impl System<2> for ImpactOscillator {
         Some((it.state, it.jacobian))
     }
 
-    /// The free oscillator's eigenvalues: modulus 1 when under-damped,
-    /// ζ ± √(ζ² - 1) when over-damped (the larger one).
+    /// The free oscillator's largest eigenvalue modulus: 1 when
+    /// under-damped (the pair -ζ ± i√(1-ζ²)), ζ + √(ζ² - 1) when over-damped.
     fn stiffness(&self) -> f64 {
-        self.zeta + (self.zeta * self.zeta - 1.0).max(0.0).sqrt()
+        if self.zeta < 1.0 {
+            1.0
+        } else {
+            self.zeta + (self.zeta * self.zeta - 1.0).sqrt()
+        }
     }
 
     /// The free motion's most negative exponent, -ζ - √(ζ² - 1) (-ζ when
     /// under-damped). Impacts with e < 1 contract further, by ln e each, but
     /// at an instant: the parts are about the flow between them.
     fn contraction(&self) -> f64 {
-        self.stiffness().max(self.zeta)
+        self.zeta + (self.zeta * self.zeta - 1.0).max(0.0).sqrt()
     }
 }
