@@ -42,6 +42,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let omega = lanes[lb + LANE_OMEGA];
     let end = min(c.x + control.chunk_steps, control.steps_per_period);
     for (var k = c.x; k < end; k = k + 1u) {
+#ifdef WALL
+        if (at_rest_on(wall_position(p), y)) {
+            // Stuck on the wall (see stuck_step): no plain RK4 step.
+            let w = stuck_step(p, omega, phase, h);
+            y = w.y;
+            comp = State();
+            c.z = c.z | rank_flags(w.rank_loss);
+            phase = rotate(rotate(phase, half), half);
+            continue;
+        }
+#endif
         let inc = rk4_increment(p, phase, half, y, h);
 #ifdef COMPENSATED
         // Kahan summation: the increment of one step is far smaller than y,
@@ -63,6 +74,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (w.chattering) {
                 c.z = c.z | FLAG_CHATTERING;
             }
+            c.z = c.z | rank_flags(w.rank_loss);
         }
 #endif
         y = y1;

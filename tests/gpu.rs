@@ -456,3 +456,70 @@ fn f32_perturbations_from_1e_2_to_1e_6_are_answered_or_flagged() {
         }
     }
 }
+
+#[test]
+fn sticking_and_perfectly_inelastic_impacts_match_the_cpu() {
+    // Sticking (f = 3 > X_w = 2, e = 0.5; η = 0.3 sticks every period) and
+    // e = 0 (λ2 = -∞): the kernels' sticking model and rank-loss flags
+    // against the CPU path's.
+    let scenes: [&[&str]; 2] = [
+        &[
+            "system.f=3",
+            "system.restitution=0.5",
+            "sweep.values=[0.3, 0.5, 0.8, 1.2]",
+        ],
+        &["system.restitution=0", "sweep.values=[0.8, 0.9, 1.2]"],
+    ];
+    for precision in [Precision::F64, Precision::F32] {
+        let p = if precision == Precision::F64 {
+            "f64"
+        } else {
+            "f32"
+        };
+        if !gpu_or_skip(
+            "sticking_and_perfectly_inelastic_impacts_match_the_cpu",
+            precision,
+        ) {
+            continue;
+        }
+        let (exponent_tolerance, point_tolerance) = if precision == Precision::F64 {
+            (1e-6, 1e-9)
+        } else {
+            // Measured: 5e-4 in λ (η = 0.5 sticking scene), 2e-7 in the points.
+            (5e-3, 1e-4)
+        };
+        for scene in scenes {
+            let mut overrides: Vec<String> = scene.iter().map(|s| s.to_string()).collect();
+            overrides.extend([
+                "integration.transient=100".to_owned(),
+                "integration.iterations=200".to_owned(),
+                "output.bifurcation_points=1".to_owned(),
+            ]);
+            let with = |backend: &str, precision: &str| {
+                let mut o = overrides.clone();
+                o.push(format!("run.backend=\"{backend}\""));
+                o.push(format!("run.precision=\"{precision}\""));
+                o
+            };
+            let cpu = run(SEED, &with("cpu", "f64"), RunOptions::default());
+            let gpu = run(SEED, &with("gpu", p), RunOptions::default());
+            assert!(cpu.lanes.iter().any(|l| l.status != LaneStatus::Ok));
+            for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+                assert_eq!(g.status, c.status, "{p} {scene:?} lane {k}");
+                for (x, y) in c.exponents.iter().zip(&g.exponents) {
+                    if x.is_infinite() {
+                        assert_eq!(x, y, "{p} {scene:?} lane {k}");
+                    } else {
+                        assert!(
+                            (x - y).abs() < exponent_tolerance,
+                            "{p} {scene:?} lane {k}: {x} vs gpu {y}"
+                        );
+                    }
+                }
+                for (x, y) in c.bifurcation.iter().zip(&g.bifurcation) {
+                    assert!((x - y).abs() < point_tolerance, "{p} lane {k}: {x} vs {y}");
+                }
+            }
+        }
+    }
+}

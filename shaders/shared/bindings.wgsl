@@ -42,6 +42,17 @@ override WORKGROUP_SIZE: u32 = 64u;
 // counts[t]: (step within the period, impacts this iteration, flags, iteration).
 const FLAG_CHATTERING: u32 = 1u;
 const FLAG_NONFINITE: u32 = 2u;
+// The iteration collapsed one dimension (an impact with e = 0), or all of
+// them (sticking): see IterationStats::rank_loss.
+const FLAG_RANK_ONE: u32 = 4u;
+const FLAG_RANK_ALL: u32 = 8u;
+
+fn rank_flags(rank_loss: u32) -> u32 {
+    if (rank_loss >= DIM) {
+        return FLAG_RANK_ALL;
+    }
+    return select(0u, FLAG_RANK_ONE, rank_loss > 0u);
+}
 
 @group(0) @binding(0) var<uniform> control: Control;
 @group(0) @binding(1) var<storage, read> lanes: array<real>;

@@ -4,11 +4,59 @@
 // wall_restitution; coordinate 0 is the position, 1 its velocity.
 
 const MAX_IMPACTS_PER_STEP: u32 = 64u;
+// See ACCUMULATION_FRACTION in src/integrate/impact.rs.
+const ACCUMULATION_FRACTION: f32 = 1e-3;
 
 struct WallStep {
     y: State,
     impacts: u32,
     chattering: bool,
+    // Dimensions collapsed: 1 after an impact with e = 0, 2 after sticking.
+    rank_loss: u32,
+}
+
+// At rest on the wall: the sticking state, X = X_w and V = 0.
+fn at_rest_on(xw: real, y: State) -> bool {
+    return y.x == xw && y.y == real(0.0);
+}
+
+// The acceleration at rest on the wall at `phase`: > 0 presses the mass into
+// the wall.
+fn pressing(p: Params, xw: real, phase: vec2<real>) -> real {
+    var rest = State();
+    rest.x = xw;
+    return rhs(p, phase, rest).y;
+}
+
+// A step of size h from rest on the wall: the mass stays while the force
+// presses it there and leaves when the force reverses (bisection for the
+// release). Twin of stuck_step in src/integrate/impact.rs, except that after
+// a release the rest of the step is one plain RK4 step held off the wall
+// (WGSL has no recursion; the force pulls away right after a release).
+fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
+    let xw = wall_position(p);
+    var rest = State();
+    rest.x = xw;
+    if (pressing(p, xw, phase) <= real(0.0)) {
+        let free = sub_step(p, omega, phase, rest, h);
+        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u);
+    }
+    var out = rest;
+    if (pressing(p, xw, rotate(phase, cos_sin(omega * h))) <= real(0.0)) {
+        var lo = real(0.0);
+        var hi = h;
+        for (var k = 0u; k < 64u; k = k + 1u) {
+            let mid = real(0.5) * (lo + hi);
+            if (pressing(p, xw, rotate(phase, cos_sin(omega * mid))) > real(0.0)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let release = rotate(phase, cos_sin(omega * hi));
+        out = clamp_to_wall(xw, sub_step(p, omega, release, rest, h - hi).y);
+    }
+    return WallStep(out, 0u, false, DIM);
 }
 
 struct Hit {
@@ -41,6 +89,7 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
     var y0 = y;
     var y1 = y1_plain;
     var impacts = 0u;
+    var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
         let rest = h - done;
 #ifdef IMPACT_LINEAR
@@ -49,26 +98,37 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
         let hit = locate_newton(p, omega, xw, phase0, y0, rest, y1);
 #endif
         if (!hit.found) {
-            return WallStep(y1, impacts, false);
+            return WallStep(y1, impacts, false, rank_loss);
         }
         let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-        var yc = hit.y;
-        if (yc.y <= real(0.0)) {
-            // Reaching the wall without approaching it: pressed into the wall.
-            yc.x = xw;
-            yc.y = real(0.0);
-            let r = sub_step(p, omega, phase_c, yc, rest - hit.s);
-            return WallStep(clamp_to_wall(xw, r.y), impacts, true);
-        }
-        yc.x = xw;
-        yc.y = -e * yc.y;
-        impacts = impacts + 1u;
         done = done + hit.s;
+        if (hit.y.y <= real(0.0)) {
+            // Arriving at rest, pressed into the wall: it sticks.
+            let stuck = stuck_step(p, omega, phase_c, h - done);
+            return WallStep(stuck.y, impacts, false, max(rank_loss, stuck.rank_loss));
+        }
+        impacts = impacts + 1u;
+        let rebound = e * hit.y.y;
+        let push = pressing(p, xw, phase_c);
+        // e = 0 stops the mass dead; bounces that would accumulate within a
+        // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
+        if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
+            let stuck = stuck_step(p, omega, phase_c, h - done);
+            return WallStep(stuck.y, impacts, false, max(max(rank_loss, 1u), stuck.rank_loss));
+        }
+        var yc = hit.y;
+        yc.x = xw;
+        yc.y = -rebound;
         phase0 = phase_c;
         y0 = yc;
         y1 = sub_step(p, omega, phase0, y0, h - done).y;
     }
-    return WallStep(clamp_to_wall(xw, y1), impacts, true);
+    // Bounces this dense under a pressing force: the mass is at rest.
+    if (y0.x == xw && pressing(p, xw, phase0) > real(0.0)) {
+        let stuck = stuck_step(p, omega, phase0, h - done);
+        return WallStep(stuck.y, impacts, false, DIM);
+    }
+    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss);
 }
 
 #ifdef IMPACT_LINEAR

@@ -59,7 +59,7 @@ pub const INFO: SystemInfo = SystemInfo {
     forcing_frequency: super::forcing_of::<2, ImpactOscillator>,
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
     plan: crate::method::lane::plan_of::<2, ImpactOscillator>,
-    gpu_refuses,
+    gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
     wall_reachable: Some(wall_reachable),
 };
@@ -117,15 +117,6 @@ fn wall_reachable(p: &Params, x: &[f64]) -> bool {
     let bound = (a * a + b * b).sqrt() + (u * u + du * du).sqrt();
     // NaN anywhere counts as reachable: compile the impact code when unsure.
     p.get("wall") <= bound * (1.0 + 1e-9) || bound.is_nan()
-}
-
-/// e = 0 loses a dimension at every impact (λ2 = -∞, `LaneStatus::Collapsed`),
-/// which the CPU path reports and the WGSL kernels do not model yet.
-fn gpu_refuses(p: &Params) -> Option<String> {
-    (p.get("restitution") == 0.0).then(|| {
-        "restitution = 0 collapses phase space at every impact; the GPU kernels do not model that yet"
-            .to_owned()
-    })
 }
 
 fn expected_sum(p: &Params, impacts_per_time: f64) -> f64 {

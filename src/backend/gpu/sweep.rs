@@ -802,6 +802,11 @@ where
                     let stats = IterationStats {
                         impacts,
                         chattering: flags & FLAG_CHATTERING != 0,
+                        rank_loss: if flags & FLAG_RANK_ALL != 0 {
+                            D as u32
+                        } else {
+                            u32::from(flags & FLAG_RANK_ONE != 0)
+                        },
                         ..Default::default()
                     };
                     let jacobian: Option<SMatrix<f64, D, D>> = has_jac
@@ -876,3 +881,5 @@ fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<()> {
 
 const FLAG_CHATTERING: u32 = 1;
 const FLAG_NONFINITE: u32 = 2;
+const FLAG_RANK_ONE: u32 = 4;
+const FLAG_RANK_ALL: u32 = 8;
