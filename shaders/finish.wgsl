@@ -20,6 +20,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var flags = cr.z;
     if (control.transient == 0u) {
         let slot = (cr.w % control.ring) * control.lane_count + lane;
+        // How far the copies left the linear regime at the wall (see
+        // IterationStats::nonlinearity): the host re-estimates the
+        // iterations where that matters (grazing).
+        var nonlinearity = 0.0f;
 #ifdef LYAPUNOV
         for (var i = 0u; i < DIM; i = i + 1u) {
             // Column i from the copy at x + δe_i and, for central
@@ -60,6 +64,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             for (var k = 0u; k < DIM; k = k + 1u) {
                 jac[slot * DIM * DIM + k * DIM + i] = difference[k] / step;
             }
+#ifdef WALL
+            nonlinearity = max(nonlinearity, max(departure(r, plus), departure(r, minus)));
+#endif
         }
 #endif
 #ifdef POINTS
@@ -71,7 +78,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var k = 0u; k < DIM; k = k + 1u) {
             scale = max(scale, abs(y[k]));
         }
-        summary[slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), 0u);
+        summary[slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
         cr.w = cr.w + 1u;
     }
     cr.x = 0u;
@@ -107,10 +114,30 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #endif
 }
 
+#ifdef WALL
+// A copy's departure from the reference r at the wall: the relative
+// difference of their slowest impact speeds, or a large value when they met
+// the wall a different number of times (0 for the reference itself, or
+// without impacts).
+fn departure(r: u32, t: u32) -> f32 {
+    let impacts = counts[r].y;
+    if (t == r || impacts == 0u) {
+        return 0.0f;
+    }
+    if (counts[t].y != impacts) {
+        return 1e30f;
+    }
+    let vr = traj[r * TRAJ_STRIDE + TRAJ_SLOWEST];
+    let vt = traj[t * TRAJ_STRIDE + TRAJ_SLOWEST];
+    return f32(abs(vt - vr) / vr);
+}
+#endif
+
 // A trajectory starting a map iteration at y: phase 0, no compensation.
 fn restart(base: u32, y: State) {
     store_state(base, y);
     store_state(base + DIM, State());
     traj[base + 2u * DIM] = real(1.0);
     traj[base + 2u * DIM + 1u] = real(0.0);
+    traj[base + TRAJ_SLOWEST] = NO_IMPACT;
 }

@@ -41,6 +41,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let half = vec2<real>(lanes[lb + LANE_HALF], lanes[lb + LANE_HALF + 1u]);
     let omega = lanes[lb + LANE_OMEGA];
     let end = min(c.x + control.chunk_steps, control.steps_per_period);
+#ifdef WALL
+    var slowest = traj[base + TRAJ_SLOWEST];
+#endif
     for (var k = c.x; k < end; k = k + 1u) {
 #ifdef WALL
         if (at_rest_on(wall_position(p), y)) {
@@ -66,11 +69,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #ifdef WALL
         if (y1.x > wall_position(p) || (y.y > real(0.0) && y1.y < real(0.0))) {
             let w = resolve_impacts(p, omega, phase, y, h, y1);
-            if (w.impacts > 0u || w.chattering) {
+            // Whatever the wall did (an impact, a rest, a departure from
+            // rest), the step ends where resolve_impacts says; the
+            // compensation belongs to the plain step it replaced.
+            if (any(w.y != y1)) {
                 y1 = w.y;
                 comp = State();
             }
             c.y = c.y + w.impacts;
+            slowest = min(slowest, w.slowest);
             if (w.chattering) {
                 c.z = c.z | FLAG_CHATTERING;
             }
@@ -84,6 +91,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     store_state(base + DIM, comp);
     traj[base + 2u * DIM] = phase.x;
     traj[base + 2u * DIM + 1u] = phase.y;
+#ifdef WALL
+    traj[base + TRAJ_SLOWEST] = slowest;
+#endif
 #endif
     if (!is_finite(y)) {
         c.z = c.z | FLAG_NONFINITE;

@@ -221,12 +221,13 @@ fn a_scene_picks_only_the_parts_it_needs() {
         let text = format!("[system]\nkind = \"impact-oscillator\"\n{extra}");
         lyapsweep::scene::parse(&text, "test", "test", &[]).unwrap()
     };
-    // The seed's wall at 2 is within reach of the forced response.
+    // The seed's wall at 2 is within reach of the forced response; the
+    // points come along so that the host can re-estimate grazing iterations.
     let seed = variant(
         &scene("[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),
         Precision::F64,
     );
-    assert!(seed.wall && seed.lyapunov && !seed.points);
+    assert!(seed.wall && seed.lyapunov && seed.points);
     // A wall beyond |X_p| + √(u² + u'²) for every swept η is never reached.
     let far = variant(
         &scene("wall = 30.0\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),

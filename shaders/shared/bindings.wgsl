@@ -32,8 +32,11 @@ const LANE_OMEGA: u32 = PARAM_COUNT + 3u;
 const LANE_DELTA: u32 = PARAM_COUNT + 4u;
 const LANE_STRIDE: u32 = PARAM_COUNT + 5u;
 
-// Per trajectory: y (DIM), the compensation of y (DIM), the phase (2).
-const TRAJ_STRIDE: u32 = 2u * DIM + 2u;
+// Per trajectory: y (DIM), the compensation of y (DIM), the phase (2), the
+// slowest impact speed of the iteration so far (NO_IMPACT if none).
+const TRAJ_STRIDE: u32 = 2u * DIM + 3u;
+const TRAJ_SLOWEST: u32 = 2u * DIM + 2u;
+const NO_IMPACT: real = real(1e30);
 
 // Invocations per workgroup, set by the host when it builds the pipeline
 // (the benchmark measures several sizes).

@@ -13,6 +13,8 @@ struct WallStep {
     chattering: bool,
     // Dimensions collapsed: 1 after an impact with e = 0, 2 after sticking.
     rank_loss: u32,
+    // The slowest approach speed of the step's impacts (NO_IMPACT if none).
+    slowest: real,
 }
 
 // At rest on the wall: the sticking state, X = X_w and V = 0.
@@ -39,7 +41,7 @@ fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
     rest.x = xw;
     if (pressing(p, xw, phase) <= real(0.0)) {
         let free = sub_step(p, omega, phase, rest, h);
-        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u);
+        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u, NO_IMPACT);
     }
     var out = rest;
     if (pressing(p, xw, rotate(phase, cos_sin(omega * h))) <= real(0.0)) {
@@ -56,7 +58,7 @@ fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
         let release = rotate(phase, cos_sin(omega * hi));
         out = clamp_to_wall(xw, sub_step(p, omega, release, rest, h - hi).y);
     }
-    return WallStep(out, 0u, false, DIM);
+    return WallStep(out, 0u, false, DIM, NO_IMPACT);
 }
 
 struct Hit {
@@ -89,6 +91,12 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
     var y0 = y;
     var y1 = y1_plain;
     var impacts = 0u;
+    var slowest = NO_IMPACT;
+    // How the loop ended: 0 no further impact in the step, 1 at rest on the
+    // wall (stuck_step takes the rest of the step from phase0), 2 out of
+    // impacts. stuck_step is called once, after the loop: with the call
+    // inside it, lavapipe computed wrong states for ordinary impacts.
+    var ending = 2u;
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
         let rest = h - done;
@@ -98,37 +106,48 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
         let hit = locate_newton(p, omega, xw, phase0, y0, rest, y1);
 #endif
         if (!hit.found) {
-            return WallStep(y1, impacts, false, rank_loss);
+            ending = 0u;
+            break;
         }
         let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-        done = done + hit.s;
-        if (hit.y.y <= real(0.0)) {
+        var yc = hit.y;
+        if (yc.y <= real(0.0)) {
             // Arriving at rest, pressed into the wall: it sticks.
-            let stuck = stuck_step(p, omega, phase_c, h - done);
-            return WallStep(stuck.y, impacts, false, max(rank_loss, stuck.rank_loss));
+            done = done + hit.s;
+            phase0 = phase_c;
+            ending = 1u;
+            break;
         }
         impacts = impacts + 1u;
-        let rebound = e * hit.y.y;
+        slowest = min(slowest, yc.y);
+        let rebound = e * yc.y;
         let push = pressing(p, xw, phase_c);
+        done = done + hit.s;
+        phase0 = phase_c;
         // e = 0 stops the mass dead; bounces that would accumulate within a
         // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
         if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
-            let stuck = stuck_step(p, omega, phase_c, h - done);
-            return WallStep(stuck.y, impacts, false, max(max(rank_loss, 1u), stuck.rank_loss));
+            rank_loss = 1u;
+            ending = 1u;
+            break;
         }
-        var yc = hit.y;
         yc.x = xw;
         yc.y = -rebound;
-        phase0 = phase_c;
         y0 = yc;
         y1 = sub_step(p, omega, phase0, y0, h - done).y;
     }
-    // Bounces this dense under a pressing force: the mass is at rest.
-    if (y0.x == xw && pressing(p, xw, phase0) > real(0.0)) {
-        let stuck = stuck_step(p, omega, phase0, h - done);
-        return WallStep(stuck.y, impacts, false, DIM);
+    if (ending == 2u && y0.x == xw && pressing(p, xw, phase0) > real(0.0)) {
+        // Bounces this dense under a pressing force: the mass is at rest.
+        ending = 1u;
     }
-    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss);
+    if (ending == 1u) {
+        let stuck = stuck_step(p, omega, phase0, h - done);
+        return WallStep(stuck.y, impacts, false, max(rank_loss, stuck.rank_loss), slowest);
+    }
+    if (ending == 0u) {
+        return WallStep(y1, impacts, false, rank_loss, slowest);
+    }
+    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss, slowest);
 }
 
 #ifdef IMPACT_LINEAR

@@ -256,7 +256,9 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
         lyapunov: scene.lyapunov,
         difference: scene.difference(),
         wall,
-        points: scene.bifurcation_points > 0,
+        // The GPU host re-estimates grazing iterations from the reference
+        // point, so a wall and exponents need the points too.
+        points: scene.bifurcation_points > 0 || (wall && scene.lyapunov),
         impact_location: scene.integration.impact_location,
     }
 }

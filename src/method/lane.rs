@@ -124,6 +124,51 @@ pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSett
     }
 }
 
+/// One whole iteration's Jacobian at x by [`estimate_resolving_grazing`],
+/// row-major, with what happened (`SystemInfo::reestimate`).
+pub fn reestimate_of<const D: usize, S: System<D>>(
+    params: &Params,
+    settings: &MethodSettings,
+    x: &[f64],
+) -> (Vec<f64>, IterationStats)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let system = S::new(params);
+    let x: [f64; D] = std::array::from_fn(|i| x[i]);
+    let mut stats = IterationStats::default();
+    let mut phase = ZERO_PHASE;
+    let (_, j) = estimate_resolving_grazing(
+        &system,
+        &settings.flow,
+        settings,
+        Part::WHOLE,
+        &mut phase,
+        &x,
+        &mut stats,
+    );
+    (j.transpose().iter().copied().collect(), stats)
+}
+
+/// Whether an estimate with this nonlinearity and Jacobian is a grazing
+/// iteration (see [`GRAZING_ERROR`]).
+pub fn is_grazing<const D: usize>(
+    difference: jacobian::Difference,
+    nonlinearity: f64,
+    j: &SMatrix<f64, D, D>,
+) -> bool
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let p = match difference {
+        jacobian::Difference::Forward => 1,
+        jacobian::Difference::Central => 2,
+    };
+    let (_, log_hadamard) = log_diagonal(j);
+    let suspect = nonlinearity.powi(p) * log_hadamard.exp();
+    !suspect.is_nan() && suspect > GRAZING_ERROR
+}
+
 /// [`plan_lane`] from parameter values (`SystemInfo::plan`).
 pub fn plan_of<const D: usize, S: System<D>>(
     params: &Params,
@@ -572,8 +617,12 @@ where
 /// for an error of 1e-8 instead of 5e-8. Real grazing iterations score far
 /// above 1 (2e5 at the seed sweep's worst value), so 1e-4 separates them.
 pub const GRAZING_ERROR: f64 = 1e-4;
-/// The δ ladder of a grazing iteration: rungs δ·10^(-k/2), k = 1..=RUNGS.
-const GRAZING_RUNGS: i32 = 8;
+/// The δ ladder of a grazing iteration: rungs δ·10^(-k/2), k = 1..=RUNGS,
+/// down to the rounding floor. Twenty rungs reach ten decades below δ: from
+/// f32's 2e-4 (the GPU host re-estimates in f64 at the scene's δ) they reach
+/// the f64 floor, where eight rungs stopped at 2e-8 and missed the seed's
+/// worst value by 1.2e-3.
+const GRAZING_RUNGS: i32 = 20;
 
 /// ln R_ii of J's QR factorisation, and ln of J's Hadamard ratio.
 fn log_diagonal<const D: usize>(j: &SMatrix<f64, D, D>) -> ([f64; D], f64)

@@ -36,6 +36,7 @@ pub const INFO: SystemInfo = SystemInfo {
     forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<2, Henon>,
     plan: crate::method::lane::plan_of::<2, Henon>,
+    reestimate: crate::method::lane::reestimate_of::<2, Henon>,
     gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/henon.wgsl")),
     wall_reachable: None,

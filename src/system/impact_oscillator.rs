@@ -59,6 +59,7 @@ pub const INFO: SystemInfo = SystemInfo {
     forcing_frequency: super::forcing_of::<2, ImpactOscillator>,
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
     plan: crate::method::lane::plan_of::<2, ImpactOscillator>,
+    reestimate: crate::method::lane::reestimate_of::<2, ImpactOscillator>,
     gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
     wall_reachable: Some(wall_reachable),

@@ -48,6 +48,7 @@ pub const INFO: SystemInfo = SystemInfo {
     forcing_frequency: super::forcing_of::<3, Lorenz>,
     run_lane: crate::method::run_lane::<3, Lorenz>,
     plan: crate::method::lane::plan_of::<3, Lorenz>,
+    reestimate: crate::method::lane::reestimate_of::<3, Lorenz>,
     gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/lorenz.wgsl")),
     wall_reachable: None,

@@ -22,7 +22,7 @@ use super::stopwatch::{self, Stopwatch};
 use crate::backend::RunOptions;
 use crate::error::{Error, Result};
 use crate::integrate::clock::cos_sin;
-use crate::method::lane::LanePlan;
+use crate::method::lane::{is_grazing, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
 use crate::system::IterationStats;
@@ -136,7 +136,7 @@ impl Layout {
             traj: variant.trajectories(),
             real,
             lane_stride: scene.system.parameters.len() + 5,
-            traj_stride: 2 * dim + 2,
+            traj_stride: 2 * dim + 3,
             summary: 16,
             jacobian: if variant.lyapunov {
                 (dim * dim) as u64 * real
@@ -362,6 +362,18 @@ struct Batch<'a, const D: usize> {
     /// The transient passes' timestamps, read back after each submission.
     transient_ticks: Option<wgpu::Buffer>,
     periods: Vec<f64>,
+    /// The trajectories (read once after the transient, for grazing).
+    traj: wgpu::Buffer,
+    grazing: Option<Grazing>,
+}
+
+/// What the host needs to re-estimate the iterations the kernels flag as
+/// grazing: the CPU path's estimate with its δ ladder, at the reference's
+/// point, in f64 (`method::lane::estimate_resolving_grazing`).
+struct Grazing {
+    system: &'static crate::system::SystemInfo,
+    params: Vec<crate::system::Params>,
+    settings: MethodSettings,
 }
 
 impl<'a, const D: usize> Batch<'a, D>
@@ -435,7 +447,8 @@ where
                 }
                 traj_data.extend_from_slice(&y);
                 traj_data.extend(std::iter::repeat_n(0.0, D));
-                traj_data.extend_from_slice(&[1.0, 0.0]);
+                // Phase (1, 0); the slowest impact speed: none yet (NO_IMPACT).
+                traj_data.extend_from_slice(&[1.0, 0.0, 1e30]);
             }
         }
 
@@ -571,6 +584,18 @@ where
                 entries: &entries,
             })
         };
+        let grazing = (variant.wall && variant.lyapunov).then(|| {
+            let mut cpu =
+                crate::backend::method_settings(scene, crate::scene::Backend::Cpu, Precision::F64);
+            cpu.flow.steps_per_period = steps;
+            Grazing {
+                system: scene.system,
+                params: (first..first + count)
+                    .map(|k| scene.lane_params(k))
+                    .collect(),
+                settings: cpu,
+            }
+        });
         Batch {
             stopwatch,
             settings,
@@ -590,6 +615,8 @@ where
             ticks_offset,
             transient_ticks,
             periods,
+            traj: traj_buffer,
+            grazing,
         }
     }
 
@@ -658,6 +685,12 @@ where
             }
             done += n;
         }
+        // The reference points x_0 the first averaging iteration starts from,
+        // for re-estimating it should it graze.
+        let mut previous: Vec<Option<[f64; D]>> = vec![None; self.count];
+        if self.grazing.is_some() {
+            previous = self.reference_states(gpu)?.into_iter().map(Some).collect();
+        }
         timings.transient = start.elapsed();
 
         // Averaging, streamed in chunks of `ring` iterations.
@@ -691,12 +724,14 @@ where
                 receiver: self.map_staging(c % 2),
                 index,
             };
-            if let Some(previous) = pending.replace(submitted) {
-                self.collect(gpu, &mut accumulators, &chunks, previous, &mut timings)?;
+            if let Some(done) = pending.replace(submitted) {
+                let lanes = &mut accumulators;
+                self.collect(gpu, lanes, &mut previous, &chunks, done, &mut timings)?;
             }
         }
         if let Some(last) = pending {
-            self.collect(gpu, &mut accumulators, &chunks, last, &mut timings)?;
+            let lanes = &mut accumulators;
+            self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)?;
         }
         timings.averaging = start.elapsed();
         Ok((
@@ -706,6 +741,26 @@ where
                 .collect(),
             timings,
         ))
+    }
+
+    /// The references' states, read back (after the transient).
+    fn reference_states(&self, gpu: &Gpu) -> Result<Vec<[f64; D]>> {
+        let bytes = self.traj.size();
+        let readable = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("reference states"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = gpu.device.create_command_encoder(&Default::default());
+        encoder.copy_buffer_to_buffer(&self.traj, 0, &readable, 0, bytes);
+        let index = gpu.queue.submit([encoder.finish()]);
+        wait_for(&gpu.device, index)?;
+        let reals = read_back(&gpu.device, &readable, |b| reals_from(b, self.precision))?;
+        let per_lane = self.layout.traj * self.layout.traj_stride;
+        Ok((0..self.count)
+            .map(|lane| std::array::from_fn(|k| reals[lane * per_lane + k]))
+            .collect())
     }
 
     fn copy_to_staging(
@@ -741,10 +796,12 @@ where
 
     /// Waits for a submitted chunk's staging copy, reads it and accumulates
     /// QR for every lane.
+    #[allow(clippy::too_many_arguments)]
     fn collect(
         &self,
         gpu: &Gpu,
         accumulators: &mut [LaneAccumulator<D>],
+        previous: &mut [Option<[f64; D]>],
         chunks: &[(usize, usize)],
         pending: Pending,
         timings: &mut Timings,
@@ -788,18 +845,20 @@ where
         let transient = self.settings.transient;
         let has_jac = self.jac.is_some();
         let has_points = self.points.is_some();
+        let grazing = self.grazing.as_ref();
         accumulators
             .par_iter_mut()
+            .zip(previous.par_iter_mut())
             .enumerate()
-            .for_each(|(lane, acc)| {
+            .for_each(|(lane, (acc, x_n))| {
                 for j in 0..n {
                     let slot = j * count + lane;
-                    let [impacts, flags, scale_bits, _] = summary[slot];
+                    let [impacts, flags, scale_bits, nonlinearity_bits] = summary[slot];
                     if flags & FLAG_NONFINITE != 0 {
                         acc.fail(transient + first_iteration + j);
                         break;
                     }
-                    let stats = IterationStats {
+                    let mut stats = IterationStats {
                         impacts,
                         chattering: flags & FLAG_CHATTERING != 0,
                         rank_loss: if flags & FLAG_RANK_ALL != 0 {
@@ -809,10 +868,26 @@ where
                         },
                         ..Default::default()
                     };
-                    let jacobian: Option<SMatrix<f64, D, D>> = has_jac
+                    let mut jacobian: Option<SMatrix<f64, D, D>> = has_jac
                         .then(|| SMatrix::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D]));
                     let point: Option<[f64; D]> =
                         has_points.then(|| std::array::from_fn(|k| points[slot * D + k]));
+                    // A grazing iteration: the host redoes it on the CPU,
+                    // from the point it started at, with the δ ladder.
+                    let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
+                    if let (Some(g), Some(x), Some(j)) = (grazing, x_n.as_ref(), jacobian.as_mut())
+                    {
+                        if stats.rank_loss == 0
+                            && is_grazing(self.settings.difference, nonlinearity, j)
+                        {
+                            let (cpu, cpu_stats) =
+                                (g.system.reestimate)(&g.params[lane], &g.settings, x);
+                            *j = SMatrix::from_row_slice(&cpu);
+                            stats.grazing = true;
+                            stats.grazing_error = cpu_stats.grazing_error;
+                        }
+                    }
+                    *x_n = point;
                     let scale = f64::from(f32::from_bits(scale_bits));
                     if !acc.record(scale, point.as_ref(), jacobian.as_slice(), &stats) {
                         break;
