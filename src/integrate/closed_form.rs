@@ -208,6 +208,19 @@ impl ForcedImpactOscillator {
         Matrix2::new(-e, 0.0, jump / v_minus, -e)
     }
 
+    /// A mass at rest on the wall since `t`: still held there at `t1` (the
+    /// end point), or released, with the free flight from the release.
+    fn rest_on_wall(&self, model: &Model, t: f64, t1: f64) -> Rest {
+        let y = [self.wall, 0.0];
+        let release = self.release_after(t);
+        if release >= t1 {
+            return Rest::Held(model.exact_point(&model.segment(t1, y), y));
+        }
+        let segment = model.segment(release, y);
+        let start = model.exact_point(&segment, y);
+        Rest::Released(segment, start)
+    }
+
     /// When a mass at rest on the wall since `t` leaves it: the first time
     /// after `t` at which the net force there, -X_w + f·cos(ηt), falls to
     /// zero (∞ if it never does).
@@ -272,14 +285,10 @@ impl ForcedImpactOscillator {
                 Event::Sticking(p) | Event::Chattering(p) if p.x >= self.wall && p.acc > 0.0 => {
                     rank_loss = 2;
                     jacobian = Matrix2::zeros();
-                    let y = [self.wall, 0.0];
-                    let release = self.release_after(p.t);
-                    if release >= t1 {
-                        let end = model.exact_point(&model.segment(t1, y), y);
-                        break (end, ExactStatus::Ok);
+                    match self.rest_on_wall(&model, p.t, t1) {
+                        Rest::Held(end) => break (end, ExactStatus::Ok),
+                        Rest::Released(s, a) => (segment, start) = (s, a),
                     }
-                    segment = model.segment(release, y);
-                    start = model.exact_point(&segment, y);
                 }
                 Event::Sticking(p) | Event::Chattering(p) => break (p, ExactStatus::Chattering),
                 Event::Impact(p) => {
@@ -288,14 +297,10 @@ impl ForcedImpactOscillator {
                             // Dense bounces under a pressing force: at rest.
                             rank_loss = 2;
                             jacobian = Matrix2::zeros();
-                            let y = [self.wall, 0.0];
-                            let release = self.release_after(p.t);
-                            if release >= t1 {
-                                let end = model.exact_point(&model.segment(t1, y), y);
-                                break (end, ExactStatus::Ok);
+                            match self.rest_on_wall(&model, p.t, t1) {
+                                Rest::Held(end) => break (end, ExactStatus::Ok),
+                                Rest::Released(s, a) => (segment, start) = (s, a),
                             }
-                            segment = model.segment(release, y);
-                            start = model.exact_point(&segment, y);
                             continue;
                         }
                         break (p, ExactStatus::Chattering);
@@ -308,16 +313,14 @@ impl ForcedImpactOscillator {
                         // reverse, and the Jacobian is already zero (or the
                         // part began at rest after sticking), which a
                         // singular saltation would only turn into NaN.
-                        let y = [self.wall, 0.0];
-                        segment = model.segment(p.t, y);
-                        start = model.exact_point(&segment, y);
                         if p.acc > 0.0 {
-                            let release = self.release_after(p.t);
-                            if release >= t1 {
-                                let end = model.exact_point(&model.segment(t1, y), y);
-                                break (end, ExactStatus::Ok);
+                            match self.rest_on_wall(&model, p.t, t1) {
+                                Rest::Held(end) => break (end, ExactStatus::Ok),
+                                Rest::Released(s, a) => (segment, start) = (s, a),
                             }
-                            segment = model.segment(release, y);
+                        } else {
+                            let y = [self.wall, 0.0];
+                            segment = model.segment(p.t, y);
                             start = model.exact_point(&segment, y);
                         }
                         continue;
@@ -428,6 +431,12 @@ struct Point {
     acc: f64,
     /// Deviation from the particular solution, u = (X - X_p, V - V_p).
     u: Vector2<f64>,
+}
+
+/// Where a sticking mass is at the end of an iteration's span.
+enum Rest {
+    Held(Point),
+    Released(Segment, Point),
 }
 
 /// A free flight starting at local time `t0` with deviation `u0`.
