@@ -35,17 +35,17 @@ const DISPATCH_LANE_STEPS: usize = 1 << 22;
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
-/// Invocations per workgroup on a hardware GPU unless the run asks
-/// otherwise (docs/BENCHMARKS.md measures sizes 32 to 256).
+/// Invocations per workgroup unless the run asks otherwise
+/// (docs/BENCHMARKS.md measures sizes 1 to 256 on lavapipe).
+///
+/// On lavapipe (SIMD groups of 8), an earlier form of the impact kernel let
+/// one lane chattering against the wall change the seven beside it, and
+/// ordinary impacts went wrong with the sticking code inside the impact
+/// loop. Both went away when stuck_step moved out of that loop; tests/gpu.rs
+/// holds lanes apart (`a_faulty_or_chattering_lane_touches_no_other_lane`)
+/// and compares size 1, where no lane shares a SIMD group, with this size bit
+/// for bit on chaotic, grazing, sticking and overflowing lanes.
 pub const DEFAULT_WORKGROUP: u32 = 64;
-/// On a software adapter (lavapipe/llvmpipe): one invocation per
-/// workgroup. Measured: with more, lavapipe packs invocations into SIMD
-/// groups of 8 and one lane that chatters against the wall (f = 1e10 among
-/// f = 1) changed the results of the seven beside it, with newton impact
-/// location only; no rewrite of the kernels' loops and early exits cured it.
-/// Alone in its workgroup a lane cannot be touched; it costs 3.8 times the
-/// time on lavapipe (0.37 s against 1.40 s for 1024 lanes × 200 steps × 3).
-pub const SOFTWARE_WORKGROUP: u32 = 1;
 
 /// Where a GPU run's wall time went.
 #[derive(Clone, Copy, Debug, Default)]
@@ -163,13 +163,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
-    let workgroup = options
-        .workgroup_size
-        .unwrap_or(if gpu.summary.is_hardware() {
-            DEFAULT_WORKGROUP
-        } else {
-            SOFTWARE_WORKGROUP
-        });
+    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
     let pipelines = Pipelines::new(gpu, variant, workgroup);
     let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant);
