@@ -59,27 +59,20 @@ impl Config {
     pub fn path(&self) -> String {
         match self.backend {
             Backend::Exact => "exact".into(),
-            b => format!("{}-{}", b.name(), precision_name(self.precision)),
+            b => format!("{}-{}", b.name(), self.precision.name()),
         }
     }
 
     fn overrides(&self) -> Vec<String> {
         vec![
             format!("run.backend=\"{}\"", self.backend.name()),
-            format!("run.precision=\"{}\"", precision_name(self.precision)),
+            format!("run.precision=\"{}\"", self.precision.name()),
             format!("integration.steps_per_period={}", self.steps),
             format!("integration.impact_location=\"{}\"", self.location.name()),
             format!("integration.perturbation={:e}", self.perturbation),
             format!("integration.difference=\"{}\"", self.difference.name()),
             "run.validate=0".into(),
         ]
-    }
-}
-
-fn precision_name(p: Precision) -> &'static str {
-    match p {
-        Precision::F64 => "f64",
-        Precision::F32 => "f32",
     }
 }
 

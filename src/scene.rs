@@ -101,6 +101,23 @@ pub enum Precision {
     F32,
 }
 
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        }
+    }
+
+    /// The unit roundoff of the arithmetic, as an f64.
+    pub fn rounding_unit(self) -> f64 {
+        match self {
+            Precision::F64 => f64::EPSILON,
+            Precision::F32 => f64::from(f32::EPSILON),
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Lyapunov {
@@ -403,19 +420,13 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
     let precision = raw.run.precision.unwrap_or_default();
     // A δ below a few units of rounding starts the copies where the
     // reference is: every column would be 0/0.
-    let unit = match precision {
-        Precision::F64 => f64::EPSILON,
-        Precision::F32 => f64::from(f32::EPSILON),
-    };
+    let unit = precision.rounding_unit();
     if let Some(delta) = integration.perturbation.filter(|&d| d < 4.0 * unit) {
         return Err(Error::invalid(
             "integration.perturbation",
             format!(
                 "{delta:e} is below what {} resolves (x + δ·max(1, |x|) would round to x): it must be at least {:.1e}",
-                match precision {
-                    Precision::F64 => "f64",
-                    Precision::F32 => "f32",
-                },
+                precision.name(),
                 4.0 * unit
             ),
         ));

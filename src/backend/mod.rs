@@ -237,10 +237,7 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         // does not accumulate over the steps of an iteration.
         rounding_accumulates: precision == Precision::F64 && steps > 1,
         submaps: scene.integration.submaps,
-        rounding_unit: match precision {
-            Precision::F64 => f64::EPSILON,
-            Precision::F32 => f64::from(f32::EPSILON),
-        },
+        rounding_unit: precision.rounding_unit(),
     }
 }
 

@@ -92,9 +92,6 @@ pub enum ExactStatus {
     /// its step budget: the iteration stopped early, at
     /// [`ExactIteration::time`].
     Chattering,
-    /// Unused since sticking is modelled (see [`ExactIteration::rank_loss`]);
-    /// kept so that callers matching on the status stay exhaustive.
-    Sticking,
 }
 
 /// The result of one exact forcing period.

@@ -122,6 +122,15 @@ impl Difference {
         }
     }
 
+    /// The order of the scheme's error in δ: a copy that leaves the linear
+    /// regime by a fraction r errs by r (forward) or r² (central).
+    pub fn order(self) -> i32 {
+        match self {
+            Difference::Forward => 1,
+            Difference::Central => 2,
+        }
+    }
+
     /// Perturbed copies per lane.
     pub fn copies(self, dimension: usize) -> usize {
         match self {

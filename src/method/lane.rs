@@ -160,12 +160,8 @@ pub fn is_grazing<const D: usize>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let p = match difference {
-        jacobian::Difference::Forward => 1,
-        jacobian::Difference::Central => 2,
-    };
     let (_, log_hadamard) = log_diagonal(j);
-    let suspect = nonlinearity.powi(p) * log_hadamard.exp();
+    let suspect = nonlinearity.powi(difference.order()) * log_hadamard.exp();
     !suspect.is_nan() && suspect > GRAZING_ERROR
 }
 
@@ -658,10 +654,6 @@ pub fn estimate_resolving_grazing<const D: usize, S: System<D>>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let p = match settings.difference {
-        jacobian::Difference::Forward => 1,
-        jacobian::Difference::Central => 2,
-    };
     let delta = perturbation_at(settings.perturbation, x);
     let start = *phase;
     let mut first = *stats;
@@ -675,13 +667,12 @@ where
         settings.difference,
         &mut first,
     );
-    let (log0, log_hadamard) = log_diagonal(&j0);
-    let suspect = first.nonlinearity.powi(p) * log_hadamard.exp();
     // A collapsed iteration's Jacobian is singular by nature, not by error.
-    if suspect.is_nan() || suspect <= GRAZING_ERROR || first.rank_loss > 0 {
+    if first.rank_loss > 0 || !is_grazing(settings.difference, first.nonlinearity, &j0) {
         *stats = first;
         return (image, j0);
     }
+    let (log0, _) = log_diagonal(&j0);
     // Rungs sit half a decade apart, so a plateau two rungs wide is a
     // decade of δ. The rounding floor: relative noise u·√steps/δ of 1e-2 in an image-sized
     // column; the ladder itself finds where rounding starts to matter.

@@ -85,7 +85,7 @@ impl Variant {
     pub fn name(&self) -> String {
         let mut parts = vec![
             self.system.kind.to_owned(),
-            self.precision_name().to_owned(),
+            self.precision.name().to_owned(),
         ];
         if self.wall {
             parts.push(format!("wall+{}", self.impact_location.name()));
@@ -101,13 +101,6 @@ impl Variant {
             parts.push("points".into());
         }
         parts.join("/")
-    }
-
-    fn precision_name(&self) -> &'static str {
-        match self.precision {
-            Precision::F64 => "f64",
-            Precision::F32 => "f32",
-        }
     }
 
     /// The names `#ifdef` tests.
