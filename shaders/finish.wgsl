@@ -1,10 +1,12 @@
-// Kernel: the end of a map iteration, one invocation per lane.
+// Kernel: the end of a part of a map iteration (the whole iteration when it
+// has one part), one invocation per lane.
 //
-// Averaging: write the estimated Jacobian (column i = (U(x + δe_i) - U(x)) /
-// δ_i, the paper's eq. 6, or the central (U(x + δe_i) - U(x - δe_i)) / 2δ), the Poincaré point and a summary into this
-// iteration's ring slot. Always: restart the reference at phase 0 and
-// re-seed the perturbed copies from its new point, so the next iteration
-// needs nothing from the host.
+// Averaging: write the estimated Jacobian of the part (column i =
+// (U(x + δe_i) - U(x)) / δ_i, the paper's eq. 6, or the central
+// (U(x + δe_i) - U(x - δe_i)) / 2δ), the reference's state and a summary into
+// the part's ring slot. Always: re-seed the perturbed copies from the
+// reference's new state, and at the end of an iteration restart the
+// reference at phase 0, so the next part needs nothing from the host.
 
 #include "shared/bindings.wgsl"
 
@@ -18,8 +20,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var cr = counts[r];
     let y = load_state(r * TRAJ_STRIDE);
     var flags = cr.z;
+    // The end of a whole iteration (always, in the transient), or of a part
+    // (a sub-map), after which the reference runs on at its phase. A failed
+    // reference stopped where it failed: its iterations end at once, each
+    // reporting the failure in its last part.
+    let last = cr.x >= control.steps_per_period || (cr.z & FLAG_NONFINITE) != 0u;
     if (control.transient == 0u) {
-        let slot = (cr.w % control.ring) * control.lane_count + lane;
+        let part = select(cr.x / control.part_steps - 1u, control.parts - 1u, last);
+        let slot = ((cr.w % control.ring) * control.parts + part) * control.lane_count + lane;
         // How far the copies left the linear regime at the wall (see
         // IterationStats::nonlinearity): the host re-estimates the
         // iterations where that matters (grazing).
@@ -33,7 +41,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var minus = r + 1u + DIM + i;
             let step_plus = deltas[lane * 2u * DIM + i];
             let step_minus = deltas[lane * 2u * DIM + DIM + i];
-            flags = flags | ((counts[plus].z | counts[minus].z) & FLAG_CHATTERING);
+            flags = flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED));
             // A copy that met the wall a different number of times than the
             // reference crossed a grazing boundary: its difference is O(1)
             // wrong. Difference on the other side, where the map is smooth.
@@ -50,7 +58,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             let minus = r;
             let step = deltas[lane * DIM + i];
-            flags = flags | (counts[plus].z & FLAG_CHATTERING);
+            flags = flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED));
 #endif
             // The two images are close, so their difference is exact; their
             // low bits are what the column is made of.
@@ -79,13 +87,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             scale = max(scale, abs(y[k]));
         }
         summary[slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
-        cr.w = cr.w + 1u;
+        if (last) {
+            cr.w = cr.w + 1u;
+        }
     }
-    cr.x = 0u;
+    // The copies start where the reference is: the next iteration's step 0
+    // and phase 0, or the next part's first step at the reference's phase
+    // and with its compensation (so that a copy's exact start is the
+    // reference's plus exactly its δ).
+    var phase = vec2<real>(real(1.0), real(0.0));
+    var comp = State();
+    if (last) {
+        cr.x = 0u;
+        restart(r * TRAJ_STRIDE, y, phase, comp);
+    } else {
+        phase = vec2<real>(traj[r * TRAJ_STRIDE + 2u * DIM], traj[r * TRAJ_STRIDE + 2u * DIM + 1u]);
+        comp = load_state(r * TRAJ_STRIDE + DIM);
+        traj[r * TRAJ_STRIDE + TRAJ_SLOWEST] = NO_IMPACT;
+    }
     cr.y = 0u;
-    cr.z = flags & FLAG_NONFINITE;
+    cr.z = flags & FLAG_STICKY;
     counts[r] = cr;
-    restart(r * TRAJ_STRIDE, y);
 #ifdef LYAPUNOV
     // δ relative to the state's size, as on the CPU: δ·max(1, ‖y‖∞).
     var size = real(1.0);
@@ -101,14 +123,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
         deltas[lane * DIM + i] = yi[i] - y[i];
 #endif
-        restart((r + 1u + i) * TRAJ_STRIDE, yi);
-        counts[r + 1u + i] = vec4<u32>(0u, 0u, cr.z, 0u);
+        restart((r + 1u + i) * TRAJ_STRIDE, yi, phase, comp);
+        counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z, 0u);
 #ifdef CENTRAL
         var ym = y;
         ym[i] = y[i] - delta;
         deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];
-        restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym);
-        counts[r + 1u + DIM + i] = vec4<u32>(0u, 0u, cr.z, 0u);
+        restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym, phase, comp);
+        counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z, 0u);
 #endif
     }
 #endif
@@ -133,11 +155,12 @@ fn departure(r: u32, t: u32) -> f32 {
 }
 #endif
 
-// A trajectory starting a map iteration at y: phase 0, no compensation.
-fn restart(base: u32, y: State) {
+// A trajectory starting a map iteration or a part at y, with its phase and
+// compensation, and no impact yet.
+fn restart(base: u32, y: State, phase: vec2<real>, comp: State) {
     store_state(base, y);
-    store_state(base + DIM, State());
-    traj[base + 2u * DIM] = real(1.0);
-    traj[base + 2u * DIM + 1u] = real(0.0);
+    store_state(base + DIM, comp);
+    traj[base + 2u * DIM] = phase.x;
+    traj[base + 2u * DIM + 1u] = phase.y;
     traj[base + TRAJ_SLOWEST] = NO_IMPACT;
 }

@@ -191,6 +191,12 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
             gpu.batches,
             gpu.chunk_steps
         );
+        if gpu.retries > 0 {
+            println!(
+                "               {} batch run(s) redone with shorter dispatches: the adapter cut loops short past its cap (lavapipe: 65 535 loop iterations per invocation)",
+                gpu.retries
+            );
+        }
         if let Some(busy) = t.gpu_busy {
             println!(
                 "               device time of the compute passes (timestamp queries) {:.3} s",

@@ -4,6 +4,7 @@
 mod common;
 
 use common::{gpu_or_skip, PERIODIC_ETAS, SEED};
+use lyapsweep::method::lane::RESOLUTION_BOUND;
 use lyapsweep::method::LaneStatus;
 use lyapsweep::scene::{Backend, Precision};
 use lyapsweep::{Report, RunOptions};
@@ -624,5 +625,216 @@ fn grazing_iterations_are_re_estimated_on_the_host() {
         assert!(lane.grazing >= 1, "{p}: no grazing iteration flagged");
         let error = (lane.exponent_sum() - -0.1).abs();
         assert!(error < 1e-5, "{p}: sum rule off by {error:e}");
+    }
+}
+
+#[test]
+fn grazing_sub_maps_are_re_estimated_from_their_own_start() {
+    if !gpu_or_skip(
+        "grazing_sub_maps_are_re_estimated_from_their_own_start",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The grazing lane above, each iteration cut into 20 sub-maps: the host
+    // re-estimates a flagged part from the reference's state at the part's
+    // start and the forcing phase there, as the CPU path does. Measured:
+    // parts 0 and 2 graze, and the GPU matches the CPU to 3e-12; with the
+    // phase left at 0 for part 2, λ1 was 1e-4 off.
+    let with = |backend: &str| {
+        vec![
+            "sweep.values=[0.7117216117216117]".to_owned(),
+            "integration.steps_per_period=1800".to_owned(),
+            "integration.submaps=20".to_owned(),
+            format!("run.backend=\"{backend}\""),
+        ]
+    };
+    let gpu = run(SEED, &with("gpu"), RunOptions::default());
+    let cpu = run(SEED, &with("cpu"), RunOptions::default());
+    let (g, c) = (&gpu.lanes[0], &cpu.lanes[0]);
+    assert_eq!(g.plan.parts, 20);
+    assert_eq!(g.status, LaneStatus::Ok);
+    assert!(g.grazing >= 1, "no grazing part flagged");
+    assert_eq!(g.grazing, c.grazing);
+    for (x, y) in g.exponents.iter().zip(&c.exponents) {
+        assert!((x - y).abs() < 1e-9, "gpu {x} vs cpu {y}");
+    }
+    let error = (g.exponent_sum() - -0.1).abs();
+    assert!(error < 1e-5, "sum rule off by {error:e}");
+}
+
+/// Over-damped lanes (ζ = 20 and 2, no wall in reach): steps raised and each
+/// iteration cut into sub-maps on the GPU as on the CPU (tests/stability.rs).
+/// Both exponents come out in both precisions: against the CPU run with the
+/// GPU's plan, and against the closed form -ζ ± √(ζ² - 1).
+#[test]
+fn stiff_lanes_are_cut_into_sub_maps_on_the_gpu() {
+    for precision in [Precision::F64, Precision::F32] {
+        let p = if precision == Precision::F64 {
+            "f64"
+        } else {
+            "f32"
+        };
+        if !gpu_or_skip("stiff_lanes_are_cut_into_sub_maps_on_the_gpu", precision) {
+            continue;
+        }
+        for zeta in [20.0, 2.0] {
+            let base = [
+                format!("system.zeta={zeta}"),
+                "system.wall=100".to_owned(),
+                "sweep.values=[0.1, 0.2]".to_owned(),
+                "integration.transient=5".to_owned(),
+                "integration.iterations=50".to_owned(),
+            ];
+            let with = |extra: &[String]| {
+                let mut o = base.to_vec();
+                o.extend_from_slice(extra);
+                o
+            };
+            // f32 at its default δ; the CPU (f64 only) takes the same δ.
+            let delta = if precision == Precision::F64 {
+                "1e-6"
+            } else {
+                "2e-4"
+            };
+            let gpu = run(
+                SEED,
+                &with(&[
+                    "run.backend=\"gpu\"".into(),
+                    format!("run.precision=\"{p}\""),
+                    format!("integration.perturbation={delta}"),
+                ]),
+                RunOptions::default(),
+            );
+            let plan = gpu.lanes[0].plan;
+            assert!(plan.parts > 1, "{p} ζ = {zeta}: {plan:?}");
+            assert_eq!(plan.steps_per_period % plan.parts, 0);
+            // The CPU path with the GPU's plan, in the same δ.
+            let cpu = run(
+                SEED,
+                &with(&[
+                    "run.backend=\"cpu\"".into(),
+                    format!("integration.perturbation={delta}"),
+                    format!("integration.steps_per_period={}", plan.steps_per_period),
+                    format!("integration.submaps={}", plan.parts),
+                ]),
+                RunOptions::default(),
+            );
+            let kappa = f64::sqrt(zeta * zeta - 1.0);
+            let closed = [-zeta + kappa, -zeta - kappa];
+            for (k, eta) in [0.1, 0.2].into_iter().enumerate() {
+                let (g, c) = (&gpu.lanes[k], &cpu.lanes[k]);
+                assert_eq!(c.status, LaneStatus::Ok, "cpu ζ = {zeta}, η = {eta}");
+                assert_eq!(g.plan, plan);
+                assert_eq!(c.plan, plan);
+                let period = std::f64::consts::TAU / eta;
+                // f64: the same arithmetic up to operation order (measured:
+                // λ1 within a relative 1.2e-10, λ2 within 4e-14). f32 runs
+                // at the edge of what it resolves (ζ = 20: ln R_11 of a part
+                // is 2e-3 against rounding noise of 3e-4; λ1 measured 1e-4
+                // off): the lane's own resolution bound must cover its
+                // error, and a lane past 1e-3 says `unresolved`.
+                let bound = match g.status {
+                    LaneStatus::Ok => RESOLUTION_BOUND,
+                    LaneStatus::Unresolved { bound } if precision == Precision::F32 => bound,
+                    ref other => panic!("{p} ζ = {zeta}, η = {eta}: {other:?}"),
+                };
+                for i in 0..2 {
+                    let (x, y) = (g.exponents[i], c.exponents[i]);
+                    let difference = (x - y).abs();
+                    let within = if precision == Precision::F64 {
+                        [1e-9, 1e-12][i] * y.abs()
+                    } else {
+                        bound
+                    };
+                    assert!(
+                        difference < within,
+                        "{p} ζ = {zeta}, η = {eta}: λ{} gpu {x} vs cpu {y}",
+                        i + 1
+                    );
+                    // The closed form, up to the QR's start (tests/stability.rs).
+                    assert!(
+                        (x - closed[i]).abs() < 1.0 / (50.0 * period),
+                        "{p} ζ = {zeta}, η = {eta}: λ{} {x} vs closed form {}",
+                        i + 1,
+                        closed[i]
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Over-damped with a reachable wall (tests/stability.rs): the mass sticks
+/// every period, on the GPU as on the CPU, in sub-mapped iterations. Each
+/// period's bounces onto the wall (e = 1) run lavapipe past its loop cap
+/// within 256 steps per dispatch: the batch is redone with shorter
+/// dispatches, and before that check existed the GPU's mass ended the
+/// period far from the wall it should rest on.
+#[test]
+fn stiff_lanes_stick_on_the_wall_on_the_gpu() {
+    for precision in [Precision::F64, Precision::F32] {
+        let p = if precision == Precision::F64 {
+            "f64"
+        } else {
+            "f32"
+        };
+        if !gpu_or_skip("stiff_lanes_stick_on_the_wall_on_the_gpu", precision) {
+            continue;
+        }
+        let zeta = 20.0;
+        let base = [
+            format!("system.zeta={zeta}"),
+            format!("system.wall={}", 0.3 / (2.0 * zeta * 0.2)),
+            "sweep.values=[0.1, 0.2]".to_owned(),
+            "integration.transient=5".to_owned(),
+            "integration.iterations=50".to_owned(),
+            "output.bifurcation_points=1".to_owned(),
+        ];
+        let with = |extra: &[String]| {
+            let mut o = base.to_vec();
+            o.extend_from_slice(extra);
+            o
+        };
+        let gpu = run(
+            SEED,
+            &with(&[
+                "run.backend=\"gpu\"".into(),
+                format!("run.precision=\"{p}\""),
+            ]),
+            RunOptions::default(),
+        );
+        let plan = gpu.lanes[0].plan;
+        assert!(plan.parts > 1, "{p}: {plan:?}");
+        let cpu = run(
+            SEED,
+            &with(&[
+                "run.backend=\"cpu\"".into(),
+                format!("integration.steps_per_period={}", plan.steps_per_period),
+                format!("integration.submaps={}", plan.parts),
+            ]),
+            RunOptions::default(),
+        );
+        for (k, (g, c)) in gpu.lanes.iter().zip(&cpu.lanes).enumerate() {
+            assert_eq!(
+                g.status,
+                LaneStatus::Collapsed { exponents: 2 },
+                "{p} lane {k}"
+            );
+            assert_eq!(c.status, g.status, "{p} lane {k}");
+            assert!(g.exponents.iter().all(|&l| l == f64::NEG_INFINITY));
+            // Measured: f64 to the last digit, f32 within 1.4e-6.
+            let tolerance = if precision == Precision::F64 {
+                1e-9
+            } else {
+                1e-5
+            };
+            for (x, y) in g.bifurcation.iter().zip(&c.bifurcation) {
+                assert!(
+                    (x - y).abs() < tolerance,
+                    "{p} lane {k}: gpu {x} vs cpu {y}"
+                );
+            }
+        }
     }
 }

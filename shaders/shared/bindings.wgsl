@@ -9,7 +9,7 @@
 struct Control {
     // Lanes in this batch.
     lane_count: u32,
-    // RK4 steps per map period (1 for a map).
+    // RK4 steps per map period (1 for a map): parts × part_steps.
     steps_per_period: u32,
     // RK4 steps per integrate dispatch, bounding each dispatch's work.
     chunk_steps: u32,
@@ -21,8 +21,12 @@ struct Control {
     // and WGSL cannot mark them exact (SPIR-V NoContraction): a select on a
     // value the compiler cannot know hides the identity (y + c) - y = c.
     opaque_zero: u32,
-    _pad1: u32,
-    _pad2: u32,
+    // While averaging, each iteration is cut into `parts` sub-maps of
+    // `part_steps` steps (see system::Part): at the end of each, the finish
+    // kernel takes the part's Jacobian and re-seeds the copies from the
+    // reference, which runs on. One part is the whole iteration.
+    part_steps: u32,
+    parts: u32,
 }
 
 // Per lane: the system's parameters, then h, cos(ωh/2), sin(ωh/2), ω, δ.
@@ -49,6 +53,11 @@ const FLAG_NONFINITE: u32 = 2u;
 // them (sticking): see IterationStats::rank_loss.
 const FLAG_RANK_ONE: u32 = 4u;
 const FLAG_RANK_ALL: u32 = 8u;
+// The adapter cut this dispatch's loops short (see loop_budget_exhausted):
+// the host redoes the batch with shorter dispatches.
+const FLAG_TRUNCATED: u32 = 16u;
+// Flags that outlive the iteration they were raised in.
+const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED;
 
 fn rank_flags(rank_loss: u32) -> u32 {
     if (rank_loss >= DIM) {
@@ -61,17 +70,20 @@ fn rank_flags(rank_loss: u32) -> u32 {
 @group(0) @binding(1) var<storage, read> lanes: array<real>;
 @group(0) @binding(2) var<storage, read_write> traj: array<real>;
 @group(0) @binding(3) var<storage, read_write> counts: array<vec4<u32>>;
-// Per ring slot and lane: (impacts, flags, bits of the f32 max |y|, 0).
+// Per ring slot and lane, a slot per part of an iteration: (impacts, flags,
+// bits of the f32 max |y|, bits of the f32 nonlinearity).
 @group(0) @binding(4) var<storage, read_write> summary: array<vec4<u32>>;
 #ifdef LYAPUNOV
 // Per lane: the perturbation actually taken per copy, (x_i + δ) - x_i
 // (then x_i - (x_i - δ) for central differences).
 @group(0) @binding(5) var<storage, read_write> deltas: array<real>;
-// Per ring slot and lane: the estimated Jacobian, row-major.
+// Per ring slot (a part of an iteration) and lane: the estimated Jacobian,
+// row-major.
 @group(0) @binding(6) var<storage, read_write> jac: array<real>;
 #endif
 #ifdef POINTS
-// Per ring slot and lane: the reference's Poincaré point.
+// Per ring slot (a part of an iteration) and lane: the reference's state at
+// the part's end; the last part's is the Poincaré point.
 @group(0) @binding(7) var<storage, read_write> points: array<real>;
 #endif
 
@@ -92,4 +104,19 @@ fn store_state(base: u32, y: State) {
 fn is_finite(y: State) -> bool {
     // NaN fails every comparison; infinity exceeds the largest real.
     return all(abs(y) <= State(MAX_REAL));
+}
+
+// lavapipe (Mesa's gallivm) caps the loop iterations of one shader
+// invocation at 65 535, counted over all its loops together and shared by
+// the lanes of a SIMD group; past the cap every loop stops after one pass,
+// silently. A chattering lane, or a long dispatch of steps with impacts,
+// reached it and came out wrong. A loop of two passes, bounded by a uniform
+// so that it cannot be unrolled, tells whether this invocation stayed
+// within the cap.
+fn loop_budget_exhausted() -> bool {
+    var passes = 0u;
+    for (var i = 0u; i < 2u + control.opaque_zero; i = i + 1u) {
+        passes = passes + 1u;
+    }
+    return passes < 2u;
 }

@@ -15,6 +15,12 @@ struct WallStep {
     rank_loss: u32,
     // The slowest approach speed of the step's impacts (NO_IMPACT if none).
     slowest: real,
+    // From resolve_impacts: the mass came to rest on the wall `rest_at`
+    // into the step, at `rest_phase`, and stuck_step takes the rest of the
+    // step from there (`y` is then meaningless).
+    sticks: bool,
+    rest_at: real,
+    rest_phase: vec2<real>,
 }
 
 // At rest on the wall: the sticking state, X = X_w and V = 0.
@@ -41,7 +47,7 @@ fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
     rest.x = xw;
     if (pressing(p, xw, phase) <= real(0.0)) {
         let free = sub_step(p, omega, phase, rest, h);
-        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u, NO_IMPACT);
+        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u, NO_IMPACT, false, h, phase);
     }
     var out = rest;
     if (pressing(p, xw, rotate(phase, cos_sin(omega * h))) <= real(0.0)) {
@@ -58,7 +64,7 @@ fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
         let release = rotate(phase, cos_sin(omega * hi));
         out = clamp_to_wall(xw, sub_step(p, omega, release, rest, h - hi).y);
     }
-    return WallStep(out, 0u, false, DIM, NO_IMPACT);
+    return WallStep(out, 0u, false, DIM, NO_IMPACT, false, h, phase);
 }
 
 struct Hit {
@@ -82,7 +88,11 @@ fn clamp_to_wall(xw: real, y: State) -> State {
 }
 
 // Applies every impact inside the step [0, h] from (phase, y), whose plain
-// RK4 image y1 reached the wall or turned back inside the step.
+// RK4 image y1 reached the wall or turned back inside the step; a mass that
+// comes to rest is handed back with `sticks`, and the integrate kernel's
+// one call of stuck_step takes the rest of the step (every inlined copy of
+// its bisection loop costs loop iterations on lavapipe, whose budget per
+// invocation is small: see loop_budget_exhausted).
 fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
     let xw = wall_position(p);
     let e = wall_restitution(p);
@@ -94,8 +104,7 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
     var slowest = NO_IMPACT;
     // How the loop ended: 0 no further impact in the step, 1 at rest on the
     // wall (stuck_step takes the rest of the step from phase0), 2 out of
-    // impacts. stuck_step is called once, after the loop: with the call
-    // inside it, lavapipe computed wrong states for ordinary impacts.
+    // impacts.
     var ending = 2u;
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
@@ -141,13 +150,12 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
         ending = 1u;
     }
     if (ending == 1u) {
-        let stuck = stuck_step(p, omega, phase0, h - done);
-        return WallStep(stuck.y, impacts, false, max(rank_loss, stuck.rank_loss), slowest);
+        return WallStep(y0, impacts, false, rank_loss, slowest, true, done, phase0);
     }
     if (ending == 0u) {
-        return WallStep(y1, impacts, false, rank_loss, slowest);
+        return WallStep(y1, impacts, false, rank_loss, slowest, false, h, phase0);
     }
-    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss, slowest);
+    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss, slowest, false, h, phase0);
 }
 
 #ifdef IMPACT_LINEAR

@@ -7,6 +7,7 @@ pub mod gpu;
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
+use crate::method::lane::LanePlan;
 use crate::method::{LaneResult, LaneStatus, MethodSettings, Tangent};
 use crate::scene::{Backend, Precision, Scene};
 use crate::system::FlowSettings;
@@ -42,6 +43,8 @@ pub struct GpuReport {
     pub timings: gpu::sweep::Timings,
     pub batches: usize,
     pub chunk_steps: usize,
+    /// Batches redone with shorter dispatches (see `gpu::sweep::GpuRun::retries`).
+    pub retries: usize,
     pub validation: Option<Validation>,
 }
 
@@ -126,7 +129,7 @@ fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
             let gpu_settings = method_settings(scene, Backend::Gpu, scene.precision);
-            if let Err(Error::Invalid { reason, .. }) = gpu_steps(scene, &gpu_settings) {
+            if let Err(Error::Invalid { reason, .. }) = gpu_plan(scene, &gpu_settings) {
                 return Ok((
                     Plan::Cpu,
                     Precision::F64,
@@ -260,12 +263,16 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
     }
 }
 
-/// The GPU integrates every lane of a batch with the same number of steps:
-/// the largest any lane's plan needs (see `method::lane::plan_lane`). Parts
-/// (sub-maps) are not on the GPU yet: a scene whose lanes need them is
-/// refused there, with the reason.
-fn gpu_steps(scene: &Scene, settings: &MethodSettings) -> Result<usize> {
-    let mut steps = settings.flow.steps_per_period;
+/// The GPU integrates every lane of a sweep with the same plan: the most
+/// steps and the most parts (sub-maps) any lane's plan needs (see
+/// `method::lane::plan_lane`), the steps raised to a whole number per part.
+/// A lane cut into more parts than it needs gives the same exponents from
+/// more, shorter differences.
+fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
+    let mut plan = LanePlan {
+        steps_per_period: settings.flow.steps_per_period,
+        parts: 1,
+    };
     // Whether the kernels would compile impact code (precision is irrelevant).
     let wall = variant(scene, Precision::F64).wall;
     for k in 0..scene.sweep.values.len() {
@@ -279,23 +286,31 @@ fn gpu_steps(scene: &Scene, settings: &MethodSettings) -> Result<usize> {
                 ),
             ));
         }
-        let plan = (scene.system.plan)(&params, settings);
-        if plan.parts > 1 {
-            return Err(Error::invalid(
-                "run.backend",
-                format!(
-                    "{} = {} contracts too strongly over one period for a single finite difference; \
-                     the CPU path cuts each iteration into {} sub-maps, the GPU path cannot yet: \
-                     use backend = \"cpu\" (\"auto\" does)",
-                    scene.sweep.parameter,
-                    scene.sweep.values[k],
-                    plan.parts
-                ),
-            ));
-        }
-        steps = steps.max(plan.steps_per_period);
+        let lane = (scene.system.plan)(&params, settings);
+        plan.steps_per_period = plan.steps_per_period.max(lane.steps_per_period);
+        plan.parts = plan.parts.max(lane.parts);
     }
-    Ok(steps)
+    plan.steps_per_period = plan.steps_per_period.next_multiple_of(plan.parts);
+    // The kernels count steps in u32.
+    if plan.steps_per_period > u32::MAX as usize {
+        return Err(Error::invalid(
+            "integration.steps_per_period",
+            format!(
+                "the sweep needs {} RK4 steps per period, more than the GPU kernels count (2^32 - 1)",
+                plan.steps_per_period
+            ),
+        ));
+    }
+    Ok(plan)
+}
+
+/// `settings` for every lane of a GPU sweep, and for the CPU lanes that
+/// validate or re-estimate it: the sweep's [`gpu_plan`].
+fn follow_gpu_plan(scene: &Scene, settings: &mut MethodSettings) -> Result<()> {
+    let plan = gpu_plan(scene, settings)?;
+    settings.flow.steps_per_period = plan.steps_per_period;
+    settings.submaps = Some(plan.parts);
+    Ok(())
 }
 
 /// Runs a whole sweep on the backend the scene asks for.
@@ -321,7 +336,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
         Plan::Gpu(adapter, summary) => {
             let mut settings = method_settings(scene, Backend::Gpu, precision);
             settings.keep_jacobians = options.keep_jacobians;
-            settings.flow.steps_per_period = gpu_steps(scene, &settings)?;
+            follow_gpu_plan(scene, &mut settings)?;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
             let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
@@ -332,6 +347,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
                 timings: run.timings,
                 batches: run.batches,
                 chunk_steps: run.chunk_steps,
+                retries: run.retries,
                 validation: None,
             };
             (Backend::Gpu, run.lanes, Some(report))
@@ -384,8 +400,8 @@ fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Op
     // The same δ and difference scheme as the GPU run (both follow the
     // scene's precision), so the difference measures arithmetic only.
     let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
-    // The GPU ran every lane with the batch's steps.
-    settings.flow.steps_per_period = gpu_steps(scene, &settings).ok()?;
+    // The GPU ran every lane with the sweep's steps and parts.
+    follow_gpu_plan(scene, &mut settings).ok()?;
     let tolerance = validation_tolerance(precision);
     let mut max_difference: f64 = 0.0;
     for &k in &picks {

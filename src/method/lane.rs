@@ -124,11 +124,14 @@ pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSett
     }
 }
 
-/// One whole iteration's Jacobian at x by [`estimate_resolving_grazing`],
-/// row-major, with what happened (`SystemInfo::reestimate`).
+/// The Jacobian of one part of an iteration (the whole iteration, or a
+/// sub-map) from the reference's state x at the part's start, by
+/// [`estimate_resolving_grazing`], row-major, with what happened
+/// (`SystemInfo::reestimate`).
 pub fn reestimate_of<const D: usize, S: System<D>>(
     params: &Params,
     settings: &MethodSettings,
+    part: Part,
     x: &[f64],
 ) -> (Vec<f64>, IterationStats)
 where
@@ -137,12 +140,17 @@ where
     let system = S::new(params);
     let x: [f64; D] = std::array::from_fn(|i| x[i]);
     let mut stats = IterationStats::default();
+    // The forcing phase at the part's start, advanced through the earlier
+    // parts exactly as the reference's was (no trajectory rides along).
     let mut phase = ZERO_PHASE;
+    for earlier in Part::all(part.count).take(part.index) {
+        system.part_many(&mut [], &settings.flow, earlier, &mut phase, &mut []);
+    }
     let (_, j) = estimate_resolving_grazing(
         &system,
         &settings.flow,
         settings,
-        Part::WHOLE,
+        part,
         &mut phase,
         &x,
         &mut stats,

@@ -66,9 +66,10 @@ pub struct SystemInfo {
     /// Why the GPU kernels cannot run a lane with these parameters, if
     /// they cannot (what the CPU path models and the kernels do not yet).
     pub gpu_refuses: fn(&Params) -> Option<String>,
-    /// One whole iteration's Jacobian at x, re-estimated on the CPU with the
-    /// grazing ladder (`method::lane::reestimate_of`): what the GPU host
-    /// does with iterations its kernels flag as grazing. Row-major.
+    /// One part's Jacobian (the whole iteration's, or a sub-map's) from x,
+    /// re-estimated on the CPU with the grazing ladder
+    /// (`method::lane::reestimate_of`): what the GPU host does with the
+    /// parts its kernels flag as grazing. Row-major.
     pub reestimate: Reestimate,
     /// How a lane would be cut (`method::lane::plan_lane`), without running it.
     pub plan: fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan,
@@ -148,7 +149,7 @@ pub struct FlowSettings {
 
 /// See [`SystemInfo::reestimate`].
 pub type Reestimate =
-    fn(&Params, &crate::method::MethodSettings, &[f64]) -> (Vec<f64>, IterationStats);
+    fn(&Params, &crate::method::MethodSettings, Part, &[f64]) -> (Vec<f64>, IterationStats);
 
 /// Part `index` of `count` equal parts of one map iteration: a sub-map.
 /// Over a long period a strongly contracting direction shrinks below what a

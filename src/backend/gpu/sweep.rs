@@ -1,8 +1,8 @@
 //! One GPU sweep: buffers, the dispatch schedule and the streaming readback.
 //!
-//! Per map iteration the host encodes `ceil(steps / chunk_steps)` integrate
-//! dispatches and one finish dispatch; nothing crosses back to the host per
-//! iteration. The transient runs references only, with no readback. While
+//! Per map iteration, and per part of one when it is cut into sub-maps, the
+//! host encodes `ceil(steps / chunk_steps)` integrate dispatches and one
+//! finish dispatch; nothing crosses back to the host per iteration. The transient runs references only, with no readback. While
 //! averaging, each chunk of iterations writes its Jacobians, points and
 //! summaries into a ring of slots that is copied to one of two staging
 //! buffers; the host maps and accumulates QR for one chunk while the GPU
@@ -25,12 +25,22 @@ use crate::integrate::clock::cos_sin;
 use crate::method::lane::{is_grazing, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
-use crate::system::IterationStats;
+use crate::system::{IterationStats, Part};
 
 /// Lane-steps (RK4 steps of one trajectory) per integrate dispatch: small
 /// enough that no dispatch trips a desktop driver's watchdog (~2 s), large
 /// enough to fill a GPU.
 const DISPATCH_LANE_STEPS: usize = 1 << 22;
+/// Steps per integrate dispatch with a wall on a software adapter. lavapipe
+/// caps the loop iterations of one invocation at 65 535 (every loop
+/// together, shared by a SIMD group; see `loop_budget_exhausted` in
+/// shaders/shared/bindings.wgsl), and a step with impacts runs many loops:
+/// a dispatch of 1 300 steps with 3 700 impacts went past it. Quiet steps
+/// cost a few dozen iterations, so 256 leave room for ~60 impacts of 1 000
+/// each; a batch whose dispatches still ran past the cap is redone with
+/// dispatches `TRUNCATION_RETRY` times shorter.
+const SOFTWARE_WALL_CHUNK: usize = 256;
+const TRUNCATION_RETRY: usize = 8;
 /// Lane-steps per transient submission, after which the host waits.
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
@@ -38,13 +48,13 @@ const CHUNK_BYTES: u64 = 32 << 20;
 /// Invocations per workgroup unless the run asks otherwise
 /// (docs/BENCHMARKS.md measures sizes 1 to 256 on lavapipe).
 ///
-/// On lavapipe (SIMD groups of 8), an earlier form of the impact kernel let
-/// one lane chattering against the wall change the seven beside it, and
-/// ordinary impacts went wrong with the sticking code inside the impact
-/// loop. Both went away when stuck_step moved out of that loop; tests/gpu.rs
-/// holds lanes apart (`a_faulty_or_chattering_lane_touches_no_other_lane`)
-/// and compares size 1, where no lane shares a SIMD group, with this size bit
-/// for bit on chaotic, grazing, sticking and overflowing lanes.
+/// On lavapipe a lane chattering against the wall once changed the seven
+/// beside it in its SIMD group of 8: they share the adapter's loop budget
+/// (see `SOFTWARE_WALL_CHUNK`), which the chattering lane used up. Such a
+/// dispatch is now detected and redone; tests/gpu.rs holds lanes apart
+/// (`a_faulty_or_chattering_lane_touches_no_other_lane`) and compares size
+/// 1, where no lane shares a SIMD group, with this size bit for bit on
+/// chaotic, grazing, sticking and overflowing lanes.
 pub const DEFAULT_WORKGROUP: u32 = 64;
 
 /// Where a GPU run's wall time went.
@@ -90,6 +100,9 @@ pub struct GpuRun {
     pub batches: usize,
     /// RK4 steps per integrate dispatch in the averaging phase.
     pub chunk_steps: usize,
+    /// Batches redone with shorter dispatches because the adapter cut a
+    /// dispatch's loops short (see `SOFTWARE_WALL_CHUNK`).
+    pub retries: usize,
 }
 
 /// Runs the whole sweep, split into batches that fit the device's limits
@@ -119,14 +132,16 @@ struct Layout {
     real: u64,
     lane_stride: usize,
     traj_stride: usize,
-    /// Ring bytes per lane and iteration: summary, Jacobian, point.
+    /// Ring bytes per lane and part of an iteration: summary, Jacobian, point.
     summary: u64,
     jacobian: u64,
     point: u64,
+    /// Parts (sub-maps) per iteration, each with its ring slot.
+    parts: usize,
 }
 
 impl Layout {
-    fn new(scene: &Scene, variant: &Variant) -> Self {
+    fn new(scene: &Scene, variant: &Variant, settings: &MethodSettings) -> Self {
         let dim = scene.system.dimension();
         let real = match variant.precision {
             Precision::F64 => 8,
@@ -144,11 +159,17 @@ impl Layout {
                 0
             },
             point: if variant.points { dim as u64 * real } else { 0 },
+            parts: settings.submaps.unwrap_or(1),
         }
     }
 
     fn per_iteration(&self) -> u64 {
-        self.summary + self.jacobian + self.point
+        (self.summary + self.jacobian + self.point) * self.parts as u64
+    }
+
+    /// The largest ring array's bytes per lane and iteration.
+    fn largest_per_iteration(&self) -> u64 {
+        self.jacobian.max(self.point).max(self.summary) * self.parts as u64
     }
 }
 
@@ -166,7 +187,7 @@ where
     let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
     let pipelines = Pipelines::new(gpu, variant, workgroup);
     let stopwatch = Stopwatch::new(gpu);
-    let layout = Layout::new(scene, variant);
+    let layout = Layout::new(scene, variant, settings);
     let limits = &gpu.limits;
     let binding = limits
         .max_storage_buffer_binding_size
@@ -176,7 +197,7 @@ where
     let by_dispatch =
         limits.max_compute_workgroups_per_dimension as usize * workgroup as usize / layout.traj;
     let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
-    let by_ring = (binding / layout.jacobian.max(layout.point).max(layout.summary)) as usize;
+    let by_ring = (binding / layout.largest_per_iteration()) as usize;
     let batch_lanes = by_dispatch
         .min(by_binding)
         .min(by_ring)
@@ -190,23 +211,48 @@ where
     };
     let mut batches = 0;
     let mut chunk_steps = 0;
+    // The first try's dispatch length, and how many batches were redone
+    // with shorter ones.
+    let mut max_chunk = if variant.wall && !gpu.summary.is_hardware() {
+        SOFTWARE_WALL_CHUNK
+    } else {
+        usize::MAX
+    };
+    let mut retries = 0;
     for first in (0..total).step_by(batch_lanes) {
         let count = batch_lanes.min(total - first);
-        let batch = Batch::<D>::new(
-            gpu,
-            &pipelines,
-            stopwatch.as_ref(),
-            scene,
-            variant,
-            settings,
-            &layout,
-            first,
-            count,
-        );
-        chunk_steps = batch.chunk_steps;
-        let (results, t) = batch.run(gpu, &pipelines)?;
-        timings.add(&t);
-        lanes.extend(results);
+        loop {
+            let batch = Batch::<D>::new(
+                gpu,
+                &pipelines,
+                stopwatch.as_ref(),
+                scene,
+                variant,
+                settings,
+                &layout,
+                first,
+                count,
+                max_chunk,
+            );
+            chunk_steps = batch.chunk_steps;
+            let (results, t) = batch.run(gpu, &pipelines)?;
+            timings.add(&t);
+            if let Some(results) = results {
+                lanes.extend(results);
+                break;
+            }
+            // The adapter cut a dispatch's loops short: the results are
+            // wrong, and shorter dispatches stay within its cap.
+            if chunk_steps == 1 {
+                return Err(gpu_error(
+                    "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
+                     of 65 535 loop iterations per invocation): use backend = \"cpu\""
+                        .into(),
+                ));
+            }
+            max_chunk = (chunk_steps / TRUNCATION_RETRY).max(1);
+            retries += 1;
+        }
         batches += 1;
     }
     Ok(GpuRun {
@@ -214,6 +260,7 @@ where
         timings,
         batches,
         chunk_steps,
+        retries,
     })
 }
 
@@ -310,7 +357,8 @@ struct Control {
     ring: u32,
     /// Always 0; see `opaque_zero` in the WGSL.
     opaque_zero: u32,
-    pad: [u32; 2],
+    part_steps: u32,
+    parts: u32,
 }
 
 /// Reals in the precision of the variant, as bytes.
@@ -342,6 +390,8 @@ struct Batch<'a, const D: usize> {
     precision: Precision,
     count: usize,
     steps: usize,
+    /// Steps per part (sub-map) of an iteration, `steps / layout.parts`.
+    part_steps: usize,
     chunk_steps: usize,
     transient_chunk_steps: usize,
     ring: usize,
@@ -385,6 +435,7 @@ where
         layout: &'a Layout,
         first: usize,
         count: usize,
+        max_chunk: usize,
     ) -> Self {
         let device = &gpu.device;
         let precision = variant.precision;
@@ -395,6 +446,9 @@ where
             1
         };
         let traj = layout.traj;
+        // The backend makes the steps a multiple of the parts (`gpu_plan`).
+        assert_eq!(steps % layout.parts, 0, "steps are whole parts");
+        let part_steps = steps / layout.parts;
 
         // Per lane: parameters, h, cos(ωh/2), sin(ωh/2), ω, δ.
         let mut lane_data = Vec::with_capacity(count * layout.lane_stride);
@@ -453,17 +507,16 @@ where
             .min(gpu.limits.max_buffer_size);
         let ring_budget = CHUNK_BYTES.min(binding);
         let ring_by_budget = (ring_budget / per_iteration.max(1)) as usize;
-        let ring_by_binding = (binding
-            / (layout.jacobian.max(layout.point).max(layout.summary) * count as u64))
-            as usize;
+        let ring_by_binding = (binding / (layout.largest_per_iteration() * count as u64)) as usize;
         let ring = ring_by_budget
             .min(ring_by_binding)
             .clamp(1, settings.iterations.max(1));
 
         let chunk =
             |trajectories: usize| (DISPATCH_LANE_STEPS / trajectories.max(1)).clamp(1, steps);
-        let chunk_steps = chunk(count * traj);
-        let transient_chunk_steps = chunk(count);
+        // While averaging a dispatch stops at the end of a part.
+        let chunk_steps = chunk(count * traj).min(part_steps).min(max_chunk);
+        let transient_chunk_steps = chunk(count).min(max_chunk);
 
         let storage = wgpu::BufferUsages::STORAGE
             | wgpu::BufferUsages::COPY_SRC
@@ -490,7 +543,8 @@ where
             transient: u32::from(transient),
             ring: ring as u32,
             opaque_zero: 0,
-            pad: [0; 2],
+            part_steps: part_steps as u32,
+            parts: layout.parts as u32,
         };
         let transient_uniform = init(
             "control (transient)",
@@ -509,20 +563,17 @@ where
         );
         let traj_buffer = init("trajectories", &real_bytes(&traj_data, precision), storage);
         let counts = empty("counts", (count * traj * 16) as u64, storage);
-        let summary = empty("summary", layout.summary * (ring * count) as u64, storage);
+        let slots = (ring * layout.parts * count) as u64;
+        let summary = empty("summary", layout.summary * slots, storage);
         let deltas_buffer = pipelines
             .lyapunov
             .then(|| init("deltas", &real_bytes(&deltas, precision), storage));
-        let jac = pipelines.lyapunov.then(|| {
-            empty(
-                "jacobians",
-                layout.jacobian * (ring * count) as u64,
-                storage,
-            )
-        });
+        let jac = pipelines
+            .lyapunov
+            .then(|| empty("jacobians", layout.jacobian * slots, storage));
         let points = pipelines
             .points
-            .then(|| empty("points", layout.point * (ring * count) as u64, storage));
+            .then(|| empty("points", layout.point * slots, storage));
         let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         let ticks_offset = per_iteration * ring as u64;
         let ticks_bytes = if stopwatch.is_some() {
@@ -582,6 +633,7 @@ where
             let mut cpu =
                 crate::backend::method_settings(scene, crate::scene::Backend::Cpu, Precision::F64);
             cpu.flow.steps_per_period = steps;
+            cpu.submaps = Some(layout.parts);
             Grazing {
                 system: scene.system,
                 params: (first..first + count)
@@ -597,6 +649,7 @@ where
             precision,
             count,
             steps,
+            part_steps,
             chunk_steps,
             transient_chunk_steps,
             ring,
@@ -614,8 +667,9 @@ where
         }
     }
 
-    /// Encodes `iterations` map iterations: integrate dispatches in chunks of
-    /// `chunk_steps`, then the finish kernel; one pass, timed in `slot`.
+    /// Encodes `iterations` map iterations: per part (the whole iteration in
+    /// the transient), integrate dispatches in chunks of `chunk_steps`, then
+    /// the finish kernel; one pass, timed in `slot`.
     fn encode_iterations(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -624,17 +678,21 @@ where
         iterations: usize,
         slot: u32,
     ) {
-        let (bind_group, chunk, invocations) = if transient {
+        let (bind_group, chunk, invocations, parts, part_steps) = if transient {
             (
                 &self.transient_control,
                 self.transient_chunk_steps,
                 self.count,
+                1,
+                self.steps,
             )
         } else {
             (
                 &self.averaging_control,
                 self.chunk_steps,
                 self.count * self.layout.traj,
+                self.layout.parts,
+                self.part_steps,
             )
         };
         let groups = |n: usize| n.div_ceil(pipelines.workgroup as usize) as u32;
@@ -643,9 +701,9 @@ where
             timestamp_writes: self.stopwatch.map(|s| s.writes(slot)),
         });
         pass.set_bind_group(0, bind_group, &[]);
-        for _ in 0..iterations {
+        for _ in 0..iterations * parts {
             pass.set_pipeline(&pipelines.integrate);
-            for _ in 0..self.steps.div_ceil(chunk) {
+            for _ in 0..part_steps.div_ceil(chunk) {
                 pass.dispatch_workgroups(groups(invocations), 1, 1);
             }
             pass.set_pipeline(&pipelines.finish);
@@ -653,7 +711,10 @@ where
         }
     }
 
-    fn run(self, gpu: &Gpu, pipelines: &Pipelines) -> Result<(Vec<LaneResult>, Timings)> {
+    /// The batch's lanes, or `None` when a dispatch ran past the adapter's
+    /// loop cap (the lanes are then wrong and the batch must be redone).
+    #[allow(clippy::type_complexity)]
+    fn run(self, gpu: &Gpu, pipelines: &Pipelines) -> Result<(Option<Vec<LaneResult>>, Timings)> {
         let device = &gpu.device;
         let queue = &gpu.queue;
         let settings = self.settings;
@@ -691,7 +752,7 @@ where
         let start = Instant::now();
         let plan = LanePlan {
             steps_per_period: self.steps,
-            parts: 1,
+            parts: self.layout.parts,
         };
         let mut accumulators: Vec<LaneAccumulator<D>> = self
             .periods
@@ -720,19 +781,29 @@ where
             };
             if let Some(done) = pending.replace(submitted) {
                 let lanes = &mut accumulators;
-                self.collect(gpu, lanes, &mut previous, &chunks, done, &mut timings)?;
+                if !self.collect(gpu, lanes, &mut previous, &chunks, done, &mut timings)? {
+                    // Let the chunk in flight finish before its buffers go.
+                    if let Some(in_flight) = pending {
+                        wait_for(device, in_flight.index)?;
+                    }
+                    return Ok((None, timings));
+                }
             }
         }
         if let Some(last) = pending {
             let lanes = &mut accumulators;
-            self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)?;
+            if !self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)? {
+                return Ok((None, timings));
+            }
         }
         timings.averaging = start.elapsed();
         Ok((
-            accumulators
-                .into_iter()
-                .map(LaneAccumulator::finish)
-                .collect(),
+            Some(
+                accumulators
+                    .into_iter()
+                    .map(LaneAccumulator::finish)
+                    .collect(),
+            ),
             timings,
         ))
     }
@@ -763,7 +834,7 @@ where
         staging: &wgpu::Buffer,
         iterations: usize,
     ) {
-        let lanes = (iterations * self.count) as u64;
+        let lanes = (iterations * self.layout.parts * self.count) as u64;
         let mut offset = 0;
         let mut copy = |source: &wgpu::Buffer, bytes: u64| {
             if bytes > 0 {
@@ -789,7 +860,8 @@ where
     }
 
     /// Waits for a submitted chunk's staging copy, reads it and accumulates
-    /// QR for every lane.
+    /// QR for every lane; false (nothing accumulated) when a dispatch ran
+    /// past the adapter's loop cap.
     #[allow(clippy::too_many_arguments)]
     fn collect(
         &self,
@@ -799,7 +871,7 @@ where
         chunks: &[(usize, usize)],
         pending: Pending,
         timings: &mut Timings,
-    ) -> Result<()> {
+    ) -> Result<bool> {
         let start = Instant::now();
         wait_for(&gpu.device, pending.index)?;
         timings.gpu_wait += start.elapsed();
@@ -812,7 +884,8 @@ where
         let c = pending.chunk;
         let (first_iteration, n) = chunks[c];
         let staging = &self.staging[c % 2];
-        let lanes = (n * self.count) as u64;
+        let parts = self.layout.parts;
+        let lanes = (n * parts * self.count) as u64;
         let (summary, jac, points) = {
             let view = staging
                 .get_mapped_range(..)
@@ -833,6 +906,9 @@ where
         };
         staging.unmap();
         timings.readback += start.elapsed();
+        if summary.iter().any(|s| s[1] & FLAG_TRUNCATED != 0) {
+            return Ok(false);
+        }
 
         let start = Instant::now();
         let count = self.count;
@@ -845,51 +921,72 @@ where
             .zip(previous.par_iter_mut())
             .enumerate()
             .for_each(|(lane, (acc, x_n))| {
+                let mut jacobians: Vec<SMatrix<f64, D, D>> = Vec::with_capacity(parts);
                 for j in 0..n {
-                    let slot = j * count + lane;
-                    let [impacts, flags, scale_bits, nonlinearity_bits] = summary[slot];
-                    if flags & FLAG_NONFINITE != 0 {
+                    let slot = |part: usize| (j * parts + part) * count + lane;
+                    // A failed reference reports in its iteration's last
+                    // part; the earlier slots may hold an older iteration.
+                    if (0..parts).any(|p| summary[slot(p)][1] & FLAG_NONFINITE != 0) {
                         acc.fail(transient + first_iteration + j);
                         break;
                     }
-                    let mut stats = IterationStats {
-                        impacts,
-                        chattering: flags & FLAG_CHATTERING != 0,
-                        rank_loss: if flags & FLAG_RANK_ALL != 0 {
-                            D as u32
-                        } else {
-                            u32::from(flags & FLAG_RANK_ONE != 0)
-                        },
-                        ..Default::default()
-                    };
-                    let mut jacobian: Option<SMatrix<f64, D, D>> = has_jac
-                        .then(|| SMatrix::from_row_slice(&jac[slot * D * D..(slot + 1) * D * D]));
-                    let point: Option<[f64; D]> =
-                        has_points.then(|| std::array::from_fn(|k| points[slot * D + k]));
-                    // A grazing iteration: the host redoes it on the CPU,
-                    // from the point it started at, with the δ ladder.
-                    let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
-                    if let (Some(g), Some(x), Some(j)) = (grazing, x_n.as_ref(), jacobian.as_mut())
-                    {
-                        if stats.rank_loss == 0
-                            && is_grazing(self.settings.difference, nonlinearity, j)
-                        {
-                            let (cpu, cpu_stats) =
-                                (g.system.reestimate)(&g.params[lane], &g.settings, x);
-                            *j = SMatrix::from_row_slice(&cpu);
-                            stats.grazing = true;
-                            stats.grazing_error = cpu_stats.grazing_error;
+                    let mut stats = IterationStats::default();
+                    let mut scale = 0.0;
+                    let mut point = None;
+                    jacobians.clear();
+                    for p in 0..parts {
+                        let s = slot(p);
+                        let [impacts, flags, scale_bits, nonlinearity_bits] = summary[s];
+                        let mut part = IterationStats {
+                            impacts,
+                            chattering: flags & FLAG_CHATTERING != 0,
+                            rank_loss: if flags & FLAG_RANK_ALL != 0 {
+                                D as u32
+                            } else {
+                                u32::from(flags & FLAG_RANK_ONE != 0)
+                            },
+                            ..Default::default()
+                        };
+                        if has_jac {
+                            let mut jacobian =
+                                SMatrix::from_row_slice(&jac[s * D * D..(s + 1) * D * D]);
+                            // A grazing part: the host redoes it on the CPU,
+                            // from the point it started at, with the δ ladder.
+                            let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
+                            if let (Some(g), Some(x)) = (grazing, x_n.as_ref()) {
+                                if part.rank_loss == 0
+                                    && is_grazing(self.settings.difference, nonlinearity, &jacobian)
+                                {
+                                    let index = Part {
+                                        index: p,
+                                        count: parts,
+                                    };
+                                    let (cpu, cpu_stats) = (g.system.reestimate)(
+                                        &g.params[lane],
+                                        &g.settings,
+                                        index,
+                                        x,
+                                    );
+                                    jacobian = SMatrix::from_row_slice(&cpu);
+                                    part.grazing = true;
+                                    part.grazing_error = cpu_stats.grazing_error;
+                                }
+                            }
+                            jacobians.push(jacobian);
                         }
+                        stats.merge(&part);
+                        point = has_points.then(|| std::array::from_fn(|k| points[s * D + k]));
+                        *x_n = point;
+                        // The size of the iteration's image, as on the CPU.
+                        scale = f64::from(f32::from_bits(scale_bits));
                     }
-                    *x_n = point;
-                    let scale = f64::from(f32::from_bits(scale_bits));
-                    if !acc.record(scale, point.as_ref(), jacobian.as_slice(), &stats) {
+                    if !acc.record(scale, point.as_ref(), &jacobians, &stats) {
                         break;
                     }
                 }
             });
         timings.host_qr += start.elapsed();
-        Ok(())
+        Ok(true)
     }
 }
 
@@ -952,3 +1049,4 @@ const FLAG_CHATTERING: u32 = 1;
 const FLAG_NONFINITE: u32 = 2;
 const FLAG_RANK_ONE: u32 = 4;
 const FLAG_RANK_ALL: u32 = 8;
+const FLAG_TRUNCATED: u32 = 16;
