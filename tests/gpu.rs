@@ -838,3 +838,65 @@ fn stiff_lanes_stick_on_the_wall_on_the_gpu() {
         }
     }
 }
+
+/// Extreme sweeps (tests/stability.rs, case 5) on the GPU: η over three
+/// decades in one batch (every lane at the steps η = 0.01 needs), forcing up
+/// to 100 times the seed's, and a wall out of reach.
+#[test]
+fn extreme_sweeps_keep_the_sum_rule_on_the_gpu() {
+    for precision in [Precision::F64, Precision::F32] {
+        let p = if precision == Precision::F64 {
+            "f64"
+        } else {
+            "f32"
+        };
+        if !gpu_or_skip("extreme_sweeps_keep_the_sum_rule_on_the_gpu", precision) {
+            continue;
+        }
+        let sweep = |extra: &[&str]| {
+            let mut o: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
+            o.extend([
+                "integration.transient=100".to_owned(),
+                "integration.iterations=200".to_owned(),
+                "run.backend=\"gpu\"".to_owned(),
+                format!("run.precision=\"{p}\""),
+            ]);
+            run(SEED, &o, RunOptions::default())
+        };
+        let etas = sweep(&["sweep.values=[0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 20.0]"]);
+        let forcing = sweep(&[
+            "sweep.parameter=\"f\"",
+            "sweep.values=[1.0, 10.0, 30.0, 100.0]",
+            "system.eta=0.8",
+        ]);
+        assert!(etas.lanes[0].plan.steps_per_period >= 6283);
+        assert!(forcing.lanes.iter().all(|l| l.impacts_per_period > 0.0));
+        // Measured: f64 within 2.8e-7 of the sum rule (η = 0.01), f32 within
+        // 7e-5 (the f32 tolerance of the other GPU tests is 5e-4).
+        let tolerance = if precision == Precision::F64 {
+            1e-6
+        } else {
+            5e-4
+        };
+        for report in [&etas, &forcing] {
+            for lane in &report.lanes {
+                assert_eq!(lane.status, LaneStatus::Ok, "{p} {:?}", lane.plan);
+                let error = (lane.exponent_sum() - -0.1).abs();
+                assert!(
+                    error < tolerance,
+                    "{p}: sum off by {error:e} ({:?})",
+                    lane.plan
+                );
+            }
+        }
+        // A wall never reached: λ1 = λ2 = -ζ (measured within 3e-5 after 200
+        // iterations; the CPU test allows 1e-4).
+        let free = sweep(&["system.wall=100", "sweep.values=[0.5, 1.5]"]);
+        for lane in &free.lanes {
+            assert_eq!(lane.impacts_per_period, 0.0);
+            for l in &lane.exponents {
+                assert!((l - -0.05).abs() < 1e-4, "{p} {:?}", lane.exponents);
+            }
+        }
+    }
+}
