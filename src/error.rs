@@ -25,6 +25,10 @@ pub enum Error {
     /// The requested backend cannot run this scene.
     #[error("run.backend = \"{backend}\": {reason}")]
     Backend { backend: String, reason: String },
+    /// Results given to `plot` or `merge` are missing, malformed, or do not
+    /// belong together.
+    #[error("{path}: {reason}")]
+    Results { path: PathBuf, reason: String },
     /// Writing the output failed.
     #[error("cannot write {path}: {source}")]
     Write {

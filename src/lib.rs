@@ -21,6 +21,6 @@ pub mod output;
 pub mod scene;
 pub mod system;
 
-pub use backend::{run, run_with, Report, RunOptions};
+pub use backend::{run, run_with, Progress, Report, RunOptions};
 pub use error::{Error, Result};
 pub use scene::Scene;

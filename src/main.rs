@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+mod progress_bar;
+
 use clap::{Parser, Subcommand};
 use lyapsweep::scene::{self, Backend, Precision};
 use lyapsweep::{output, Error, Report, Scene};
@@ -36,6 +38,26 @@ enum Command {
         /// Overrides any scene key, e.g. --set integration.iterations=2000 (repeatable).
         #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
         sets: Vec<String>,
+        /// Run shard i of n (from 0): sweep values i, i + n, i + 2n, ...; `merge` combines the shards.
+        #[arg(long, value_name = "I/N")]
+        shard: Option<String>,
+        /// No progress on stderr.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Redraw the figures of an output folder from its CSV files.
+    Plot {
+        /// The output folder of a run (or of a merge).
+        dir: PathBuf,
+    },
+    /// Combine the output folders of a sharded sweep into the files one run writes.
+    Merge {
+        /// Where the merged files go.
+        #[arg(long)]
+        out: PathBuf,
+        /// The shards' output folders (all n of them, any order).
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
     },
     /// List the GPU adapters wgpu finds (honours WGPU_BACKEND and WGPU_ADAPTER_NAME for runs).
     Devices,
@@ -73,13 +95,17 @@ fn main() -> ExitCode {
             backend,
             precision,
             sets,
+            shard,
+            quiet,
         } => {
             let mut overrides = sets;
             // Flags are overrides of their scene keys, applied last.
             overrides.extend(backend.map(|b| format!("run.backend=\"{b}\"")));
             overrides.extend(precision.map(|p| format!("run.precision=\"{p}\"")));
-            exit_code(run(&scene, out, &overrides))
+            exit_code(run(&scene, out, &overrides, shard.as_deref(), quiet))
         }
+        Command::Plot { dir } => exit_code(plot(&dir)),
+        Command::Merge { out, shards } => exit_code(merge(&out, &shards)),
     }
 }
 
@@ -94,18 +120,55 @@ fn exit_code(result: Result<(), Error>) -> ExitCode {
     }
 }
 
-fn run(path: &std::path::Path, out: Option<PathBuf>, overrides: &[String]) -> Result<(), Error> {
-    let scene = scene::load(path, overrides)?;
-    let report = lyapsweep::run(&scene)?;
-    let dir = out.unwrap_or_else(|| PathBuf::from("out").join(&scene.name));
+fn run(
+    path: &std::path::Path,
+    out: Option<PathBuf>,
+    overrides: &[String],
+    shard: Option<&str>,
+    quiet: bool,
+) -> Result<(), Error> {
+    let mut scene = scene::load(path, overrides)?;
+    if let Some(shard) = shard {
+        scene = scene.sharded(scene::Shard::parse(shard)?)?;
+    }
+    let dir = out.unwrap_or_else(|| match scene.shard {
+        Some(s) => {
+            PathBuf::from("out").join(format!("{}.shard-{}-of-{}", scene.name, s.index, s.count))
+        }
+        None => PathBuf::from("out").join(&scene.name),
+    });
+    let progress = lyapsweep::Progress::default();
+    let watcher = (!quiet).then(|| progress_bar::watch(&progress));
+    let options = lyapsweep::RunOptions {
+        progress: Some(progress.clone()),
+        ..Default::default()
+    };
+    let report = lyapsweep::run_with(&scene, &options);
+    if let Some(w) = watcher {
+        w.finish();
+    }
+    let report = report?;
     let written = output::write(&scene, &report, &dir)?;
     print_summary(&scene, &report, &written);
     Ok(())
 }
 
+fn plot(dir: &std::path::Path) -> Result<(), Error> {
+    for path in output::results::draw(dir)? {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn merge(out: &std::path::Path, shards: &[PathBuf]) -> Result<(), Error> {
+    for path in output::merge::merge(out, shards)? {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
 fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
     let i = &scene.integration;
-    let values = &scene.sweep.values;
     println!("lyapsweep: {} ({})", scene.name, scene.system.kind);
     if let Some(choice) = &report.choice {
         println!("  {choice}");
@@ -128,16 +191,33 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
             report.threads
         ),
     }
-    let (lo, hi) = values
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    println!(
-        "  lanes        {} values of {} in [{lo}, {hi}]",
-        values.len(),
-        scene.sweep.parameter
-    );
+    let ranges: Vec<String> = scene
+        .sweep
+        .axes()
+        .map(|axis| {
+            let (lo, hi) = axis
+                .values
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                });
+            format!(
+                "{} values of {} in [{lo}, {hi}]",
+                axis.values.len(),
+                axis.parameter
+            )
+        })
+        .collect();
+    let shard = scene.shard.map_or(String::new(), |s| {
+        format!(
+            "; shard {} of {}: {} of the {} lanes",
+            s.index,
+            s.count,
+            scene.lane_count(),
+            scene.sweep.lanes()
+        )
+    });
+    println!("  lanes        {}{shard}", ranges.join(" × "));
     let mut method = format!("transient {}, iterations {}", i.transient, i.iterations);
     if report.backend != Backend::Exact && scene.lyapunov {
         method += &format!(", δ = {:e}", scene.perturbation());

@@ -11,6 +11,9 @@
 //! from = 0.5                      # from, to, count (inclusive, evenly spaced; count default 101)
 //! to = 1.5                        # ... or values = [..]; neither: the [system] value alone
 //! count = 4096
+//! [sweep.second]                  # optional: a second parameter, for a map over the grid
+//! parameter = "f"                 #   (same keys; lanes run over the grid, first axis fastest)
+//! values = [0.5, 1.0, 2.0]
 //! [integration]
 //! steps_per_period = 450          # RK4 steps per map period (flows; raised where a lane's
 //!                                 #   fastest time scale needs it, and the summary says so)
@@ -29,6 +32,8 @@
 //! [output]
 //! lyapunov = "spectrum"           # or "none"
 //! bifurcation_points = 0          # last reference points kept per parameter value
+//! plot = true                     # figures (PNG and SVG); default: when the sweep has
+//!                                 #   more than one value
 //! ```
 //!
 //! Unknown keys, wrong types and impossible values are errors that name the key.
@@ -141,14 +146,85 @@ pub struct Scene {
     pub validate: usize,
     pub lyapunov: bool,
     pub bifurcation_points: usize,
+    /// Draw the figures next to the CSV files.
+    pub plot: bool,
+    /// The part of the sweep this run computes (`--shard i/n`), if not all.
+    pub shard: Option<Shard>,
+    /// The scene as TOML after overrides (keys sorted), written next to the
+    /// results so that `plot` and `merge` know what produced them.
+    pub source: String,
 }
 
+/// One swept parameter and its values.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Sweep {
+pub struct Axis {
     pub parameter: String,
-    /// Index of the swept parameter in the system's list.
+    /// Index of the parameter in the system's list.
     pub index: usize,
     pub values: Vec<f64>,
+}
+
+/// What a scene sweeps: one parameter, or two (`[sweep.second]`) for a map
+/// over their grid. Lanes run over the grid with the first axis fastest:
+/// lane k is (first[k % n₁], second[k / n₁]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub first: Axis,
+    pub second: Option<Axis>,
+}
+
+impl Sweep {
+    /// Lanes in the whole sweep.
+    pub fn lanes(&self) -> usize {
+        self.first.values.len() * self.second.as_ref().map_or(1, |a| a.values.len())
+    }
+
+    /// The axes, first then second.
+    pub fn axes(&self) -> impl Iterator<Item = &Axis> {
+        std::iter::once(&self.first).chain(self.second.as_ref())
+    }
+
+    /// The swept values of lane `k`, one per axis.
+    pub fn values_at(&self, k: usize) -> Vec<f64> {
+        let n = self.first.values.len();
+        let mut values = vec![self.first.values[k % n]];
+        values.extend(self.second.as_ref().map(|a| a.values[k / n]));
+        values
+    }
+}
+
+/// Shard `index` of `count` (`--shard i/n`, counted from 0): sweep lanes
+/// index, index + count, index + 2·count, …, so that every shard gets its
+/// share of each region of the sweep (chaotic windows cost more).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// `i/n` as the command line gives it.
+    pub fn parse(text: &str) -> Result<Shard> {
+        let bad = |reason: &str| Error::invalid("--shard", format!("{text:?}: {reason}"));
+        let (i, n) = text
+            .split_once('/')
+            .ok_or_else(|| bad("expected i/n, e.g. 0/4"))?;
+        let number = |t: &str| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|_| bad("i and n must be whole numbers"))
+        };
+        let (index, count) = (number(i)?, number(n)?);
+        if count == 0 || index >= count {
+            return Err(bad("needs 0 ≤ i < n"));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The sweep lanes of this shard, in order.
+    pub fn lanes(&self, sweep_lanes: usize) -> impl Iterator<Item = usize> {
+        (self.index..sweep_lanes).step_by(self.count)
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -189,11 +265,63 @@ impl Scene {
             })
     }
 
-    /// The parameter values of lane `i`.
-    pub fn lane_params(&self, i: usize) -> Params {
+    /// Lanes this run computes: the sweep's, or its shard's.
+    pub fn lane_count(&self) -> usize {
+        let all = self.sweep.lanes();
+        self.shard.map_or(all, |s| s.lanes(all).count())
+    }
+
+    /// The sweep lane of this run's lane `j`.
+    pub fn sweep_lane(&self, j: usize) -> usize {
+        self.shard.map_or(j, |s| s.index + j * s.count)
+    }
+
+    /// The parameter values of sweep lane `k` (of the whole sweep).
+    pub fn params_at(&self, k: usize) -> Params {
         let mut p = self.params.clone();
-        p.set(self.sweep.index, self.sweep.values[i]);
+        for (axis, value) in self.sweep.axes().zip(self.sweep.values_at(k)) {
+            p.set(axis.index, value);
+        }
         p
+    }
+
+    /// The parameter values of this run's lane `j`.
+    pub fn lane_params(&self, j: usize) -> Params {
+        self.params_at(self.sweep_lane(j))
+    }
+
+    /// The swept values of this run's lane `j`, one per axis.
+    pub fn lane_values(&self, j: usize) -> Vec<f64> {
+        self.sweep.values_at(self.sweep_lane(j))
+    }
+
+    /// "eta = 0.7" or "eta = 0.7, f = 2": where sweep lane `k` is.
+    pub fn describe(&self, k: usize) -> String {
+        self.sweep
+            .axes()
+            .zip(self.sweep.values_at(k))
+            .map(|(axis, v)| format!("{} = {v}", axis.parameter))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// This scene restricted to `shard` (checked against the sweep's size).
+    pub fn sharded(mut self, shard: Shard) -> Result<Scene> {
+        let lanes = self.sweep.lanes();
+        if shard.count > lanes {
+            return Err(Error::invalid(
+                "--shard",
+                format!(
+                    "{}/{}: the sweep has {lanes} values, so shard {} of {} would be empty",
+                    shard.index,
+                    shard.count,
+                    shard.count - 1,
+                    shard.count
+                ),
+            ));
+        }
+        self.shard = Some(shard);
+        Ok(self)
     }
 }
 
@@ -216,6 +344,14 @@ struct RawScene {
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSweep {
+    #[serde(flatten)]
+    axis: RawAxis,
+    second: Option<RawAxis>,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAxis {
     parameter: Option<String>,
     from: Option<f64>,
     to: Option<f64>,
@@ -249,6 +385,7 @@ struct RawRun {
 struct RawOutput {
     lyapunov: Option<Lyapunov>,
     bifurcation_points: Option<usize>,
+    plot: Option<bool>,
 }
 
 /// Reads and checks a scene file, applying `--set key.path=value` overrides first.
@@ -277,6 +414,12 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
     for o in overrides {
         apply_override(&mut table, o)?;
     }
+    // The name goes into the written scene, so that it reads back the same
+    // wherever the file lies.
+    table
+        .entry("name")
+        .or_insert_with(|| toml::Value::String(default_name.to_owned()));
+    let source = toml::to_string(&table).expect("a parsed table serialises");
     let raw: RawScene =
         serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
             let path = e.path().to_string();
@@ -294,7 +437,7 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
                 message: format!("{key}{first_line}"),
             }
         })?;
-    resolve(raw, default_name)
+    resolve(raw, default_name, source)
 }
 
 /// `--set integration.iterations=2000`: the value is read as TOML, or as a
@@ -326,7 +469,7 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
     Ok(())
 }
 
-fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
+fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
     let (info, params) = resolve_system(&raw.system)?;
     let sweep = resolve_sweep(info, &params, raw.sweep)?;
 
@@ -379,17 +522,19 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         ));
     }
     // The start must be admissible at every swept value (the wall may be swept).
-    for (k, value) in sweep.values.iter().enumerate() {
-        let mut p = params.clone();
-        p.set(sweep.index, *value);
-        (info.check_state)(&p, state).map_err(|reason| {
-            let at = if sweep.values.len() > 1 {
-                format!(" (at {} = {value}, sweep value {k})", sweep.parameter)
-            } else {
-                String::new()
-            };
-            Error::invalid("integration.initial_state", format!("{reason}{at}"))
-        })?;
+    for axis in sweep.axes() {
+        for (k, value) in axis.values.iter().enumerate() {
+            let mut p = params.clone();
+            p.set(axis.index, *value);
+            (info.check_state)(&p, state).map_err(|reason| {
+                let at = if axis.values.len() > 1 {
+                    format!(" (at {} = {value}, sweep value {k})", axis.parameter)
+                } else {
+                    String::new()
+                };
+                Error::invalid("integration.initial_state", format!("{reason}{at}"))
+            })?;
+        }
     }
 
     let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
@@ -431,6 +576,7 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
             ),
         ));
     }
+    let plot = raw.output.plot.unwrap_or(sweep.lanes() > 1);
     Ok(Scene {
         name,
         system: info,
@@ -442,6 +588,9 @@ fn resolve(raw: RawScene, default_name: &str) -> Result<Scene> {
         validate: raw.run.validate.unwrap_or(DEFAULT_VALIDATE),
         lyapunov,
         bifurcation_points,
+        plot,
+        shard: None,
+        source,
     })
 }
 
@@ -514,12 +663,64 @@ fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> 
 }
 
 fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> Result<Sweep> {
+    let first = resolve_axis(info, params, raw.axis, "sweep")?;
+    let second = match raw.second {
+        None => None,
+        Some(axis) => {
+            if axis.parameter.is_none() {
+                return Err(Error::invalid(
+                    "sweep.second.parameter",
+                    "is required: which parameter is the second axis",
+                ));
+            }
+            let second = resolve_axis(info, params, axis, "sweep.second")?;
+            if second.index == first.index {
+                return Err(Error::invalid(
+                    "sweep.second.parameter",
+                    format!("{} is already the first axis", second.parameter),
+                ));
+            }
+            Some(second)
+        }
+    };
+    // Each axis was checked with the other at its [system] value; the
+    // grid's corners must be valid too (a check may couple parameters).
+    if let Some(second) = &second {
+        for &x in &first.values {
+            for &y in &second.values {
+                let mut p = params.clone();
+                p.set(first.index, x);
+                p.set(second.index, y);
+                (info.check)(&p).map_err(|(name, reason)| {
+                    Error::invalid(
+                        format!("system.{name}"),
+                        format!(
+                            "{reason} (at {} = {x}, {} = {y})",
+                            first.parameter, second.parameter
+                        ),
+                    )
+                })?;
+            }
+        }
+    }
+    Ok(Sweep { first, second })
+}
+
+/// One axis of `[sweep]` (`table` names it in messages: "sweep" or
+/// "sweep.second").
+fn resolve_axis(
+    info: &'static SystemInfo,
+    params: &Params,
+    raw: RawAxis,
+    table: &str,
+) -> Result<Axis> {
+    let key = |name: &str| format!("{table}.{name}");
     let parameter = raw
         .parameter
         .unwrap_or_else(|| info.default_sweep.to_owned());
     let index = info.parameter_index(&parameter).ok_or_else(|| {
         Error::invalid(
-            "sweep.parameter",
+            key("parameter"),
             format!(
                 "{} has no parameter `{parameter}` (its parameters: {})",
                 info.kind,
@@ -527,33 +728,38 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
             ),
         )
     })?;
-    let (values, key) = match (raw.values, raw.from, raw.to) {
+    // Which key a bad value came from ("from" for a generated one, "to" for
+    // the last), and the values.
+    let (values, source) = match (raw.values, raw.from, raw.to) {
         (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
             return Err(Error::invalid(
-                "sweep.values",
+                key("values"),
                 "give either values or from/to/count, not both",
             ))
         }
         (Some(_), None, None) if raw.count.is_some() => {
             return Err(Error::invalid(
-                "sweep.count",
+                key("count"),
                 "goes with from and to, not with values",
             ))
         }
         (Some(values), None, None) => {
             if values.is_empty() {
                 return Err(Error::invalid(
-                    "sweep.values",
+                    key("values"),
                     "must hold at least one value",
                 ));
             }
-            (values, "sweep.values")
+            (values, "values")
         }
         (None, Some(from), Some(to)) => {
-            let count = positive("sweep.count", raw.count, DEFAULT_COUNT)?;
-            for (key, v) in [("sweep.from", from), ("sweep.to", to)] {
+            let count = positive(&key("count"), raw.count, DEFAULT_COUNT)?;
+            for (name, v) in [("from", from), ("to", to)] {
                 if !v.is_finite() {
-                    return Err(Error::invalid(key, format!("must be finite, got {v}")));
+                    return Err(Error::invalid(
+                        key(name),
+                        format!("must be finite, got {v}"),
+                    ));
                 }
             }
             let values = if count == 1 {
@@ -563,19 +769,25 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
                     .map(|k| from + (to - from) * k as f64 / (count - 1) as f64)
                     .collect()
             };
-            (values, "sweep.from")
+            (values, "from")
         }
         (None, Some(_), None) => {
-            return Err(Error::invalid("sweep.to", "is required with sweep.from"))
+            return Err(Error::invalid(
+                key("to"),
+                format!("is required with {}", key("from")),
+            ))
         }
         (None, None, Some(_)) => {
-            return Err(Error::invalid("sweep.from", "is required with sweep.to"))
+            return Err(Error::invalid(
+                key("from"),
+                format!("is required with {}", key("to")),
+            ))
         }
         (None, None, None) => {
             if raw.count.is_some() {
                 return Err(Error::invalid(
-                    "sweep.count",
-                    "needs sweep.from and sweep.to",
+                    key("count"),
+                    format!("needs {} and {}", key("from"), key("to")),
                 ));
             }
             (vec![params.values[index]], "system")
@@ -586,14 +798,12 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
         p.set(index, *value);
         (info.check)(&p).map_err(|(name, reason)| {
             if name == parameter {
-                let key = if key == "sweep.from" && k + 1 == values.len() && values.len() > 1 {
-                    "sweep.to"
-                } else if key == "sweep.values" {
-                    "sweep.values"
-                } else {
-                    key
+                let at = match source {
+                    "from" if k + 1 == values.len() && values.len() > 1 => key("to"),
+                    "system" => "system".to_owned(),
+                    other => key(other),
                 };
-                Error::invalid(key, format!("{parameter} = {value}: {parameter} {reason}"))
+                Error::invalid(at, format!("{parameter} = {value}: {parameter} {reason}"))
             } else {
                 Error::invalid(
                     format!("system.{name}"),
@@ -602,7 +812,7 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
             }
         })?;
     }
-    Ok(Sweep {
+    Ok(Axis {
         parameter,
         index,
         values,

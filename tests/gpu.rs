@@ -41,8 +41,8 @@ fn f64_matches_the_cpu_per_iteration_and_in_exponents() {
             o.push(format!("run.backend=\"{backend}\""));
             o
         };
-        let cpu = run(SEED, &with("cpu"), keep);
-        let gpu = run(SEED, &with("gpu"), keep);
+        let cpu = run(SEED, &with("cpu"), keep.clone());
+        let gpu = run(SEED, &with("gpu"), keep.clone());
         assert_eq!(gpu.backend, Backend::Gpu);
         assert_eq!(gpu.precision, Precision::F64);
         for (k, eta) in PERIODIC_ETAS.iter().enumerate() {

@@ -26,7 +26,7 @@ fn exponents_sum_to_minus_two_zeta_across_the_sweep() {
     let scene = common::scene(SEED, &["sweep.from=0.5", "sweep.to=1.5", "sweep.count=201"]);
     let report = common::run(&scene);
     common::assert_all_ok(&report);
-    for (lane, eta) in report.lanes.iter().zip(&scene.sweep.values) {
+    for (lane, eta) in report.lanes.iter().zip(&scene.sweep.first.values) {
         let sum = lane.exponent_sum();
         assert!((sum - -0.1).abs() < 1e-5, "η = {eta}: λ1 + λ2 = {sum}");
     }

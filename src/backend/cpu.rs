@@ -4,19 +4,23 @@
 
 use rayon::prelude::*;
 
+use super::Progress;
 use crate::method::{Lane, LaneResult, MethodSettings};
 use crate::scene::Scene;
 
-/// Runs every sweep value of `scene`, in parallel, results in sweep order.
-pub fn sweep(scene: &Scene, settings: &MethodSettings) -> Vec<LaneResult> {
-    (0..scene.sweep.values.len())
+/// Runs every lane of `scene` (of its shard, when sharded), in parallel,
+/// results in sweep order.
+pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> Vec<LaneResult> {
+    (0..scene.lane_count())
         .into_par_iter()
         .map(|k| {
             let lane = Lane {
                 params: scene.lane_params(k),
                 settings,
             };
-            (scene.system.run_lane)(&lane)
+            let result = (scene.system.run_lane)(&lane);
+            progress.advance((settings.transient + settings.iterations) as u64);
+            result
         })
         .collect()
 }

@@ -3,6 +3,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod progress;
 
 use std::time::{Duration, Instant};
 
@@ -13,6 +14,7 @@ use crate::scene::{Backend, Precision, Scene};
 use crate::system::FlowSettings;
 use gpu::context::{self, Want};
 use gpu::shader::Variant;
+pub use progress::Progress;
 
 /// The outcome of a sweep.
 #[derive(Clone, Debug)]
@@ -81,7 +83,7 @@ impl Report {
 }
 
 /// Options of a run that are not part of a scene.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct RunOptions {
     /// Split GPU sweeps into batches of at most this many lanes (the limits
     /// of the device split them anyway; tests use this to exercise it).
@@ -91,6 +93,8 @@ pub struct RunOptions {
     /// Invocations per GPU workgroup (default [`gpu::sweep::DEFAULT_WORKGROUP`]);
     /// the benchmark varies it.
     pub workgroup_size: Option<u32>,
+    /// Advanced as lanes run, for a progress display.
+    pub progress: Option<Progress>,
 }
 
 /// The per-precision tolerance of the GPU's validation against the CPU.
@@ -246,9 +250,10 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
 
 /// The kernel variant a scene needs: only the parts it uses.
 pub fn variant(scene: &Scene, precision: Precision) -> Variant {
+    // Over the whole sweep, so that every shard compiles the same kernels.
     let wall = scene.system.wall_reachable.is_some_and(|reachable| {
-        (0..scene.sweep.values.len())
-            .any(|k| reachable(&scene.lane_params(k), &scene.integration.initial_state))
+        (0..scene.sweep.lanes())
+            .any(|k| reachable(&scene.params_at(k), &scene.integration.initial_state))
     });
     Variant {
         system: scene.system,
@@ -264,7 +269,8 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
 }
 
 /// The GPU integrates every lane of a sweep with the same plan: the most
-/// steps and the most parts (sub-maps) any lane's plan needs (see
+/// steps and the most parts (sub-maps) any lane of the whole sweep (not
+/// only of the shard) needs (see
 /// `method::lane::plan_lane`), the steps raised to a whole number per part.
 /// A lane cut into more parts than it needs gives the same exponents from
 /// more, shorter differences.
@@ -275,14 +281,16 @@ fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
     };
     // Whether the kernels would compile impact code (precision is irrelevant).
     let wall = variant(scene, Precision::F64).wall;
-    for k in 0..scene.sweep.values.len() {
-        let params = scene.lane_params(k);
+    // Over the whole sweep, so that a shard runs every lane as the whole
+    // sweep would.
+    for k in 0..scene.sweep.lanes() {
+        let params = scene.params_at(k);
         if let Some(reason) = (scene.system.gpu_refuses)(&params).filter(|_| wall) {
             return Err(Error::invalid(
                 "run.backend",
                 format!(
-                    "{} = {}: {reason}: use backend = \"cpu\" (\"auto\" does)",
-                    scene.sweep.parameter, scene.sweep.values[k]
+                    "{}: {reason}: use backend = \"cpu\" (\"auto\" does)",
+                    scene.describe(k)
                 ),
             ));
         }
@@ -331,7 +339,10 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             };
             let mut settings = method_settings(scene, backend, Precision::F64);
             settings.keep_jacobians = options.keep_jacobians;
-            (backend, cpu::sweep(scene, &settings), None)
+            let progress = options.progress.clone().unwrap_or_default();
+            progress
+                .start((scene.lane_count() * (settings.transient + settings.iterations)) as u64);
+            (backend, cpu::sweep(scene, &settings, &progress), None)
         }
         Plan::Gpu(adapter, summary) => {
             let mut settings = method_settings(scene, Backend::Gpu, precision);
@@ -339,6 +350,9 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             follow_gpu_plan(scene, &mut settings)?;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
+            if let Some(p) = &options.progress {
+                p.start((scene.lane_count() * (settings.transient + settings.iterations)) as u64);
+            }
             let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
             let report = GpuReport {
                 adapter: gpu.summary.name.clone(),

@@ -19,7 +19,7 @@ use wgpu::util::DeviceExt;
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
 use super::stopwatch::{self, Stopwatch};
-use crate::backend::RunOptions;
+use crate::backend::{Progress, RunOptions};
 use crate::error::{Error, Result};
 use crate::integrate::clock::cos_sin;
 use crate::method::lane::{is_grazing, LanePlan};
@@ -203,7 +203,7 @@ where
         .min(by_ring)
         .min(options.max_batch_lanes.unwrap_or(usize::MAX))
         .max(1);
-    let total = scene.sweep.values.len();
+    let total = scene.lane_count();
     let mut lanes = Vec::with_capacity(total);
     let mut timings = Timings {
         setup: start.elapsed(),
@@ -235,7 +235,8 @@ where
                 max_chunk,
             );
             chunk_steps = batch.chunk_steps;
-            let (results, t) = batch.run(gpu, &pipelines)?;
+            let progress = options.progress.clone().unwrap_or_default();
+            let (results, t) = batch.run(gpu, &pipelines, &progress)?;
             timings.add(&t);
             if let Some(results) = results {
                 lanes.extend(results);
@@ -714,7 +715,12 @@ where
     /// The batch's lanes, or `None` when a dispatch ran past the adapter's
     /// loop cap (the lanes are then wrong and the batch must be redone).
     #[allow(clippy::type_complexity)]
-    fn run(self, gpu: &Gpu, pipelines: &Pipelines) -> Result<(Option<Vec<LaneResult>>, Timings)> {
+    fn run(
+        self,
+        gpu: &Gpu,
+        pipelines: &Pipelines,
+        progress: &Progress,
+    ) -> Result<(Option<Vec<LaneResult>>, Timings)> {
         let device = &gpu.device;
         let queue = &gpu.queue;
         let settings = self.settings;
@@ -739,6 +745,7 @@ where
                 *timings.gpu_busy.get_or_insert_default() += busy;
             }
             done += n;
+            progress.advance((self.count * n) as u64);
         }
         // The reference points x_0 the first averaging iteration starts from,
         // for re-estimating it should it graze.
@@ -781,20 +788,26 @@ where
             };
             if let Some(done) = pending.replace(submitted) {
                 let lanes = &mut accumulators;
+                let n = chunks[done.chunk].1;
                 if !self.collect(gpu, lanes, &mut previous, &chunks, done, &mut timings)? {
                     // Let the chunk in flight finish before its buffers go.
                     if let Some(in_flight) = pending {
                         wait_for(device, in_flight.index)?;
                     }
+                    progress.retreat(self.progress_made(&chunks, c));
                     return Ok((None, timings));
                 }
+                progress.advance((self.count * n) as u64);
             }
         }
         if let Some(last) = pending {
             let lanes = &mut accumulators;
+            let n = chunks[last.chunk].1;
             if !self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)? {
+                progress.retreat(self.progress_made(&chunks, chunks.len()));
                 return Ok((None, timings));
             }
+            progress.advance((self.count * n) as u64);
         }
         timings.averaging = start.elapsed();
         Ok((
@@ -806,6 +819,14 @@ where
             ),
             timings,
         ))
+    }
+
+    /// Lane-iterations this batch reported before the averaging chunk
+    /// before `chunk` turned out truncated: the transient and the chunks
+    /// before that one.
+    fn progress_made(&self, chunks: &[(usize, usize)], chunk: usize) -> u64 {
+        let averaged: usize = chunks[..chunk.saturating_sub(1)].iter().map(|c| c.1).sum();
+        (self.count * (self.settings.transient + averaged)) as u64
     }
 
     /// The references' states, read back (after the transient).

@@ -1,0 +1,200 @@
+//! Shards back into one run's files (`lyapsweep merge OUT SHARD...`).
+//!
+//! Shard i of n holds sweep lanes i, i + n, i + 2n, … (scene::Shard). Every
+//! lane is computed as in the whole sweep (the GPU takes the whole sweep's
+//! plan), so the merged CSV files are, byte for byte, those of one run.
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::results::{read_csv, scene_of};
+use super::{
+    spectrum_file, write_atomically, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE,
+};
+use crate::error::{Error, Result};
+
+/// `shard.toml`, as [`super::write`] writes it.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ShardFile {
+    index: usize,
+    count: usize,
+    /// Lanes of the whole sweep.
+    lanes: usize,
+    /// Rows of `bifurcation.csv` per lane of the shard, in order.
+    bifurcation_rows: Vec<usize>,
+}
+
+/// One shard folder, read.
+struct Shard {
+    dir: PathBuf,
+    file: ShardFile,
+    scene_text: String,
+}
+
+fn bad(path: &Path, reason: impl Into<String>) -> Error {
+    Error::Results {
+        path: path.to_owned(),
+        reason: reason.into(),
+    }
+}
+
+fn read_shard(dir: &Path) -> Result<Shard> {
+    let read = |name: &str| {
+        let path = dir.join(name);
+        std::fs::read_to_string(&path).map_err(|e| {
+            bad(
+                &path,
+                format!("cannot read it ({e}): is this the output of a `--shard` run?"),
+            )
+        })
+    };
+    let text = read(SHARD_FILE)?;
+    let file: ShardFile =
+        toml::from_str(&text).map_err(|e| bad(&dir.join(SHARD_FILE), e.message().to_owned()))?;
+    Ok(Shard {
+        dir: dir.to_owned(),
+        file,
+        scene_text: read(SCENE_FILE)?,
+    })
+}
+
+/// Merges the shard folders into `out`; returns the paths written.
+pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut shards = dirs
+        .iter()
+        .map(|d| read_shard(d))
+        .collect::<Result<Vec<_>>>()?;
+    shards.sort_by_key(|s| s.file.index);
+    let Some(first) = shards.first() else {
+        return Err(Error::invalid("merge", "give the shard folders to merge"));
+    };
+    // They must come from the same scene, split the same way, all present.
+    let (count, lanes) = (first.file.count, first.file.lanes);
+    for shard in &shards {
+        let here = |name: &str| shard.dir.join(name);
+        if shard.scene_text != first.scene_text {
+            return Err(bad(
+                &here(SCENE_FILE),
+                format!(
+                    "differs from {}: shards of different scenes (or overrides) cannot be merged",
+                    first.dir.join(SCENE_FILE).display()
+                ),
+            ));
+        }
+        if shard.file.count != count || shard.file.lanes != lanes {
+            return Err(bad(
+                &here(SHARD_FILE),
+                format!(
+                    "shard of {} over {} lanes, but {} is a shard of {count} over {lanes}",
+                    shard.file.count,
+                    shard.file.lanes,
+                    first.dir.display()
+                ),
+            ));
+        }
+    }
+    for (i, shard) in shards.iter().enumerate() {
+        if shard.file.index != i {
+            let missing_or_twice = if shard.file.index < i {
+                format!("shard {} is given twice", shard.file.index)
+            } else {
+                format!("shard {i} of {count} is missing")
+            };
+            return Err(bad(&shard.dir, missing_or_twice));
+        }
+    }
+    if shards.len() != count {
+        return Err(bad(
+            &shards[shards.len() - 1].dir,
+            format!("{} of {count} shards given", shards.len()),
+        ));
+    }
+    let scene = scene_of(&first.dir)?;
+    let shard_lanes = |i: usize| (i..lanes).step_by(count).count();
+    for (i, shard) in shards.iter().enumerate() {
+        if shard.file.bifurcation_rows.len() != shard_lanes(i) {
+            return Err(bad(
+                &shard.dir.join(SHARD_FILE),
+                format!(
+                    "{} lanes listed, shard {i} of {count} over {lanes} lanes has {}",
+                    shard.file.bifurcation_rows.len(),
+                    shard_lanes(i)
+                ),
+            ));
+        }
+    }
+
+    std::fs::create_dir_all(out).map_err(|source| Error::Write {
+        path: out.to_owned(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    let path = out.join(SCENE_FILE);
+    write_text(&path, &first.scene_text)?;
+    written.push(path);
+
+    // Per shard, its rows of each file grouped by lane; then lane k of the
+    // sweep is lane k / n of shard k % n.
+    let interleave = |name: &str, rows_of: &dyn Fn(usize) -> Vec<usize>| -> Result<PathBuf> {
+        let mut header = None;
+        let mut per_shard: Vec<Vec<Vec<csv::StringRecord>>> = Vec::new();
+        for (i, shard) in shards.iter().enumerate() {
+            let (h, records) = read_csv(&shard.dir, name)?;
+            if header
+                .as_ref()
+                .is_some_and(|first: &csv::StringRecord| *first != h)
+            {
+                return Err(bad(
+                    &shard.dir.join(name),
+                    "its header differs from shard 0's",
+                ));
+            }
+            header = Some(h);
+            let counts = rows_of(i);
+            if counts.iter().sum::<usize>() != records.len() {
+                return Err(bad(
+                    &shard.dir.join(name),
+                    format!(
+                        "{} rows, {} expected from {SHARD_FILE}",
+                        records.len(),
+                        counts.iter().sum::<usize>()
+                    ),
+                ));
+            }
+            let mut rows = records.into_iter();
+            per_shard.push(
+                counts
+                    .iter()
+                    .map(|&n| rows.by_ref().take(n).collect())
+                    .collect(),
+            );
+        }
+        let path = out.join(name);
+        write_atomically(&path, |w| {
+            w.write_record(header.as_ref().expect("at least one shard"))?;
+            for k in 0..lanes {
+                for record in &per_shard[k % count][k / count] {
+                    w.write_record(record)?;
+                }
+            }
+            Ok(())
+        })?;
+        Ok(path)
+    };
+    if scene.lyapunov {
+        written.push(interleave(spectrum_file(&scene), &|i| {
+            vec![1; shard_lanes(i)]
+        })?);
+    }
+    if scene.bifurcation_points > 0 {
+        written.push(interleave(BIFURCATION_FILE, &|i| {
+            shards[i].file.bifurcation_rows.clone()
+        })?);
+    }
+    if scene.plot {
+        written.extend(super::results::draw(out)?);
+    }
+    Ok(written)
+}
