@@ -63,29 +63,43 @@ fn bar(progress: &Progress, stop: &AtomicBool) {
 }
 
 fn lines(progress: &Progress, stop: &AtomicBool) {
+    // LYAPSWEEP_PROGRESS_SECONDS sets the interval (the tests use 0).
+    let every = std::env::var("LYAPSWEEP_PROGRESS_SECONDS")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .map_or(LINE_EVERY, Duration::from_secs_f64);
     let start = Instant::now();
-    let mut next = LINE_EVERY;
-    while !stop.load(Ordering::Relaxed) {
-        std::thread::sleep(POLL);
-        let elapsed = start.elapsed();
-        let (done, total) = (progress.done(), progress.total());
-        if elapsed < next || total == 0 {
-            continue;
+    let mut next = every;
+    loop {
+        let stopping = stop.load(Ordering::Relaxed);
+        if !stopping {
+            std::thread::sleep(POLL);
         }
-        next += LINE_EVERY;
-        let rate = done as f64 / elapsed.as_secs_f64();
-        let left = if rate > 0.0 {
-            format!(
-                ", about {:.0} s left",
-                (total - done.min(total)) as f64 / rate
-            )
-        } else {
-            String::new()
-        };
-        eprintln!(
-            "progress: {:.0}% ({done} of {total} lane-iterations) after {:.0} s, {rate:.3e} per second{left}",
-            100.0 * done as f64 / total as f64,
-            elapsed.as_secs_f64()
-        );
+        let elapsed = start.elapsed();
+        // A run long enough to have had a line gets a last one when it ends.
+        let due = elapsed >= next || (stopping && elapsed >= every);
+        if due && progress.total() > 0 {
+            next = elapsed + every;
+            line(progress, elapsed);
+        }
+        if stopping {
+            return;
+        }
     }
+}
+
+fn line(progress: &Progress, elapsed: Duration) {
+    let (done, total) = (progress.done(), progress.total());
+    let rate = done as f64 / elapsed.as_secs_f64();
+    let left = if rate > 0.0 && done < total {
+        format!(", about {:.0} s left", (total - done) as f64 / rate)
+    } else {
+        String::new()
+    };
+    eprintln!(
+        "progress: {:.0}% ({done} of {total} lane-iterations) after {:.1} s, {rate:.3e} per second{left}",
+        100.0 * done as f64 / total as f64,
+        elapsed.as_secs_f64()
+    );
 }

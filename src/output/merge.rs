@@ -26,6 +26,14 @@ struct ShardFile {
     bifurcation_rows: Vec<usize>,
 }
 
+/// One output file of every shard: its header, and per shard the rows of
+/// each of its lanes.
+struct Table {
+    name: &'static str,
+    header: csv::StringRecord,
+    per_shard: Vec<Vec<Vec<csv::StringRecord>>>,
+}
+
 /// One shard folder, read.
 struct Shard {
     dir: PathBuf,
@@ -95,20 +103,30 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
             ));
         }
     }
-    for (i, shard) in shards.iter().enumerate() {
-        if shard.file.index != i {
-            let missing_or_twice = if shard.file.index < i {
-                format!("shard {} is given twice", shard.file.index)
-            } else {
-                format!("shard {i} of {count} is missing")
-            };
-            return Err(bad(&shard.dir, missing_or_twice));
-        }
-    }
-    if shards.len() != count {
+    if let Some(pair) = shards
+        .windows(2)
+        .find(|w| w[0].file.index == w[1].file.index)
+    {
         return Err(bad(
-            &shards[shards.len() - 1].dir,
-            format!("{} of {count} shards given", shards.len()),
+            &pair[1].dir,
+            format!(
+                "shard {} is given twice (also {})",
+                pair[1].file.index,
+                pair[0].dir.display()
+            ),
+        ));
+    }
+    let missing: Vec<String> = (0..count)
+        .filter(|i| !shards.iter().any(|s| s.file.index == *i))
+        .map(|i| i.to_string())
+        .collect();
+    if !missing.is_empty() {
+        return Err(bad(
+            &first.dir,
+            format!(
+                "shard(s) {} of {count} missing: merge needs all of them",
+                missing.join(", ")
+            ),
         ));
     }
     let scene = scene_of(&first.dir)?;
@@ -126,26 +144,15 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         }
     }
 
-    std::fs::create_dir_all(out).map_err(|source| Error::Write {
-        path: out.to_owned(),
-        source,
-    })?;
-    let mut written = Vec::new();
-    let path = out.join(SCENE_FILE);
-    write_text(&path, &first.scene_text)?;
-    written.push(path);
-
-    // Per shard, its rows of each file grouped by lane; then lane k of the
-    // sweep is lane k / n of shard k % n.
-    let interleave = |name: &str, rows_of: &dyn Fn(usize) -> Vec<usize>| -> Result<PathBuf> {
-        let mut header = None;
-        let mut per_shard: Vec<Vec<Vec<csv::StringRecord>>> = Vec::new();
+    // Every file is read and checked before anything is written. Per shard,
+    // its rows grouped by lane; lane k of the sweep is lane k / n of shard
+    // k % n.
+    let gather = |name: &'static str, rows_of: &dyn Fn(usize) -> Vec<usize>| -> Result<Table> {
+        let mut header: Option<csv::StringRecord> = None;
+        let mut per_shard = Vec::new();
         for (i, shard) in shards.iter().enumerate() {
             let (h, records) = read_csv(&shard.dir, name)?;
-            if header
-                .as_ref()
-                .is_some_and(|first: &csv::StringRecord| *first != h)
-            {
+            if header.as_ref().is_some_and(|first| *first != h) {
                 return Err(bad(
                     &shard.dir.join(name),
                     "its header differs from shard 0's",
@@ -153,13 +160,13 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
             }
             header = Some(h);
             let counts = rows_of(i);
-            if counts.iter().sum::<usize>() != records.len() {
+            let expected: usize = counts.iter().sum();
+            if expected != records.len() {
                 return Err(bad(
                     &shard.dir.join(name),
                     format!(
-                        "{} rows, {} expected from {SHARD_FILE}",
-                        records.len(),
-                        counts.iter().sum::<usize>()
+                        "{} rows, {expected} expected from {SHARD_FILE}",
+                        records.len()
                     ),
                 ));
             }
@@ -171,27 +178,41 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
                     .collect(),
             );
         }
-        let path = out.join(name);
+        Ok(Table {
+            name,
+            header: header.expect("at least one shard"),
+            per_shard,
+        })
+    };
+    let mut tables = Vec::new();
+    if scene.lyapunov {
+        tables.push(gather(spectrum_file(&scene), &|i| vec![1; shard_lanes(i)])?);
+    }
+    if scene.bifurcation_points > 0 {
+        tables.push(gather(BIFURCATION_FILE, &|i| {
+            shards[i].file.bifurcation_rows.clone()
+        })?);
+    }
+
+    std::fs::create_dir_all(out).map_err(|source| Error::Write {
+        path: out.to_owned(),
+        source,
+    })?;
+    let path = out.join(SCENE_FILE);
+    write_text(&path, &first.scene_text)?;
+    let mut written = vec![path];
+    for table in &tables {
+        let path = out.join(table.name);
         write_atomically(&path, |w| {
-            w.write_record(header.as_ref().expect("at least one shard"))?;
+            w.write_record(&table.header)?;
             for k in 0..lanes {
-                for record in &per_shard[k % count][k / count] {
+                for record in &table.per_shard[k % count][k / count] {
                     w.write_record(record)?;
                 }
             }
             Ok(())
         })?;
-        Ok(path)
-    };
-    if scene.lyapunov {
-        written.push(interleave(spectrum_file(&scene), &|i| {
-            vec![1; shard_lanes(i)]
-        })?);
-    }
-    if scene.bifurcation_points > 0 {
-        written.push(interleave(BIFURCATION_FILE, &|i| {
-            shards[i].file.bifurcation_rows.clone()
-        })?);
+        written.push(path);
     }
     if scene.plot {
         written.extend(super::results::draw(out)?);
