@@ -44,6 +44,9 @@ enum Command {
         /// No progress on stderr.
         #[arg(long, short)]
         quiet: bool,
+        /// Run on adapter N of `lyapsweep devices` (e.g. one process per GPU, each with a shard).
+        #[arg(long, value_name = "N")]
+        device: Option<usize>,
     },
     /// Redraw the figures of an output folder from its CSV files.
     Plot {
@@ -97,12 +100,18 @@ fn main() -> ExitCode {
             sets,
             shard,
             quiet,
+            device,
         } => {
             let mut overrides = sets;
             // Flags are overrides of their scene keys, applied last.
             overrides.extend(backend.map(|b| format!("run.backend=\"{b}\"")));
             overrides.extend(precision.map(|p| format!("run.precision=\"{p}\"")));
-            exit_code(run(&scene, out, &overrides, shard.as_deref(), quiet))
+            let how = How {
+                shard: shard.as_deref(),
+                quiet,
+                device,
+            };
+            exit_code(run(&scene, out, &overrides, how))
         }
         Command::Plot { dir } => exit_code(plot(&dir)),
         Command::Merge { out, shards } => exit_code(merge(&out, &shards)),
@@ -120,15 +129,21 @@ fn exit_code(result: Result<(), Error>) -> ExitCode {
     }
 }
 
+/// How `run` runs a scene, besides the scene's own keys.
+struct How<'a> {
+    shard: Option<&'a str>,
+    quiet: bool,
+    device: Option<usize>,
+}
+
 fn run(
     path: &std::path::Path,
     out: Option<PathBuf>,
     overrides: &[String],
-    shard: Option<&str>,
-    quiet: bool,
+    how: How,
 ) -> Result<(), Error> {
     let mut scene = scene::load(path, overrides)?;
-    if let Some(shard) = shard {
+    if let Some(shard) = how.shard {
         scene = scene.sharded(scene::Shard::parse(shard)?)?;
     }
     let dir = out.unwrap_or_else(|| match scene.shard {
@@ -138,9 +153,10 @@ fn run(
         None => PathBuf::from("out").join(&scene.name),
     });
     let progress = lyapsweep::Progress::default();
-    let watcher = (!quiet).then(|| progress_bar::watch(&progress));
+    let watcher = (!how.quiet).then(|| progress_bar::watch(&progress));
     let options = lyapsweep::RunOptions {
         progress: Some(progress.clone()),
+        device: how.device,
         ..Default::default()
     };
     let report = lyapsweep::run_with(&scene, &options);
@@ -311,9 +327,9 @@ fn print_devices() {
         println!("no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
         return;
     }
-    for a in adapters {
+    for (n, a) in adapters.iter().enumerate() {
         println!(
-            "{} [{}] {}: f64 {}, timestamps {}, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
+            "{n}: {} [{}] {}: f64 {}, timestamps {}, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
             a.name,
             a.backend,
             a.device_type,

@@ -900,3 +900,39 @@ fn extreme_sweeps_keep_the_sum_rule_on_the_gpu() {
         }
     }
 }
+
+/// A shard runs its lanes as the whole sweep would: the GPU takes the plan
+/// (steps, sub-maps) of the whole sweep, not of the shard's lanes, so the
+/// merged shards are the unsharded run to the last bit.
+#[test]
+fn a_gpu_shard_runs_its_lanes_as_the_whole_sweep_does() {
+    if !gpu_or_skip(
+        "a_gpu_shard_runs_its_lanes_as_the_whole_sweep_does",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // Only lane 1 (ζ = 2) needs raised steps and sub-maps; shard 0 of 2
+    // holds lanes 0 and 2 (ζ = 0.05, 0.1), which alone would need neither.
+    let overrides = [
+        "sweep.parameter=\"zeta\"",
+        "sweep.values=[0.05, 2.0, 0.1]",
+        "system.eta=0.2",
+        "system.wall=100",
+        "integration.transient=5",
+        "integration.iterations=30",
+        "run.backend=\"gpu\"",
+    ];
+    let scene = common::scene(SEED, &overrides);
+    let whole = lyapsweep::run(&scene).expect("runs");
+    for index in 0..2 {
+        let shard = lyapsweep::scene::Shard { index, count: 2 };
+        let part = lyapsweep::run(&scene.clone().sharded(shard).unwrap()).expect("runs");
+        for (j, lane) in part.lanes.iter().enumerate() {
+            let k = index + 2 * j;
+            assert_eq!(lane.plan, whole.lanes[k].plan, "lane {k}");
+            assert!(lane.plan.parts > 1, "lane {k} runs the whole sweep's plan");
+            assert_eq!(lane.exponents, whole.lanes[k].exponents, "lane {k}");
+        }
+    }
+}

@@ -95,6 +95,9 @@ pub struct RunOptions {
     pub workgroup_size: Option<u32>,
     /// Advanced as lanes run, for a progress display.
     pub progress: Option<Progress>,
+    /// Run on adapter number `device` of `lyapsweep devices` (one process
+    /// per GPU of a machine, each with its shard).
+    pub device: Option<usize>,
 }
 
 /// The per-precision tolerance of the GPU's validation against the CPU.
@@ -129,7 +132,7 @@ enum Plan {
     Gpu(wgpu::Adapter, context::AdapterSummary),
 }
 
-fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
+fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
             let gpu_settings = method_settings(scene, Backend::Gpu, scene.precision);
@@ -140,7 +143,7 @@ fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
                     Some(format!("auto: CPU path, since {reason}")),
                 ));
             }
-            let chosen = match context::choose(Want::Hardware, scene.precision) {
+            let chosen = match context::choose(Want::Hardware, scene.precision, device) {
                 Ok(Some(pick)) => pick,
                 Ok(None) => {
                     return Ok((
@@ -180,7 +183,7 @@ fn plan(scene: &Scene) -> Result<(Plan, Precision, Option<String>)> {
                     reason: format!("{} has no WGSL kernel", scene.system.kind),
                 });
             }
-            let (adapter, summary) = context::choose(Want::Any, scene.precision)?
+            let (adapter, summary) = context::choose(Want::Any, scene.precision, device)?
                 .expect("Want::Any yields an adapter or an error");
             Ok((Plan::Gpu(adapter, summary), scene.precision, None))
         }
@@ -328,7 +331,7 @@ pub fn run(scene: &Scene) -> Result<Report> {
 
 /// [`run`] with options that are not part of the scene.
 pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
-    let (plan, precision, choice) = plan(scene)?;
+    let (plan, precision, choice) = plan(scene, options.device)?;
     let start = Instant::now();
     let (backend, mut lanes, gpu_report) = match plan {
         Plan::Cpu | Plan::Exact => {

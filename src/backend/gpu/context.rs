@@ -75,8 +75,13 @@ pub enum Want {
 }
 
 /// The adapter a run would use, or why there is none: `Ok(None)` when
-/// `want` is `Hardware` and there is no hardware GPU.
-pub fn choose(want: Want, precision: Precision) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
+/// `want` is `Hardware` and there is no hardware GPU. `device` picks one by
+/// its number in [`list`] (identical GPUs have the same name).
+pub fn choose(
+    want: Want,
+    precision: Precision,
+    device: Option<usize>,
+) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
     let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = all_adapters()
         .into_iter()
         .map(|a| {
@@ -84,6 +89,18 @@ pub fn choose(want: Want, precision: Precision) -> Result<Option<(wgpu::Adapter,
             (a, s)
         })
         .collect();
+    if let Some(n) = device {
+        if n >= candidates.len() {
+            return Err(Error::invalid(
+                "--device",
+                format!(
+                    "there is no adapter {n}: `lyapsweep devices` lists {} (numbered from 0)",
+                    candidates.len()
+                ),
+            ));
+        }
+        candidates = vec![candidates.swap_remove(n)];
+    }
     let found = || {
         let names: Vec<String> = list()
             .iter()
