@@ -52,6 +52,9 @@ enum Command {
     Plot {
         /// The output folder of a run (or of a merge).
         dir: PathBuf,
+        /// Where the figures go [default: DIR].
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
     /// Combine the output folders of a sharded sweep into the files one run writes.
     Merge {
@@ -113,7 +116,7 @@ fn main() -> ExitCode {
             };
             exit_code(run(&scene, out, &overrides, how))
         }
-        Command::Plot { dir } => exit_code(plot(&dir)),
+        Command::Plot { dir, out } => exit_code(plot(&dir, out.as_deref().unwrap_or(&dir))),
         Command::Merge { out, shards } => exit_code(merge(&out, &shards)),
     }
 }
@@ -169,8 +172,8 @@ fn run(
     Ok(())
 }
 
-fn plot(dir: &std::path::Path) -> Result<(), Error> {
-    for path in output::results::draw(dir)? {
+fn plot(dir: &std::path::Path, into: &std::path::Path) -> Result<(), Error> {
+    for path in output::results::draw(dir, into)? {
         println!("wrote {}", path.display());
     }
     Ok(())

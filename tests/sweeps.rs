@@ -235,3 +235,31 @@ fn progress_is_reported_in_plain_lines_off_a_terminal_and_quiet_says_nothing() {
         String::from_utf8_lossy(&quiet.stderr)
     );
 }
+
+#[test]
+fn every_committed_scene_is_valid() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let scene = lyapsweep::scene::load(&path, &[])
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        names.push(scene.name.clone());
+        if scene.name == "eta-f-map" {
+            // The two-parameter showcase: 512 × 512 lanes, λ1 on the grid.
+            assert_eq!(scene.sweep.lanes(), 512 * 512);
+            assert!(scene.lyapunov && scene.plot);
+        }
+    }
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "chaotic-window",
+            "eta-f-map",
+            "henon",
+            "lorenz",
+            "seed-fig3"
+        ]
+    );
+}

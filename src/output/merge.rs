@@ -215,7 +215,7 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         written.push(path);
     }
     if scene.plot {
-        written.extend(super::results::draw(out)?);
+        written.extend(super::results::draw(out, out)?);
     }
     Ok(written)
 }

@@ -125,7 +125,7 @@ pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>>
         write_text(&path, &text)?;
         written.push(path);
     } else if scene.plot {
-        written.extend(results::draw(dir)?);
+        written.extend(results::draw(dir, dir)?);
     }
     Ok(written)
 }

@@ -56,9 +56,14 @@ fn column(path: &Path, records: &[csv::StringRecord], k: usize) -> Result<Vec<f6
 }
 
 /// Draws the figures of the results in `dir` (the sweep figure for one
-/// parameter, the heat map of λ1 for two); returns their paths.
-pub fn draw(dir: &Path) -> Result<Vec<PathBuf>> {
+/// parameter, the heat map of λ1 for two) into the folder `into`; returns
+/// their paths.
+pub fn draw(dir: &Path, into: &Path) -> Result<Vec<PathBuf>> {
     let scene = scene_of(dir)?;
+    std::fs::create_dir_all(into).map_err(|source| Error::Write {
+        path: into.to_owned(),
+        source,
+    })?;
     let axes = scene.sweep.axes().count();
     let dim = scene.system.dimension();
     let per_unit_time = scene.system.is_flow;
@@ -92,7 +97,7 @@ pub fn draw(dir: &Path) -> Result<Vec<PathBuf>> {
                 ),
             });
         }
-        return plot::heat_map(&data, dir, HEAT_MAP);
+        return plot::heat_map(&data, into, HEAT_MAP);
     }
     let (values, exponents, sum, expected_sum) = match &spectrum {
         Some((_, records)) => {
@@ -130,5 +135,5 @@ pub fn draw(dir: &Path) -> Result<Vec<PathBuf>> {
         bifurcation,
         state_name: scene.system.state_names[0].to_owned(),
     };
-    plot::sweep_figure(&data, dir, SWEEP_FIGURE)
+    plot::sweep_figure(&data, into, SWEEP_FIGURE)
 }
