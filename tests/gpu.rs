@@ -145,11 +145,7 @@ fn henon_and_lorenz_match_their_published_values_on_the_gpu() {
         ) {
             continue;
         }
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         let henon = lyapsweep::run(&common::committed_scene(
             "henon.toml",
             &["run.backend=\"gpu\"", &format!("run.precision=\"{p}\"")],
@@ -207,11 +203,7 @@ fn large_sweeps_split_into_batches_and_match_the_cpu() {
     } else {
         return;
     };
-    let p = if precision == Precision::F64 {
-        "f64"
-    } else {
-        "f32"
-    };
+    let p = precision.name();
     for (count, steps, max_batch_lanes, batches) in
         [(4096, 60, None, 1), (100_000, 20, Some(40_000), 3)]
     {
@@ -318,11 +310,7 @@ fn variants_without_wall_or_copies_match_the_cpu() {
 #[test]
 fn workgroup_size_changes_no_digit_and_device_time_is_measured() {
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip(
             "workgroup_size_changes_no_digit_and_device_time_is_measured",
             precision,
@@ -408,11 +396,7 @@ fn workgroup_size_changes_no_digit_and_device_time_is_measured() {
 #[test]
 fn a_faulty_or_chattering_lane_touches_no_other_lane() {
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip(
             "a_faulty_or_chattering_lane_touches_no_other_lane",
             precision,
@@ -510,11 +494,7 @@ fn sticking_and_perfectly_inelastic_impacts_match_the_cpu() {
         &["system.restitution=0", "sweep.values=[0.8, 0.9, 1.2]"],
     ];
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip(
             "sticking_and_perfectly_inelastic_impacts_match_the_cpu",
             precision,
@@ -605,11 +585,7 @@ fn grazing_iterations_are_re_estimated_on_the_host() {
     // matches it to 7e-14 (1.6e-6 off the sum rule); f32 flags 85 and is
     // 7.9e-7 off.
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip("grazing_iterations_are_re_estimated_on_the_host", precision) {
             continue;
         }
@@ -670,11 +646,7 @@ fn grazing_sub_maps_are_re_estimated_from_their_own_start() {
 #[test]
 fn stiff_lanes_are_cut_into_sub_maps_on_the_gpu() {
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip("stiff_lanes_are_cut_into_sub_maps_on_the_gpu", precision) {
             continue;
         }
@@ -774,11 +746,7 @@ fn stiff_lanes_are_cut_into_sub_maps_on_the_gpu() {
 #[test]
 fn stiff_lanes_stick_on_the_wall_on_the_gpu() {
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip("stiff_lanes_stick_on_the_wall_on_the_gpu", precision) {
             continue;
         }
@@ -845,11 +813,7 @@ fn stiff_lanes_stick_on_the_wall_on_the_gpu() {
 #[test]
 fn extreme_sweeps_keep_the_sum_rule_on_the_gpu() {
     for precision in [Precision::F64, Precision::F32] {
-        let p = if precision == Precision::F64 {
-            "f64"
-        } else {
-            "f32"
-        };
+        let p = precision.name();
         if !gpu_or_skip("extreme_sweeps_keep_the_sum_rule_on_the_gpu", precision) {
             continue;
         }
