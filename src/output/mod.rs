@@ -1,9 +1,11 @@
-//! Writing results: `spectrum.csv` and `bifurcation.csv`.
+//! Writing results: `spectrum.csv` and `bifurcation.csv`, and the figures of
+//! [`plot`].
 //!
 //! Each file is written under a temporary name in the output folder and
 //! renamed into place when complete, so a file appears whole or not at all.
 
 pub mod figure;
+pub mod plot;
 
 use std::fs;
 use std::path::{Path, PathBuf};
