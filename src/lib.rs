@@ -10,7 +10,8 @@
 //! Modules follow the mathematics: [`system`] (the models), [`integrate`]
 //! (RK4, impact location, the closed-form propagator), [`method`] (the
 //! perturbation Jacobian and the QR accumulation), [`backend`] (where lanes
-//! run), [`scene`] (the input contract) and [`output`] (the CSV files).
+//! run), [`scene`] (the input contract) and [`output`] (the CSV files and
+//! the figures).
 
 pub mod backend;
 pub mod bench;

@@ -263,3 +263,82 @@ fn every_committed_scene_is_valid() {
         ]
     );
 }
+
+/// PNG width and height, from the IHDR chunk.
+fn png_size(path: &Path) -> (u32, u32) {
+    let b = bytes(path.to_owned());
+    assert_eq!(&b[1..4], b"PNG", "{} is a PNG", path.display());
+    let at = |k: usize| u32::from_be_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
+    (at(16), at(20))
+}
+
+#[test]
+fn runs_draw_their_figures_and_plot_redraws_them_from_the_csvs() {
+    use lyapsweep::output::plot::{HEAT_MAP_SIZE, SWEEP_SIZE};
+    let dir = tempfile::tempdir().unwrap();
+    let line = run(
+        dir.path(),
+        &SCENE.replace("plot = false", "plot = true"),
+        "line",
+        &[],
+    );
+    assert_eq!(png_size(&line.join("figure.png")), SWEEP_SIZE);
+    let svg = String::from_utf8(bytes(line.join("figure.svg"))).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("shards"));
+    // Redrawn from the CSV files alone, the figure is the run's.
+    let drawn = bytes(line.join("figure.png"));
+    std::fs::remove_file(line.join("figure.png")).unwrap();
+    ok(lyapsweep(&["plot", line.to_str().unwrap()]));
+    assert!(
+        bytes(line.join("figure.png")) == drawn,
+        "plot redraws the same figure"
+    );
+    // Elsewhere, with --out.
+    let elsewhere = dir.path().join("figures");
+    ok(lyapsweep(&[
+        "plot",
+        line.to_str().unwrap(),
+        "--out",
+        elsewhere.to_str().unwrap(),
+    ]));
+    assert!(bytes(elsewhere.join("figure.png")) == drawn);
+
+    // A grid draws the heat map of λ1; `plot = true` is the default for
+    // more than one value.
+    let grid = run(
+        dir.path(),
+        &SCENE.replace("plot = false", "").replace(
+            "[integration]",
+            "[sweep.second]\nparameter = \"eta\"\nvalues = [0.7, 0.9, 1.1]\n[integration]",
+        ),
+        "grid",
+        &[],
+    );
+    assert_eq!(png_size(&grid.join("heat-map.png")), HEAT_MAP_SIZE);
+    assert!(!grid.join("figure.png").exists());
+    // A shard draws nothing; its merge does.
+    let shard = run(
+        dir.path(),
+        &SCENE.replace("plot = false", ""),
+        "s",
+        &["--shard", "0/1"],
+    );
+    assert!(!shard.join("figure.png").exists());
+    let merged = dir.path().join("merged");
+    ok(lyapsweep(&[
+        "merge",
+        "--out",
+        merged.to_str().unwrap(),
+        shard.to_str().unwrap(),
+    ]));
+    assert_eq!(png_size(&merged.join("figure.png")), SWEEP_SIZE);
+}
+
+#[test]
+fn plot_refuses_a_folder_that_is_not_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = lyapsweep(&["plot", dir.path().to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("scene.toml"), "{stderr}");
+}
