@@ -149,6 +149,32 @@ fn bifurcation_points_lie_above_and_exponents_below() {
 }
 
 #[test]
+fn without_exponents_the_diagram_takes_the_whole_figure() {
+    // `lyapunov = "none"`: no exponent panel; the points spread over both
+    // halves (the logistic attractor spans most of [0, 1]).
+    let data = SweepData {
+        values: Vec::new(),
+        exponents: Vec::new(),
+        sum: Vec::new(),
+        expected_sum: Vec::new(),
+        ..sweep()
+    };
+    let (width, height) = SWEEP_SIZE;
+    let half = height as usize / 2;
+    let (mut above, mut below) = (0, 0);
+    for (row, pixel) in rows_and_pixels(&sweep_pixels(&data), width) {
+        if pixel == [DATA_COLOUR.0, DATA_COLOUR.1, DATA_COLOUR.2] {
+            if row < half {
+                above += 1;
+            } else {
+                below += 1;
+            }
+        }
+    }
+    assert!(above > 1000 && below > 1000, "{above} above, {below} below");
+}
+
+#[test]
 fn degenerate_sweeps_draw_without_panicking() {
     let dir = tempfile::tempdir().unwrap();
     let no_diagram = SweepData {

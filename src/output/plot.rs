@@ -259,6 +259,12 @@ impl Figure for SweepData {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Drawn<DB> {
         root.fill(&WHITE)?;
         let body = root.titled(&self.title, (FONT, TITLE_PX))?;
+        if self.exponents.is_empty() {
+            // A run without exponents (`lyapunov = "none"`): the diagram
+            // alone, over the values its points lie at.
+            let x_range = padded(extent(self.bifurcation.iter().map(|p| p.0)), X_PAD);
+            return draw_bifurcation(&body, self, x_range, true);
+        }
         // The legend has a row of its own, where it can hide no data.
         let (_, height) = body.dim_in_pixel();
         let (panels, legend) = body.split_vertically(height - LEGEND_ROW);
@@ -271,7 +277,7 @@ impl Figure for SweepData {
         // the shared x axis.
         let (_, height) = panels.dim_in_pixel();
         let (top, bottom) = panels.split_vertically((height + TICKS_ONLY_AREA - X_LABEL_AREA) / 2);
-        draw_bifurcation(&top, self, x_range.clone())?;
+        draw_bifurcation(&top, self, x_range.clone(), false)?;
         draw_exponents(&bottom, self, x_range)
     }
 }
@@ -351,10 +357,13 @@ fn draw_legend<DB: DrawingBackend>(
 /// runs of lit pixels drawn as one rectangle, so that the SVG holds a few
 /// thousand rectangles rather than one per point (hundreds of thousands),
 /// and the PNG is the same drawing.
+/// The bifurcation diagram; `labelled`: with the x axis's labels (when no
+/// exponent panel below carries them).
 fn draw_bifurcation<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     data: &SweepData,
     x_range: Range<f64>,
+    labelled: bool,
 ) -> Drawn<DB> {
     let points = || {
         data.bifurcation
@@ -364,13 +373,21 @@ fn draw_bifurcation<DB: DrawingBackend>(
     let y_range = padded(extent(points().map(|p| p.1)), Y_PAD);
     let mut chart = ChartBuilder::on(area)
         .margin(MARGIN)
-        .x_label_area_size(TICKS_ONLY_AREA)
+        .x_label_area_size(if labelled {
+            X_LABEL_AREA
+        } else {
+            TICKS_ONLY_AREA
+        })
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(x_range, y_range)?;
-    mesh(&mut chart)
-        .x_label_formatter(&|_| String::new())
-        .y_desc(&data.state_name)
-        .draw()?;
+    let mut axes = mesh(&mut chart);
+    axes.y_desc(&data.state_name);
+    if labelled {
+        axes.x_desc(pretty(&data.parameter));
+    } else {
+        axes.x_label_formatter(&|_| String::new());
+    }
+    axes.draw()?;
 
     let plot = chart.plotting_area();
     let (width, height) = plot.dim_in_pixel();
