@@ -45,8 +45,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // A copy that met the wall a different number of times than the
             // reference crossed a grazing boundary: its difference is O(1)
             // wrong. Difference on the other side, where the map is smooth.
-            let same_plus = counts[plus].y == cr.y;
-            let same_minus = counts[minus].y == cr.y;
+            let same_plus = counts[plus].y == cr.y && (counts[plus].z & FLAG_BEHIND_WALL) == 0u;
+            let same_minus = counts[minus].y == cr.y && (counts[minus].z & FLAG_BEHIND_WALL) == 0u;
             var step = step_plus + step_minus;
             if (!same_plus && same_minus) {
                 plus = r;
@@ -124,13 +124,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         deltas[lane * DIM + i] = yi[i] - y[i];
 #endif
         restart((r + 1u + i) * TRAJ_STRIDE, yi, phase, comp);
-        counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z, 0u);
+        counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(lane, yi), 0u);
 #ifdef CENTRAL
         var ym = y;
         ym[i] = y[i] - delta;
         deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];
         restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym, phase, comp);
-        counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z, 0u);
+        counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(lane, ym), 0u);
 #endif
     }
 #endif
@@ -143,7 +143,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 // without impacts).
 fn departure(r: u32, t: u32) -> f32 {
     let impacts = counts[r].y;
-    if (t == r || impacts == 0u) {
+    if (t == r) {
+        return 0.0f;
+    }
+    if ((counts[t].z & FLAG_BEHIND_WALL) != 0u) {
+        return 1e30f;
+    }
+    if (impacts == 0u) {
         return 0.0f;
     }
     if (counts[t].y != impacts) {
@@ -154,6 +160,16 @@ fn departure(r: u32, t: u32) -> f32 {
     return f32(abs(vt - vr) / vr);
 }
 #endif
+
+// FLAG_BEHIND_WALL for a copy seeded at y, else 0 (twin of System::admits).
+fn behind_wall(lane: u32, y: State) -> u32 {
+#ifdef WALL
+    if (y.x > wall_position(load_params(lane))) {
+        return FLAG_BEHIND_WALL;
+    }
+#endif
+    return 0u;
+}
 
 // A trajectory starting a map iteration or a part at y, with its phase and
 // compensation, and no impact yet.

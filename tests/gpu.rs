@@ -900,3 +900,38 @@ fn a_gpu_shard_runs_its_lanes_as_the_whole_sweep_does() {
         }
     }
 }
+
+/// The lane of tests/stability.rs whose copy would start behind the wall:
+/// the finish kernel flags such a copy when it seeds it, and the GPU gives
+/// the CPU's exponents (central: the other side; forward: re-estimated).
+#[test]
+fn a_copy_seeded_behind_the_wall_is_handled_as_on_the_cpu() {
+    if !gpu_or_skip(
+        "a_copy_seeded_behind_the_wall_is_handled_as_on_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    for difference in ["central", "forward"] {
+        let with = |backend: &str| {
+            vec![
+                "system.f=1.083170254403131".to_owned(),
+                "sweep.values=[0.8228962818003913]".to_owned(),
+                "integration.steps_per_period=150".to_owned(),
+                "integration.transient=200".to_owned(),
+                "integration.iterations=400".to_owned(),
+                format!("integration.difference=\"{difference}\""),
+                format!("run.backend=\"{backend}\""),
+            ]
+        };
+        let cpu = run(SEED, &with("cpu"), RunOptions::default());
+        let gpu = run(SEED, &with("gpu"), RunOptions::default());
+        let (c, g) = (&cpu.lanes[0], &gpu.lanes[0]);
+        assert_eq!(g.status, LaneStatus::Ok);
+        assert_eq!(g.grazing, c.grazing, "{difference}");
+        // Measured: within 5e-14.
+        for (x, y) in g.exponents.iter().zip(&c.exponents) {
+            assert!((x - y).abs() < 1e-9, "{difference}: gpu {x} vs cpu {y}");
+        }
+    }
+}

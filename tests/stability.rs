@@ -471,3 +471,44 @@ fn every_perturbation_from_1e_2_to_1e_14_is_answered_or_flagged() {
         }
     }
 }
+
+/// Found by the 512 × 512 (η, f) map at 150 steps: one lane of 262 144 began
+/// an iteration 7e-7 from the wall, so its copy at x + δ (δ = 1e-6) started
+/// behind it. The wall threw that copy back at once, with as many impacts as
+/// the reference, and its O(1) wrong column went unflagged: the sum rule
+/// missed by 1.3e-4 and λ1 by 2e-4, with status `ok`. Such a copy is now
+/// differenced on the other side (central), or flagged as grazing and
+/// re-estimated with smaller δ (forward).
+#[test]
+fn a_copy_that_would_start_behind_the_wall_is_differenced_on_the_other_side() {
+    let overrides = |difference: &str, backend: &str| {
+        [
+            "system.f=1.083170254403131".to_owned(),
+            "sweep.values=[0.8228962818003913]".to_owned(),
+            "integration.steps_per_period=150".to_owned(),
+            "integration.transient=200".to_owned(),
+            "integration.iterations=400".to_owned(),
+            format!("integration.difference=\"{difference}\""),
+            format!("run.backend=\"{backend}\""),
+        ]
+    };
+    let run = |o: [String; 7]| {
+        let o: Vec<&str> = o.iter().map(String::as_str).collect();
+        common::run(&common::scene(SEED, &o))
+    };
+    let exact = run(overrides("central", "exact"));
+    for difference in ["central", "forward"] {
+        let report = run(overrides(difference, "cpu"));
+        let lane = &report.lanes[0];
+        assert_eq!(lane.status, LaneStatus::Ok);
+        // Measured: 3.1e-8 (central), 1.4e-8 (forward, one iteration
+        // re-estimated); λ1 within 2.1e-7 of exact.
+        let error = (lane.exponent_sum() - -0.1).abs();
+        assert!(error < 1e-6, "{difference}: sum off by {error:e}");
+        let l1 = (lane.exponents[0] - exact.lanes[0].exponents[0]).abs();
+        assert!(l1 < 1e-6, "{difference}: λ1 off exact by {l1:e}");
+        if difference == "forward" {
+            assert!(lane.grazing >= 1, "the behind-the-wall copy is flagged");
+        }
+    }
+}

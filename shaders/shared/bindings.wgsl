@@ -58,6 +58,9 @@ const FLAG_RANK_ALL: u32 = 8u;
 const FLAG_TRUNCATED: u32 = 16u;
 // Flags that outlive the iteration they were raised in.
 const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED;
+// A copy seeded behind the wall (its reference within δ of it): its column
+// is differenced on the other side (System::admits on the CPU).
+const FLAG_BEHIND_WALL: u32 = 32u;
 
 fn rank_flags(rank_loss: u32) -> u32 {
     if (rank_loss >= DIM) {

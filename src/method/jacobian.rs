@@ -55,6 +55,11 @@ pub fn estimate<const D: usize, S: System<D>>(
         y[i] += sign * delta;
         steps[1 + c] = sign * (y[i] - x[i]);
     }
+    // A copy that would start behind the wall (the reference is within δ
+    // of it) is no perturbation of the reference's motion: the wall throws
+    // it back at once, and its column would be O(1) wrong. Like a copy that
+    // crossed a grazing boundary, it is differenced on the other side.
+    let admitted: [bool; MAX_TRAJECTORIES] = std::array::from_fn(|t| system.admits(&ys[t]));
     let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
     system.part_many(
         &mut ys[..1 + copies],
@@ -68,12 +73,16 @@ pub fn estimate<const D: usize, S: System<D>>(
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
 
     let image = ys[0];
-    let same = |t: usize| st[t].impacts == st[0].impacts;
+    let same = |t: usize| admitted[t] && st[t].impacts == st[0].impacts;
     // How far a copy's impacts moved, relative to the reference's: near
     // grazing, an impact at speed v moves by δ·a/v² of itself (a the
     // acceleration at the wall), and so does the difference quotient.
     let departure = |t: usize| {
-        if t == 0 || st[0].impacts == 0 {
+        if t == 0 {
+            0.0
+        } else if !admitted[t] {
+            f64::INFINITY
+        } else if st[0].impacts == 0 {
             0.0
         } else if !same(t) {
             f64::INFINITY

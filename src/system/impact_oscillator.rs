@@ -220,4 +220,9 @@ impl System<2> for ImpactOscillator {
     fn contraction(&self) -> f64 {
         self.zeta + (self.zeta * self.zeta - 1.0).max(0.0).sqrt()
     }
+
+    /// X ≤ X_w (on the wall is admissible: the mass may rest there).
+    fn admits(&self, y: &[f64; 2]) -> bool {
+        y[0] <= self.wall
+    }
 }

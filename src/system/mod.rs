@@ -307,6 +307,12 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     fn contraction(&self) -> f64 {
         0.0
     }
+
+    /// Whether a trajectory may start at y: not behind a wall. A perturbed
+    /// copy of a reference within δ of the wall would start behind it.
+    fn admits(&self, _y: &[f64; D]) -> bool {
+        true
+    }
 }
 
 /// [`SystemInfo::period`] from the system's own [`System::period`].

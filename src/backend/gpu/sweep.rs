@@ -470,7 +470,11 @@ where
         let delta = crate::method::lane::perturbation_at(settings.perturbation, x0);
         let mut traj_data = Vec::with_capacity(count * traj * layout.traj_stride);
         let mut deltas = Vec::with_capacity(count * D);
-        for _ in 0..count {
+        // Per trajectory: step 0, no impacts, FLAG_BEHIND_WALL for a copy
+        // that starts behind the wall (as the finish kernel seeds them).
+        let mut counts_data: Vec<[u32; 4]> = Vec::with_capacity(count * traj);
+        for k in first..first + count {
+            let params = scene.lane_params(k);
             for t in 0..traj {
                 let mut y = x0.clone();
                 if t > 0 {
@@ -494,6 +498,8 @@ where
                     y[i] = shifted;
                     deltas.push(step);
                 }
+                let behind = t > 0 && (info.check_state)(&params, &y).is_err();
+                counts_data.push([0, 0, if behind { FLAG_BEHIND_WALL } else { 0 }, 0]);
                 traj_data.extend_from_slice(&y);
                 traj_data.extend(std::iter::repeat_n(0.0, D));
                 // Phase (1, 0); the slowest impact speed: none yet (NO_IMPACT).
@@ -563,7 +569,7 @@ where
             wgpu::BufferUsages::STORAGE,
         );
         let traj_buffer = init("trajectories", &real_bytes(&traj_data, precision), storage);
-        let counts = empty("counts", (count * traj * 16) as u64, storage);
+        let counts = init("counts", bytemuck::cast_slice(&counts_data), storage);
         let slots = (ring * layout.parts * count) as u64;
         let summary = empty("summary", layout.summary * slots, storage);
         let deltas_buffer = pipelines
@@ -1071,3 +1077,4 @@ const FLAG_NONFINITE: u32 = 2;
 const FLAG_RANK_ONE: u32 = 4;
 const FLAG_RANK_ALL: u32 = 8;
 const FLAG_TRUNCATED: u32 = 16;
+const FLAG_BEHIND_WALL: u32 = 32;
