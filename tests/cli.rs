@@ -256,12 +256,22 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
     let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
     assert!(bifurcation.starts_with("eta,x,v\n"));
     assert_eq!(bifurcation.lines().count(), 1 + 3 * 4);
-    // No temporary files remain.
-    let names: Vec<_> = std::fs::read_dir(dir.path().join("out"))
+    // The scene as run, the CSV files and the figure; no temporary files.
+    let mut names: Vec<String> = std::fs::read_dir(dir.path().join("out"))
         .unwrap()
-        .map(|e| e.unwrap().file_name())
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(names.len(), 2, "{names:?}");
+    names.sort();
+    assert_eq!(
+        names,
+        [
+            "bifurcation.csv",
+            "figure.png",
+            "figure.svg",
+            "scene.toml",
+            "spectrum.csv"
+        ]
+    );
 }
 
 #[test]
@@ -297,10 +307,11 @@ fn devices_lists_each_adapter_with_its_f64_support_and_limits() {
     if adapters.is_empty() {
         assert!(stdout.contains("no GPU adapters found"), "{stdout}");
     }
-    for a in adapters {
+    // Numbered, for `run --device N`.
+    for (n, a) in adapters.iter().enumerate() {
         let line = stdout
             .lines()
-            .find(|l| l.starts_with(&a.name) && l.contains(&format!("[{}]", a.backend)))
+            .find(|l| l.starts_with(&format!("{n}: {} [{}]", a.name, a.backend)))
             .unwrap_or_else(|| panic!("{} missing from: {stdout}", a.name));
         assert!(
             line.contains(if a.f64 { "f64 yes" } else { "f64 no" }),
