@@ -368,37 +368,7 @@ fn a_faulty_lane_is_reported_and_touches_no_other() {
 /// sum rule or its status says why not.
 #[test]
 fn extreme_sweeps_keep_the_sum_rule_or_say_why() {
-    // η from 0.01 (T = 628: steps raised to 10·T) to 20.
-    let etas = sweep_with(
-        &["sweep.values=[0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 20.0]"],
-        "cpu",
-    );
-    assert!(etas.lanes[0].plan.steps_per_period >= 6283);
-    // f = 1 to 100 at η = 0.8, impacts ever more violent.
-    let forcing = sweep_with(
-        &[
-            "sweep.parameter=\"f\"",
-            "sweep.values=[1.0, 10.0, 30.0, 100.0]",
-            "system.eta=0.8",
-        ],
-        "cpu",
-    );
-    for report in [&etas, &forcing] {
-        for lane in &report.lanes {
-            assert_eq!(lane.status, LaneStatus::Ok, "{:?}", lane.plan);
-            let error = (lane.exponent_sum() - -0.1).abs();
-            assert!(error < 1e-6, "sum off by {error:e} ({:?})", lane.plan);
-        }
-    }
-    assert!(forcing.lanes.iter().all(|l| l.impacts_per_period > 0.0));
-    // A wall never reached: the free, under-damped motion, λ1 = λ2 = -ζ.
-    let free = sweep_with(&["system.wall=100", "sweep.values=[0.5, 1.5]"], "cpu");
-    for lane in &free.lanes {
-        assert_eq!(lane.impacts_per_period, 0.0);
-        for l in &lane.exponents {
-            assert!((l - -0.05).abs() < 1e-4, "{:?}", lane.exponents);
-        }
-    }
+    common::assert_extreme_sweeps(|o| sweep_with(o, "cpu"), 1e-6, "cpu");
 }
 
 /// X_w ≤ 0: a start behind the wall is an input error naming the key; a

@@ -81,3 +81,37 @@ pub fn gpu_or_skip(test: &str, precision: lyapsweep::scene::Precision) -> bool {
     let _ = writeln!(std::io::stderr(), "{message}");
     false
 }
+
+/// Extreme sweeps (case 5 of docs/STABILITY.md) on any backend: η over three
+/// decades (η = 0.01 raises the steps to 10·T), forcing up to 100 times the
+/// seed's, every lane `ok` within `tolerance` of the sum rule; and a wall
+/// never reached, where λ1 = λ2 = -ζ within 1e-4. `sweep` runs the seed's
+/// scene with the overrides given; `label` names the run in messages.
+pub fn assert_extreme_sweeps(sweep: impl Fn(&[&str]) -> Report, tolerance: f64, label: &str) {
+    let etas = sweep(&["sweep.values=[0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 20.0]"]);
+    assert!(etas.lanes[0].plan.steps_per_period >= 6283, "{label}");
+    let forcing = sweep(&[
+        "sweep.parameter=\"f\"",
+        "sweep.values=[1.0, 10.0, 30.0, 100.0]",
+        "system.eta=0.8",
+    ]);
+    assert!(forcing.lanes.iter().all(|l| l.impacts_per_period > 0.0));
+    for report in [&etas, &forcing] {
+        for lane in &report.lanes {
+            assert_eq!(lane.status, LaneStatus::Ok, "{label} {:?}", lane.plan);
+            let error = (lane.exponent_sum() - -0.1).abs();
+            assert!(
+                error < tolerance,
+                "{label}: sum off by {error:e} ({:?})",
+                lane.plan
+            );
+        }
+    }
+    let free = sweep(&["system.wall=100", "sweep.values=[0.5, 1.5]"]);
+    for lane in &free.lanes {
+        assert_eq!(lane.impacts_per_period, 0.0);
+        for l in &lane.exponents {
+            assert!((l - -0.05).abs() < 1e-4, "{label} {:?}", lane.exponents);
+        }
+    }
+}
