@@ -22,11 +22,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scene: writes spectrum.csv (and bifurcation.csv when asked) into the output folder.
+    /// Run a scene: writes spectrum.csv (grid.csv for two parameters), bifurcation.csv when asked, the scene as run and the figures into the output folder.
     Run {
         /// The scene file (TOML).
         scene: PathBuf,
-        /// Output folder [default: out/<scene name>].
+        /// Output folder [default: out/<scene name>, or out/<scene name>.shard-I-of-N].
         #[arg(long)]
         out: Option<PathBuf>,
         /// Overrides [run] backend.
