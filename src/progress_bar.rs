@@ -49,9 +49,14 @@ fn bar(progress: &Progress, stop: &AtomicBool) {
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template(
-            "{elapsed_precise} [{wide_bar}] {percent}%  {human_pos}/{human_len} lane-iterations  {per_sec}  {eta} left",
+            "{elapsed_precise} [{wide_bar}] {percent}%  {human_pos}/{human_len} lane-iterations  {rate}  {eta} left",
         )
         .expect("the template is valid")
+        // indicatif's own {per_sec} prints four decimals of a rate in the
+        // millions; three significant digits say as much.
+        .with_key("rate", |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+            let _ = write!(w, "{:.3e} per second", state.per_sec());
+        })
         .progress_chars("=> "),
     );
     while !stop.load(Ordering::Relaxed) {
