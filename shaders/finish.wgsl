@@ -115,6 +115,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         size = max(size, abs(y[k]));
     }
     let delta = lanes[lane * LANE_STRIDE + LANE_DELTA] * size;
+    let p = load_params(lane);
     for (var i = 0u; i < DIM; i = i + 1u) {
         var yi = y;
         yi[i] = y[i] + delta;
@@ -124,13 +125,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         deltas[lane * DIM + i] = yi[i] - y[i];
 #endif
         restart((r + 1u + i) * TRAJ_STRIDE, yi, phase, comp);
-        counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(lane, yi), 0u);
+        counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(p, yi), 0u);
 #ifdef CENTRAL
         var ym = y;
         ym[i] = y[i] - delta;
         deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];
         restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym, phase, comp);
-        counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(lane, ym), 0u);
+        counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(p, ym), 0u);
 #endif
     }
 #endif
@@ -162,9 +163,9 @@ fn departure(r: u32, t: u32) -> f32 {
 #endif
 
 // FLAG_BEHIND_WALL for a copy seeded at y, else 0 (twin of System::admits).
-fn behind_wall(lane: u32, y: State) -> u32 {
+fn behind_wall(p: Params, y: State) -> u32 {
 #ifdef WALL
-    if (y.x > wall_position(load_params(lane))) {
+    if (y.x > wall_position(p)) {
         return FLAG_BEHIND_WALL;
     }
 #endif

@@ -333,6 +333,9 @@ pub fn run(scene: &Scene) -> Result<Report> {
 pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
     let (plan, precision, choice) = plan(scene, options.device)?;
     let start = Instant::now();
+    let progress = options.progress.clone().unwrap_or_default();
+    let i = &scene.integration;
+    progress.start((scene.lane_count() * (i.transient + i.iterations)) as u64);
     let (backend, mut lanes, gpu_report) = match plan {
         Plan::Cpu | Plan::Exact => {
             let backend = if matches!(plan, Plan::Exact) {
@@ -342,9 +345,6 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             };
             let mut settings = method_settings(scene, backend, Precision::F64);
             settings.keep_jacobians = options.keep_jacobians;
-            let progress = options.progress.clone().unwrap_or_default();
-            progress
-                .start((scene.lane_count() * (settings.transient + settings.iterations)) as u64);
             (backend, cpu::sweep(scene, &settings, &progress), None)
         }
         Plan::Gpu(adapter, summary) => {
@@ -353,9 +353,6 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             follow_gpu_plan(scene, &mut settings)?;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
-            if let Some(p) = &options.progress {
-                p.start((scene.lane_count() * (settings.transient + settings.iterations)) as u64);
-            }
             let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
             let report = GpuReport {
                 adapter: gpu.summary.name.clone(),

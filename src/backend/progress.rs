@@ -27,10 +27,13 @@ impl Progress {
         self.0.done.fetch_add(n, Ordering::Relaxed);
     }
 
-    /// `n` lane-iterations are to be done again (a GPU batch redone with
-    /// shorter dispatches).
-    pub fn retreat(&self, n: u64) {
-        self.0.done.fetch_sub(n, Ordering::Relaxed);
+    /// An attempt at part of the run whose progress may have to be taken
+    /// back (a GPU batch that is redone with shorter dispatches).
+    pub fn attempt(&self) -> Attempt<'_> {
+        Attempt {
+            progress: self,
+            reported: 0,
+        }
     }
 
     pub fn done(&self) -> u64 {
@@ -40,5 +43,26 @@ impl Progress {
     /// 0 until the run has started.
     pub fn total(&self) -> u64 {
         self.0.total.load(Ordering::Relaxed)
+    }
+}
+
+/// The progress one attempt has reported (see [`Progress::attempt`]).
+pub struct Attempt<'a> {
+    progress: &'a Progress,
+    reported: u64,
+}
+
+impl Attempt<'_> {
+    pub fn advance(&mut self, n: u64) {
+        self.progress.advance(n);
+        self.reported += n;
+    }
+
+    /// The attempt is to be redone: its progress is taken back.
+    pub fn undo(self) {
+        self.progress
+            .0
+            .done
+            .fetch_sub(self.reported, Ordering::Relaxed);
     }
 }

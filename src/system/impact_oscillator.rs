@@ -100,10 +100,16 @@ fn check(p: &Params) -> Result<(), (&'static str, String)> {
 
 fn check_state(p: &Params, x: &[f64]) -> Result<(), String> {
     let wall = p.get("wall");
-    if x[0] > wall {
+    if !admitted(wall, x[0]) {
         return Err(format!("x = {} lies behind the wall at {wall}", x[0]));
     }
     Ok(())
+}
+
+/// A state may start at position x: not behind the wall (on it, the mass
+/// may rest). Twin of `behind_wall` in shaders/finish.wgsl.
+fn admitted(wall: f64, x: f64) -> bool {
+    x <= wall
 }
 
 /// Between impacts X = X_p + u with X_p = A cos ητ + B sin ητ the harmonic
@@ -221,8 +227,7 @@ impl System<2> for ImpactOscillator {
         self.zeta + (self.zeta * self.zeta - 1.0).max(0.0).sqrt()
     }
 
-    /// X ≤ X_w (on the wall is admissible: the mass may rest there).
     fn admits(&self, y: &[f64; 2]) -> bool {
-        y[0] <= self.wall
+        admitted(self.wall, y[0])
     }
 }

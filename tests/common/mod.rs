@@ -115,3 +115,18 @@ pub fn assert_extreme_sweeps(sweep: impl Fn(&[&str]) -> Report, tolerance: f64, 
         }
     }
 }
+
+/// A run at an unusual δ: no NaN reaches the exponents, and every row the
+/// status calls `ok` keeps the sum rule (-0.1) within 1e-3.
+pub fn assert_answered_or_flagged(report: &Report, delta: f64) {
+    for lane in &report.lanes {
+        assert!(lane.exponents.iter().all(|l| !l.is_nan()), "δ = {delta:e}");
+        let error = (lane.exponent_sum() - -0.1).abs();
+        if lane.status == LaneStatus::Ok {
+            assert!(
+                error < 1e-3,
+                "δ = {delta:e}: sum off by {error:e}, status ok"
+            );
+        }
+    }
+}

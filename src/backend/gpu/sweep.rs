@@ -219,6 +219,7 @@ where
         usize::MAX
     };
     let mut retries = 0;
+    let progress = options.progress.clone().unwrap_or_default();
     for first in (0..total).step_by(batch_lanes) {
         let count = batch_lanes.min(total - first);
         loop {
@@ -235,7 +236,6 @@ where
                 max_chunk,
             );
             chunk_steps = batch.chunk_steps;
-            let progress = options.progress.clone().unwrap_or_default();
             let (results, t) = batch.run(gpu, &pipelines, &progress)?;
             timings.add(&t);
             if let Some(results) = results {
@@ -731,6 +731,7 @@ where
         let queue = &gpu.queue;
         let settings = self.settings;
         let mut timings = Timings::default();
+        let mut progress = progress.attempt();
 
         // The transient: references only, no readback.
         let start = Instant::now();
@@ -800,7 +801,7 @@ where
                     if let Some(in_flight) = pending {
                         wait_for(device, in_flight.index)?;
                     }
-                    progress.retreat(self.progress_made(&chunks, c));
+                    progress.undo();
                     return Ok((None, timings));
                 }
                 progress.advance((self.count * n) as u64);
@@ -810,7 +811,7 @@ where
             let lanes = &mut accumulators;
             let n = chunks[last.chunk].1;
             if !self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)? {
-                progress.retreat(self.progress_made(&chunks, chunks.len()));
+                progress.undo();
                 return Ok((None, timings));
             }
             progress.advance((self.count * n) as u64);
@@ -825,14 +826,6 @@ where
             ),
             timings,
         ))
-    }
-
-    /// Lane-iterations this batch reported before the averaging chunk
-    /// before `chunk` turned out truncated: the transient and the chunks
-    /// before that one.
-    fn progress_made(&self, chunks: &[(usize, usize)], chunk: usize) -> u64 {
-        let averaged: usize = chunks[..chunk.saturating_sub(1)].iter().map(|c| c.1).sum();
-        (self.count * (self.settings.transient + averaged)) as u64
     }
 
     /// The references' states, read back (after the transient).
