@@ -29,6 +29,20 @@ pub enum Error {
     /// belong together.
     #[error("{path}: {reason}")]
     Results { path: PathBuf, reason: String },
+    /// The output folder cannot take the run's files (found before any
+    /// computation): it is a file, holds files lyapsweep does not write, is
+    /// an input, or cannot be created.
+    #[error("cannot write {path}: {reason}")]
+    Output { path: PathBuf, reason: String },
+    /// The run is larger than this machine can hold (or than one process
+    /// should attempt): the keys that set its size, the estimate, and how to
+    /// split it.
+    #[error("{keys}: {reason}")]
+    TooLarge { keys: String, reason: String },
+    /// Every lane failed (no exponents from any): the files were written,
+    /// with each lane's status, but the run is not a result.
+    #[error("every lane failed ({reasons}): see the status column of the output")]
+    AllLanesFailed { reasons: String },
     /// Writing the output failed.
     #[error("cannot write {path}: {source}")]
     Write {
@@ -48,7 +62,7 @@ impl Error {
 
     /// Whether the error is the user's input (exit code 2) rather than the machine's.
     pub fn is_input_error(&self) -> bool {
-        !matches!(self, Error::Write { .. })
+        !matches!(self, Error::Write { .. } | Error::AllLanesFailed { .. })
     }
 }
 

@@ -15,6 +15,7 @@
 
 pub mod backend;
 pub mod bench;
+pub mod budget;
 pub mod error;
 pub mod integrate;
 pub mod method;
@@ -22,6 +23,6 @@ pub mod output;
 pub mod scene;
 pub mod system;
 
-pub use backend::{run, run_with, Progress, Report, RunOptions};
+pub use backend::{run, run_streaming, run_with, Progress, Report, RunOptions, Summary};
 pub use error::{Error, Result};
 pub use scene::Scene;

@@ -7,7 +7,7 @@ mod progress_bar;
 
 use clap::{Parser, Subcommand};
 use lyapsweep::scene::{self, Backend, Precision};
-use lyapsweep::{output, Error, Report, Scene};
+use lyapsweep::{output, Error, Scene, Summary};
 
 #[derive(Parser)]
 #[command(
@@ -155,6 +155,13 @@ fn run(
         }
         None => PathBuf::from("out").join(&scene.name),
     });
+    // Everything that can refuse the run does so before the first step:
+    // its size, then the output folder.
+    let large = lyapsweep::budget::check_run(&scene)?;
+    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &[])?)?;
+    if let Some(line) = large.filter(|_| !how.quiet) {
+        eprintln!("lyapsweep: {line}");
+    }
     let progress = lyapsweep::Progress::default();
     let watcher = (!how.quiet).then(|| progress_bar::watch(&progress));
     let options = lyapsweep::RunOptions {
@@ -162,18 +169,31 @@ fn run(
         device: how.device,
         ..Default::default()
     };
-    let report = lyapsweep::run_with(&scene, &options);
+    let batch = lyapsweep::budget::batch_lanes(&scene);
+    let summary = lyapsweep::run_streaming(&scene, &options, batch, |batch, report| {
+        writer.append(batch, report)
+    });
     if let Some(w) = watcher {
         w.finish();
     }
-    let report = report?;
-    let written = output::write(&scene, &report, &dir)?;
-    print_summary(&scene, &report, &written);
+    let summary = summary?;
+    let written = writer.finish()?;
+    print_summary(&scene, &summary, &written);
+    if summary.all_failed() {
+        let reasons: Vec<String> = summary
+            .failures
+            .iter()
+            .map(|(name, n)| format!("{n} {name}"))
+            .collect();
+        return Err(Error::AllLanesFailed {
+            reasons: reasons.join(", "),
+        });
+    }
     Ok(())
 }
 
 fn plot(dir: &std::path::Path, into: &std::path::Path) -> Result<(), Error> {
-    for path in output::results::draw(dir, into)? {
+    for path in output::results::redraw(dir, into)? {
         println!("wrote {}", path.display());
     }
     Ok(())
@@ -186,7 +206,7 @@ fn merge(out: &std::path::Path, shards: &[PathBuf]) -> Result<(), Error> {
     Ok(())
 }
 
-fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
+fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
     let i = &scene.integration;
     println!("lyapsweep: {} ({})", scene.name, scene.system.kind);
     if let Some(choice) = &report.choice {
@@ -220,11 +240,13 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
                     (a.min(v), b.max(v))
                 });
-            format!(
-                "{} values of {} in [{lo}, {hi}]",
-                axis.values.len(),
-                axis.parameter
-            )
+            let n = axis.values.len();
+            let values = if n == 1 { "value" } else { "values" };
+            if n == 1 {
+                format!("1 {values} of {}: {lo}", axis.parameter)
+            } else {
+                format!("{n} {values} of {} in [{lo}, {hi}]", axis.parameter)
+            }
         })
         .collect();
     let shard = scene.shard.map_or(String::new(), |s| {
@@ -248,32 +270,17 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
-    if scene.system.is_flow && report.backend != Backend::Exact {
-        let requested = i.steps_per_period;
-        let raised: Vec<usize> = report
-            .lanes
-            .iter()
-            .map(|l| l.plan.steps_per_period)
-            .filter(|&s| s > requested)
-            .collect();
-        if let Some(most) = raised.iter().max() {
-            println!(
-                "  steps        raised in {} lanes, up to {most} per period: their fastest time scale needs RK4 step × rate ≤ {}",
-                raised.len(),
-                lyapsweep::method::lane::MAX_STEP_RATE
-            );
-        }
-    }
-    let cut: Vec<usize> = report
-        .lanes
-        .iter()
-        .map(|l| l.plan.parts)
-        .filter(|&p| p > 1)
-        .collect();
-    if let Some(most) = cut.iter().max() {
+    let (raised, most) = report.raised;
+    if raised > 0 {
         println!(
-            "  sub-maps     {} lanes cut each iteration into up to {most} parts: over a whole one the fastest contraction falls below what the finite difference resolves",
-            cut.len()
+            "  steps        raised in {raised} lanes, up to {most} per period: their fastest time scale needs RK4 step × rate ≤ {}",
+            lyapsweep::method::lane::MAX_STEP_RATE
+        );
+    }
+    let (cut, most) = report.cut;
+    if cut > 0 {
+        println!(
+            "  sub-maps     {cut} lanes cut each iteration into up to {most} parts: over a whole one the fastest contraction falls below what the finite difference resolves"
         );
     }
     println!("  time         {:.3} s", report.elapsed.as_secs_f64());
@@ -311,14 +318,18 @@ fn print_summary(scene: &Scene, report: &Report, written: &[PathBuf]) {
             );
         }
     }
-    if let Some(err) = report.max_sum_error() {
+    if let Some(err) = report.max_sum_error {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }
-    println!(
-        "  flagged lanes {} of {}",
-        report.flagged(),
-        report.lanes.len()
-    );
+    println!("  flagged lanes {} of {}", report.flagged, report.lanes);
+    if !report.failures.is_empty() {
+        let failures: Vec<String> = report
+            .failures
+            .iter()
+            .map(|(name, n)| format!("{n} {name}"))
+            .collect();
+        println!("  failed lanes {} (no exponents)", failures.join(", "));
+    }
     for path in written {
         println!("  wrote        {}", path.display());
     }

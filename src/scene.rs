@@ -138,7 +138,8 @@ pub struct Scene {
     pub system: &'static SystemInfo,
     /// The `[system]` parameter values (the swept one at its scene value).
     pub params: Params,
-    pub sweep: Sweep,
+    /// Shared by the batches a large run is streamed in (see [`Scene::batch`]).
+    pub sweep: std::sync::Arc<Sweep>,
     pub integration: Integration,
     pub backend: Backend,
     pub precision: Precision,
@@ -150,6 +151,9 @@ pub struct Scene {
     pub plot: bool,
     /// The part of the sweep this run computes (`--shard i/n`), if not all.
     pub shard: Option<Shard>,
+    /// The lanes of the shard (or sweep) computed now, when a large run is
+    /// streamed in batches (see [`Scene::batch`]).
+    pub batch: Option<std::ops::Range<usize>>,
     /// The scene as TOML after overrides (keys sorted), written next to the
     /// results so that `plot` and `merge` know what produced them.
     pub source: String,
@@ -265,15 +269,32 @@ impl Scene {
             })
     }
 
-    /// Lanes this run computes: the sweep's, or its shard's.
+    /// Lanes this run computes: the sweep's, or its shard's, or of the
+    /// batch being computed.
     pub fn lane_count(&self) -> usize {
+        self.batch.as_ref().map_or(self.run_lane_count(), |b| b.len())
+    }
+
+    /// Lanes of the whole run: the sweep's, or its shard's (batches aside).
+    pub fn run_lane_count(&self) -> usize {
         let all = self.sweep.lanes();
         self.shard.map_or(all, |s| s.lanes(all).count())
     }
 
     /// The sweep lane of this run's lane `j`.
     pub fn sweep_lane(&self, j: usize) -> usize {
+        let j = self.batch.as_ref().map_or(j, |b| b.start + j);
         self.shard.map_or(j, |s| s.index + j * s.count)
+    }
+
+    /// This scene restricted to lanes `range` of its run (of the shard,
+    /// when sharded): a batch of a run streamed in parts. Every lane is
+    /// computed as in the whole run.
+    pub fn batch(&self, range: std::ops::Range<usize>) -> Scene {
+        Scene {
+            batch: Some(range),
+            ..self.clone()
+        }
     }
 
     /// The parameter values of sweep lane `k` (of the whole sweep).
@@ -471,6 +492,16 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
 
 fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
     let (info, params) = resolve_system(&raw.system)?;
+    // The sweep's size is checked before its values are generated.
+    let mut counts = vec![("sweep.count".to_owned(), axis_len(&raw.sweep.axis))];
+    if let Some(second) = &raw.sweep.second {
+        counts.push(("sweep.second.count".to_owned(), axis_len(second)));
+    }
+    crate::budget::check_sweep(
+        &counts,
+        info.dimension(),
+        raw.output.bifurcation_points.unwrap_or(0),
+    )?;
     let sweep = resolve_sweep(info, &params, raw.sweep)?;
 
     let i = raw.integration;
@@ -581,7 +612,7 @@ fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
         name,
         system: info,
         params,
-        sweep,
+        sweep: std::sync::Arc::new(sweep),
         integration,
         backend: raw.run.backend.unwrap_or_default(),
         precision,
@@ -590,8 +621,18 @@ fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
         bifurcation_points,
         plot,
         shard: None,
+        batch: None,
         source,
     })
+}
+
+/// The values an axis will have (its checks come later).
+fn axis_len(raw: &RawAxis) -> usize {
+    match (&raw.values, raw.from, raw.to) {
+        (Some(values), _, _) => values.len(),
+        (None, Some(_), Some(_)) => raw.count.unwrap_or(DEFAULT_COUNT),
+        _ => 1,
+    }
 }
 
 fn positive(key: &str, value: Option<usize>, default: usize) -> Result<usize> {

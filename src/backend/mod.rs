@@ -298,6 +298,10 @@ fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
             ));
         }
         let lane = (scene.system.plan)(&params, settings);
+        if !lane.affordable() {
+            // Not run: its row says too-many-steps (see `run_batch`).
+            continue;
+        }
         plan.steps_per_period = plan.steps_per_period.max(lane.steps_per_period);
         plan.parts = plan.parts.max(lane.parts);
     }
@@ -331,12 +335,58 @@ pub fn run(scene: &Scene) -> Result<Report> {
 
 /// [`run`] with options that are not part of the scene.
 pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
-    let (plan, precision, choice) = plan(scene, options.device)?;
-    let start = Instant::now();
+    let prepared = prepare(scene, options)?;
+    start_progress(scene, options);
+    run_batch(&prepared, scene, options)
+}
+
+/// The work of a run, in lane-iterations, on its progress.
+fn start_progress(scene: &Scene, options: &RunOptions) -> Progress {
     let progress = options.progress.clone().unwrap_or_default();
     let i = &scene.integration;
-    progress.start((scene.lane_count() * (i.transient + i.iterations)) as u64);
-    let (backend, mut lanes, gpu_report) = match plan {
+    progress.start((scene.run_lane_count() * (i.transient + i.iterations)) as u64);
+    progress
+}
+
+/// [`run_with`] streamed: the run's lanes in batches of at most
+/// `batch_lanes`, each handed to `sink` (with the scene restricted to it,
+/// see `Scene::batch`) and dropped, so that the results held at once stay
+/// bounded. The backend is chosen and opened once, and every batch runs
+/// with the whole run's plan.
+pub fn run_streaming(
+    scene: &Scene,
+    options: &RunOptions,
+    batch_lanes: usize,
+    mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
+) -> Result<Summary> {
+    let prepared = prepare(scene, options)?;
+    start_progress(scene, options);
+    let lanes = scene.run_lane_count();
+    let mut summary: Option<Summary> = None;
+    for start in (0..lanes).step_by(batch_lanes.max(1)) {
+        let batch = scene.batch(start..(start + batch_lanes).min(lanes));
+        let report = run_batch(&prepared, &batch, options)?;
+        sink(&batch, &report)?;
+        match &mut summary {
+            Some(s) => s.absorb(&report),
+            None => summary = Some(Summary::of(scene, &report)),
+        }
+    }
+    Ok(summary.expect("a scene has at least one lane"))
+}
+
+/// A run's backend, chosen and opened, with the settings every lane follows.
+struct Prepared {
+    precision: Precision,
+    choice: Option<String>,
+    backend: Backend,
+    settings: MethodSettings,
+    gpu: Option<(context::Gpu, Variant)>,
+}
+
+fn prepare(scene: &Scene, options: &RunOptions) -> Result<Prepared> {
+    let (plan, precision, choice) = plan(scene, options.device)?;
+    let (backend, settings, gpu) = match plan {
         Plan::Cpu | Plan::Exact => {
             let backend = if matches!(plan, Plan::Exact) {
                 Backend::Exact
@@ -345,7 +395,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             };
             let mut settings = method_settings(scene, backend, Precision::F64);
             settings.keep_jacobians = options.keep_jacobians;
-            (backend, cpu::sweep(scene, &settings, &progress), None)
+            (backend, settings, None)
         }
         Plan::Gpu(adapter, summary) => {
             let mut settings = method_settings(scene, Backend::Gpu, precision);
@@ -353,7 +403,43 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
             follow_gpu_plan(scene, &mut settings)?;
             let variant = variant(scene, precision);
             let gpu = context::open(adapter, summary, precision)?;
-            let run = gpu::sweep::run(&gpu, scene, &variant, &settings, options)?;
+            (Backend::Gpu, settings, Some((gpu, variant)))
+        }
+    };
+    Ok(Prepared {
+        precision,
+        choice,
+        backend,
+        settings,
+        gpu,
+    })
+}
+
+/// The lanes of `scene` (a batch of the run, or all of it) on the prepared
+/// backend.
+fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result<Report> {
+    let start = Instant::now();
+    let progress = options.progress.clone().unwrap_or_default();
+    let settings = &prepared.settings;
+    let precision = prepared.precision;
+    let (mut lanes, gpu_report) = match &prepared.gpu {
+        None => (cpu::sweep(scene, settings, &progress), None),
+        Some((gpu, variant)) => {
+            let mut run = gpu::sweep::run(gpu, scene, variant, settings, options)?;
+            // The kernels ran every lane with the sweep's plan; a lane whose
+            // own plan is beyond reach is not to be trusted (the CPU path
+            // does not run it at all).
+            for (k, lane) in run.lanes.iter_mut().enumerate() {
+                let own = (scene.system.plan)(&scene.lane_params(k), settings);
+                if !own.affordable() {
+                    *lane = crate::method::lane::not_run(
+                        settings,
+                        scene.system.dimension(),
+                        lane.period,
+                        own,
+                    );
+                }
+            }
             let report = GpuReport {
                 adapter: gpu.summary.name.clone(),
                 adapter_backend: gpu.summary.backend.clone(),
@@ -364,7 +450,7 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
                 retries: run.retries,
                 validation: None,
             };
-            (Backend::Gpu, run.lanes, Some(report))
+            (run.lanes, Some(report))
         }
     };
     let elapsed = start.elapsed();
@@ -382,15 +468,114 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
         })
         .collect();
     Ok(Report {
-        backend,
+        backend: prepared.backend,
         precision,
-        choice,
+        choice: prepared.choice.clone(),
         lanes,
         expected_sums,
         elapsed,
         threads: rayon::current_num_threads(),
         gpu: gpu_report,
     })
+}
+
+/// What a run did over all its batches: what the command prints.
+#[derive(Clone, Debug)]
+pub struct Summary {
+    pub backend: Backend,
+    pub precision: Precision,
+    /// Why `auto` chose the backend, if it did.
+    pub choice: Option<String>,
+    pub threads: usize,
+    pub elapsed: Duration,
+    /// The GPU part, summed over batches (validation: the largest difference).
+    pub gpu: Option<GpuReport>,
+    pub lanes: usize,
+    /// Lanes whose status is not `ok`.
+    pub flagged: usize,
+    /// Lanes that gave no exponents at all (see [`LaneStatus::is_failure`]),
+    /// by status name.
+    pub failures: std::collections::BTreeMap<&'static str, usize>,
+    pub max_sum_error: Option<f64>,
+    /// Lanes whose RK4 steps were raised, and the most steps per period.
+    pub raised: (usize, usize),
+    /// Lanes cut into sub-maps, and the most parts.
+    pub cut: (usize, usize),
+    /// The scene's RK4 steps per period, against which `raised` counts.
+    requested_steps: usize,
+}
+
+impl Summary {
+    /// The summary of `report`, a run of `scene` (or its first batch).
+    pub fn of(scene: &Scene, report: &Report) -> Summary {
+        let mut summary = Summary {
+            backend: report.backend,
+            precision: report.precision,
+            choice: report.choice.clone(),
+            threads: report.threads,
+            elapsed: Duration::ZERO,
+            gpu: None,
+            lanes: 0,
+            flagged: 0,
+            failures: Default::default(),
+            max_sum_error: None,
+            raised: (0, 0),
+            cut: (0, 0),
+            requested_steps: if scene.system.is_flow && report.backend != Backend::Exact {
+                scene.integration.steps_per_period
+            } else {
+                usize::MAX
+            },
+        };
+        summary.absorb(report);
+        summary
+    }
+
+    /// Adds one more batch's report.
+    pub fn absorb(&mut self, report: &Report) {
+        self.elapsed += report.elapsed;
+        self.lanes += report.lanes.len();
+        self.flagged += report.flagged();
+        for lane in &report.lanes {
+            if lane.status.is_failure() {
+                *self.failures.entry(lane.status.name()).or_default() += 1;
+            }
+        }
+        self.max_sum_error = match (self.max_sum_error, report.max_sum_error()) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+        if let Some(gpu) = &report.gpu {
+            match &mut self.gpu {
+                None => self.gpu = Some(gpu.clone()),
+                Some(sum) => {
+                    sum.timings.add(&gpu.timings);
+                    sum.batches += gpu.batches;
+                    sum.retries += gpu.retries;
+                    sum.chunk_steps = sum.chunk_steps.min(gpu.chunk_steps);
+                    if let (Some(v), Some(w)) = (&mut sum.validation, &gpu.validation) {
+                        v.lanes.extend(&w.lanes);
+                        v.max_difference = v.max_difference.max(w.max_difference);
+                    }
+                }
+            }
+        }
+        let requested = self.requested_steps;
+        for lane in &report.lanes {
+            let (steps, parts) = (lane.plan.steps_per_period, lane.plan.parts);
+            if steps > requested {
+                self.raised = (self.raised.0 + 1, self.raised.1.max(steps));
+            }
+            if parts > 1 {
+                self.cut = (self.cut.0 + 1, self.cut.1.max(parts));
+            }
+        }
+    }
+
+    /// Whether every lane failed (the command then exits with 1).
+    pub fn all_failed(&self) -> bool {
+        self.failures.values().sum::<usize>() == self.lanes
+    }
 }
 
 /// Recomputes `scene.validate` sweep values, spread over the sweep, on the

@@ -74,6 +74,12 @@ pub const RESOLUTION_BOUND: f64 = 1e-3;
 /// raised: RK4 is stable up to 2.78, and at 0.1 the fastest mode's
 /// per-step growth factor is right to a relative (0.1)⁴/120 ≈ 1e-6.
 pub const MAX_STEP_RATE: f64 = 0.1;
+/// RK4 steps per map period above which a lane is not run: one lane would
+/// take hours (η = 1e-9 of the seed's oscillator, a period of 6e9 natural
+/// time units, needs 6e10), and the clock and step counters lose their
+/// resolution. Such a lane says `too-many-steps`.
+pub const MAX_STEPS_PER_PERIOD: usize = 100_000_000;
+
 /// Relative rounding noise allowed in a part's most contracted column.
 /// Its bias in an exponent is about PART_NOISE²/2 per part's time.
 const PART_NOISE: f64 = 1e-2;
@@ -91,12 +97,43 @@ pub struct LanePlan {
     pub parts: usize,
 }
 
+impl LanePlan {
+    /// Whether a lane may run on this plan (see [`MAX_STEPS_PER_PERIOD`]).
+    pub fn affordable(&self) -> bool {
+        self.steps_per_period <= MAX_STEPS_PER_PERIOD
+    }
+}
+
+/// The result of a lane that was not run because its plan needs more than
+/// [`MAX_STEPS_PER_PERIOD`] steps: no exponents (NaN), no points.
+pub fn not_run(settings: &MethodSettings, dimension: usize, period: f64, plan: LanePlan) -> LaneResult {
+    LaneResult {
+        exponents: if settings.lyapunov {
+            vec![f64::NAN; dimension]
+        } else {
+            Vec::new()
+        },
+        impacts_per_period: f64::NAN,
+        period,
+        bifurcation: Vec::new(),
+        jacobians: Vec::new(),
+        grazing: 0,
+        grazing_bound: f64::NAN,
+        plan,
+        status: LaneStatus::TooManySteps {
+            needed: plan.steps_per_period,
+        },
+    }
+}
+
 /// The plan of a lane of system `S` (see [`LanePlan`]).
 pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSettings) -> LanePlan {
     let period = system.period();
     let requested = settings.flow.steps_per_period;
     let needed = (period * system.stiffness() / MAX_STEP_RATE).ceil();
-    let steps_per_period = if needed > requested as f64 && needed < u32::MAX as f64 {
+    // A plan over MAX_STEPS_PER_PERIOD is not run (`LanePlan::affordable`);
+    // `as` saturates an infinite or overflowing need.
+    let steps_per_period = if needed > requested as f64 {
         needed as usize
     } else {
         requested
@@ -227,6 +264,36 @@ pub enum LaneStatus {
     Mismatch {
         difference: f64,
     },
+    /// The lane's fastest time scale needs more RK4 steps per period than
+    /// [`MAX_STEPS_PER_PERIOD`]: it was not run.
+    TooManySteps {
+        needed: usize,
+    },
+}
+
+impl LaneStatus {
+    /// The status's name, as the CSV column starts.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LaneStatus::Ok => "ok",
+            LaneStatus::NonFinite { .. } => "non-finite",
+            LaneStatus::Chattering { .. } => "chattering",
+            LaneStatus::Unresolved { .. } => "unresolved",
+            LaneStatus::Collapsed { .. } => "collapsed",
+            LaneStatus::Grazing { .. } => "grazing",
+            LaneStatus::Mismatch { .. } => "gpu-mismatch",
+            LaneStatus::TooManySteps { .. } => "too-many-steps",
+        }
+    }
+
+    /// Whether the lane gave no exponents at all (a run in which every lane
+    /// failed exits with an error); other statuses flag numbers to doubt.
+    pub fn is_failure(&self) -> bool {
+        matches!(
+            self,
+            LaneStatus::NonFinite { .. } | LaneStatus::TooManySteps { .. }
+        )
+    }
 }
 
 impl std::fmt::Display for LaneStatus {
@@ -243,6 +310,9 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::Grazing { bound, .. } => write!(f, "grazing(bound={bound:.1e})"),
             LaneStatus::Mismatch { difference } => {
                 write!(f, "gpu-mismatch(difference={difference:.1e})")
+            }
+            LaneStatus::TooManySteps { needed } => {
+                write!(f, "too-many-steps(needed={:.1e})", *needed as f64)
             }
         }
     }
@@ -287,6 +357,9 @@ where
     let settings = lane.settings;
     let system = S::new(&lane.params);
     let plan = plan_lane(&system, settings);
+    if !plan.affordable() {
+        return not_run(settings, D, system.period(), plan);
+    }
     let flow = &FlowSettings {
         steps_per_period: plan.steps_per_period,
         ..settings.flow

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use super::results::{read_csv, scene_of};
-use super::{
-    spectrum_file, write_atomically, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE,
-};
+use super::set::{self, Staging};
+use super::{number, write_atomically, spectrum_file, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE};
 use crate::error::{Error, Result};
+use crate::scene::Scene;
 
 /// `shard.toml`, as [`super::write`] writes it.
 #[derive(Deserialize)]
@@ -70,6 +70,12 @@ fn read_shard(dir: &Path) -> Result<Shard> {
 
 /// Merges the shard folders into `out`; returns the paths written.
 pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    // The output folder is checked first (never one of the shards), and
+    // every shard is read and checked before anything is written.
+    let staging = Staging::prepare(out, dirs)?;
+    for dir in dirs {
+        set::verify(dir)?;
+    }
     let mut shards = dirs
         .iter()
         .map(|d| read_shard(d))
@@ -194,16 +200,17 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         })?);
     }
 
-    std::fs::create_dir_all(out).map_err(|source| Error::Write {
-        path: out.to_owned(),
-        source,
-    })?;
-    let path = out.join(SCENE_FILE);
-    write_text(&path, &first.scene_text)?;
-    let mut written = vec![path];
+    let shard_dirs: Vec<&Path> = shards.iter().map(|s| s.dir.as_path()).collect();
     for table in &tables {
-        let path = out.join(table.name);
-        write_atomically(&path, |w| {
+        check_rows(&scene, table, &shard_dirs)?;
+    }
+
+    let dir = staging.dir().to_owned();
+    set::pause(SCENE_FILE);
+    write_text(&dir.join(SCENE_FILE), &first.scene_text)?;
+    for table in &tables {
+        set::pause(table.name);
+        write_atomically(&dir.join(table.name), |w| {
             w.write_record(&table.header)?;
             for k in 0..lanes {
                 for record in &table.per_shard[k % count][k / count] {
@@ -212,10 +219,58 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
             }
             Ok(())
         })?;
-        written.push(path);
     }
     if scene.plot {
-        written.extend(super::results::draw(out, out)?);
+        set::pause("figures");
+        super::results::draw(&dir, &dir)?;
     }
-    Ok(written)
+    staging.commit()
+}
+
+/// Every row of a shard's table is of the lane it stands for (its
+/// parameters as the scene gives them, to the digit) and every cell but
+/// the status is a number.
+fn check_rows(scene: &Scene, table: &Table, dirs: &[&Path]) -> Result<()> {
+    let count = dirs.len();
+    let axes = scene.sweep.axes().count();
+    let numeric = if table.name == BIFURCATION_FILE {
+        table.header.len()
+    } else {
+        // The last column is the status.
+        table.header.len() - 1
+    };
+    for (i, lanes) in table.per_shard.iter().enumerate() {
+        for (j, records) in lanes.iter().enumerate() {
+            let k = i + j * count;
+            let expected: Vec<String> = scene.sweep.values_at(k).into_iter().map(number).collect();
+            for record in records {
+                let line = record.position().map_or(0, |p| p.line());
+                let at = |reason: String| bad(&dirs[i].join(table.name), format!("line {line}: {reason}"));
+                if record.len() != table.header.len() {
+                    return Err(at(format!(
+                        "{} fields, the header has {}",
+                        record.len(),
+                        table.header.len()
+                    )));
+                }
+                for (c, want) in expected.iter().enumerate() {
+                    if &record[c] != want {
+                        return Err(at(format!(
+                            "{} = {} where the scene's sweep lane {k} has {want}: the row is not of this sweep",
+                            &table.header[c], &record[c]
+                        )));
+                    }
+                }
+                for c in axes..numeric {
+                    if record[c].parse::<f64>().is_err() {
+                        return Err(at(format!(
+                            "{} is not a number: {:?}",
+                            &table.header[c], &record[c]
+                        )));
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
 }

@@ -8,13 +8,16 @@
 //! (`--shard i/n`) writes its own rows and `shard.toml`; `merge` puts shards
 //! back into the files one run would have written.
 //!
-//! Each file is written under a temporary name in the output folder and
-//! renamed into place when complete, so a file appears whole or not at all.
+//! A run's files are one set (see [`set`]): written into a staging folder
+//! beside the output folder, the rows streamed there batch by batch as the
+//! lanes finish, and swapped in whole when complete, so the output folder
+//! holds one run's files or the previous run's, never a mix.
 
 pub mod figure;
 pub mod merge;
 pub mod plot;
 pub mod results;
+pub mod set;
 
 use std::fs;
 use std::io::Write;
@@ -23,19 +26,22 @@ use std::path::{Path, PathBuf};
 use crate::backend::Report;
 use crate::error::{Error, Result};
 use crate::scene::Scene;
+pub use set::Staging;
 
 /// The scene as run, next to its results.
 pub const SCENE_FILE: &str = "scene.toml";
 /// Which part of the sweep a shard holds (see [`merge`]).
 pub const SHARD_FILE: &str = "shard.toml";
+pub const SPECTRUM_FILE: &str = "spectrum.csv";
+pub const GRID_FILE: &str = "grid.csv";
 pub const BIFURCATION_FILE: &str = "bifurcation.csv";
 
 /// `spectrum.csv` for one swept parameter, `grid.csv` for two.
 pub fn spectrum_file(scene: &Scene) -> &'static str {
     if scene.sweep.second.is_some() {
-        "grid.csv"
+        GRID_FILE
     } else {
-        "spectrum.csv"
+        SPECTRUM_FILE
     }
 }
 
@@ -67,72 +73,136 @@ pub fn bifurcation_header(scene: &Scene) -> Vec<String> {
     header
 }
 
-/// Writes the files the scene asks for into `dir` (and the figures, unless
-/// this is a shard); returns their paths.
-pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
-    fs::create_dir_all(dir).map_err(|source| Error::Write {
-        path: dir.to_owned(),
+/// Writes a run's set: `scene.toml` first, then the rows of each batch of
+/// lanes as it finishes ([`append`](Self::append)), then `shard.toml` or the
+/// figures, and the swap ([`finish`](Self::finish)).
+pub struct SetWriter {
+    staging: Staging,
+    scene: Scene,
+    spectrum: Option<csv::Writer<fs::File>>,
+    bifurcation: Option<csv::Writer<fs::File>>,
+    /// Rows of `bifurcation.csv` per lane so far (a shard lists them).
+    bifurcation_rows: Vec<usize>,
+}
+
+fn write_error(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
+    move |source| Error::Write {
+        path: path.to_owned(),
         source,
-    })?;
-    let mut written = Vec::new();
-    let path = dir.join(SCENE_FILE);
-    write_text(&path, &scene.source)?;
-    written.push(path);
-    if scene.lyapunov {
-        let path = dir.join(spectrum_file(scene));
-        write_atomically(&path, |w| {
-            w.write_record(spectrum_header(scene))?;
-            for row in spectrum_rows(scene, report) {
-                w.write_record(&row)?;
-            }
-            Ok(())
-        })?;
-        written.push(path);
     }
-    if scene.bifurcation_points > 0 {
-        let path = dir.join(BIFURCATION_FILE);
-        write_atomically(&path, |w| {
-            w.write_record(bifurcation_header(scene))?;
-            for j in 0..report.lanes.len() {
-                for row in bifurcation_rows(scene, report, j) {
-                    w.write_record(&row)?;
+}
+
+impl SetWriter {
+    /// Starts the set of `scene` in `staging`.
+    pub fn new(scene: &Scene, staging: Staging) -> Result<SetWriter> {
+        set::pause(SCENE_FILE);
+        write_text(&staging.dir().join(SCENE_FILE), &scene.source)?;
+        let open = |name: &str, header: Vec<String>| -> Result<csv::Writer<fs::File>> {
+            set::pause(name);
+            let path = staging.dir().join(name);
+            let file = fs::File::create(&path).map_err(write_error(&path))?;
+            let mut writer = csv::Writer::from_writer(file);
+            writer
+                .write_record(header)
+                .map_err(|e| write_error(&path)(csv_to_io(e)))?;
+            Ok(writer)
+        };
+        let spectrum = scene
+            .lyapunov
+            .then(|| open(spectrum_file(scene), spectrum_header(scene)))
+            .transpose()?;
+        let bifurcation = (scene.bifurcation_points > 0)
+            .then(|| open(BIFURCATION_FILE, bifurcation_header(scene)))
+            .transpose()?;
+        Ok(SetWriter {
+            staging,
+            scene: scene.clone(),
+            spectrum,
+            bifurcation,
+            bifurcation_rows: Vec::new(),
+        })
+    }
+
+    /// Appends the rows of one batch: `batch` is the scene restricted to
+    /// the batch's lanes (see `Scene::batch`), `report` its results.
+    pub fn append(&mut self, batch: &Scene, report: &Report) -> Result<()> {
+        let dir = self.staging.dir().to_owned();
+        if let Some(w) = &mut self.spectrum {
+            let path = dir.join(spectrum_file(batch));
+            for row in spectrum_rows(batch, report) {
+                w.write_record(&row)
+                    .map_err(|e| write_error(&path)(csv_to_io(e)))?;
+            }
+        }
+        for j in 0..report.lanes.len() {
+            let rows = bifurcation_rows(batch, report, j);
+            self.bifurcation_rows.push(rows.len());
+            if let Some(w) = &mut self.bifurcation {
+                let path = dir.join(BIFURCATION_FILE);
+                for row in rows {
+                    w.write_record(&row)
+                        .map_err(|e| write_error(&path)(csv_to_io(e)))?;
                 }
             }
-            Ok(())
-        })?;
-        written.push(path);
+        }
+        Ok(())
     }
-    if let Some(shard) = scene.shard {
-        let rows: Vec<String> = (0..report.lanes.len())
-            .map(|j| (report.lanes[j].bifurcation.len() / scene.system.dimension()).to_string())
-            .collect();
-        let first: Vec<String> = shard
-            .lanes(scene.sweep.lanes())
-            .take(3)
-            .map(|k| k.to_string())
-            .collect();
-        let text = format!(
-            "# Shard {} of {} (sweep lanes {}, ...): `lyapsweep merge` combines the shards.\nindex = {}\ncount = {}\nlanes = {}\nbifurcation_rows = [{}]\n",
-            shard.index,
-            shard.count,
-            first.join(", "),
-            shard.index,
-            shard.count,
-            scene.sweep.lanes(),
-            rows.join(", ")
-        );
-        let path = dir.join(SHARD_FILE);
-        write_text(&path, &text)?;
-        written.push(path);
-    } else if scene.plot {
-        written.extend(results::draw(dir, dir)?);
+
+    /// Completes the set (shard.toml for a shard, the figures otherwise) and
+    /// swaps it into the output folder; returns the paths written there.
+    pub fn finish(self) -> Result<Vec<PathBuf>> {
+        let dir = self.staging.dir().to_owned();
+        for (writer, name) in [
+            (self.spectrum, spectrum_file(&self.scene)),
+            (self.bifurcation, BIFURCATION_FILE),
+        ] {
+            if let Some(w) = writer {
+                let path = dir.join(name);
+                let file = w
+                    .into_inner()
+                    .map_err(|e| write_error(&path)(e.into_error()))?;
+                file.sync_all().map_err(write_error(&path))?;
+            }
+        }
+        let scene = &self.scene;
+        if let Some(shard) = scene.shard {
+            let rows: Vec<String> = self.bifurcation_rows.iter().map(|n| n.to_string()).collect();
+            let first: Vec<String> = shard
+                .lanes(scene.sweep.lanes())
+                .take(3)
+                .map(|k| k.to_string())
+                .collect();
+            let text = format!(
+                "# Shard {} of {} (sweep lanes {}, ...): `lyapsweep merge` combines the shards.\nindex = {}\ncount = {}\nlanes = {}\nbifurcation_rows = [{}]\n",
+                shard.index,
+                shard.count,
+                first.join(", "),
+                shard.index,
+                shard.count,
+                scene.sweep.lanes(),
+                rows.join(", ")
+            );
+            set::pause(SHARD_FILE);
+            write_text(&dir.join(SHARD_FILE), &text)?;
+        } else if scene.plot {
+            set::pause("figures");
+            results::draw(&dir, &dir)?;
+        }
+        self.staging.commit()
     }
-    Ok(written)
+}
+
+/// Writes the whole set of one report into `dir` (a run in one batch; the
+/// command streams batches through [`SetWriter`] itself); returns the paths.
+pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut writer = SetWriter::new(scene, Staging::prepare(dir, &[])?)?;
+    writer.append(scene, report)?;
+    writer.finish()
 }
 
 /// Rust's `{}` for f64 is the shortest text that reads back to the same
 /// number: full precision without trailing noise.
-fn number(v: f64) -> String {
+pub(crate) fn number(v: f64) -> String {
     format!("{v}")
 }
 

@@ -55,6 +55,19 @@ fn column(path: &Path, records: &[csv::StringRecord], k: usize) -> Result<Vec<f6
         .collect()
 }
 
+/// `lyapsweep plot DIR --out INTO`: checks that `dir` holds one complete
+/// set (`set::verify`) and draws its figures into `into`; a folder this
+/// call created is removed again when drawing fails.
+pub fn redraw(dir: &Path, into: &Path) -> Result<Vec<PathBuf>> {
+    super::set::verify(dir)?;
+    let created = !into.exists();
+    let result = draw(dir, into);
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir_all(into);
+    }
+    result
+}
+
 /// Draws the figures of the results in `dir` (the sweep figure for one
 /// parameter, the heat map of λ1 for two) into the folder `into`; returns
 /// their paths.

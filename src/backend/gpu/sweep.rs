@@ -78,7 +78,7 @@ pub struct Timings {
 }
 
 impl Timings {
-    fn add(&mut self, other: &Timings) {
+    pub(crate) fn add(&mut self, other: &Timings) {
         self.setup += other.setup;
         self.transient += other.transient;
         self.averaging += other.averaging;

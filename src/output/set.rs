@@ -1,0 +1,341 @@
+//! One run's files as a set: written into a fresh sibling of the output
+//! folder and swapped in whole, so that the folder holds one complete set,
+//! the previous one or the new one, never a mix.
+//!
+//! A run (or a merge) first [`prepare`](Staging::prepare)s its output folder,
+//! before any computation: the folder must be new, empty, or a lyapsweep
+//! output folder (nothing else in it is ever replaced), and its parent must
+//! be writable. The files go into `.NAME.lyapsweep-PID.partial` beside it;
+//! [`commit`](Staging::commit) writes `manifest.toml` (every data file's size
+//! and SHA-256) and exchanges the two folders in one `renameat2(2)` call
+//! (`RENAME_EXCHANGE`, Linux), then removes the previous set. Where the
+//! exchange is not available the previous set is renamed aside first, which
+//! leaves a moment with no folder at all, never a mixed one. A killed run
+//! leaves only its hidden sibling, which the next run into the same folder
+//! removes; `plot` and `merge` read a folder only when its files match its
+//! manifest ([`verify`]).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use super::results::{HEAT_MAP, SWEEP_FIGURE};
+use super::{BIFURCATION_FILE, GRID_FILE, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE};
+use crate::error::{Error, Result};
+
+/// The list of a set's data files, with their sizes and digests.
+pub const MANIFEST_FILE: &str = "manifest.toml";
+
+/// The data files a set may hold (the figures are drawn from them and are
+/// not part of the manifest: `plot` redraws them in place).
+const DATA_FILES: [&str; 5] = [
+    SCENE_FILE,
+    SHARD_FILE,
+    SPECTRUM_FILE,
+    GRID_FILE,
+    BIFURCATION_FILE,
+];
+const FIGURE_STEMS: [&str; 2] = [SWEEP_FIGURE, HEAT_MAP];
+
+/// Pauses before writing each file and before the swap, naming the step on
+/// stderr, for tests that kill a run in its write phase.
+const PAUSE_VARIABLE: &str = "LYAPSWEEP_TEST_WRITE_PAUSE_MS";
+
+/// A set being written: the folder it will become and the staging folder.
+#[derive(Debug)]
+pub struct Staging {
+    target: PathBuf,
+    dir: PathBuf,
+    committed: bool,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Manifest {
+    files: Vec<Entry>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Entry {
+    name: String,
+    bytes: u64,
+    sha256: String,
+}
+
+fn unwritable(path: &Path, reason: impl Into<String>) -> Error {
+    Error::Output {
+        path: path.to_owned(),
+        reason: reason.into(),
+    }
+}
+
+/// Whether lyapsweep writes files of this name into an output folder.
+fn is_ours(name: &str) -> bool {
+    DATA_FILES.contains(&name)
+        || name == MANIFEST_FILE
+        || FIGURE_STEMS
+            .iter()
+            .any(|stem| [".png", ".svg"].iter().any(|ext| name == format!("{stem}{ext}")))
+        // A single file's temporary (see `super::temporary_name`).
+        || (name.starts_with('.') && name.contains(".partial"))
+}
+
+/// The staging folders of `target` are named `.NAME.lyapsweep-PID.partial`.
+fn staging_prefix(target: &Path) -> String {
+    let name = target
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("output");
+    format!(".{name}.lyapsweep-")
+}
+
+impl Staging {
+    /// Checks that `target` can take a new set and creates the staging
+    /// folder beside it. `inputs` are folders the set is made from (merge's
+    /// shards): the target must not be one of them.
+    pub fn prepare(target: &Path, inputs: &[PathBuf]) -> Result<Staging> {
+        if let Ok(meta) = fs::symlink_metadata(target) {
+            if !meta.is_dir() {
+                return Err(unwritable(target, "exists and is not a folder"));
+            }
+            let canonical = fs::canonicalize(target).ok();
+            if let Some(input) = inputs
+                .iter()
+                .find(|i| canonical.is_some() && fs::canonicalize(i).ok() == canonical)
+            {
+                return Err(unwritable(
+                    target,
+                    format!(
+                        "is also an input ({}): write the merged set to another folder",
+                        input.display()
+                    ),
+                ));
+            }
+            let entries = fs::read_dir(target).map_err(|e| unwritable(target, e.to_string()))?;
+            let mut foreign: Vec<String> = entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|name| !is_ours(name))
+                .collect();
+            if !foreign.is_empty() {
+                foreign.sort();
+                foreign.truncate(5);
+                return Err(unwritable(
+                    target,
+                    format!(
+                        "holds files lyapsweep does not write ({}), which a new set would replace: give a new or empty folder",
+                        foreign.join(", ")
+                    ),
+                ));
+            }
+        }
+        let parent = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
+            _ => PathBuf::from("."),
+        };
+        fs::create_dir_all(&parent).map_err(|e| {
+            unwritable(target, format!("cannot create {}: {e}", parent.display()))
+        })?;
+        remove_abandoned(&parent, &staging_prefix(target));
+        let dir = parent.join(format!(
+            "{}{}.partial",
+            staging_prefix(target),
+            std::process::id()
+        ));
+        if dir.exists() {
+            let _ = fs::remove_dir_all(&dir);
+        }
+        fs::create_dir(&dir).map_err(|e| {
+            unwritable(target, format!("cannot write in {}: {e}", parent.display()))
+        })?;
+        Ok(Staging {
+            target: target.to_owned(),
+            dir,
+            committed: false,
+        })
+    }
+
+    /// The staging folder, where the set's files are written.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The folder the set becomes.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Where file `name` will be once committed.
+    pub fn final_path(&self, name: &str) -> PathBuf {
+        self.target.join(name)
+    }
+
+    /// Writes the manifest and swaps the set in; returns the paths of its
+    /// files in the output folder.
+    pub fn commit(mut self) -> Result<Vec<PathBuf>> {
+        let write_error = |source| Error::Write {
+            path: self.target.clone(),
+            source,
+        };
+        let mut names: Vec<String> = fs::read_dir(&self.dir)
+            .map_err(write_error)?
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| !n.starts_with('.'))
+            .collect();
+        names.sort();
+        let mut files = Vec::new();
+        for name in names.iter().filter(|n| DATA_FILES.contains(&n.as_str())) {
+            let (bytes, sha256) = digest(&self.dir.join(name)).map_err(write_error)?;
+            files.push(Entry {
+                name: name.clone(),
+                bytes,
+                sha256,
+            });
+        }
+        let text = toml::to_string(&Manifest { files }).expect("a manifest serialises");
+        pause(MANIFEST_FILE);
+        super::write_text(
+            &self.dir.join(MANIFEST_FILE),
+            &format!("# The data files of this set (lyapsweep): their sizes and SHA-256.\n{text}"),
+        )?;
+        fs::File::open(&self.dir)
+            .and_then(|d| d.sync_all())
+            .map_err(write_error)?;
+        pause("swap");
+        swap_in(&self.dir, &self.target).map_err(write_error)?;
+        self.committed = true;
+        // The staging folder now holds the previous set, if there was one.
+        let _ = fs::remove_dir_all(&self.dir);
+        names.push(MANIFEST_FILE.to_owned());
+        names.sort();
+        Ok(names.iter().map(|n| self.target.join(n)).collect())
+    }
+}
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = fs::remove_dir_all(&self.dir);
+        }
+    }
+}
+
+/// Before writing `what`, the pause tests ask for (see [`PAUSE_VARIABLE`]).
+pub(crate) fn pause(what: &str) {
+    if let Some(ms) = std::env::var(PAUSE_VARIABLE)
+        .ok()
+        .and_then(|v| v.parse::<u64>().ok())
+    {
+        eprintln!("writing: {what}");
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+    }
+}
+
+fn digest(path: &Path) -> std::io::Result<(u64, String)> {
+    let mut file = fs::File::open(path)?;
+    let mut hasher = Sha256::new();
+    let bytes = std::io::copy(&mut file, &mut hasher)?;
+    let hash = hasher.finalize();
+    Ok((bytes, hash.iter().map(|b| format!("{b:02x}")).collect()))
+}
+
+/// Replaces `target` by `staging` at once; `staging` then holds what
+/// `target` held (or nothing, when there was no `target`).
+fn swap_in(staging: &Path, target: &Path) -> std::io::Result<()> {
+    if !target.exists() {
+        return fs::rename(staging, target);
+    }
+    #[cfg(target_os = "linux")]
+    if exchange(staging, target).is_ok() {
+        return Ok(());
+    }
+    // Not atomic: the previous set goes aside, then the new one comes in.
+    let aside = staging.with_extension("previous");
+    fs::rename(target, &aside)?;
+    fs::rename(staging, target)?;
+    fs::rename(&aside, staging)
+}
+
+#[cfg(target_os = "linux")]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let c = |p: &Path| CString::new(p.as_os_str().as_bytes()).map_err(std::io::Error::other);
+    let (a, b) = (c(a)?, c(b)?);
+    // SAFETY: both are valid NUL-terminated paths that outlive the call.
+    let rc = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Removes staging folders of `parent` left by runs that were killed (their
+/// process is gone). Without /proc nothing can be told, and they stay:
+/// they are hidden and never read.
+fn remove_abandoned(parent: &Path, prefix: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let Ok(entries) = fs::read_dir(parent) else {
+        return;
+    };
+    for entry in entries.filter_map(|e| e.ok()) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(rest) = name.strip_prefix(prefix) else {
+            continue;
+        };
+        let pid = rest.split('.').next().unwrap_or_default();
+        if pid.parse::<u32>().is_ok() && !Path::new("/proc").join(pid).exists() {
+            let _ = fs::remove_dir_all(entry.path());
+        }
+    }
+}
+
+/// Checks that `dir` holds one complete set: a manifest whose every file is
+/// present with its size and digest, and no data file it does not list.
+pub fn verify(dir: &Path) -> Result<()> {
+    let bad = |path: PathBuf, reason: String| Error::Results { path, reason };
+    let path = dir.join(MANIFEST_FILE);
+    let text = fs::read_to_string(&path).map_err(|e| {
+        bad(
+            path.clone(),
+            format!("cannot read it ({e}): not a complete lyapsweep output folder (an interrupted run, or one written before sets had manifests); run it again"),
+        )
+    })?;
+    let manifest: Manifest =
+        toml::from_str(&text).map_err(|e| bad(path.clone(), e.message().to_owned()))?;
+    for entry in &manifest.files {
+        let file = dir.join(&entry.name);
+        let (bytes, sha256) =
+            digest(&file).map_err(|e| bad(file.clone(), format!("listed in {MANIFEST_FILE}, but {e}")))?;
+        if bytes != entry.bytes || sha256 != entry.sha256 {
+            return Err(bad(
+                file,
+                format!("differs from what {MANIFEST_FILE} lists ({bytes} bytes, {} listed): the folder's files are not one set", entry.bytes),
+            ));
+        }
+    }
+    for name in DATA_FILES {
+        if dir.join(name).exists() && !manifest.files.iter().any(|e| e.name == name) {
+            return Err(bad(
+                dir.join(name),
+                format!("is not listed in {MANIFEST_FILE}: the folder's files are not one set"),
+            ));
+        }
+    }
+    Ok(())
+}
