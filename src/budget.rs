@@ -142,7 +142,12 @@ pub fn check_run(scene: &Scene) -> Result<Option<String>> {
     }
     let lanes = scene.run_lane_count();
     let batch = batch_lanes(scene);
-    let held = 8.0 * scene.sweep.axes().map(|a| a.values.len() as f64).sum::<f64>()
+    let held = 8.0
+        * scene
+            .sweep
+            .axes()
+            .map(|a| a.values.len() as f64)
+            .sum::<f64>()
         + (batch.min(lanes) * lane_bytes(scene)) as f64;
     Ok((work > 1e12 || held > 1e9 || batch < lanes).then(|| {
         format!(

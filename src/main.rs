@@ -79,18 +79,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // Mesa's drivers print "error: XDG_RUNTIME_DIR is invalid or not set"
-    // while wgpu looks for adapters, which reads like one of ours; a headless
-    // compute run needs no runtime directory. Set before any thread starts.
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
-    }
     let cli = Cli::parse();
     match cli.command {
-        Command::Devices => {
-            print_devices();
-            ExitCode::SUCCESS
-        }
+        Command::Devices => exit_code(print_devices()),
         Command::Bench { quick, out } => exit_code(bench(
             quick,
             out.unwrap_or_else(|| PathBuf::from("out/bench")),
@@ -270,6 +261,18 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
+    let unused = scene.unused_keys(report.backend);
+    if !unused.is_empty() {
+        println!(
+            "  not used     {}: {}",
+            unused.join(", "),
+            if report.backend == Backend::Exact {
+                "the exact backend propagates in closed form"
+            } else {
+                "this system has no wall, or is a map"
+            }
+        );
+    }
     let (raised, most) = report.raised;
     if raised > 0 {
         println!(
@@ -335,11 +338,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
     }
 }
 
-fn print_devices() {
+fn print_devices() -> Result<(), Error> {
+    lyapsweep::backend::gpu::context::backends_from_env()?;
     let adapters = lyapsweep::backend::gpu::context::list();
     if adapters.is_empty() {
         println!("no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
-        return;
+        return Ok(());
     }
     for (n, a) in adapters.iter().enumerate() {
         println!(
@@ -354,6 +358,7 @@ fn print_devices() {
             a.max_workgroups
         );
     }
+    Ok(())
 }
 
 fn bench(quick: bool, out: PathBuf) -> Result<(), Error> {

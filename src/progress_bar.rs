@@ -46,7 +46,14 @@ impl Watcher {
 }
 
 fn bar(progress: &Progress, stop: &AtomicBool) {
-    let bar = ProgressBar::new(0);
+    // Nothing until the run has counted its work: a bar of 0/0 reads 100%.
+    while progress.total() == 0 {
+        if stop.load(Ordering::Relaxed) {
+            return;
+        }
+        std::thread::sleep(POLL);
+    }
+    let bar = ProgressBar::new(progress.total());
     bar.set_style(
         ProgressStyle::with_template(
             "{elapsed_precise} [{wide_bar}] {percent}%  {human_pos}/{human_len} lane-iterations  {rate}  {eta} left",

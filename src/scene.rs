@@ -272,7 +272,9 @@ impl Scene {
     /// Lanes this run computes: the sweep's, or its shard's, or of the
     /// batch being computed.
     pub fn lane_count(&self) -> usize {
-        self.batch.as_ref().map_or(self.run_lane_count(), |b| b.len())
+        self.batch
+            .as_ref()
+            .map_or(self.run_lane_count(), |b| b.len())
     }
 
     /// Lanes of the whole run: the sweep's, or its shard's (batches aside).
@@ -326,6 +328,41 @@ impl Scene {
             .join(", ")
     }
 
+    /// The `[integration]` keys the scene sets that `backend` does not use
+    /// (the exact backend propagates in closed form; a system without a
+    /// wall locates no impacts), for the summary to say so.
+    pub fn unused_keys(&self, backend: Backend) -> Vec<String> {
+        let set: Vec<String> = self
+            .source
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("integration").and_then(|i| i.as_table()).cloned())
+            .map(|i| i.keys().cloned().collect())
+            .unwrap_or_default();
+        let mut unused: Vec<&str> = Vec::new();
+        if backend == Backend::Exact {
+            unused.extend([
+                "steps_per_period",
+                "perturbation",
+                "difference",
+                "impact_location",
+            ]);
+        }
+        if self.system.wall_reachable.is_none() || !self.system.is_flow {
+            unused.push("impact_location");
+        }
+        if !self.system.is_flow {
+            unused.push("steps_per_period");
+        }
+        unused.sort_unstable();
+        unused.dedup();
+        unused
+            .into_iter()
+            .filter(|k| set.iter().any(|s| s == k))
+            .map(|k| format!("integration.{k}"))
+            .collect()
+    }
+
     /// This scene restricted to `shard` (checked against the sweep's size).
     pub fn sharded(mut self, shard: Shard) -> Result<Scene> {
         let lanes = self.sweep.lanes();
@@ -333,7 +370,7 @@ impl Scene {
             return Err(Error::invalid(
                 "--shard",
                 format!(
-                    "{}/{}: the sweep has {lanes} values, so shard {} of {} would be empty",
+                    "{}/{}: the sweep has {lanes} lanes, so it splits into at most {lanes} shards (shards {lanes} to {} of {} would be empty)",
                     shard.index,
                     shard.count,
                     shard.count - 1,
@@ -362,12 +399,30 @@ struct RawScene {
     output: RawOutput,
 }
 
+// The first axis's keys are spelled out rather than flattened from
+// RawAxis: serde's flatten loses the key of a bad value ("sweep: invalid
+// type" instead of "sweep.count: invalid type").
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSweep {
-    #[serde(flatten)]
-    axis: RawAxis,
+    parameter: Option<String>,
+    from: Option<f64>,
+    to: Option<f64>,
+    count: Option<usize>,
+    values: Option<Vec<f64>>,
     second: Option<RawAxis>,
+}
+
+impl RawSweep {
+    fn first(&self) -> RawAxis {
+        RawAxis {
+            parameter: self.parameter.clone(),
+            from: self.from,
+            to: self.to,
+            count: self.count,
+            values: self.values.clone(),
+        }
+    }
 }
 
 #[derive(Default, Deserialize)]
@@ -432,8 +487,9 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
             message: format!("{}{}", at.unwrap_or_default(), e.message().trim()),
         }
     })?;
+    let mut overridden = Vec::new();
     for o in overrides {
-        apply_override(&mut table, o)?;
+        overridden.push((apply_override(&mut table, o)?, o));
     }
     // The name goes into the written scene, so that it reads back the same
     // wherever the file lies.
@@ -453,24 +509,47 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
             // the path is already in front.
             let inner = e.inner().to_string();
             let first_line = inner.lines().next().unwrap_or_default().trim();
-            Error::Syntax {
-                path: origin.to_owned(),
-                message: format!("{key}{first_line}"),
+            // A value an override gave is the override's fault, not the file's.
+            let from = |key: &str| {
+                path == key
+                    || path.starts_with(&format!("{key}."))
+                    || path.starts_with(&format!("{key}["))
+            };
+            match overridden.iter().rev().find(|(key, _)| from(key)) {
+                Some((_, assignment)) => {
+                    Error::invalid(format!("--set {assignment}"), format!("{key}{first_line}"))
+                }
+                None => Error::Syntax {
+                    path: origin.to_owned(),
+                    message: format!("{key}{first_line}"),
+                },
             }
         })?;
     resolve(raw, default_name, source)
 }
 
 /// `--set integration.iterations=2000`: the value is read as TOML, or as a
-/// string when it is not valid TOML (so `--set run.backend=cpu` works).
-fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
+/// string when it is a bare word (so `--set run.backend=cpu` works); returns
+/// the key's path ("integration.iterations").
+fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<String> {
     let bad = |reason: &str| Error::invalid(format!("--set {assignment}"), reason);
     let (path, value) = assignment
         .split_once('=')
         .ok_or_else(|| bad("expected key.path=value"))?;
+    let bare_word = |v: &str| {
+        v.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+            && v.chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+    };
     let value: toml::Value = match format!("v = {value}").parse::<toml::Table>() {
         Ok(mut t) => t.remove("v").expect("just parsed"),
-        Err(_) => toml::Value::String(value.to_owned()),
+        Err(_) if bare_word(value.trim()) => toml::Value::String(value.trim().to_owned()),
+        Err(e) => {
+            return Err(bad(&format!(
+                "the value is not TOML ({}); quote a string: key='\"text\"'",
+                e.message().split_whitespace().collect::<Vec<_>>().join(" ")
+            )))
+        }
     };
     let keys: Vec<&str> = path.trim().split('.').collect();
     if keys.iter().any(|k| k.is_empty()) {
@@ -487,13 +566,13 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<()> {
             .ok_or_else(|| bad(&format!("`{key}` is not a table")))?;
     }
     node.insert(last.to_string(), value);
-    Ok(())
+    Ok(keys.join("."))
 }
 
 fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
     let (info, params) = resolve_system(&raw.system)?;
     // The sweep's size is checked before its values are generated.
-    let mut counts = vec![("sweep.count".to_owned(), axis_len(&raw.sweep.axis))];
+    let mut counts = vec![("sweep.count".to_owned(), axis_len(&raw.sweep.first()))];
     if let Some(second) = &raw.sweep.second {
         counts.push(("sweep.second.count".to_owned(), axis_len(second)));
     }
@@ -704,7 +783,7 @@ fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> 
 }
 
 fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> Result<Sweep> {
-    let first = resolve_axis(info, params, raw.axis, "sweep")?;
+    let first = resolve_axis(info, params, raw.first(), "sweep")?;
     let second = match raw.second {
         None => None,
         Some(axis) => {

@@ -256,7 +256,8 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
     let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
     assert!(bifurcation.starts_with("eta,x,v\n"));
     assert_eq!(bifurcation.lines().count(), 1 + 3 * 4);
-    // The scene as run, the CSV files and the figure; no temporary files.
+    // The scene as run, the CSV files, their manifest and the figure; no
+    // temporary files, and nothing left beside the folder.
     let mut names: Vec<String> = std::fs::read_dir(dir.path().join("out"))
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
@@ -268,10 +269,17 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
             "bifurcation.csv",
             "figure.png",
             "figure.svg",
+            "manifest.toml",
             "scene.toml",
             "spectrum.csv"
         ]
     );
+    let mut beside: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    beside.sort();
+    assert_eq!(beside, ["out", "scene.toml"]);
 }
 
 #[test]

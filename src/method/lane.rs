@@ -106,7 +106,12 @@ impl LanePlan {
 
 /// The result of a lane that was not run because its plan needs more than
 /// [`MAX_STEPS_PER_PERIOD`] steps: no exponents (NaN), no points.
-pub fn not_run(settings: &MethodSettings, dimension: usize, period: f64, plan: LanePlan) -> LaneResult {
+pub fn not_run(
+    settings: &MethodSettings,
+    dimension: usize,
+    period: f64,
+    plan: LanePlan,
+) -> LaneResult {
     LaneResult {
         exponents: if settings.lyapunov {
             vec![f64::NAN; dimension]

@@ -10,7 +10,9 @@ use serde::Deserialize;
 
 use super::results::{read_csv, scene_of};
 use super::set::{self, Staging};
-use super::{number, write_atomically, spectrum_file, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE};
+use super::{
+    number, spectrum_file, write_atomically, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE,
+};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -245,7 +247,9 @@ fn check_rows(scene: &Scene, table: &Table, dirs: &[&Path]) -> Result<()> {
             let expected: Vec<String> = scene.sweep.values_at(k).into_iter().map(number).collect();
             for record in records {
                 let line = record.position().map_or(0, |p| p.line());
-                let at = |reason: String| bad(&dirs[i].join(table.name), format!("line {line}: {reason}"));
+                let at = |reason: String| {
+                    bad(&dirs[i].join(table.name), format!("line {line}: {reason}"))
+                };
                 if record.len() != table.header.len() {
                     return Err(at(format!(
                         "{} fields, the header has {}",

@@ -166,7 +166,11 @@ impl SetWriter {
         }
         let scene = &self.scene;
         if let Some(shard) = scene.shard {
-            let rows: Vec<String> = self.bifurcation_rows.iter().map(|n| n.to_string()).collect();
+            let rows: Vec<String> = self
+                .bifurcation_rows
+                .iter()
+                .map(|n| n.to_string())
+                .collect();
             let first: Vec<String> = shard
                 .lanes(scene.sweep.lanes())
                 .take(3)

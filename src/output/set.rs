@@ -136,9 +136,8 @@ impl Staging {
             Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
             _ => PathBuf::from("."),
         };
-        fs::create_dir_all(&parent).map_err(|e| {
-            unwritable(target, format!("cannot create {}: {e}", parent.display()))
-        })?;
+        fs::create_dir_all(&parent)
+            .map_err(|e| unwritable(target, format!("cannot create {}: {e}", parent.display())))?;
         remove_abandoned(&parent, &staging_prefix(target));
         let dir = parent.join(format!(
             "{}{}.partial",
@@ -320,8 +319,8 @@ pub fn verify(dir: &Path) -> Result<()> {
         toml::from_str(&text).map_err(|e| bad(path.clone(), e.message().to_owned()))?;
     for entry in &manifest.files {
         let file = dir.join(&entry.name);
-        let (bytes, sha256) =
-            digest(&file).map_err(|e| bad(file.clone(), format!("listed in {MANIFEST_FILE}, but {e}")))?;
+        let (bytes, sha256) = digest(&file)
+            .map_err(|e| bad(file.clone(), format!("listed in {MANIFEST_FILE}, but {e}")))?;
         if bytes != entry.bytes || sha256 != entry.sha256 {
             return Err(bad(
                 file,

@@ -43,13 +43,59 @@ impl AdapterSummary {
     }
 }
 
-fn instance() -> wgpu::Instance {
-    wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env())
+/// An instance for `backends` (the descriptor from the environment would
+/// take `WGPU_BACKEND` too, and the f64 message must look past it).
+fn instance(backends: wgpu::Backends) -> wgpu::Instance {
+    quiet_mesa();
+    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    descriptor.backends = backends;
+    wgpu::Instance::new(descriptor)
+}
+
+/// Mesa's drivers print "error: XDG_RUNTIME_DIR is invalid or not set" while
+/// wgpu looks for adapters, which reads like an error of ours (and filled
+/// the test log with hundreds of lines); a headless compute run needs no
+/// runtime directory. Set once, before the first instance loads a driver.
+fn quiet_mesa() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+            // SAFETY (edition 2024 wording): no other thread of this
+            // library reads the environment while the driver is not loaded.
+            std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir());
+        }
+    });
+}
+
+/// The backends `WGPU_BACKEND` names (all when unset); a name wgpu does not
+/// know is an error here (wgpu ignores it, finds no adapter, and the message
+/// would blame the driver).
+pub fn backends_from_env() -> Result<wgpu::Backends> {
+    const KNOWN: [&str; 10] = [
+        "vulkan", "vk", "dx12", "d3d12", "metal", "mtl", "opengl", "gles", "gl", "webgpu",
+    ];
+    let Ok(text) = std::env::var("WGPU_BACKEND") else {
+        return Ok(wgpu::Backends::all());
+    };
+    if let Some(unknown) = text
+        .split(',')
+        .map(|b| b.trim().to_lowercase())
+        .find(|b| !KNOWN.contains(&b.as_str()))
+    {
+        return Err(Error::invalid(
+            "WGPU_BACKEND",
+            format!("{unknown:?} is not a backend (vulkan, metal, dx12, gl or webgpu; several separated by commas)"),
+        ));
+    }
+    Ok(wgpu::Backends::from_comma_list(&text))
+}
+
+fn adapters_of(backends: wgpu::Backends) -> Vec<wgpu::Adapter> {
+    pollster::block_on(instance(backends).enumerate_adapters(backends))
 }
 
 fn all_adapters() -> Vec<wgpu::Adapter> {
-    let backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-    pollster::block_on(instance().enumerate_adapters(backends))
+    adapters_of(backends_from_env().unwrap_or(wgpu::Backends::all()))
 }
 
 /// Every adapter wgpu finds (after `WGPU_BACKEND`), for `lyapsweep devices`.
@@ -82,7 +128,7 @@ pub fn choose(
     precision: Precision,
     device: Option<usize>,
 ) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
-    let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = all_adapters()
+    let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = adapters_of(backends_from_env()?)
         .into_iter()
         .map(|a| {
             let s = AdapterSummary::of(&a);
@@ -140,14 +186,44 @@ pub fn choose(
     }
     if precision == Precision::F64 {
         if !candidates.iter().any(|(_, s)| s.f64) {
-            let names: Vec<&str> = candidates.iter().map(|(_, s)| s.name.as_str()).collect();
-            return Err(Error::invalid(
-                "run.precision",
+            let names: Vec<String> = candidates
+                .iter()
+                .map(|(_, s)| format!("{} ({})", s.name, s.backend))
+                .collect();
+            // Adapters the selection left out may have it: say which, and
+            // what selected.
+            let elsewhere: Vec<String> = adapters_of(wgpu::Backends::all())
+                .iter()
+                .map(AdapterSummary::of)
+                .filter(|s| s.f64)
+                .map(|s| format!("{} ({})", s.name, s.backend))
+                .collect();
+            let selection: Vec<String> = [
+                std::env::var("WGPU_BACKEND")
+                    .ok()
+                    .map(|v| format!("WGPU_BACKEND={v}")),
+                std::env::var("WGPU_ADAPTER_NAME")
+                    .ok()
+                    .map(|v| format!("WGPU_ADAPTER_NAME={v}")),
+                device.map(|n| format!("--device {n}")),
+            ]
+            .into_iter()
+            .flatten()
+            .collect();
+            let reason = if elsewhere.is_empty() || selection.is_empty() {
                 format!(
                     "\"f64\" needs SHADER_F64, which no adapter here has ({}); use \"f32\"",
                     names.join(", ")
-                ),
-            ));
+                )
+            } else {
+                format!(
+                    "\"f64\" needs SHADER_F64, which the adapters {} selects do not have ({}); {} has it: change the selection or use \"f32\"",
+                    selection.join(" and "),
+                    names.join(", "),
+                    elsewhere.join(", ")
+                )
+            };
+            return Err(Error::invalid("run.precision", reason));
         }
         candidates.retain(|(_, s)| s.f64);
     }
