@@ -12,7 +12,7 @@
 
 use crate::error::{Error, Result};
 use crate::method::LaneResult;
-use crate::scene::Scene;
+use crate::scene::{Integration, Scene, Shard};
 
 /// Results held at once: a batch of lanes is at most this large.
 pub const BATCH_BYTES: usize = 1 << 30;
@@ -52,6 +52,8 @@ pub fn check_sweep(
     counts: &[(String, usize)],
     dimension: usize,
     bifurcation_points: usize,
+    lane_steps_per_lane: f64,
+    shard: Option<Shard>,
 ) -> Result<()> {
     let keys = || {
         counts
@@ -66,6 +68,19 @@ pub fn check_sweep(
             keys: keys(),
             reason: format!(
                 "{lanes:.3e} lanes, more than one sweep may hold ({MAX_SWEEP_LANES:.0e}): split it into several scenes (over ranges of the parameter)"
+            ),
+        });
+    }
+    // The work of this process's lanes (its shard's), at the requested steps
+    // (lanes may need more).
+    let run_lanes = shard.map_or(lanes, |s| (lanes / s.count as f64).ceil());
+    let work = run_lanes * lane_steps_per_lane;
+    if work > MAX_LANE_STEPS {
+        let shards = (lanes * lane_steps_per_lane / MAX_LANE_STEPS).ceil();
+        return Err(Error::TooLarge {
+            keys: format!("{}, integration.iterations, integration.steps_per_period", keys()),
+            reason: format!(
+                "about {work:.1e} RK4 lane-steps, more than one process takes on ({MAX_LANE_STEPS:.0e}): split the run with --shard i/{shards} (or more shards), one process each, and `lyapsweep merge` the results"
             ),
         });
     }
@@ -109,37 +124,31 @@ pub fn batch_lanes(scene: &Scene) -> usize {
     (budget / lane_bytes(scene)).clamp(1, scene.run_lane_count().max(1))
 }
 
-/// The RK4 lane-steps of the run (of its shard): every trajectory (the
-/// reference and, for exponents, its copies) over every iteration, at the
-/// requested steps (lanes may need more).
-pub fn lane_steps(scene: &Scene) -> f64 {
-    let i = &scene.integration;
-    let steps = if scene.system.is_flow {
-        i.steps_per_period as f64
+/// The RK4 trajectory-steps of one lane: the reference and its `copies`
+/// over every iteration, at the requested steps (lanes may need more).
+pub fn steps_per_lane(integration: &Integration, is_flow: bool, copies: usize) -> f64 {
+    let steps = if is_flow {
+        integration.steps_per_period as f64
     } else {
         1.0
     };
-    let copies = if scene.lyapunov {
-        scene.difference().copies(scene.system.dimension()) as f64
-    } else {
-        0.0
-    };
-    scene.run_lane_count() as f64 * (i.transient + i.iterations) as f64 * steps * (1.0 + copies)
+    (integration.transient + integration.iterations) as f64 * steps * (1 + copies) as f64
 }
 
-/// Checks the run (after sharding) against [`MAX_LANE_STEPS`]; returns the
-/// estimate's line for a run large enough that its user should see it.
-pub fn check_run(scene: &Scene) -> Result<Option<String>> {
+/// The RK4 lane-steps of the run (of its shard).
+pub fn lane_steps(scene: &Scene) -> f64 {
+    let copies = if scene.lyapunov {
+        scene.difference().copies(scene.system.dimension())
+    } else {
+        0
+    };
+    scene.run_lane_count() as f64 * steps_per_lane(&scene.integration, scene.system.is_flow, copies)
+}
+
+/// A line describing a run large enough that its user should see what it
+/// will take (the limits were checked when the scene was read).
+pub fn large_run(scene: &Scene) -> Option<String> {
     let work = lane_steps(scene);
-    if work > MAX_LANE_STEPS {
-        let shards = (work / MAX_LANE_STEPS).ceil();
-        return Err(Error::TooLarge {
-            keys: "sweep.count, integration.iterations, integration.steps_per_period".into(),
-            reason: format!(
-                "about {work:.1e} RK4 lane-steps, more than one process takes on ({MAX_LANE_STEPS:.0e}): split the run with --shard i/{shards} (or more shards), one process each, and `lyapsweep merge` the results"
-            ),
-        });
-    }
     let lanes = scene.run_lane_count();
     let batch = batch_lanes(scene);
     let held = 8.0
@@ -149,7 +158,7 @@ pub fn check_run(scene: &Scene) -> Result<Option<String>> {
             .map(|a| a.values.len() as f64)
             .sum::<f64>()
         + (batch.min(lanes) * lane_bytes(scene)) as f64;
-    Ok((work > 1e12 || held > 1e9 || batch < lanes).then(|| {
+    (work > 1e12 || held > 1e9 || batch < lanes).then(|| {
         format!(
             "a large run: {lanes} lanes, about {work:.1e} RK4 lane-steps, {} held in memory{}",
             bytes(held),
@@ -159,5 +168,5 @@ pub fn check_run(scene: &Scene) -> Result<Option<String>> {
                 String::new()
             }
         )
-    }))
+    })
 }

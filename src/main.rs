@@ -136,10 +136,8 @@ fn run(
     overrides: &[String],
     how: How,
 ) -> Result<(), Error> {
-    let mut scene = scene::load(path, overrides)?;
-    if let Some(shard) = how.shard {
-        scene = scene.sharded(scene::Shard::parse(shard)?)?;
-    }
+    let shard = how.shard.map(scene::Shard::parse).transpose()?;
+    let scene = scene::load_shard(path, overrides, shard)?;
     let dir = out.unwrap_or_else(|| match scene.shard {
         Some(s) => {
             PathBuf::from("out").join(format!("{}.shard-{}-of-{}", scene.name, s.index, s.count))
@@ -148,7 +146,7 @@ fn run(
     });
     // Everything that can refuse the run does so before the first step:
     // its size, then the output folder.
-    let large = lyapsweep::budget::check_run(&scene)?;
+    let large = lyapsweep::budget::large_run(&scene);
     let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &[])?)?;
     if let Some(line) = large.filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");

@@ -466,17 +466,34 @@ struct RawOutput {
 
 /// Reads and checks a scene file, applying `--set key.path=value` overrides first.
 pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
+    load_shard(path, overrides, None)
+}
+
+/// [`load`], restricted to `shard` of the sweep: the run's size is checked
+/// for the shard's lanes (see `budget::check_sweep`).
+pub fn load_shard(path: &Path, overrides: &[String], shard: Option<Shard>) -> Result<Scene> {
     let text = std::fs::read_to_string(path).map_err(|source| Error::ReadScene {
         path: path.to_owned(),
         source,
     })?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
-    parse(&text, &path.display().to_string(), stem, overrides)
+    parse_shard(&text, &path.display().to_string(), stem, overrides, shard)
 }
 
 /// Parses scene text; `origin` names it in messages, `default_name` is the
 /// name when the scene gives none.
 pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String]) -> Result<Scene> {
+    parse_shard(text, origin, default_name, overrides, None)
+}
+
+/// [`parse`], restricted to `shard` (see [`load_shard`]).
+pub fn parse_shard(
+    text: &str,
+    origin: &str,
+    default_name: &str,
+    overrides: &[String],
+    shard: Option<Shard>,
+) -> Result<Scene> {
     let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
         let at = e.span().map(|span| {
             let line = text[..span.start].matches('\n').count() + 1;
@@ -525,7 +542,11 @@ pub fn parse(text: &str, origin: &str, default_name: &str, overrides: &[String])
                 },
             }
         })?;
-    resolve(raw, default_name, source)
+    let scene = resolve(raw, default_name, source, shard)?;
+    match shard {
+        Some(shard) => scene.sharded(shard),
+        None => Ok(scene),
+    }
 }
 
 /// `--set integration.iterations=2000`: the value is read as TOML, or as a
@@ -569,19 +590,13 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<String> {
     Ok(keys.join("."))
 }
 
-fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
+fn resolve(
+    raw: RawScene,
+    default_name: &str,
+    source: String,
+    shard: Option<Shard>,
+) -> Result<Scene> {
     let (info, params) = resolve_system(&raw.system)?;
-    // The sweep's size is checked before its values are generated.
-    let mut counts = vec![("sweep.count".to_owned(), axis_len(&raw.sweep.first()))];
-    if let Some(second) = &raw.sweep.second {
-        counts.push(("sweep.second.count".to_owned(), axis_len(second)));
-    }
-    crate::budget::check_sweep(
-        &counts,
-        info.dimension(),
-        raw.output.bifurcation_points.unwrap_or(0),
-    )?;
-    let sweep = resolve_sweep(info, &params, raw.sweep)?;
 
     let i = raw.integration;
     let integration = Integration {
@@ -603,6 +618,30 @@ fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
             None => None,
         },
     };
+    // The run's size is checked before the sweep's values are generated:
+    // the values, one lane's points, and the work of this process's lanes.
+    let mut counts = vec![("sweep.count".to_owned(), axis_len(&raw.sweep.first()))];
+    if let Some(second) = &raw.sweep.second {
+        counts.push(("sweep.second.count".to_owned(), axis_len(second)));
+    }
+    let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
+    let copies = if lyapunov {
+        integration
+            .difference
+            .unwrap_or(Difference::Central)
+            .copies(info.dimension())
+    } else {
+        0
+    };
+    crate::budget::check_sweep(
+        &counts,
+        info.dimension(),
+        raw.output.bifurcation_points.unwrap_or(0),
+        crate::budget::steps_per_lane(&integration, info.is_flow, copies),
+        shard,
+    )?;
+    let sweep = resolve_sweep(info, &params, raw.sweep)?;
+
     if let Some(delta) = integration
         .perturbation
         .filter(|d| !(d.is_finite() && *d > 0.0))
@@ -647,7 +686,6 @@ fn resolve(raw: RawScene, default_name: &str, source: String) -> Result<Scene> {
         }
     }
 
-    let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
     let bifurcation_points = raw.output.bifurcation_points.unwrap_or(0);
     if bifurcation_points > integration.iterations {
         return Err(Error::invalid(
