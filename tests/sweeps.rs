@@ -340,5 +340,9 @@ fn plot_refuses_a_folder_that_is_not_a_run() {
     let output = lyapsweep(&["plot", dir.path().to_str().unwrap()]);
     assert_eq!(output.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("scene.toml"), "{stderr}");
+    assert!(stderr.contains("manifest.toml"), "{stderr}");
+    assert!(
+        stderr.contains("not a complete lyapsweep output folder"),
+        "{stderr}"
+    );
 }

@@ -97,7 +97,18 @@ impl Staging {
     /// folder beside it. `inputs` are folders the set is made from (merge's
     /// shards): the target must not be one of them.
     pub fn prepare(target: &Path, inputs: &[PathBuf]) -> Result<Staging> {
-        if let Ok(meta) = fs::symlink_metadata(target) {
+        // A link to a folder (scratch space on a cluster) is followed: the
+        // set is staged beside, and swapped into, the folder it names. So
+        // are "." and "..", which name no entry of their parent.
+        let is_link = fs::symlink_metadata(target).is_ok_and(|m| m.file_type().is_symlink());
+        let resolved;
+        let target = if is_link || target.file_name().is_none() {
+            resolved = fs::canonicalize(target).map_err(|e| unwritable(target, e.to_string()))?;
+            resolved.as_path()
+        } else {
+            target
+        };
+        if let Ok(meta) = fs::metadata(target) {
             if !meta.is_dir() {
                 return Err(unwritable(target, "exists and is not a folder"));
             }
