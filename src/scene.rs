@@ -671,9 +671,11 @@ fn resolve(
         ));
     }
     // The start must be admissible at every swept value (the wall may be swept).
+    // One copy of the parameters per axis, not per value: a sweep may have
+    // 10^9 values.
     for axis in sweep.axes() {
+        let mut p = params.clone();
         for (k, value) in axis.values.iter().enumerate() {
-            let mut p = params.clone();
             p.set(axis.index, *value);
             (info.check_state)(&p, state).map_err(|reason| {
                 let at = if axis.values.len() > 1 {
@@ -844,9 +846,9 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
     // Each axis was checked with the other at its [system] value; the
     // grid's corners must be valid too (a check may couple parameters).
     if let Some(second) = &second {
+        let mut p = params.clone();
         for &x in &first.values {
             for &y in &second.values {
-                let mut p = params.clone();
                 p.set(first.index, x);
                 p.set(second.index, y);
                 (info.check)(&p).map_err(|(name, reason)| {
@@ -951,8 +953,8 @@ fn resolve_axis(
             (vec![params.values[index]], "system")
         }
     };
+    let mut p = params.clone();
     for (k, value) in values.iter().enumerate() {
-        let mut p = params.clone();
         p.set(index, *value);
         (info.check)(&p).map_err(|(name, reason)| {
             if name == parameter {
