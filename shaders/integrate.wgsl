@@ -49,51 +49,73 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let end = min(c.x + control.chunk_steps, part_end);
 #ifdef WALL
     var slowest = traj[base + TRAJ_SLOWEST];
-#endif
-    for (var k = c.x; k < end; k = k + 1u) {
-        let next_phase = rotate(rotate(phase, half), half);
-#ifdef WALL
-        // At rest on the wall, from the step's start or from an impact
-        // inside it: stuck_step takes (the rest of) the step, called here
-        // only (see resolve_impacts).
-        var sticks = at_rest_on(wall_position(p), y);
-        var rest_at = real(0.0);
-        var rest_phase = phase;
-        if (!sticks) {
-#endif
+    let xw = wall_position(p);
+    var k = c.x;
+    // The hot loop only steps and detects: a step whose plain image reaches
+    // the wall or turns back inside it, or a mass at rest on the wall, ends
+    // it, and the resolution path below takes that one step and goes back.
+    // With the resolution inlined into every step, lavapipe ran the kernel
+    // 21 times slower than the kernel without a wall, even when no impact
+    // happened (docs/BENCHMARKS.md, "Impacts off the hot path").
+    loop {
+        var y1 = y;
+        var comp1 = comp;
+        var pending = false;
+        for (; k < end; k = k + 1u) {
+            if (at_rest_on(xw, y)) {
+                pending = true;
+                break;
+            }
             let inc = rk4_increment(p, phase, half, y, h);
 #ifdef COMPENSATED
             // Kahan summation: the increment of one step is far smaller
             // than y, and f32 would drop its low bits every step.
             let corrected = inc.y - comp;
-            var y1 = select(y + corrected, y, control.opaque_zero != 0u);
-            comp = (y1 - y) - corrected;
+            y1 = select(y + corrected, y, control.opaque_zero != 0u);
+            comp1 = (y1 - y) - corrected;
 #else
-            var y1 = y + inc.y;
+            y1 = y + inc.y;
 #endif
-#ifdef WALL
-            if (y1.x > wall_position(p) || (y.y > real(0.0) && y1.y < real(0.0))) {
-                let w = resolve_impacts(p, omega, phase, y, h, y1);
-                // Whatever the wall did (an impact, a rest, a departure
-                // from rest), the step ends where resolve_impacts says; the
-                // compensation belongs to the plain step it replaced.
-                if (any(w.y != y1)) {
-                    y1 = w.y;
-                    comp = State();
-                }
-                c.y = c.y + w.impacts;
-                slowest = min(slowest, w.slowest);
-                if (w.chattering) {
-                    c.z = c.z | FLAG_CHATTERING;
-                }
-                c.z = c.z | rank_flags(w.rank_loss);
-                sticks = w.sticks;
-                rest_at = w.rest_at;
-                rest_phase = w.rest_phase;
+            if (y1.x > xw || (y.y > real(0.0) && y1.y < real(0.0))) {
+                pending = true;
+                break;
             }
-#endif
             y = y1;
-#ifdef WALL
+            comp = comp1;
+            phase = rotate(rotate(phase, half), half);
+        }
+        if (!pending) {
+            break;
+        }
+        // Step k meets the wall (or starts at rest on it).
+        let next_phase = rotate(rotate(phase, half), half);
+        // At rest on the wall, from the step's start or from an impact
+        // inside it: stuck_step takes (the rest of) the step, called here
+        // only (see resolve_impacts).
+        var sticks = at_rest_on(xw, y);
+        var rest_at = real(0.0);
+        var rest_phase = phase;
+        if (!sticks) {
+            let w = resolve_impacts(p, omega, phase, y, h, y1);
+            // Whatever the wall did (an impact, a rest, a departure from
+            // rest), the step ends where resolve_impacts says; the
+            // compensation belongs to the plain step it replaced.
+            if (any(w.y != y1)) {
+                y = w.y;
+                comp = State();
+            } else {
+                y = y1;
+                comp = comp1;
+            }
+            c.y = c.y + w.impacts;
+            slowest = min(slowest, w.slowest);
+            if (w.chattering) {
+                c.z = c.z | FLAG_CHATTERING;
+            }
+            c.z = c.z | rank_flags(w.rank_loss);
+            sticks = w.sticks;
+            rest_at = w.rest_at;
+            rest_phase = w.rest_phase;
         }
         if (sticks) {
             let w = stuck_step(p, omega, rest_phase, h - rest_at);
@@ -101,9 +123,26 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             comp = State();
             c.z = c.z | rank_flags(w.rank_loss);
         }
+        phase = next_phase;
+        k = k + 1u;
+    }
+#else
+    for (var k = c.x; k < end; k = k + 1u) {
+        let next_phase = rotate(rotate(phase, half), half);
+        let inc = rk4_increment(p, phase, half, y, h);
+#ifdef COMPENSATED
+        // Kahan summation: the increment of one step is far smaller than
+        // y, and f32 would drop its low bits every step.
+        let corrected = inc.y - comp;
+        let y1 = select(y + corrected, y, control.opaque_zero != 0u);
+        comp = (y1 - y) - corrected;
+#else
+        let y1 = y + inc.y;
 #endif
+        y = y1;
         phase = next_phase;
     }
+#endif
     c.x = end;
     store_state(base + DIM, comp);
     traj[base + 2u * DIM] = phase.x;
