@@ -14,11 +14,13 @@
 //! 3. how throughput grows with the sweep (64 to 65 536 values) on one CPU
 //!    thread, all threads, and the GPU adapter;
 //! 4. how a run's cost grows with iterations and with steps per period;
-//! 5. the GPU's workgroup size.
+//! 5. the GPU's workgroup size;
+//! 6. impacts: the same sweep with a wall the orbits reach and one they never
+//!    reach (kernels without impact code), on every path.
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
-//! `-- --quick paper cost` (first, paper, scaling, cost, workgroups).
+//! `-- --quick paper cost` (first, paper, scaling, cost, workgroups, impacts).
 
 use std::time::Instant;
 
@@ -285,7 +287,7 @@ fn scaling(quick: bool) {
     let counts: &[usize] = if quick {
         &[64, 1024]
     } else {
-        &[64, 256, 1024, 4096, 16384, 65536]
+        &[64, 256, 1024, 4096, 16384, 65536, 262144]
     };
     let one_thread = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -361,6 +363,45 @@ fn main() {
     }
     if wanted("workgroups") {
         workgroups(quick);
+    }
+    if wanted("impacts") {
+        impacts(repeats);
+    }
+}
+
+/// Section 6: the sweep of the speed issue (4096 values of η in [0.5, 1.5],
+/// 200 RK4 steps per period, transient 20, iterations 20) with the wall at
+/// X_w = 2, which most orbits hit, and at X_w = 100, which none reaches (the
+/// GPU then compiles no impact code). Whole-run wall time (shader
+/// compilation included), device time, and lane-steps per second of the
+/// whole run (references only in the transient).
+fn impacts(repeats: usize) {
+    let (values, steps, transient, iterations) = (4096, 200, 20, 20);
+    let lane_steps = (values * steps * (transient + 5 * iterations)) as f64;
+    println!(
+        "\nImpacts ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}; {lane_steps:.3e} lane-steps; medians of {repeats} runs after a warm-up)\n"
+    );
+    println!("| path | wall | run s | device s | lane-steps/s | vs cpu |");
+    println!("|---|---|---|---|---|---|");
+    for wall in [2.0, 100.0] {
+        let mut cpu_seconds = None;
+        for (backend, precision) in [("cpu", "f64"), ("gpu", "f64"), ("gpu", "f32")] {
+            let text = format!(
+                "[system]\nkind = \"impact-oscillator\"\nwall = {wall}\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
+            );
+            let scene = scene::parse(&text, "bench", "bench", &[]).expect("scene");
+            let Some((seconds, device)) = time_runs(&scene, &Default::default(), repeats) else {
+                println!("| {backend} {precision} | {wall} | – | – | – | – |");
+                continue;
+            };
+            let cpu = *cpu_seconds.get_or_insert(seconds);
+            println!(
+                "| {backend} {precision} | {wall} | {seconds:.3} | {} | {:.3e} | {:.2}× |",
+                device.map_or("–".into(), |d| format!("{d:.3}")),
+                lane_steps / seconds,
+                cpu / seconds
+            );
+        }
     }
 }
 

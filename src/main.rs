@@ -288,7 +288,7 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
     if let Some(gpu) = &report.gpu {
         let t = &gpu.timings;
         println!(
-            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch",
+            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch, {} bytes of device memory per lane",
             t.setup.as_secs_f64(),
             t.transient.as_secs_f64(),
             t.averaging.as_secs_f64(),
@@ -296,7 +296,8 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
             t.readback.as_secs_f64(),
             t.host_qr.as_secs_f64(),
             gpu.batches,
-            gpu.chunk_steps
+            gpu.chunk_steps,
+            gpu.bytes_per_lane
         );
         if gpu.retries > 0 {
             println!(

@@ -47,6 +47,8 @@ pub struct GpuReport {
     pub chunk_steps: usize,
     /// Batches redone with shorter dispatches (see `gpu::sweep::GpuRun::retries`).
     pub retries: usize,
+    /// Device memory per lane (see `gpu::sweep::GpuRun::bytes_per_lane`).
+    pub bytes_per_lane: u64,
     pub validation: Option<Validation>,
 }
 
@@ -448,6 +450,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
                 batches: run.batches,
                 chunk_steps: run.chunk_steps,
                 retries: run.retries,
+                bytes_per_lane: run.bytes_per_lane,
                 validation: None,
             };
             (run.lanes, Some(report))
@@ -552,6 +555,7 @@ impl Summary {
                     sum.timings.add(&gpu.timings);
                     sum.batches += gpu.batches;
                     sum.retries += gpu.retries;
+                    sum.bytes_per_lane = sum.bytes_per_lane.max(gpu.bytes_per_lane);
                     sum.chunk_steps = sum.chunk_steps.min(gpu.chunk_steps);
                     if let (Some(v), Some(w)) = (&mut sum.validation, &gpu.validation) {
                         v.lanes.extend(&w.lanes);

@@ -103,6 +103,8 @@ pub struct GpuRun {
     /// Batches redone with shorter dispatches because the adapter cut a
     /// dispatch's loops short (see `SOFTWARE_WALL_CHUNK`).
     pub retries: usize,
+    /// Device memory of a batch's buffers per lane (the largest batch's).
+    pub bytes_per_lane: u64,
 }
 
 /// Runs the whole sweep, split into batches that fit the device's limits
@@ -219,6 +221,7 @@ where
         usize::MAX
     };
     let mut retries = 0;
+    let mut bytes_per_lane = 0;
     let progress = options.progress.clone().unwrap_or_default();
     for first in (0..total).step_by(batch_lanes) {
         let count = batch_lanes.min(total - first);
@@ -236,6 +239,7 @@ where
                 max_chunk,
             );
             chunk_steps = batch.chunk_steps;
+            bytes_per_lane = bytes_per_lane.max(batch.device_bytes / count as u64);
             let (results, t) = batch.run(gpu, &pipelines, &progress)?;
             timings.add(&t);
             if let Some(results) = results {
@@ -262,6 +266,7 @@ where
         batches,
         chunk_steps,
         retries,
+        bytes_per_lane,
     })
 }
 
@@ -410,6 +415,8 @@ struct Batch<'a, const D: usize> {
     /// The trajectories (read once after the transient, for grazing).
     traj: wgpu::Buffer,
     grazing: Option<Grazing>,
+    /// Bytes of device memory in the batch's buffers.
+    device_bytes: u64,
 }
 
 /// What the host needs to re-estimate the iterations the kernels flag as
@@ -590,6 +597,14 @@ where
         };
         let staging = [0, 1].map(|_| empty("staging", ticks_offset + ticks_bytes, readable));
         let transient_ticks = stopwatch.map(|_| empty("transient ticks", ticks_bytes, readable));
+        let device_bytes = [&lanes_buffer, &traj_buffer, &counts, &summary]
+            .into_iter()
+            .chain(&deltas_buffer)
+            .chain(&jac)
+            .chain(&points)
+            .chain(&staging)
+            .map(|b| b.size())
+            .sum();
 
         let bind_group = |uniform: &wgpu::Buffer| {
             let mut entries = vec![
@@ -650,6 +665,7 @@ where
             }
         });
         Batch {
+            device_bytes,
             stopwatch,
             settings,
             layout,
