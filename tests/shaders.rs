@@ -210,7 +210,7 @@ fn variants_leave_out_what_the_scene_does_not_need() {
         ..full
     }
     .source(Kernel::Integrate)
-    .contains("comp = (y1 - y) - corrected"));
+    .contains("= (y1 - y) - corrected"));
     assert!(!full.source(Kernel::Integrate).contains("corrected"));
 }
 

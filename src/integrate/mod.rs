@@ -64,9 +64,16 @@ pub fn time_map_many<const D: usize, F: Flow<D>>(
 }
 
 /// Part `part` of the time-T map (its share of the period's RK4 steps),
-/// from the forcing phase `phase` at the part's start, which it advances to
+/// from the forcing phase `phase` at its start, which it advances to
 /// the part's end. The parts of a period, run in order with the phase
 /// passed on, do exactly the arithmetic of the whole [`time_map_many`].
+///
+/// The trajectories are stepped as structure-of-arrays batches of up to
+/// eight (see [`rk4::step_lanes`]), which the compiler vectorises: a hot
+/// loop that only steps and detects, as the GPU's integrate kernel does.
+/// A step that meets the wall (or starts at rest on it) is redone for that
+/// trajectory alone by the impact code, outside the vector loop. Every
+/// trajectory's arithmetic is exactly what it would be alone.
 pub fn part_map_many<const D: usize, F: Flow<D>>(
     flow: &F,
     ys: &mut [[f64; D]],
@@ -76,27 +83,131 @@ pub fn part_map_many<const D: usize, F: Flow<D>>(
     phase: &mut Phase,
     stats: &mut [IterationStats],
 ) {
+    // Where the CPU has AVX2, the same code compiled for it (runtime
+    // detection: a binary built here must still run on an older CPU). No
+    // operation is fused or reordered, so the results are the same bits.
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has the features the function is compiled for.
+        unsafe { part_map_many_avx2(flow, ys, period, settings, part, phase, stats) };
+        return;
+    }
+    part_map_many_lanes(flow, ys, period, settings, part, phase, stats);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn part_map_many_avx2<const D: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &mut [[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
+    stats: &mut [IterationStats],
+) {
+    part_map_many_lanes(flow, ys, period, settings, part, phase, stats);
+}
+
+/// Trajectories stepped together in one vector batch.
+const BATCH: usize = 8;
+
+#[inline(always)]
+fn part_map_many_lanes<const D: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &mut [[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
+    stats: &mut [IterationStats],
+) {
+    let start = *phase;
+    if ys.is_empty() {
+        // No trajectory: only the forcing phase goes through the part's
+        // steps, as it would with trajectories (see `reestimate_of`).
+        let h = period / settings.steps_per_period as f64;
+        let half = cos_sin(0.5 * flow.forcing_frequency() * h);
+        for _ in part.steps(settings.steps_per_period) {
+            *phase = rk4::stage_phases(phase, &half)[2];
+        }
+        return;
+    }
+    for (chunk, st) in ys.chunks_mut(BATCH).zip(stats.chunks_mut(BATCH)) {
+        *phase = start;
+        match chunk.len() {
+            1 => steps::<D, 1, F>(flow, chunk, period, settings, part, phase, st),
+            2..=4 => steps::<D, 4, F>(flow, chunk, period, settings, part, phase, st),
+            _ => steps::<D, BATCH, F>(flow, chunk, period, settings, part, phase, st),
+        }
+    }
+}
+
+/// The steps of `part` for up to W trajectories held as structure of
+/// arrays (unused slots repeat the first trajectory and are never read).
+#[inline(always)]
+fn steps<const D: usize, const W: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &mut [[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
+    stats: &mut [IterationStats],
+) {
+    let n = ys.len();
     let steps = settings.steps_per_period;
     let h = period / steps as f64;
     let omega = flow.forcing_frequency();
     let half = cos_sin(0.5 * omega * h);
     let wall = flow.wall();
     let location = settings.impact_location;
+    let mut y: [[f64; W]; D] =
+        std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
     for _ in part.steps(steps) {
         let phases = rk4::stage_phases(phase, &half);
-        for (y, st) in ys.iter_mut().zip(stats.iter_mut()) {
-            if let Some(w) = wall.as_ref().filter(|w| impact::at_rest_on(w, y)) {
-                *y = impact::stuck_step(flow, w, location, omega, phase, h, st);
-                continue;
+        let mut y1 = rk4::step_lanes(flow, &phases, &y, h);
+        if let Some(w) = &wall {
+            // Detection only: at rest on the wall before the step, or
+            // reaching it (or turning back inside the step) after it.
+            let meets: [bool; W] = std::array::from_fn(|k| {
+                (y[0][k] == w.position && y[1][k] == 0.0)
+                    | (y1[0][k] > w.position)
+                    | ((y[1][k] > 0.0) & (y1[1][k] < 0.0))
+            });
+            let mut any = false;
+            for &m in &meets[..n] {
+                any |= m;
             }
-            let y1 = rk4::step_at(flow, &phases, y, h);
-            *y = match &wall {
-                Some(w) if impact::reaches_wall(w, y, &y1) => {
-                    impact::resolve(flow, w, location, omega, phase, y, h, y1, st)
+            if any {
+                for k in (0..n).filter(|&k| meets[k]) {
+                    let before: [f64; D] = std::array::from_fn(|i| y[i][k]);
+                    let after = if impact::at_rest_on(w, &before) {
+                        impact::stuck_step(flow, w, location, omega, phase, h, &mut stats[k])
+                    } else {
+                        let plain: [f64; D] = std::array::from_fn(|i| y1[i][k]);
+                        impact::resolve(
+                            flow,
+                            w,
+                            location,
+                            omega,
+                            phase,
+                            &before,
+                            h,
+                            plain,
+                            &mut stats[k],
+                        )
+                    };
+                    for i in 0..D {
+                        y1[i][k] = after[i];
+                    }
                 }
-                _ => y1,
-            };
+            }
         }
+        y = y1;
         *phase = phases[2];
+    }
+    for (k, out) in ys.iter_mut().enumerate() {
+        *out = std::array::from_fn(|i| y[i][k]);
     }
 }
