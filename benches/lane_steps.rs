@@ -294,9 +294,10 @@ fn scaling(quick: bool) {
         .build()
         .expect("a pool");
     println!("\nThroughput against sweep size (lane-steps/s, median of 3; 200 steps/period, 2 iterations, no transient)\n");
-    println!("| values | cpu 1 thread | cpu all threads | gpu f64 | gpu f32 |");
-    println!("|---|---|---|---|---|");
+    println!("| values | cpu 1 thread | cpu all threads | gpu f64 | gpu f32 | gpu steps per dispatch | gpu bytes per value (f64) |");
+    println!("|---|---|---|---|---|---|---|");
     for &n in counts {
+        let gpu_shape = std::cell::Cell::new(None);
         let rate = |backend: &str, precision: &str, one: bool| -> String {
             let text = format!(
                 "[system]\nkind = \"impact-oscillator\"\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = {n}\n[integration]\nsteps_per_period = 200\ntransient = 0\niterations = 2\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
@@ -315,6 +316,9 @@ fn scaling(quick: bool) {
             let mut rates = Vec::new();
             for _ in 0..3 {
                 let report = go().expect("runs");
+                if let Some(g) = report.gpu.as_ref().filter(|_| precision == "f64") {
+                    gpu_shape.set(Some((g.chunk_steps, g.bytes_per_lane)));
+                }
                 let seconds = report
                     .gpu
                     .as_ref()
@@ -326,13 +330,16 @@ fn scaling(quick: bool) {
             }
             format!("{:.2e}", median(rates))
         };
-        println!(
-            "| {n} | {} | {} | {} | {} |",
+        let cells = [
             rate("cpu", "f64", true),
             rate("cpu", "f64", false),
             rate("gpu", "f64", false),
-            rate("gpu", "f32", false)
-        );
+            rate("gpu", "f32", false),
+        ];
+        let (chunk, bytes) = gpu_shape.get().map_or(("–".into(), "–".into()), |(c, b)| {
+            (c.to_string(), b.to_string())
+        });
+        println!("| {n} | {} | {chunk} | {bytes} |", cells.join(" | "));
     }
 }
 

@@ -28,9 +28,15 @@ use crate::scene::{Precision, Scene};
 use crate::system::{IterationStats, Part};
 
 /// Lane-steps (RK4 steps of one trajectory) per integrate dispatch: small
-/// enough that no dispatch trips a desktop driver's watchdog (~2 s), large
-/// enough to fill a GPU.
-const DISPATCH_LANE_STEPS: usize = 1 << 22;
+/// enough that no dispatch trips a desktop driver's watchdog (~2 s: 6.7e7
+/// lane-steps take 2 ms at the 3e10 per second sought on an H100, 0.1 s on a
+/// GPU 50 times slower, 0.15 s on lavapipe), large enough that a dispatch's
+/// fixed cost (its launch, every trajectory's state loaded and stored) stays
+/// small. At 2^22 a sweep of 262 144 values (1.3 million trajectories) took 3
+/// steps per dispatch, and lavapipe ran it at 3.2e7 lane-steps per second
+/// against 2.2e8 at 4 096 values (docs/BENCHMARKS.md, "Throughput against
+/// sweep size").
+const DISPATCH_LANE_STEPS: usize = 1 << 26;
 /// Steps per integrate dispatch with a wall on a software adapter. lavapipe
 /// caps the loop iterations of one invocation at 65 535 (every loop
 /// together, shared by a SIMD group; see `loop_budget_exhausted` in
