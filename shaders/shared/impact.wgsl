@@ -239,22 +239,33 @@ fn hermite_slope(c: vec4<real>, th: real) -> real {
     return c.y + th * (real(2.0) * c.z + th * real(3.0) * c.w);
 }
 
-// Where the slope turns from positive to negative inside (0, 1), or -1.
+// Where the slope turns from positive to negative inside (0, 1), or -1:
+// safeguarded Newton from the midpoint, twin of Hermite::peak.
 fn hermite_peak(c: vec4<real>) -> real {
     var a = real(0.0);
     var b = real(1.0);
     if (!(hermite_slope(c, a) > real(0.0) && hermite_slope(c, b) < real(0.0))) {
         return real(-1.0);
     }
-    for (var k = 0u; k < 60u; k = k + 1u) {
-        let m = real(0.5) * (a + b);
-        if (hermite_slope(c, m) > real(0.0)) {
-            a = m;
+    var th = real(0.5);
+    for (var k = 0u; k < 64u; k = k + 1u) {
+        let g = hermite_slope(c, th);
+        if (g > real(0.0)) {
+            a = th;
         } else {
-            b = m;
+            b = th;
         }
+        let curvature = real(2.0) * c.z + real(6.0) * c.w * th;
+        var next = th - g / curvature;
+        if (!(next > a && next < b)) {
+            next = real(0.5) * (a + b);
+        }
+        if (next == th) {
+            break;
+        }
+        th = next;
     }
-    return real(0.5) * (a + b);
+    return th;
 }
 
 // The first upward root of the cubic in [a, b]: Newton's starting guess.

@@ -8,19 +8,27 @@ use super::Progress;
 use crate::method::{Lane, LaneResult, MethodSettings};
 use crate::scene::Scene;
 
+/// Lanes whose transients are stepped together (`method::lane::run_lanes`):
+/// one vector batch of references.
+const NEIGHBOURS: usize = 8;
+
 /// Runs every lane of `scene` (of its shard, when sharded), in parallel,
 /// results in sweep order.
 pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> Vec<LaneResult> {
-    (0..scene.lane_count())
-        .into_par_iter()
-        .map(|k| {
-            let lane = Lane {
-                params: scene.lane_params(k),
-                settings,
-            };
-            let result = (scene.system.run_lane)(&lane);
-            progress.advance((settings.transient + settings.iterations) as u64);
-            result
+    let lanes: Vec<usize> = (0..scene.lane_count()).collect();
+    lanes
+        .par_chunks(NEIGHBOURS)
+        .flat_map_iter(|chunk| {
+            let lanes: Vec<Lane> = chunk
+                .iter()
+                .map(|&k| Lane {
+                    params: scene.lane_params(k),
+                    settings,
+                })
+                .collect();
+            let results = (scene.system.run_lanes)(&lanes);
+            progress.advance((lanes.len() * (settings.transient + settings.iterations)) as u64);
+            results
         })
         .collect()
 }

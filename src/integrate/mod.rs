@@ -134,45 +134,172 @@ fn part_map_many_lanes<const D: usize, F: Flow<D>>(
         return;
     }
     for (chunk, st) in ys.chunks_mut(BATCH).zip(stats.chunks_mut(BATCH)) {
-        *phase = start;
+        let mut phases = [start; BATCH];
         match chunk.len() {
-            1 => steps::<D, 1, F>(flow, chunk, period, settings, part, phase, st),
-            2..=4 => steps::<D, 4, F>(flow, chunk, period, settings, part, phase, st),
-            _ => steps::<D, BATCH, F>(flow, chunk, period, settings, part, phase, st),
+            1 => steps::<D, 1, _>(&One(flow), chunk, period, settings, part, &mut phases, st),
+            2..=4 => steps::<D, 4, _>(&One(flow), chunk, period, settings, part, &mut phases, st),
+            _ => steps::<D, BATCH, _>(&One(flow), chunk, period, settings, part, &mut phases, st),
         }
+        *phase = phases[0];
+    }
+}
+
+/// The time-T map of several flows at once, one trajectory each (the
+/// references of neighbouring lanes of a sweep, in their transient), each
+/// over its own period with the same number of RK4 steps: stepped as one
+/// structure-of-arrays batch, so that a lane's lone reference does not run
+/// as a single latency-bound chain. Each trajectory's arithmetic is exactly
+/// [`time_map`]'s.
+pub fn time_map_lanes<const D: usize, F: Flow<D>>(
+    flows: &[F],
+    ys: &mut [[f64; D]],
+    periods: &[f64],
+    settings: &FlowSettings,
+    stats: &mut [IterationStats],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU has the features the function is compiled for.
+        unsafe { time_map_lanes_avx2(flows, ys, periods, settings, stats) };
+        return;
+    }
+    time_map_lanes_portable(flows, ys, periods, settings, stats);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn time_map_lanes_avx2<const D: usize, F: Flow<D>>(
+    flows: &[F],
+    ys: &mut [[f64; D]],
+    periods: &[f64],
+    settings: &FlowSettings,
+    stats: &mut [IterationStats],
+) {
+    time_map_lanes_portable(flows, ys, periods, settings, stats);
+}
+
+#[inline(always)]
+fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
+    flows: &[F],
+    ys: &mut [[f64; D]],
+    periods: &[f64],
+    settings: &FlowSettings,
+    stats: &mut [IterationStats],
+) {
+    let chunks = ys
+        .chunks_mut(BATCH)
+        .zip(stats.chunks_mut(BATCH))
+        .zip(flows.chunks(BATCH).zip(periods.chunks(BATCH)));
+    for ((chunk, st), (flows, periods)) in chunks {
+        let mut phases = [ZERO_PHASE; BATCH];
+        let each = Each { flows, periods };
+        steps::<D, BATCH, _>(&each, chunk, 0.0, settings, Part::WHOLE, &mut phases, st);
+    }
+}
+
+/// The flows of the trajectories a batch steps, and their map periods.
+trait Flows<const D: usize> {
+    type F: Flow<D>;
+    /// Whether every trajectory has the same flow and period, and so the
+    /// same forcing phases at every step (computed once for all).
+    const SHARED: bool;
+    /// The flow of trajectory k.
+    fn of(&self, k: usize) -> &Self::F;
+    /// The map period of trajectory k (`period` when all share one).
+    fn period(&self, k: usize, period: f64) -> f64;
+}
+
+/// One flow for every trajectory: a lane's reference and its copies.
+struct One<'a, F>(&'a F);
+
+impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
+    type F = F;
+    const SHARED: bool = true;
+    #[inline(always)]
+    fn of(&self, _k: usize) -> &F {
+        self.0
+    }
+    #[inline(always)]
+    fn period(&self, _k: usize, period: f64) -> f64 {
+        period
+    }
+}
+
+/// A flow and a period per trajectory (unused slots repeat the first).
+struct Each<'a, F> {
+    flows: &'a [F],
+    periods: &'a [f64],
+}
+
+impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
+    type F = F;
+    const SHARED: bool = false;
+    #[inline(always)]
+    fn of(&self, k: usize) -> &F {
+        &self.flows[k.min(self.flows.len() - 1)]
+    }
+    #[inline(always)]
+    fn period(&self, k: usize, _period: f64) -> f64 {
+        self.periods[k.min(self.periods.len() - 1)]
     }
 }
 
 /// The steps of `part` for up to W trajectories held as structure of
-/// arrays (unused slots repeat the first trajectory and are never read).
+/// arrays (unused slots repeat the first trajectory and are never read),
+/// each from its forcing phase in `phases`, advanced to the part's end.
 #[inline(always)]
-fn steps<const D: usize, const W: usize, F: Flow<D>>(
-    flow: &F,
+fn steps<const D: usize, const W: usize, S: Flows<D>>(
+    flows: &S,
     ys: &mut [[f64; D]],
     period: f64,
     settings: &FlowSettings,
     part: Part,
-    phase: &mut Phase,
+    phases: &mut [Phase; BATCH],
     stats: &mut [IterationStats],
 ) {
     let n = ys.len();
     let steps = settings.steps_per_period;
-    let h = period / steps as f64;
-    let omega = flow.forcing_frequency();
-    let half = cos_sin(0.5 * omega * h);
-    let wall = flow.wall();
     let location = settings.impact_location;
+    let h: [f64; W] = std::array::from_fn(|k| flows.period(k, period) / steps as f64);
+    let omega: [f64; W] = std::array::from_fn(|k| flows.of(k).forcing_frequency());
+    let half: [Phase; W] = std::array::from_fn(|k| cos_sin(0.5 * omega[k] * h[k]));
+    let walls: [Option<Wall>; W] = std::array::from_fn(|k| flows.of(k).wall());
+    let any_wall = walls[..n].iter().any(Option::is_some);
+    // A position no trajectory reaches where there is no wall.
+    let position: [f64; W] =
+        std::array::from_fn(|k| walls[k].as_ref().map_or(f64::INFINITY, |w| w.position));
     let mut y: [[f64; W]; D] =
         std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
     for _ in part.steps(steps) {
-        let phases = rk4::stage_phases(phase, &half);
-        let mut y1 = rk4::step_lanes(flow, &phases, &y, h);
-        if let Some(w) = &wall {
+        // One whole step per trajectory in the loop body: the loop over k
+        // is what vectorises, and each trajectory's four stages stay in
+        // registers.
+        let mut y1 = [[0.0; W]; D];
+        let mut next = [ZERO_PHASE; W];
+        let shared = rk4::stage_phases(&phases[0], &half[0]);
+        for k in 0..W {
+            let stages = if S::SHARED {
+                shared
+            } else {
+                rk4::stage_phases(&phases[k], &half[k])
+            };
+            let out = rk4::step_at(
+                flows.of(k),
+                &stages,
+                &std::array::from_fn(|i| y[i][k]),
+                h[k],
+            );
+            for i in 0..D {
+                y1[i][k] = out[i];
+            }
+            next[k] = stages[2];
+        }
+        if any_wall {
             // Detection only: at rest on the wall before the step, or
             // reaching it (or turning back inside the step) after it.
             let meets: [bool; W] = std::array::from_fn(|k| {
-                (y[0][k] == w.position && y[1][k] == 0.0)
-                    | (y1[0][k] > w.position)
+                (y[0][k] == position[k] && y[1][k] == 0.0)
+                    | (y1[0][k] > position[k])
                     | ((y[1][k] > 0.0) & (y1[1][k] < 0.0))
             });
             let mut any = false;
@@ -181,19 +308,29 @@ fn steps<const D: usize, const W: usize, F: Flow<D>>(
             }
             if any {
                 for k in (0..n).filter(|&k| meets[k]) {
+                    let Some(w) = &walls[k] else { continue };
+                    let flow = flows.of(k);
                     let before: [f64; D] = std::array::from_fn(|i| y[i][k]);
                     let after = if impact::at_rest_on(w, &before) {
-                        impact::stuck_step(flow, w, location, omega, phase, h, &mut stats[k])
+                        impact::stuck_step(
+                            flow,
+                            w,
+                            location,
+                            omega[k],
+                            &phases[k],
+                            h[k],
+                            &mut stats[k],
+                        )
                     } else {
                         let plain: [f64; D] = std::array::from_fn(|i| y1[i][k]);
                         impact::resolve(
                             flow,
                             w,
                             location,
-                            omega,
-                            phase,
+                            omega[k],
+                            &phases[k],
                             &before,
-                            h,
+                            h[k],
                             plain,
                             &mut stats[k],
                         )
@@ -205,7 +342,7 @@ fn steps<const D: usize, const W: usize, F: Flow<D>>(
             }
         }
         y = y1;
-        *phase = phases[2];
+        phases[..W].copy_from_slice(&next);
     }
     for (k, out) in ys.iter_mut().enumerate() {
         *out = std::array::from_fn(|i| y[i][k]);

@@ -48,30 +48,6 @@ pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
     std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
 }
 
-/// [`step_at`] for W trajectories held as structure of arrays (y[i][w]:
-/// coordinate i of trajectory w), every one with the same phases and h: the
-/// loops over w are what the compiler vectorises. The arithmetic of each
-/// trajectory is that of [`step_at`], operation for operation.
-#[inline(always)]
-pub fn step_lanes<const D: usize, const W: usize, F: Flow<D> + ?Sized>(
-    flow: &F,
-    phases: &[Phase; 3],
-    y: &[[f64; W]; D],
-    h: f64,
-) -> [[f64; W]; D] {
-    // One whole step per trajectory in the loop body: the loop over w is
-    // what vectorises, and each trajectory's four stages stay in registers
-    // (stage by stage over arrays, they went through the stack).
-    let mut out = [[0.0; W]; D];
-    for w in 0..W {
-        let next = step_at(flow, phases, &std::array::from_fn(|i| y[i][w]), h);
-        for i in 0..D {
-            out[i][w] = next[i];
-        }
-    }
-    out
-}
-
 /// y + a·k
 #[inline]
 fn axpy<const D: usize>(y: &[f64; D], a: f64, k: &[f64; D]) -> [f64; D] {

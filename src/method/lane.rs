@@ -369,8 +369,6 @@ where
         steps_per_period: plan.steps_per_period,
         ..settings.flow
     };
-    let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
-
     let mut x: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
@@ -385,22 +383,84 @@ where
             }
         };
         if !all_finite(&x) {
-            return acc.failed(n);
+            return LaneAccumulator::<D>::new(settings, system.period(), plan).failed(n);
         }
     }
+    average(&system, settings, plan, x)
+}
+
+/// [`run_lane`] for neighbouring lanes of a sweep: where they share their
+/// plan's steps (and use finite differences), their transients run as one
+/// batch, the references stepped together
+/// ([`System::iterate_lanes`]); then each lane averages on its own. Every
+/// lane's numbers are those of [`run_lane`], to the last bit.
+pub fn run_lanes<const D: usize, S: System<D>>(lanes: &[Lane]) -> Vec<LaneResult>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let Some(first) = lanes.first() else {
+        return Vec::new();
+    };
+    let settings = first.settings;
+    let systems: Vec<S> = lanes.iter().map(|l| S::new(&l.params)).collect();
+    let plans: Vec<LanePlan> = systems.iter().map(|s| plan_lane(s, settings)).collect();
+    let together = lanes.len() > 1
+        && settings.tangent == Tangent::FiniteDifference
+        && lanes.iter().all(|l| std::ptr::eq(l.settings, settings))
+        && plans
+            .iter()
+            .all(|p| p.affordable() && p.steps_per_period == plans[0].steps_per_period);
+    if !together {
+        return lanes.iter().map(run_lane::<D, S>).collect();
+    }
+    let flow = &FlowSettings {
+        steps_per_period: plans[0].steps_per_period,
+        ..settings.flow
+    };
+    let start: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
+    let mut xs = vec![start; lanes.len()];
+    // A lane that fails goes on being stepped with the others (its
+    // numbers touch no other lane's) but is reported at its first failure.
+    let mut failed: Vec<Option<usize>> = vec![None; lanes.len()];
+    for n in 0..settings.transient {
+        S::iterate_lanes(&systems, &mut xs, flow);
+        for (k, x) in xs.iter().enumerate() {
+            if failed[k].is_none() && !all_finite(x) {
+                failed[k] = Some(n);
+            }
+        }
+    }
+    systems
+        .iter()
+        .zip(plans)
+        .zip(xs.into_iter().zip(failed))
+        .map(|((system, plan), (x, failed))| match failed {
+            Some(n) => LaneAccumulator::<D>::new(settings, system.period(), plan).failed(n),
+            None => average(system, settings, plan, x),
+        })
+        .collect()
+}
+
+/// The averaging iterations of a lane from x, the end of its transient.
+fn average<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    plan: LanePlan,
+    mut x: [f64; D],
+) -> LaneResult
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let flow = &FlowSettings {
+        steps_per_period: plan.steps_per_period,
+        ..settings.flow
+    };
+    let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
     let mut jacobians = Vec::with_capacity(plan.parts);
     for _ in 0..settings.iterations {
         let mut stats = IterationStats::default();
         jacobians.clear();
-        let next = step::<D, S>(
-            &system,
-            flow,
-            settings,
-            plan,
-            &x,
-            &mut stats,
-            &mut jacobians,
-        );
+        let next = step::<D, S>(system, flow, settings, plan, &x, &mut stats, &mut jacobians);
         if !acc.push(&next, &jacobians, &stats) {
             break;
         }

@@ -35,6 +35,7 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<2, Henon>,
     forcing_frequency: |_| 0.0,
     run_lane: crate::method::run_lane::<2, Henon>,
+    run_lanes: crate::method::lane::run_lanes::<2, Henon>,
     plan: crate::method::lane::plan_of::<2, Henon>,
     reestimate: crate::method::lane::reestimate_of::<2, Henon>,
     gpu_refuses: |_| None,

@@ -58,6 +58,7 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<2, ImpactOscillator>,
     forcing_frequency: super::forcing_of::<2, ImpactOscillator>,
     run_lane: crate::method::run_lane::<2, ImpactOscillator>,
+    run_lanes: crate::method::lane::run_lanes::<2, ImpactOscillator>,
     plan: crate::method::lane::plan_of::<2, ImpactOscillator>,
     reestimate: crate::method::lane::reestimate_of::<2, ImpactOscillator>,
     gpu_refuses: |_| None,
@@ -179,6 +180,10 @@ impl System<2> for ImpactOscillator {
 
     fn iterate(&self, x: &[f64; 2], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 2] {
         time_map(self, x, self.period(), flow, stats)
+    }
+
+    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; 2]], flow: &FlowSettings) {
+        super::time_map_lanes(systems, xs, flow)
     }
 
     fn iterate_many(&self, ys: &mut [[f64; 2]], flow: &FlowSettings, stats: &mut [IterationStats]) {

@@ -47,6 +47,7 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<3, Lorenz>,
     forcing_frequency: super::forcing_of::<3, Lorenz>,
     run_lane: crate::method::run_lane::<3, Lorenz>,
+    run_lanes: crate::method::lane::run_lanes::<3, Lorenz>,
     plan: crate::method::lane::plan_of::<3, Lorenz>,
     reestimate: crate::method::lane::reestimate_of::<3, Lorenz>,
     gpu_refuses: |_| None,
@@ -98,6 +99,10 @@ impl System<3> for Lorenz {
 
     fn iterate(&self, x: &[f64; 3], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; 3] {
         time_map(self, x, self.period, flow, stats)
+    }
+
+    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; 3]], flow: &FlowSettings) {
+        super::time_map_lanes(systems, xs, flow)
     }
 
     fn iterate_many(&self, ys: &mut [[f64; 3]], flow: &FlowSettings, stats: &mut [IterationStats]) {

@@ -63,6 +63,9 @@ pub struct SystemInfo {
     pub forcing_frequency: fn(&Params) -> f64,
     /// Runs one lane on the dimension-specific code path.
     pub run_lane: fn(&Lane) -> crate::method::LaneResult,
+    /// [`crate::method::lane::run_lanes`]: neighbouring lanes, their
+    /// transients stepped together.
+    pub run_lanes: fn(&[Lane]) -> Vec<crate::method::LaneResult>,
     /// Why the GPU kernels cannot run a lane with these parameters, if
     /// they cannot (what the CPU path models and the kernels do not yet).
     pub gpu_refuses: fn(&Params) -> Option<String>,
@@ -268,6 +271,16 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         }
     }
 
+    /// One map iteration of one trajectory of each of several systems (the
+    /// references of neighbouring lanes of a sweep, in their transient); a
+    /// flow steps them as one batch ([`crate::integrate::time_map_lanes`]).
+    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; D]], flow: &FlowSettings) {
+        let mut discard = IterationStats::default();
+        for (system, x) in systems.iter().zip(xs.iter_mut()) {
+            *x = system.iterate(x, flow, &mut discard);
+        }
+    }
+
     /// [`iterate_many`](Self::iterate_many) for one part of the iteration,
     /// from the forcing phase `phase` at its start (advanced to its end).
     /// Only flows have parts; a map is always whole.
@@ -313,6 +326,17 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     fn admits(&self, _y: &[f64; D]) -> bool {
         true
     }
+}
+
+/// [`System::iterate_lanes`] of a flow: its time-T maps stepped as one batch.
+pub fn time_map_lanes<const D: usize, S: System<D> + crate::integrate::Flow<D>>(
+    systems: &[S],
+    xs: &mut [[f64; D]],
+    flow: &FlowSettings,
+) {
+    let periods: Vec<f64> = systems.iter().map(|s| s.period()).collect();
+    let mut discard = vec![IterationStats::default(); systems.len()];
+    crate::integrate::time_map_lanes(systems, xs, &periods, flow, &mut discard);
 }
 
 /// [`SystemInfo::period`] from the system's own [`System::period`].
