@@ -9,8 +9,8 @@ use crate::method::{Lane, LaneResult, MethodSettings};
 use crate::scene::Scene;
 
 /// Lanes whose transients are stepped together (`method::lane::run_lanes`):
-/// one vector batch of references.
-const NEIGHBOURS: usize = 8;
+/// one batch of references.
+const NEIGHBOURS: usize = crate::integrate::LANE_BATCH;
 
 /// Runs every lane of `scene` (of its shard, when sharded), in parallel,
 /// results in sweep order.
