@@ -83,30 +83,28 @@ pub fn part_map_many<const D: usize, F: Flow<D>>(
     phase: &mut Phase,
     stats: &mut [IterationStats],
 ) {
-    // Where the CPU has AVX2, the same code compiled for it (runtime
-    // detection: a binary built here must still run on an older CPU). No
-    // operation is fused or reordered, so the results are the same bits.
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU has the features the function is compiled for.
-        unsafe { part_map_many_avx2(flow, ys, period, settings, part, phase, stats) };
-        return;
-    }
-    part_map_many_lanes(flow, ys, period, settings, part, phase, stats);
+    vectorised(
+        #[inline(always)]
+        || part_map_many_lanes(flow, ys, period, settings, part, phase, stats),
+    );
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn part_map_many_avx2<const D: usize, F: Flow<D>>(
-    flow: &F,
-    ys: &mut [[f64; D]],
-    period: f64,
-    settings: &FlowSettings,
-    part: Part,
-    phase: &mut Phase,
-    stats: &mut [IterationStats],
-) {
-    part_map_many_lanes(flow, ys, period, settings, part, phase, stats);
+/// Runs `body` compiled for AVX2 where the CPU has it (runtime detection: a
+/// binary built here must still run on an older CPU), as is otherwise. No
+/// operation is fused or reordered, so the results are the same bits. The
+/// body and what it calls must be inlined into it to be compiled so.
+#[inline(always)]
+fn vectorised<R>(body: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn avx2<R>(body: impl FnOnce() -> R) -> R {
+            body()
+        }
+        // SAFETY: the CPU has the features the function is compiled for.
+        return unsafe { avx2(body) };
+    }
+    body()
 }
 
 /// Trajectories of one lane stepped together in one vector batch.
@@ -160,25 +158,10 @@ pub fn time_map_lanes<const D: usize, F: Flow<D>>(
     settings: &FlowSettings,
     stats: &mut [IterationStats],
 ) {
-    #[cfg(target_arch = "x86_64")]
-    if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU has the features the function is compiled for.
-        unsafe { time_map_lanes_avx2(flows, ys, periods, settings, stats) };
-        return;
-    }
-    time_map_lanes_portable(flows, ys, periods, settings, stats);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn time_map_lanes_avx2<const D: usize, F: Flow<D>>(
-    flows: &[F],
-    ys: &mut [[f64; D]],
-    periods: &[f64],
-    settings: &FlowSettings,
-    stats: &mut [IterationStats],
-) {
-    time_map_lanes_portable(flows, ys, periods, settings, stats);
+    vectorised(
+        #[inline(always)]
+        || time_map_lanes_portable(flows, ys, periods, settings, stats),
+    );
 }
 
 #[inline(always)]
