@@ -173,16 +173,6 @@ impl Staging {
         &self.dir
     }
 
-    /// The folder the set becomes.
-    pub fn target(&self) -> &Path {
-        &self.target
-    }
-
-    /// Where file `name` will be once committed.
-    pub fn final_path(&self, name: &str) -> PathBuf {
-        self.target.join(name)
-    }
-
     /// Writes the manifest and swaps the set in; returns the paths of its
     /// files in the output folder.
     pub fn commit(mut self) -> Result<Vec<PathBuf>> {
