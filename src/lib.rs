@@ -19,6 +19,7 @@ pub mod budget;
 pub mod error;
 pub mod integrate;
 pub mod method;
+pub mod model;
 pub mod output;
 pub mod scene;
 pub mod system;
