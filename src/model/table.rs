@@ -1,0 +1,398 @@
+//! The `[model]` table of a scene (or a model file): states, parameters,
+//! equations, the map (a period, or a Poincaré section) and events, checked
+//! and parsed into a [`Model`]. Every error names its key, and for an
+//! expression the column: `model.equations.v: unknown name 'zeta2' (column 6)`.
+
+use super::expr::{Expr, Names, Var};
+use crate::error::{Error, Result};
+
+/// A model as the scene gives it, its expressions parsed.
+#[derive(Clone, Debug)]
+pub struct Model {
+    pub name: String,
+    /// Names of states and parameters, in order (expressions index them).
+    pub names: Names,
+    /// Parameter defaults, in `names.parameters` order.
+    pub defaults: Vec<f64>,
+    /// d(state)/dt, one per state, in `names.states` order.
+    pub equations: Vec<Expr>,
+    pub map: Map,
+    pub events: Vec<Event>,
+}
+
+/// How the flow is reduced to a map.
+#[derive(Clone, Debug)]
+pub enum Map {
+    /// The stroboscopic (time-T) map of a T-periodic flow; T is an
+    /// expression of the parameters.
+    Period(Expr),
+    /// The Poincaré map of a section `state = at`, crossed in `direction`.
+    Section {
+        state: usize,
+        at: Expr,
+        increasing: bool,
+    },
+}
+
+/// An event: when `surface` crosses 0 from below, the states in `reset`
+/// take their new values (the others keep theirs).
+#[derive(Clone, Debug)]
+pub struct Event {
+    pub name: String,
+    pub surface: Expr,
+    /// (state, new value), in the order written.
+    pub reset: Vec<(usize, Expr)>,
+}
+
+fn invalid(key: &str, reason: impl Into<String>) -> Error {
+    Error::invalid(key, reason)
+}
+
+/// Words an expression gives a meaning of its own.
+const RESERVED: [&str; 2] = ["t", "pi"];
+const FUNCTIONS: [&str; 12] = [
+    "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max", "pow",
+];
+
+fn check_name(key: &str, name: &str) -> Result<()> {
+    let mut chars = name.chars();
+    let first_ok = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_');
+    if !first_ok || !chars.all(|c| c.is_alphanumeric() || c == '_') {
+        return Err(invalid(
+            key,
+            format!("{name:?} is not a name (letters, digits and _, not starting with a digit)"),
+        ));
+    }
+    if RESERVED.contains(&name) || FUNCTIONS.contains(&name) {
+        return Err(invalid(
+            key,
+            format!("'{name}' is reserved (time t, pi and the functions)"),
+        ));
+    }
+    Ok(())
+}
+
+fn string<'a>(value: &'a toml::Value, key: &str) -> Result<&'a str> {
+    value
+        .as_str()
+        .ok_or_else(|| invalid(key, format!("expected a string, got {value}")))
+}
+
+fn table<'a>(value: &'a toml::Value, key: &str) -> Result<&'a toml::Table> {
+    value
+        .as_table()
+        .ok_or_else(|| invalid(key, format!("expected a table, got {value}")))
+}
+
+/// Parses `text` at `key`, its names restricted to what `allowed` accepts
+/// (a period may not read the states, for instance).
+fn expression(
+    text: &toml::Value,
+    key: &str,
+    names: &Names,
+    allowed: impl Fn(Var) -> Option<&'static str>,
+) -> Result<Expr> {
+    let text = string(text, key)?;
+    let expr = Expr::parse(text, names).map_err(|e| invalid(key, e.to_string()))?;
+    for (i, state) in names.states.iter().enumerate() {
+        if let (true, Some(why)) = (expr.uses(Var::State(i)), allowed(Var::State(i))) {
+            return Err(invalid(
+                key,
+                format!("may not use the state '{state}': {why}"),
+            ));
+        }
+    }
+    if let (true, Some(why)) = (expr.uses(Var::Time), allowed(Var::Time)) {
+        return Err(invalid(key, format!("may not use the time 't': {why}")));
+    }
+    Ok(expr)
+}
+
+fn any(_: Var) -> Option<&'static str> {
+    None
+}
+
+fn parameters_only(_: Var) -> Option<&'static str> {
+    Some("it must be a function of the parameters alone")
+}
+
+impl Model {
+    /// Parses the `[model]` table; `key` names it in messages ("model").
+    pub fn parse(table_value: &toml::Value, key: &str) -> Result<Model> {
+        let root = table(table_value, key)?;
+        let at = |name: &str| format!("{key}.{name}");
+        for k in root.keys() {
+            if !["name", "states", "parameters", "equations", "map", "events"].contains(&k.as_str())
+            {
+                return Err(invalid(
+                    &at(k),
+                    "unknown key (a model has name, states, parameters, equations, map and events)",
+                ));
+            }
+        }
+        let name = match root.get("name") {
+            Some(v) => string(v, &at("name"))?.to_owned(),
+            None => "model".to_owned(),
+        };
+
+        let states_key = at("states");
+        let states: Vec<String> = match root.get("states") {
+            None => return Err(invalid(&states_key, "is required: the states, in order")),
+            Some(toml::Value::Array(items)) if !items.is_empty() => items
+                .iter()
+                .map(|v| string(v, &states_key).map(str::to_owned))
+                .collect::<Result<_>>()?,
+            Some(other) => {
+                return Err(invalid(
+                    &states_key,
+                    format!("expected a non-empty array of names, got {other}"),
+                ))
+            }
+        };
+        for (i, s) in states.iter().enumerate() {
+            check_name(&states_key, s)?;
+            if states[..i].contains(s) {
+                return Err(invalid(&states_key, format!("'{s}' is listed twice")));
+            }
+        }
+
+        let parameters_key = at("parameters");
+        let mut parameters = Vec::new();
+        let mut defaults = Vec::new();
+        if let Some(value) = root.get("parameters") {
+            for (p, v) in table(value, &parameters_key)? {
+                let key = format!("{parameters_key}.{p}");
+                check_name(&key, p)?;
+                if states.contains(p) {
+                    return Err(invalid(
+                        &key,
+                        format!("'{p}' is both a state and a parameter"),
+                    ));
+                }
+                let number = match v {
+                    toml::Value::Float(x) => *x,
+                    toml::Value::Integer(x) => *x as f64,
+                    other => return Err(invalid(&key, format!("expected a number, got {other}"))),
+                };
+                if !number.is_finite() {
+                    return Err(invalid(&key, format!("must be finite, got {number}")));
+                }
+                parameters.push(p.clone());
+                defaults.push(number);
+            }
+        }
+        let names = Names {
+            states: states.clone(),
+            parameters,
+        };
+
+        let equations_key = at("equations");
+        let written = root
+            .get("equations")
+            .ok_or_else(|| invalid(&equations_key, "is required: d(state)/dt for every state"))?;
+        let written = table(written, &equations_key)?;
+        for k in written.keys() {
+            if !states.contains(k) {
+                return Err(invalid(
+                    &format!("{equations_key}.{k}"),
+                    format!("'{k}' is not a state (states: {})", states.join(", ")),
+                ));
+            }
+        }
+        let equations = states
+            .iter()
+            .map(|s| {
+                let key = format!("{equations_key}.{s}");
+                let text = written.get(s).ok_or_else(|| {
+                    invalid(&equations_key, format!("no equation for the state '{s}'"))
+                })?;
+                expression(text, &key, &names, any)
+            })
+            .collect::<Result<Vec<_>>>()?;
+
+        let map_key = at("map");
+        let map_table = root.get("map").ok_or_else(|| {
+            invalid(
+                &map_key,
+                "is required: period = \"...\" or section = { ... }",
+            )
+        })?;
+        let map_table = table(map_table, &map_key)?;
+        let map = match (map_table.get("period"), map_table.get("section")) {
+            (Some(_), Some(_)) => {
+                return Err(invalid(&map_key, "give period or section, not both"))
+            }
+            (None, None) => {
+                return Err(invalid(
+                    &map_key,
+                    "give period = \"...\" or section = { ... }",
+                ))
+            }
+            (Some(period), None) => Map::Period(expression(
+                period,
+                &format!("{map_key}.period"),
+                &names,
+                parameters_only,
+            )?),
+            (None, Some(section)) => {
+                let key = format!("{map_key}.section");
+                let section = table(section, &key)?;
+                for k in section.keys() {
+                    if !["state", "at", "direction"].contains(&k.as_str()) {
+                        return Err(invalid(
+                            &format!("{key}.{k}"),
+                            "unknown key (a section has state, at and direction)",
+                        ));
+                    }
+                }
+                let state_key = format!("{key}.state");
+                let state_name = string(
+                    section.get("state").ok_or_else(|| {
+                        invalid(
+                            &state_key,
+                            "is required: the state that defines the section",
+                        )
+                    })?,
+                    &state_key,
+                )?;
+                let state = states.iter().position(|s| s == state_name).ok_or_else(|| {
+                    invalid(
+                        &state_key,
+                        format!(
+                            "'{state_name}' is not a state (states: {})",
+                            states.join(", ")
+                        ),
+                    )
+                })?;
+                if states.len() < 2 {
+                    return Err(invalid(
+                        &state_key,
+                        "a section needs a flow of at least 2 states",
+                    ));
+                }
+                let at_key = format!("{key}.at");
+                let at = expression(
+                    section
+                        .get("at")
+                        .ok_or_else(|| invalid(&at_key, "is required: where the section lies"))?,
+                    &at_key,
+                    &names,
+                    parameters_only,
+                )?;
+                let increasing = match section
+                    .get("direction")
+                    .map(|d| string(d, &format!("{key}.direction")))
+                {
+                    None => true,
+                    Some(Ok("increasing")) => true,
+                    Some(Ok("decreasing")) => false,
+                    Some(Ok(other)) => {
+                        return Err(invalid(
+                            &format!("{key}.direction"),
+                            format!("expected \"increasing\" or \"decreasing\", got {other:?}"),
+                        ))
+                    }
+                    Some(Err(e)) => return Err(e),
+                };
+                Map::Section {
+                    state,
+                    at,
+                    increasing,
+                }
+            }
+        };
+        for k in map_table.keys() {
+            if !["period", "section"].contains(&k.as_str()) {
+                return Err(invalid(
+                    &format!("{map_key}.{k}"),
+                    "unknown key (a map has period or section)",
+                ));
+            }
+        }
+
+        let events_key = at("events");
+        let mut events = Vec::new();
+        if let Some(value) = root.get("events") {
+            let items = value
+                .as_array()
+                .ok_or_else(|| invalid(&events_key, "expected [[model.events]] tables"))?;
+            for (n, item) in items.iter().enumerate() {
+                let key = format!("{events_key}[{n}]");
+                let event = table(item, &key)?;
+                for k in event.keys() {
+                    if !["name", "surface", "reset"].contains(&k.as_str()) {
+                        return Err(invalid(
+                            &format!("{key}.{k}"),
+                            "unknown key (an event has name, surface and reset)",
+                        ));
+                    }
+                }
+                let name = match event.get("name") {
+                    Some(v) => string(v, &format!("{key}.name"))?.to_owned(),
+                    None => format!("event {n}"),
+                };
+                let surface_key = format!("{key}.surface");
+                let surface = expression(
+                    event.get("surface").ok_or_else(|| {
+                        invalid(
+                            &surface_key,
+                            "is required: the event fires where it crosses 0 from below",
+                        )
+                    })?,
+                    &surface_key,
+                    &names,
+                    any,
+                )?;
+                let mut reset = Vec::new();
+                if let Some(r) = event.get("reset") {
+                    let reset_key = format!("{key}.reset");
+                    for (s, text) in table(r, &reset_key)? {
+                        let state = states.iter().position(|x| x == s).ok_or_else(|| {
+                            invalid(
+                                &format!("{reset_key}.{s}"),
+                                format!("'{s}' is not a state (states: {})", states.join(", ")),
+                            )
+                        })?;
+                        reset.push((
+                            state,
+                            expression(text, &format!("{reset_key}.{s}"), &names, any)?,
+                        ));
+                    }
+                }
+                events.push(Event {
+                    name,
+                    surface,
+                    reset,
+                });
+            }
+        }
+        Ok(Model {
+            name,
+            names,
+            defaults,
+            equations,
+            map,
+            events,
+        })
+    }
+
+    /// The map period T at parameter values `params` (a period map only).
+    pub fn period(&self, params: &[f64]) -> Option<f64> {
+        match &self.map {
+            Map::Period(t) => Some(t.eval(&[], params, 0.0)),
+            Map::Section { .. } => None,
+        }
+    }
+
+    /// Checks that the period is a finite number > 0 at `params`; `at`
+    /// says which swept value they are, for the message.
+    pub fn check_period(&self, params: &[f64], key: &str, at: &str) -> Result<()> {
+        match self.period(params) {
+            Some(t) if !(t.is_finite() && t > 0.0) => Err(invalid(
+                &format!("{key}.map.period"),
+                format!("must be a finite number > 0, got {t} (at {at})"),
+            )),
+            _ => Ok(()),
+        }
+    }
+}
