@@ -69,7 +69,7 @@ pub fn time_map_many<const D: usize, F: Flow<D>>(
 /// passed on, do exactly the arithmetic of the whole [`time_map_many`].
 ///
 /// The trajectories are stepped as structure-of-arrays batches of up to
-/// eight (see [`rk4::step_lanes`]), which the compiler vectorises: a hot
+/// eight (see `steps`), which the compiler vectorises: a hot
 /// loop that only steps and detects, as the GPU's integrate kernel does.
 /// A step that meets the wall (or starts at rest on it) is redone for that
 /// trajectory alone by the impact code, outside the vector loop. Every
