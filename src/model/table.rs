@@ -108,6 +108,21 @@ fn expression(
     Ok(expr)
 }
 
+/// Refuses a key of `table` (at `key`) that is not one of `allowed`, saying
+/// what `what` ("a model") has.
+fn known_keys(table: &toml::Table, key: &str, what: &str, allowed: &[&str]) -> Result<()> {
+    match table.keys().find(|k| !allowed.contains(&k.as_str())) {
+        None => Ok(()),
+        Some(k) => {
+            let (last, rest) = allowed.split_last().expect("some keys are allowed");
+            Err(invalid(
+                &format!("{key}.{k}"),
+                format!("unknown key ({what} has {} and {last})", rest.join(", ")),
+            ))
+        }
+    }
+}
+
 fn any(_: Var) -> Option<&'static str> {
     None
 }
@@ -121,15 +136,12 @@ impl Model {
     pub fn parse(table_value: &toml::Value, key: &str) -> Result<Model> {
         let root = table(table_value, key)?;
         let at = |name: &str| format!("{key}.{name}");
-        for k in root.keys() {
-            if !["name", "states", "parameters", "equations", "map", "events"].contains(&k.as_str())
-            {
-                return Err(invalid(
-                    &at(k),
-                    "unknown key (a model has name, states, parameters, equations, map and events)",
-                ));
-            }
-        }
+        known_keys(
+            root,
+            key,
+            "a model",
+            &["name", "states", "parameters", "equations", "map", "events"],
+        )?;
         let name = match root.get("name") {
             Some(v) => string(v, &at("name"))?.to_owned(),
             None => "model".to_owned(),
@@ -218,6 +230,7 @@ impl Model {
             )
         })?;
         let map_table = table(map_table, &map_key)?;
+        known_keys(map_table, &map_key, "a map", &["period", "section"])?;
         let map = match (map_table.get("period"), map_table.get("section")) {
             (Some(_), Some(_)) => {
                 return Err(invalid(&map_key, "give period or section, not both"))
@@ -237,14 +250,7 @@ impl Model {
             (None, Some(section)) => {
                 let key = format!("{map_key}.section");
                 let section = table(section, &key)?;
-                for k in section.keys() {
-                    if !["state", "at", "direction"].contains(&k.as_str()) {
-                        return Err(invalid(
-                            &format!("{key}.{k}"),
-                            "unknown key (a section has state, at and direction)",
-                        ));
-                    }
-                }
+                known_keys(section, &key, "a section", &["state", "at", "direction"])?;
                 let state_key = format!("{key}.state");
                 let state_name = string(
                     section.get("state").ok_or_else(|| {
@@ -301,14 +307,6 @@ impl Model {
                 }
             }
         };
-        for k in map_table.keys() {
-            if !["period", "section"].contains(&k.as_str()) {
-                return Err(invalid(
-                    &format!("{map_key}.{k}"),
-                    "unknown key (a map has period or section)",
-                ));
-            }
-        }
 
         let events_key = at("events");
         let mut events = Vec::new();
@@ -319,14 +317,7 @@ impl Model {
             for (n, item) in items.iter().enumerate() {
                 let key = format!("{events_key}[{n}]");
                 let event = table(item, &key)?;
-                for k in event.keys() {
-                    if !["name", "surface", "reset"].contains(&k.as_str()) {
-                        return Err(invalid(
-                            &format!("{key}.{k}"),
-                            "unknown key (an event has name, surface and reset)",
-                        ));
-                    }
-                }
+                known_keys(event, &key, "an event", &["name", "surface", "reset"])?;
                 let name = match event.get("name") {
                     Some(v) => string(v, &format!("{key}.name"))?.to_owned(),
                     None => format!("event {n}"),
