@@ -48,6 +48,32 @@ pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
     std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
 }
 
+/// [`step_at`] for W trajectories held as structure of arrays, each with
+/// its own step, given the batch's right-hand side `rhs(s, y)` at stage s
+/// (0: the step's start, 1: its middle, 2: its end): every trajectory's
+/// arithmetic is exactly `step_at`'s.
+#[inline(always)]
+pub fn step_batch<const D: usize, const W: usize>(
+    rhs: impl Fn(usize, &[[f64; W]; D]) -> [[f64; W]; D],
+    y: &[[f64; W]; D],
+    h: &[f64; W],
+) -> [[f64; W]; D] {
+    let h2: [f64; W] = std::array::from_fn(|k| 0.5 * h[k]);
+    let axpy = |a: &[f64; W], k: &[[f64; W]; D]| -> [[f64; W]; D] {
+        std::array::from_fn(|i| std::array::from_fn(|w| y[i][w] + a[w] * k[i][w]))
+    };
+    let k1 = rhs(0, y);
+    let k2 = rhs(1, &axpy(&h2, &k1));
+    let k3 = rhs(1, &axpy(&h2, &k2));
+    let k4 = rhs(2, &axpy(h, &k3));
+    let sixth: [f64; W] = std::array::from_fn(|k| h[k] / 6.0);
+    std::array::from_fn(|i| {
+        std::array::from_fn(|w| {
+            y[i][w] + sixth[w] * (k1[i][w] + 2.0 * (k2[i][w] + k3[i][w]) + k4[i][w])
+        })
+    })
+}
+
 /// y + a·k
 #[inline]
 fn axpy<const D: usize>(y: &[f64; D], a: f64, k: &[f64; D]) -> [f64; D] {

@@ -90,7 +90,7 @@ impl Func {
         }
     }
 
-    fn apply(self, a: &[f64]) -> f64 {
+    pub(crate) fn apply(self, a: &[f64]) -> f64 {
         match self {
             Func::Sin => a[0].sin(),
             Func::Cos => a[0].cos(),

@@ -9,5 +9,6 @@
 
 pub mod expr;
 pub mod table;
+pub mod tape;
 
 pub use table::{Event, Map, Model};
