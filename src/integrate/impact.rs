@@ -1,10 +1,11 @@
 //! Wall impacts inside an RK4 step.
 //!
-//! A rigid wall at X = X_w acts on coordinate 0 (position X) of a flow whose
-//! coordinate 1 is the velocity V = X'. A step that reaches the wall is split:
-//! integrate to the impact time t_c, apply the reset V → -e·V with X = X_w
-//! exactly, then integrate the rest of the step, and look again, so several
-//! impacts in one step work and no step ends behind the wall.
+//! A rigid wall (a stop) at X = X_w acts on one coordinate of a flow (a
+//! position X) whose rate is another coordinate (its velocity V = X'),
+//! from one side. A step that reaches a wall is split: integrate to the
+//! impact time t_c, apply the reset V → -e·V with X = X_w exactly, then
+//! integrate the rest of the step, and look again, so several impacts in
+//! one step, on one wall or several, work and no step ends behind a wall.
 
 use serde::Deserialize;
 
@@ -12,11 +13,53 @@ use super::clock::{cos_sin, rotate, Phase};
 use super::{rk4, Flow};
 use crate::system::IterationStats;
 
-/// A rigid wall at `position`, approached from below, with coefficient of restitution `restitution`.
+/// A rigid wall at `position` on coordinate `coordinate`, whose rate is
+/// coordinate `velocity`, with coefficient of restitution `restitution`.
+/// `side` +1 confines the motion to coordinate ≤ position (a wall
+/// approached from below), -1 to coordinate ≥ position.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Wall {
     pub position: f64,
     pub restitution: f64,
+    pub coordinate: usize,
+    pub velocity: usize,
+    pub side: f64,
+}
+
+/// Walls a flow may have (the crossings of each are counted apart).
+pub const MAX_WALLS: usize = 4;
+
+impl Wall {
+    /// The seed's wall: coordinate 0 (X) stopped from below, coordinate 1 its velocity.
+    pub fn above(position: f64, restitution: f64) -> Wall {
+        Wall {
+            position,
+            restitution,
+            coordinate: 0,
+            velocity: 1,
+            side: 1.0,
+        }
+    }
+
+    /// How far y lies beyond the wall (> 0: behind it).
+    #[inline(always)]
+    pub fn gap<const D: usize>(&self, y: &[f64; D]) -> f64 {
+        self.side * (y[self.coordinate] - self.position)
+    }
+
+    /// The speed towards the wall (> 0: approaching).
+    #[inline(always)]
+    pub fn speed<const D: usize>(&self, y: &[f64; D]) -> f64 {
+        self.side * y[self.velocity]
+    }
+
+    /// y moved onto the wall with approach speed `speed`.
+    #[inline]
+    fn on_wall<const D: usize>(&self, mut y: [f64; D], speed: f64) -> [f64; D] {
+        y[self.coordinate] = self.position;
+        y[self.velocity] = self.side * speed;
+        y
+    }
 }
 
 /// How the impact time inside a crossing step is found.
@@ -55,52 +98,84 @@ pub const MAX_IMPACTS_PER_STEP: u32 = 64;
 /// summed in closed form instead of bounce by bounce.
 const ACCUMULATION_FRACTION: f64 = 1e-3;
 
-/// Whether y rests on the wall: the sticking state, X = X_w and V = 0.
+/// The wall of `walls` that y rests on, if any: the sticking state, X = X_w and V = 0.
 #[inline]
-pub fn at_rest_on<const D: usize>(wall: &Wall, y: &[f64; D]) -> bool {
-    y[0] == wall.position && y[1] == 0.0
+pub fn resting_on<const D: usize>(walls: &[Wall], y: &[f64; D]) -> Option<usize> {
+    walls
+        .iter()
+        .position(|w| y[w.coordinate] == w.position && y[w.velocity] == 0.0)
 }
 
-/// The acceleration at rest on the wall at `phase`: > 0 presses the mass
-/// into the wall (it sticks), ≤ 0 lets it leave.
+/// The acceleration towards the wall of state y (at rest on it) at
+/// `phase`: > 0 presses the mass into the wall (it sticks), ≤ 0 lets it
+/// leave.
 #[inline]
-fn pressing<const D: usize, F: Flow<D>>(flow: &F, wall: &Wall, phase: &Phase) -> f64 {
-    let mut rest = [0.0; D];
-    rest[0] = wall.position;
-    flow.rhs(phase, &rest)[1]
+fn pressing<const D: usize, F: Flow<D>>(flow: &F, wall: &Wall, phase: &Phase, y: &[f64; D]) -> f64 {
+    wall.side * flow.rhs(phase, y)[wall.velocity]
 }
 
-/// One step of size h from rest on the wall: the mass stays there while the
-/// force presses it into the wall and leaves when the force reverses (the
-/// sticking model). The iteration's Jacobian loses rank D: the state after
-/// release depends on the forcing alone, not on where the mass came from.
+/// The flow with a mass held at rest on a wall: its position and velocity
+/// do not move, the other coordinates follow the flow.
+struct Held<'a, F> {
+    flow: &'a F,
+    wall: Wall,
+}
+
+impl<const D: usize, F: Flow<D>> Flow<D> for Held<'_, F> {
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        let mut f = self.flow.rhs(phase, y);
+        f[self.wall.coordinate] = 0.0;
+        f[self.wall.velocity] = 0.0;
+        f
+    }
+}
+
+/// One step of size h from rest on wall `stuck` of `walls`: the mass stays
+/// there while the force presses it into the wall (the other coordinates
+/// move on) and leaves when the force reverses (the sticking model). The
+/// iteration's Jacobian loses the rank of the mass's position and velocity:
+/// after release they depend on the forcing, not on where the mass came
+/// from (with two coordinates, the whole state).
 #[allow(clippy::too_many_arguments)]
 pub fn stuck_step<const D: usize, F: Flow<D>>(
     flow: &F,
-    wall: &Wall,
+    walls: &[Wall],
+    stuck: usize,
     location: ImpactLocation,
     omega: f64,
     phase: &Phase,
+    y: &[f64; D],
     h: f64,
     stats: &mut IterationStats,
 ) -> [f64; D] {
-    let mut rest = [0.0; D];
-    rest[0] = wall.position;
+    let wall = &walls[stuck];
+    let rest = wall.on_wall(*y, 0.0);
     let at = |s: f64| rotate(phase, &cos_sin(omega * s));
-    if pressing(flow, wall, phase) <= 0.0 {
+    if pressing(flow, wall, phase, &rest) <= 0.0 {
         // Not pressed: a free departure from rest, like any other step.
         let half = cos_sin(0.5 * omega * h);
-        return step(flow, wall, location, omega, phase, &half, &rest, h, stats).0;
+        return step(flow, walls, location, omega, phase, &half, &rest, h, stats).0;
     }
-    stats.rank_loss = D as u32;
-    if pressing(flow, wall, &at(h)) > 0.0 {
-        return rest;
+    stats.rank_loss = stats.rank_loss.max(2.min(D as u32));
+    let held = Held { flow, wall: *wall };
+    // The state held for s into the step (with two coordinates, `rest`
+    // itself: RK4 adds zeros).
+    let held_for = |s: f64| -> [f64; D] {
+        if D == 2 {
+            rest
+        } else {
+            rk4::step(&held, phase, &cos_sin(0.5 * omega * s), &rest, s).0
+        }
+    };
+    let end = held_for(h);
+    if pressing(flow, wall, &at(h), &end) > 0.0 {
+        return end;
     }
     // The force reverses inside the step: bisect for the release.
     let (mut lo, mut hi) = (0.0, h);
     for _ in 0..64 {
         let mid = 0.5 * (lo + hi);
-        if pressing(flow, wall, &at(mid)) > 0.0 {
+        if pressing(flow, wall, &at(mid), &held_for(mid)) > 0.0 {
             lo = mid;
         } else {
             hi = mid;
@@ -113,12 +188,12 @@ pub fn stuck_step<const D: usize, F: Flow<D>>(
     let rest_of_step = h - hi;
     step(
         flow,
-        wall,
+        walls,
         location,
         omega,
         &release,
         &cos_sin(0.5 * omega * rest_of_step),
-        &rest,
+        &held_for(hi),
         rest_of_step,
         stats,
     )
@@ -131,7 +206,7 @@ pub fn stuck_step<const D: usize, F: Flow<D>>(
 #[allow(clippy::too_many_arguments)]
 pub fn step<const D: usize, F: Flow<D>>(
     flow: &F,
-    wall: &Wall,
+    walls: &[Wall],
     location: ImpactLocation,
     omega: f64,
     phase: &Phase,
@@ -141,11 +216,11 @@ pub fn step<const D: usize, F: Flow<D>>(
     stats: &mut IterationStats,
 ) -> ([f64; D], Phase) {
     let (y1, end) = rk4::step(flow, phase, half, y, h);
-    if !reaches_wall(wall, y, &y1) {
+    if !walls.iter().any(|w| reaches_wall(w, y, &y1)) {
         return (y1, end);
     }
     (
-        resolve(flow, wall, location, omega, phase, y, h, y1, stats),
+        resolve(flow, walls, location, omega, phase, y, h, y1, stats),
         end,
     )
 }
@@ -154,15 +229,15 @@ pub fn step<const D: usize, F: Flow<D>>(
 /// wall, or the velocity turns inside it (an excursion between the ends).
 #[inline]
 pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], y1: &[f64; D]) -> bool {
-    y1[0] > wall.position || (y[1] > 0.0 && y1[1] < 0.0)
+    wall.gap(y1) > 0.0 || (wall.speed(y) > 0.0 && wall.speed(y1) < 0.0)
 }
 
 /// Applies every impact inside the step [0, h] from (phase, y), whose plain
-/// RK4 image y1 reaches the wall ([`reaches_wall`]).
+/// RK4 image y1 reaches a wall ([`reaches_wall`]), in the order they happen.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve<const D: usize, F: Flow<D>>(
     flow: &F,
-    wall: &Wall,
+    walls: &[Wall],
     location: ImpactLocation,
     omega: f64,
     phase: &Phase,
@@ -176,24 +251,46 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
         let rest = h - done;
-        let hit = match location {
-            ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
-            ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
-        };
-        let Some((s, mut yc)) = hit else {
+        // The first wall met in the rest of the step.
+        let mut first: Option<(usize, f64, [f64; D])> = None;
+        for (j, wall) in walls.iter().enumerate() {
+            let hit = match location {
+                ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
+                ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
+            };
+            if let Some((s, yc)) = hit {
+                if first.is_none_or(|(_, earliest, _)| s < earliest) {
+                    first = Some((j, s, yc));
+                }
+            }
+        }
+        let Some((j, s, yc)) = first else {
             return y1;
         };
+        let wall = &walls[j];
         let phase_c = rotate(&phase0, &cos_sin(omega * s));
         done += s;
-        if yc[1] <= 0.0 {
+        let speed = wall.speed(&yc);
+        if speed <= 0.0 {
             // Reaching the wall without approaching it: the mass arrives at
             // rest, pressed into the wall. It sticks.
-            return stuck_step(flow, wall, location, omega, &phase_c, h - done, stats);
+            return stuck_step(
+                flow,
+                walls,
+                j,
+                location,
+                omega,
+                &phase_c,
+                &yc,
+                h - done,
+                stats,
+            );
         }
-        stats.slowest_impact = stats.slowest_impact.min(yc[1]);
+        stats.slowest_impact = stats.slowest_impact.min(speed);
         stats.impacts += 1;
-        let rebound = wall.restitution * yc[1];
-        let push = pressing(flow, wall, &phase_c);
+        stats.crossings[j] += 1;
+        let rebound = wall.restitution * speed;
+        let push = pressing(flow, wall, &phase_c, &wall.on_wall(yc, 0.0));
         // e = 0 stops the mass dead; a rebound whose bounces accumulate (the
         // flight time 2v/a shrinks by e each bounce, summing to
         // 2v/(a(1 - e))) within a sliver of the step ends at rest as well.
@@ -202,23 +299,45 @@ pub fn resolve<const D: usize, F: Flow<D>>(
                 && 2.0 * rebound / (push * (1.0 - wall.restitution)) < ACCUMULATION_FRACTION * h)
         {
             stats.rank_loss = stats.rank_loss.max(1);
-            return stuck_step(flow, wall, location, omega, &phase_c, h - done, stats);
+            return stuck_step(
+                flow,
+                walls,
+                j,
+                location,
+                omega,
+                &phase_c,
+                &yc,
+                h - done,
+                stats,
+            );
         }
-        yc[0] = wall.position;
-        yc[1] = -rebound;
         phase0 = phase_c;
-        y0 = yc;
+        y0 = wall.on_wall(yc, -rebound);
         y1 = sub.step(&phase0, &y0, h - done).0;
     }
     // Bounces this dense under a force pressing into the wall are a mass
     // effectively at rest (with e = 1 and damping their heights shrink only
     // harmonically, never summing to a finite time): it sticks. Otherwise
     // the iteration cannot be trusted.
-    if y0[0] == wall.position && pressing(flow, wall, &phase0) > 0.0 {
-        return stuck_step(flow, wall, location, omega, &phase0, h - done, stats);
+    for (j, wall) in walls.iter().enumerate() {
+        if y0[wall.coordinate] == wall.position
+            && pressing(flow, wall, &phase0, &wall.on_wall(y0, 0.0)) > 0.0
+        {
+            return stuck_step(
+                flow,
+                walls,
+                j,
+                location,
+                omega,
+                &phase0,
+                &y0,
+                h - done,
+                stats,
+            );
+        }
     }
     stats.chattering = true;
-    clamp_to_wall(wall, y1)
+    walls.iter().fold(y1, |y, w| clamp_to_wall(w, y))
 }
 
 /// RK4 steps of any size s from a given phase: the re-steps of impact location.
@@ -236,12 +355,12 @@ impl<F> SubStep<'_, F> {
     }
 }
 
-fn clamp_to_wall<const D: usize>(wall: &Wall, mut y: [f64; D]) -> [f64; D] {
-    if y[0] > wall.position {
-        y[0] = wall.position;
-        y[1] = y[1].min(0.0);
+fn clamp_to_wall<const D: usize>(wall: &Wall, y: [f64; D]) -> [f64; D] {
+    if wall.gap(&y) > 0.0 {
+        wall.on_wall(y, wall.speed(&y).min(0.0))
+    } else {
+        y
     }
-    y
 }
 
 /// The paper's location: the crossing fraction of a straight line between the
@@ -252,10 +371,11 @@ fn locate_linear<const D: usize>(
     h: f64,
     y1: &[f64; D],
 ) -> Option<(f64, [f64; D])> {
-    if y1[0] <= wall.position {
+    if wall.gap(y1) <= 0.0 {
         return None;
     }
-    let theta = ((wall.position - y0[0]) / (y1[0] - y0[0])).clamp(0.0, 1.0);
+    let c = wall.coordinate;
+    let theta = ((wall.position - y0[c]) / (y1[c] - y0[c])).clamp(0.0, 1.0);
     Some((
         theta * h,
         std::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
@@ -272,26 +392,31 @@ fn locate_newton<const D: usize, F: Flow<D>>(
     h: f64,
     y1: &[f64; D],
 ) -> Option<(f64, [f64; D])> {
-    let xw = wall.position;
-    let hermite = Hermite::new(y0[0] - xw, y0[1], y1[0] - xw, y1[1], h);
-    // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = X(RK4(y0, s)) - X_w.
-    let (hi, guess) = if y1[0] > xw {
+    let hermite = Hermite::new(
+        wall.gap(y0),
+        wall.speed(y0),
+        wall.gap(y1),
+        wall.speed(y1),
+        h,
+    );
+    // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = the gap of RK4(y0, s).
+    let (hi, guess) = if wall.gap(y1) > 0.0 {
         (h, hermite.first_root(0.0, 1.0))
-    } else if y0[1] > 0.0 && y1[1] < 0.0 {
+    } else if wall.speed(y0) > 0.0 && wall.speed(y1) < 0.0 {
         // Both ends short of the wall, but the velocity turns inside the
         // step: an excursion past the wall in between is a (near-grazing)
         // impact. The Hermite interpolant locates the peak well (X is flat
         // there) but its value is off by O(h⁴); RK4 decides whether the peak
         // is beyond the wall, at the cost of one step per oscillation.
         let peak = hermite.peak()?;
-        if sub.step(phase0, y0, peak * h).0[0] <= xw {
+        if wall.gap(&sub.step(phase0, y0, peak * h).0) <= 0.0 {
             return None;
         }
         (peak * h, hermite.first_root(0.0, peak))
     } else {
         return None;
     };
-    Some(newton_in_bracket(sub, xw, phase0, y0, hi, guess * h))
+    Some(newton_in_bracket(sub, wall, phase0, y0, hi, guess * h))
 }
 
 /// Iterations of the Hermite peak's safeguarded Newton: far more than it
@@ -299,21 +424,22 @@ fn locate_newton<const D: usize, F: Flow<D>>(
 /// bisection.
 const PEAK_ITERATIONS: usize = 64;
 
-/// Safeguarded Newton on g(s) = X(RK4(y0, s)) - X_w with g'(s) ≈ V(s) in
-/// the bracket [0, hi]: bisects whenever Newton would leave the bracket.
+/// Safeguarded Newton on g(s) = the gap of RK4(y0, s), with g'(s) ≈ the
+/// speed, in the bracket [0, hi]: bisects whenever Newton would leave the
+/// bracket.
 fn newton_in_bracket<const D: usize, F: Flow<D>>(
     sub: &SubStep<F>,
-    xw: f64,
+    wall: &Wall,
     phase0: &Phase,
     y0: &[f64; D],
     mut hi: f64,
     mut s: f64,
 ) -> (f64, [f64; D]) {
-    let tolerance = 4.0 * f64::EPSILON * xw.abs().max(1.0);
+    let tolerance = 4.0 * f64::EPSILON * wall.position.abs().max(1.0);
     let mut lo = 0.0;
     let mut y = sub.step(phase0, y0, s).0;
     for _ in 0..32 {
-        let g = y[0] - xw;
+        let g = wall.gap(&y);
         if g.abs() <= tolerance {
             break;
         }
@@ -322,7 +448,7 @@ fn newton_in_bracket<const D: usize, F: Flow<D>>(
         } else {
             lo = s;
         }
-        let newton = s - g / y[1];
+        let newton = s - g / wall.speed(&y);
         s = if newton > lo && newton < hi && newton.is_finite() {
             newton
         } else {
@@ -436,7 +562,7 @@ mod tests {
     ) -> [f64; D] {
         step(
             flow,
-            wall,
+            std::slice::from_ref(wall),
             location,
             0.0,
             &ZERO_PHASE,
@@ -484,10 +610,7 @@ mod tests {
     fn several_impacts_in_one_step_are_all_applied() {
         let (a, d, e) = (9.81, 0.5, 0.6);
         let flow = Gravity { a };
-        let wall = Wall {
-            position: 0.0,
-            restitution: e,
-        };
+        let wall = Wall::above(0.0, e);
         // One step long enough for four impacts.
         let h = 1.2;
         let (expected, impacts) = bouncing(a, d, e, h);
@@ -515,10 +638,7 @@ mod tests {
         let flow = Gravity { a: 9.81 };
         for location in [ImpactLocation::Newton, ImpactLocation::Linear] {
             for e in [1.0, 0.9, 0.5] {
-                let wall = Wall {
-                    position: 0.0,
-                    restitution: e,
-                };
+                let wall = Wall::above(0.0, e);
                 let (mut t, mut y) = (0.0, [-1.0, 0.0]);
                 let mut stats = IterationStats::default();
                 let h = 0.0137;
@@ -550,10 +670,7 @@ mod tests {
         // x(t) = cos(t - 0.1): the peak at t = 0.1 lies inside the step
         // [0, 0.2], whose ends are both at cos(0.1) = 0.995 < 1 - 1e-6 = the
         // wall (RK4's error over the half step is about 1e-8).
-        let wall = Wall {
-            position: 1.0 - 1e-6,
-            restitution: 1.0,
-        };
+        let wall = Wall::above(1.0 - 1e-6, 1.0);
         let y0 = [0.1_f64.cos(), 0.1_f64.sin()];
         let mut stats = IterationStats::default();
         let y = step_at(
@@ -584,10 +701,7 @@ mod tests {
         // e = 0: the velocity dies at the first impact and gravity keeps
         // the ball on the wall: it rests there, and the step says the
         // state has forgotten where it came from.
-        let wall = Wall {
-            position: 0.0,
-            restitution: 0.0,
-        };
+        let wall = Wall::above(0.0, 0.0);
         let mut stats = IterationStats::default();
         let y = step_at(
             &Gravity { a: 1.0 },

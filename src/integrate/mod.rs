@@ -26,10 +26,10 @@ pub trait Flow<const D: usize>: Sync {
         0.0
     }
 
-    /// The rigid wall acting on coordinate 0 (position) with coordinate 1 its
-    /// velocity, if the system has one.
-    fn wall(&self) -> Option<Wall> {
-        None
+    /// The rigid walls of the system (at most [`impact::MAX_WALLS`]); every
+    /// flow of one batch has the same number.
+    fn walls(&self) -> &[Wall] {
+        &[]
     }
 
     /// One RK4 step ([`rk4::step_at`]) of W trajectories of this flow (a
@@ -70,7 +70,12 @@ pub trait Flow<const D: usize>: Sync {
     {
         let mut out = [[0.0; W]; D];
         for k in 0..W {
-            let o = rk4::step_at(flows[k], &stages[k], &std::array::from_fn(|i| y[i][k]), h[k]);
+            let o = rk4::step_at(
+                flows[k],
+                &stages[k],
+                &std::array::from_fn(|i| y[i][k]),
+                h[k],
+            );
             for i in 0..D {
                 out[i][k] = o[i];
             }
@@ -322,11 +327,16 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
     let h: [f64; W] = std::array::from_fn(|k| flows.period(k, period) / steps as f64);
     let omega: [f64; W] = std::array::from_fn(|k| flows.of(k).forcing_frequency());
     let half: [Phase; W] = std::array::from_fn(|k| cos_sin(0.5 * omega[k] * h[k]));
-    let walls: [Option<Wall>; W] = std::array::from_fn(|k| flows.of(k).wall());
-    let any_wall = walls[..n].iter().any(Option::is_some);
-    // A position no trajectory reaches where there is no wall.
-    let position: [f64; W] =
-        std::array::from_fn(|k| walls[k].as_ref().map_or(f64::INFINITY, |w| w.position));
+    let walls: [&[Wall]; W] = std::array::from_fn(|k| flows.of(k).walls());
+    let count = walls[0].len();
+    debug_assert!(walls.iter().all(|w| w.len() == count));
+    // Wall j's position and side in each slot (its coordinates are the
+    // same in every slot: one system).
+    let position: [[f64; W]; impact::MAX_WALLS] = std::array::from_fn(|j| {
+        std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.position))
+    });
+    let side: [[f64; W]; impact::MAX_WALLS] =
+        std::array::from_fn(|j| std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side)));
     let mut y: [[f64; W]; D] =
         std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
     for _ in part.steps(steps) {
@@ -341,30 +351,37 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
         });
         let mut y1 = flows.step(&stages, &y, &h);
         let next: [Phase; W] = std::array::from_fn(|k| stages[k][2]);
-        if any_wall {
-            // Detection only: at rest on the wall before the step, or
+        if count > 0 {
+            // Detection only: at rest on a wall before the step, or
             // reaching it (or turning back inside the step) after it.
-            let meets: [bool; W] = std::array::from_fn(|k| {
-                (y[0][k] == position[k] && y[1][k] == 0.0)
-                    | (y1[0][k] > position[k])
-                    | ((y[1][k] > 0.0) & (y1[1][k] < 0.0))
-            });
+            let mut meets = [false; W];
+            for (j, wall) in walls[0].iter().enumerate() {
+                let (c, v) = (wall.coordinate, wall.velocity);
+                let (position, side) = (&position[j], &side[j]);
+                for k in 0..W {
+                    meets[k] |= (y[c][k] == position[k] && y[v][k] == 0.0)
+                        | (side[k] * (y1[c][k] - position[k]) > 0.0)
+                        | ((side[k] * y[v][k] > 0.0) & (side[k] * y1[v][k] < 0.0));
+                }
+            }
             let mut any = false;
             for &m in &meets[..n] {
                 any |= m;
             }
             if any {
                 for k in (0..n).filter(|&k| meets[k]) {
-                    let Some(w) = &walls[k] else { continue };
+                    let w = walls[k];
                     let flow = flows.of(k);
                     let before: [f64; D] = std::array::from_fn(|i| y[i][k]);
-                    let after = if impact::at_rest_on(w, &before) {
+                    let after = if let Some(j) = impact::resting_on(w, &before) {
                         impact::stuck_step(
                             flow,
                             w,
+                            j,
                             location,
                             omega[k],
                             &phases[k],
+                            &before,
                             h[k],
                             &mut stats[k],
                         )

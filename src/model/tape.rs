@@ -317,8 +317,7 @@ mod tests {
         let lane = tape.lane_values(&params);
         for (x, v, t) in [(0.3, -0.7, 0.0), (1.9, 0.4, 2.5), (-0.2, 3.0, 7.0)] {
             let phase = [(0.8 * t as f64).cos(), (0.8 * t as f64).sin()];
-            let out: [[f64; 1]; 3] =
-                tape.eval(|j| [lane.constants[j]], &[phase], &[[x], [v]]);
+            let out: [[f64; 1]; 3] = tape.eval(|j| [lane.constants[j]], &[phase], &[[x], [v]]);
             for (e, o) in exprs.iter().zip(out) {
                 let tree = e.eval(&[x, v], &params, t);
                 assert_eq!(o[0].to_bits(), tree.to_bits(), "{e:?} at {x}, {v}, {t}");
@@ -329,7 +328,12 @@ mod tests {
     #[test]
     fn time_outside_a_forcing_is_refused() {
         let names = names();
-        for text in ["x*t", "cos(eta*t + 1)", "cos(v*t)", "cos(eta*t) + sin(2*eta*t)"] {
+        for text in [
+            "x*t",
+            "cos(eta*t + 1)",
+            "cos(v*t)",
+            "cos(eta*t) + sin(2*eta*t)",
+        ] {
             let e = Expr::parse(text, &names).unwrap();
             let err = Tape::compile([&e], None).unwrap_err();
             assert!(matches!(err.1, CompileError::Time(_)), "{text}");

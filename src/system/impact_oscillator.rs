@@ -74,6 +74,7 @@ pub struct ImpactOscillator {
     pub wall: f64,
     pub restitution: f64,
     pub eta: f64,
+    walls: [Wall; 1],
     /// The same oscillator in closed form (the exact backend), built once.
     closed_form: Option<ForcedImpactOscillator>,
 }
@@ -147,11 +148,8 @@ impl Flow<2> for ImpactOscillator {
         self.eta
     }
 
-    fn wall(&self) -> Option<Wall> {
-        Some(Wall {
-            position: self.wall,
-            restitution: self.restitution,
-        })
+    fn walls(&self) -> &[Wall] {
+        &self.walls
     }
 }
 
@@ -163,6 +161,7 @@ impl System<2> for ImpactOscillator {
             wall: p.get("wall"),
             restitution: p.get("restitution"),
             eta: p.get("eta"),
+            walls: [Wall::above(p.get("wall"), p.get("restitution"))],
             closed_form: ForcedImpactOscillator::new(
                 p.get("zeta"),
                 p.get("f"),

@@ -196,6 +196,8 @@ impl Part {
 pub struct IterationStats {
     /// Wall impacts during the iteration.
     pub impacts: u32,
+    /// Of these, the impacts on each wall of the flow, in its order.
+    pub crossings: [u32; crate::integrate::impact::MAX_WALLS],
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
@@ -228,6 +230,9 @@ impl IterationStats {
     /// Adds a part's statistics to its iteration's.
     pub fn merge(&mut self, part: &IterationStats) {
         self.impacts += part.impacts;
+        for (c, p) in self.crossings.iter_mut().zip(part.crossings) {
+            *c += p;
+        }
         self.chattering |= part.chattering;
         self.rank_loss = self.rank_loss.max(part.rank_loss);
         self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
@@ -241,6 +246,7 @@ impl Default for IterationStats {
     fn default() -> Self {
         IterationStats {
             impacts: 0,
+            crossings: [0; crate::integrate::impact::MAX_WALLS],
             chattering: false,
             rank_loss: 0,
             slowest_impact: f64::INFINITY,

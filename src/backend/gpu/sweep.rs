@@ -981,6 +981,8 @@ where
                         let [impacts, flags, scale_bits, nonlinearity_bits] = summary[s];
                         let mut part = IterationStats {
                             impacts,
+                            // The kernels know one wall so far.
+                            crossings: [impacts, 0, 0, 0],
                             chattering: flags & FLAG_CHATTERING != 0,
                             rank_loss: if flags & FLAG_RANK_ALL != 0 {
                                 D as u32
