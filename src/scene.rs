@@ -388,7 +388,10 @@ impl Scene {
 #[serde(deny_unknown_fields)]
 struct RawScene {
     name: Option<String>,
-    system: toml::Table,
+    system: Option<toml::Table>,
+    /// A system given as data (see `crate::model`); a file's name is
+    /// replaced by the file's table before anything else reads the scene.
+    model: Option<toml::Value>,
     #[serde(default)]
     sweep: RawSweep,
     #[serde(default)]
@@ -477,7 +480,14 @@ pub fn load_shard(path: &Path, overrides: &[String], shard: Option<Shard>) -> Re
         source,
     })?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
-    parse_shard(&text, &path.display().to_string(), stem, overrides, shard)
+    parse_in(
+        &text,
+        &path.display().to_string(),
+        stem,
+        overrides,
+        shard,
+        path.parent(),
+    )
 }
 
 /// Parses scene text; `origin` names it in messages, `default_name` is the
@@ -494,6 +504,19 @@ pub fn parse_shard(
     overrides: &[String],
     shard: Option<Shard>,
 ) -> Result<Scene> {
+    parse_in(text, origin, default_name, overrides, shard, None)
+}
+
+/// [`parse_shard`] of a scene whose `model = "file"` is relative to `base`
+/// (the working directory when `None`).
+fn parse_in(
+    text: &str,
+    origin: &str,
+    default_name: &str,
+    overrides: &[String],
+    shard: Option<Shard>,
+    base: Option<&Path>,
+) -> Result<Scene> {
     let mut table: toml::Table = text.parse().map_err(|e: toml::de::Error| {
         let at = e.span().map(|span| {
             let line = text[..span.start].matches('\n').count() + 1;
@@ -504,6 +527,7 @@ pub fn parse_shard(
             message: format!("{}{}", at.unwrap_or_default(), e.message().trim()),
         }
     })?;
+    inline_model_file(&mut table, base)?;
     let mut overridden = Vec::new();
     for o in overrides {
         overridden.push((apply_override(&mut table, o)?, o));
@@ -596,7 +620,22 @@ fn resolve(
     source: String,
     shard: Option<Shard>,
 ) -> Result<Scene> {
-    let (info, params) = resolve_system(&raw.system)?;
+    let (info, params) = match (&raw.system, &raw.model) {
+        (Some(_), Some(_)) => {
+            return Err(Error::invalid(
+                "model",
+                "a scene gives [system] or [model], not both",
+            ))
+        }
+        (Some(system), None) => resolve_system(system)?,
+        (None, Some(model)) => resolve_model(model)?,
+        (None, None) => {
+            return Err(Error::invalid(
+                "system",
+                "is required: [system] with a kind, or a [model] (or model = \"file.toml\")",
+            ))
+        }
+    };
 
     let i = raw.integration;
     let integration = Integration {
@@ -762,6 +801,43 @@ fn positive(key: &str, value: Option<usize>, default: usize) -> Result<usize> {
     }
 }
 
+/// A `[model]` table: parsed, compiled, and checked at its defaults.
+fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
+    let model = crate::model::Model::parse(table, "model")?;
+    let info = system::model::info(system::model::Code::compile(model, "model")?);
+    let params = Params::defaults(info);
+    (info.check)(&params).map_err(|(name, reason)| Error::invalid(info.key(name), reason))?;
+    Ok((info, params))
+}
+
+/// A scene's `model = "file.toml"` replaced by the file's model table (its
+/// `[model]`, or the whole file), read relative to `base`, so that
+/// overrides and the written scene see the model itself.
+fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()> {
+    let Some(toml::Value::String(file)) = table.get("model") else {
+        return Ok(());
+    };
+    let path = base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file));
+    let bad = |reason: String| Error::invalid("model", format!("{}: {reason}", path.display()));
+    let text = std::fs::read_to_string(&path).map_err(|e| bad(e.to_string()))?;
+    let mut read: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let line = e
+            .span()
+            .map(|span| format!("line {}: ", text[..span.start].matches('\n').count() + 1));
+        bad(format!(
+            "{}{}",
+            line.unwrap_or_default(),
+            e.message().trim()
+        ))
+    })?;
+    let model = match read.remove("model") {
+        Some(model) => model,
+        None => toml::Value::Table(read),
+    };
+    table.insert("model".into(), model);
+    Ok(())
+}
+
 fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> {
     let kinds = || {
         system::SYSTEMS
@@ -817,8 +893,7 @@ fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> 
         };
         params.set(index, number);
     }
-    (info.check)(&params)
-        .map_err(|(name, reason)| Error::invalid(format!("system.{name}"), reason))?;
+    (info.check)(&params).map_err(|(name, reason)| Error::invalid(info.key(name), reason))?;
     Ok((info, params))
 }
 
@@ -853,7 +928,7 @@ fn resolve_sweep(info: &'static SystemInfo, params: &Params, raw: RawSweep) -> R
                 p.set(second.index, y);
                 (info.check)(&p).map_err(|(name, reason)| {
                     Error::invalid(
-                        format!("system.{name}"),
+                        info.key(name),
                         format!(
                             "{reason} (at {} = {x}, {} = {y})",
                             first.parameter, second.parameter
@@ -960,13 +1035,13 @@ fn resolve_axis(
             if name == parameter {
                 let at = match source {
                     "from" if k + 1 == values.len() && values.len() > 1 => key("to"),
-                    "system" => "system".to_owned(),
+                    "system" => info.key(&parameter),
                     other => key(other),
                 };
                 Error::invalid(at, format!("{parameter} = {value}: {parameter} {reason}"))
             } else {
                 Error::invalid(
-                    format!("system.{name}"),
+                    info.key(name),
                     format!("{reason} (with {parameter} = {value})"),
                 )
             }

@@ -466,8 +466,8 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
         .iter()
         .enumerate()
         .map(|(k, lane)| {
-            let rate = lane.impacts_per_period / lane.period;
-            (scene.system.expected_sum)(&scene.lane_params(k), rate)
+            let rates = lane.crossings_per_period.map(|c| c / lane.period);
+            (scene.system.expected_sum)(&scene.lane_params(k), &rates)
         })
         .collect();
     Ok(Report {

@@ -54,7 +54,7 @@ pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
 /// arithmetic is exactly `step_at`'s.
 #[inline(always)]
 pub fn step_batch<const D: usize, const W: usize>(
-    rhs: impl Fn(usize, &[[f64; W]; D]) -> [[f64; W]; D],
+    mut rhs: impl FnMut(usize, &[[f64; W]; D]) -> [[f64; W]; D],
     y: &[[f64; W]; D],
     h: &[f64; W],
 ) -> [[f64; W]; D] {

@@ -6,6 +6,7 @@
 //! accumulate QR. A lane that goes non-finite stops and says so; it never
 //! touches another lane.
 
+use crate::integrate::impact::MAX_WALLS;
 use nalgebra::{Const, DimMin, SMatrix};
 
 use super::jacobian;
@@ -119,6 +120,7 @@ pub fn not_run(
             Vec::new()
         },
         impacts_per_period: f64::NAN,
+        crossings_per_period: [f64::NAN; MAX_WALLS],
         period,
         bifurcation: Vec::new(),
         jacobians: Vec::new(),
@@ -331,6 +333,9 @@ pub struct LaneResult {
     pub exponents: Vec<f64>,
     /// Reference impacts per map iteration, over the averaging iterations.
     pub impacts_per_period: f64,
+    /// Of these, the impacts on each wall of the system, in its order
+    /// (`MAX_WALLS` numbers; NaN like `impacts_per_period` when it is).
+    pub crossings_per_period: [f64; MAX_WALLS],
     /// The map period T.
     pub period: f64,
     /// The last `bifurcation_points` reference points, D numbers each.
@@ -485,6 +490,7 @@ pub struct LaneAccumulator<const D: usize> {
     noise: Option<(f64, f64, usize)>,
     done: usize,
     impacts: u64,
+    crossings: [u64; MAX_WALLS],
     chattering: usize,
     grazing: usize,
     grazing_error: f64,
@@ -524,6 +530,7 @@ where
             )),
             done: 0,
             impacts: 0,
+            crossings: [0; MAX_WALLS],
             chattering: 0,
             grazing: 0,
             grazing_error: 0.0,
@@ -602,6 +609,9 @@ where
         }
         self.parts_done += jacobians.len();
         self.impacts += u64::from(stats.impacts);
+        for (c, &s) in self.crossings.iter_mut().zip(&stats.crossings) {
+            *c += u64::from(s);
+        }
         self.chattering += usize::from(stats.chattering);
         self.grazing += usize::from(stats.grazing);
         self.grazing_error += stats.grazing_error;
@@ -632,6 +642,7 @@ where
                     Vec::new()
                 },
                 impacts_per_period: f64::NAN,
+                crossings_per_period: [f64::NAN; MAX_WALLS],
                 period: self.period,
                 bifurcation: self.bifurcation,
                 jacobians: self.jacobians.unwrap_or_default(),
@@ -683,6 +694,7 @@ where
         LaneResult {
             exponents,
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
+            crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),

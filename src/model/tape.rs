@@ -70,8 +70,11 @@ impl std::fmt::Display for CompileError {
     }
 }
 
-/// Registers a batch evaluation holds on the stack.
+/// Instructions a tape may have.
 pub const MAX_INSTRUCTIONS: usize = 256;
+/// Register-file slots a batch evaluation holds on the stack: the
+/// instructions' results and every operand that is not one.
+const MAX_FILE: usize = 3 * MAX_INSTRUCTIONS;
 
 /// Several expressions compiled into one tape (shared subexpressions
 /// computed once), with their lane constants and forcing frequency.
@@ -85,6 +88,12 @@ pub struct Tape {
     /// ω of `cos(ω t)`/`sin(ω t)`, a parameter-only expression; `None`
     /// when no expression reads the clock.
     pub frequency: Option<Expr>,
+    /// The number of states the expressions read.
+    pub states: usize,
+    /// The tape as [`Tape::eval`] runs it.
+    lowered: Vec<Lowered>,
+    numbers: Vec<f64>,
+    output_slots: Vec<u16>,
 }
 
 impl Tape {
@@ -92,11 +101,13 @@ impl Tape {
     /// errors. Expressions compiled earlier may share subexpressions.
     pub fn compile<'a>(
         exprs: impl IntoIterator<Item = &'a Expr>,
+        states: usize,
         frequency: Option<Expr>,
     ) -> Result<Tape, (usize, CompileError)> {
         let mut compiler = Compiler {
             tape: Tape {
                 frequency,
+                states,
                 ..Tape::default()
             },
             seen: HashMap::new(),
@@ -109,7 +120,10 @@ impl Tape {
                 return Err((i, CompileError::TooLong(n)));
             }
         }
-        Ok(compiler.tape)
+        let mut tape = compiler.tape;
+        let n = tape.instructions.len();
+        tape.lower().map_err(|e| (n.saturating_sub(1), e))?;
+        Ok(tape)
     }
 
     /// The lane constants and clock frequency at parameter values `params`.
@@ -136,45 +150,253 @@ impl Tape {
         phases: &[Phase; W],
         y: &[[f64; W]; D],
     ) -> [[f64; W]; N] {
+        let mut registers = Registers::new();
+        self.prepare(&mut registers, lane);
+        self.run(&mut registers, phases, y)
+    }
+
+    /// Puts the lane constants and numbers in place in a register file,
+    /// for any number of [`run`](Self::run)s (the four stages of a step).
+    #[inline(always)]
+    pub fn prepare<const W: usize>(
+        &self,
+        registers: &mut Registers<W>,
+        lane: impl Fn(usize) -> [f64; W],
+    ) {
+        let file = &mut registers.file;
+        let constants = self.states + 2;
+        for j in 0..self.lane_constants.len() {
+            file[constants + j] = MaybeUninit::new(lane(j));
+        }
+        let numbers = constants + self.lane_constants.len();
+        for (n, &v) in self.numbers.iter().enumerate() {
+            file[numbers + n] = MaybeUninit::new([v; W]);
+        }
+    }
+
+    /// The outputs at W states, each at its own phase, in a register file
+    /// made ready by [`prepare`](Self::prepare).
+    ///
+    /// Every operand is a slot of one register file (states, the clock,
+    /// lane constants, numbers, then the instructions' results), so an
+    /// instruction is its loads, its operations and a store, with no
+    /// decision on where an operand comes from; a product feeding a sum is
+    /// one instruction (two roundings still, as written).
+    #[inline(always)]
+    pub fn run<const W: usize, const D: usize, const N: usize>(
+        &self,
+        registers: &mut Registers<W>,
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+    ) -> [[f64; W]; N] {
         debug_assert_eq!(self.outputs.len(), N);
-        let mut regs = [const { MaybeUninit::<[f64; W]>::uninit() }; MAX_INSTRUCTIONS];
-        let fetch = |regs: &[MaybeUninit<[f64; W]>], src: Src| -> [f64; W] {
-            match src {
-                // SAFETY: instruction i reads only registers of instructions
-                // before it (the compiler emits operands first), all written.
-                Src::Reg(r) => unsafe { regs[r as usize].assume_init() },
-                Src::State(i) => y[i as usize],
-                Src::Lane(j) => lane(j as usize),
-                Src::Num(v) => [v; W],
-                Src::Cos => std::array::from_fn(|k| phases[k][0]),
-                Src::Sin => std::array::from_fn(|k| phases[k][1]),
-            }
+        debug_assert_eq!(self.states, D);
+        let file = &mut registers.file;
+        for i in 0..D {
+            file[i] = MaybeUninit::new(y[i]);
+        }
+        file[D] = MaybeUninit::new(std::array::from_fn(|k| phases[k][0]));
+        file[D + 1] = MaybeUninit::new(std::array::from_fn(|k| phases[k][1]));
+        let results = D + 2 + self.lane_constants.len() + self.numbers.len();
+        // SAFETY: the lowering points every operand at a slot written above
+        // or by `prepare`, or at an earlier instruction's result
+        // (`Tape::lower`).
+        let read = |file: &[MaybeUninit<[f64; W]>], slot: u16| unsafe {
+            file[slot as usize].assume_init()
         };
-        for (i, inst) in self.instructions.iter().enumerate() {
-            let value = match *inst {
-                Inst::Neg(a) => {
-                    let a = fetch(&regs, a);
-                    std::array::from_fn(|k| -a[k])
+        for (i, ins) in self.lowered.iter().enumerate() {
+            let (a, b) = (read(file, ins.a), read(file, ins.b));
+            let value: [f64; W] = match ins.code {
+                Code::Neg => std::array::from_fn(|k| -a[k]),
+                Code::Add => std::array::from_fn(|k| a[k] + b[k]),
+                Code::Sub => std::array::from_fn(|k| a[k] - b[k]),
+                Code::Mul => std::array::from_fn(|k| a[k] * b[k]),
+                Code::Div => std::array::from_fn(|k| a[k] / b[k]),
+                Code::MulAdd => {
+                    let c = read(file, ins.c);
+                    std::array::from_fn(|k| a[k] * b[k] + c[k])
                 }
-                Inst::Bin(op, a, b) => {
-                    let (a, b) = (fetch(&regs, a), fetch(&regs, b));
-                    match op {
-                        Op::Add => std::array::from_fn(|k| a[k] + b[k]),
-                        Op::Sub => std::array::from_fn(|k| a[k] - b[k]),
-                        Op::Mul => std::array::from_fn(|k| a[k] * b[k]),
-                        Op::Div => std::array::from_fn(|k| a[k] / b[k]),
-                        Op::Pow => std::array::from_fn(|k| a[k].powf(b[k])),
+                Code::MulSub => {
+                    let c = read(file, ins.c);
+                    std::array::from_fn(|k| a[k] * b[k] - c[k])
+                }
+                Code::SubMul => {
+                    let c = read(file, ins.c);
+                    std::array::from_fn(|k| c[k] - a[k] * b[k])
+                }
+                Code::Call(f) => std::array::from_fn(|k| f.apply(&[a[k], b[k]])),
+            };
+            file[results + i] = MaybeUninit::new(value);
+        }
+        std::array::from_fn(|o| read(file, self.output_slots[o]))
+    }
+
+    /// Rewrites the instructions over register-file slots (see
+    /// [`Tape::run`]), fusing each product used once, by a sum or a
+    /// difference, into it. Fails when the file would not fit.
+    fn lower(&mut self) -> Result<(), CompileError> {
+        let d = self.states;
+        let constants = d + 2;
+        let mut uses = vec![0usize; self.instructions.len()];
+        let mut numbers: Vec<f64> = Vec::new();
+        {
+            let mut note = |src: Src| match src {
+                Src::Reg(r) => uses[r as usize] += 1,
+                Src::Num(v) if !numbers.iter().any(|x| x.to_bits() == v.to_bits()) => {
+                    numbers.push(v)
+                }
+                _ => {}
+            };
+            for inst in &self.instructions {
+                match *inst {
+                    Inst::Neg(a) => note(a),
+                    Inst::Bin(_, a, b) | Inst::Call(_, a, b) => {
+                        note(a);
+                        note(b);
                     }
                 }
-                Inst::Call(f, a, b) => {
-                    let (a, b) = (fetch(&regs, a), fetch(&regs, b));
-                    std::array::from_fn(|k| f.apply(&[a[k], b[k]]))
-                }
-            };
-            regs[i] = MaybeUninit::new(value);
+            }
+            for &o in &self.outputs {
+                note(o);
+            }
         }
-        std::array::from_fn(|o| fetch(&regs, self.outputs[o]))
+        // A product used once, by an addition or subtraction, is fused.
+        let product = |src: Src| match src {
+            Src::Reg(r) if uses[r as usize] == 1 => match self.instructions[r as usize] {
+                Inst::Bin(Op::Mul, x, y) => Some((r as usize, x, y)),
+                _ => None,
+            },
+            _ => None,
+        };
+        let mut fused = vec![false; self.instructions.len()];
+        let mut plan: Vec<(Code, Src, Src, Src)> = Vec::new();
+        for inst in &self.instructions {
+            plan.push(match *inst {
+                Inst::Neg(a) => (Code::Neg, a, a, a),
+                Inst::Bin(op @ (Op::Add | Op::Sub), a, b) => {
+                    match (op, product(a), product(b)) {
+                        // (x·y) + b and (x·y) - b
+                        (Op::Add, Some((r, x, y)), _) => {
+                            fused[r] = true;
+                            (Code::MulAdd, x, y, b)
+                        }
+                        (Op::Sub, Some((r, x, y)), _) => {
+                            fused[r] = true;
+                            (Code::MulSub, x, y, b)
+                        }
+                        // a + (x·y) is (x·y) + a, to the bit.
+                        (Op::Add, None, Some((r, x, y))) => {
+                            fused[r] = true;
+                            (Code::MulAdd, x, y, a)
+                        }
+                        (Op::Sub, None, Some((r, x, y))) => {
+                            fused[r] = true;
+                            (Code::SubMul, x, y, a)
+                        }
+                        _ => (if op == Op::Add { Code::Add } else { Code::Sub }, a, b, a),
+                    }
+                }
+                Inst::Bin(op, a, b) => (
+                    match op {
+                        Op::Mul => Code::Mul,
+                        Op::Div => Code::Div,
+                        _ => Code::Call(Func::Pow),
+                    },
+                    a,
+                    b,
+                    a,
+                ),
+                Inst::Call(f, a, b) => (Code::Call(f), a, b, a),
+            });
+        }
+        // Result slots of the instructions kept, in order.
+        let results = constants + self.lane_constants.len() + numbers.len();
+        let mut result_slot = vec![0usize; self.instructions.len()];
+        let mut next = results;
+        for (i, f) in fused.iter().enumerate() {
+            result_slot[i] = next;
+            if !f {
+                next += 1;
+            }
+        }
+        if next > MAX_FILE {
+            return Err(CompileError::TooLong(self.instructions.len()));
+        }
+        let slot = |src: Src| -> u16 {
+            (match src {
+                Src::State(i) => i as usize,
+                Src::Cos => d,
+                Src::Sin => d + 1,
+                Src::Lane(j) => constants + j as usize,
+                Src::Num(v) => {
+                    constants
+                        + self.lane_constants.len()
+                        + numbers
+                            .iter()
+                            .position(|x| x.to_bits() == v.to_bits())
+                            .expect("every number was noted")
+                }
+                Src::Reg(r) => result_slot[r as usize],
+            }) as u16
+        };
+        self.lowered = plan
+            .iter()
+            .zip(&fused)
+            .filter(|(_, f)| !**f)
+            .map(|(&(code, a, b, c), _)| Lowered {
+                code,
+                a: slot(a),
+                b: slot(b),
+                c: slot(c),
+            })
+            .collect();
+        self.output_slots = self.outputs.iter().map(|&o| slot(o)).collect();
+        self.numbers = numbers;
+        Ok(())
     }
+}
+
+/// A register file of a tape for batches of W (see [`Tape::prepare`]).
+/// Made in place and never moved: it is large, and uninitialised until
+/// written, so that making it costs nothing.
+pub struct Registers<const W: usize> {
+    file: [MaybeUninit<[f64; W]>; MAX_FILE],
+}
+
+impl<const W: usize> Registers<W> {
+    #[inline(always)]
+    #[allow(clippy::new_without_default)]
+    pub fn new() -> Self {
+        Registers {
+            file: [const { MaybeUninit::uninit() }; MAX_FILE],
+        }
+    }
+}
+
+/// An operation of the lowered tape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Code {
+    Neg,
+    Add,
+    Sub,
+    Mul,
+    Div,
+    /// a·b + c
+    MulAdd,
+    /// a·b - c
+    MulSub,
+    /// c - a·b
+    SubMul,
+    Call(Func),
+}
+
+/// An instruction over register-file slots (see [`Tape::run`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Lowered {
+    code: Code,
+    a: u16,
+    b: u16,
+    c: u16,
 }
 
 /// A tape's lane constants and clock frequency at one lane's parameters.
@@ -293,9 +515,11 @@ mod tests {
     fn parameter_subexpressions_and_the_forcing_leave_the_tape() {
         let names = names();
         let e = Expr::parse("-2*zeta*v - x + f*cos(eta*t)", &names).unwrap();
-        let tape = Tape::compile([&e], None).unwrap();
-        // (-2ζ)·v, - x, f·cos, + : four instructions; -2ζ and f are lane constants.
+        let tape = Tape::compile([&e], 2, None).unwrap();
+        // (-2ζ)·v, - x, f·cos, + : four instructions; -2ζ and f are lane
+        // constants; each product is fused into the sum that uses it.
         assert_eq!(tape.instructions.len(), 4, "{tape:?}");
+        assert_eq!(tape.lowered.len(), 2, "{tape:?}");
         assert_eq!(tape.lane_constants.len(), 2);
         assert_eq!(tape.frequency, Some(Expr::Var(Var::Param(2))));
     }
@@ -312,11 +536,11 @@ mod tests {
             .iter()
             .map(|t| Expr::parse(t, &names).unwrap())
             .collect();
-        let tape = Tape::compile(&exprs, None).unwrap();
+        let tape = Tape::compile(&exprs, 2, None).unwrap();
         let params = [0.05, 1.2, 0.8];
         let lane = tape.lane_values(&params);
-        for (x, v, t) in [(0.3, -0.7, 0.0), (1.9, 0.4, 2.5), (-0.2, 3.0, 7.0)] {
-            let phase = [(0.8 * t as f64).cos(), (0.8 * t as f64).sin()];
+        for (x, v, t) in [(0.3, -0.7, 0.0_f64), (1.9, 0.4, 2.5), (-0.2, 3.0, 7.0)] {
+            let phase = [(0.8 * t).cos(), (0.8 * t).sin()];
             let out: [[f64; 1]; 3] = tape.eval(|j| [lane.constants[j]], &[phase], &[[x], [v]]);
             for (e, o) in exprs.iter().zip(out) {
                 let tree = e.eval(&[x, v], &params, t);
@@ -335,7 +559,7 @@ mod tests {
             "cos(eta*t) + sin(2*eta*t)",
         ] {
             let e = Expr::parse(text, &names).unwrap();
-            let err = Tape::compile([&e], None).unwrap_err();
+            let err = Tape::compile([&e], 2, None).unwrap_err();
             assert!(matches!(err.1, CompileError::Time(_)), "{text}");
         }
     }

@@ -64,6 +64,9 @@ pub const INFO: SystemInfo = SystemInfo {
     gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/impact_oscillator.wgsl")),
     wall_reachable: Some(wall_reachable),
+    model: None,
+    table: "system",
+    events: &[],
 };
 
 /// The oscillator with its parameters.
@@ -128,7 +131,8 @@ fn wall_reachable(p: &Params, x: &[f64]) -> bool {
     p.get("wall") <= bound * (1.0 + 1e-9) || bound.is_nan()
 }
 
-fn expected_sum(p: &Params, impacts_per_time: f64) -> f64 {
+fn expected_sum(p: &Params, impacts_per_time: &[f64]) -> f64 {
+    let impacts_per_time = impacts_per_time[0];
     let restitution_term = if impacts_per_time == 0.0 {
         0.0
     } else {

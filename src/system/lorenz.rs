@@ -53,6 +53,9 @@ pub const INFO: SystemInfo = SystemInfo {
     gpu_refuses: |_| None,
     wgsl: Some(include_str!("../../shaders/system/lorenz.wgsl")),
     wall_reachable: None,
+    model: None,
+    table: "system",
+    events: &[],
 };
 
 #[derive(Clone, Copy, Debug)]

@@ -11,6 +11,7 @@
 pub mod henon;
 pub mod impact_oscillator;
 pub mod lorenz;
+pub mod model;
 
 use nalgebra::SMatrix;
 
@@ -55,8 +56,8 @@ pub struct SystemInfo {
     /// Checks an initial state against the parameters (e.g. not behind a wall).
     pub check_state: fn(&Params, &[f64]) -> Result<(), String>,
     /// The exponent sum the phase-space volume law predicts, per unit time,
-    /// given the measured impacts per unit time.
-    pub expected_sum: fn(&Params, f64) -> f64,
+    /// given the measured impacts per unit time on each wall.
+    pub expected_sum: fn(&Params, &[f64]) -> f64,
     /// The time T of one map iteration at these parameters.
     pub period: fn(&Params) -> f64,
     /// ω of the forcing (cos ωt enters the right-hand side); 0 if autonomous.
@@ -86,6 +87,14 @@ pub struct SystemInfo {
     /// for a system without a wall. A sweep that cannot reach it runs GPU
     /// kernels compiled without impact code.
     pub wall_reachable: Option<fn(&Params, &[f64]) -> bool>,
+    /// The compiled model of a system given as data (`None` for a built-in).
+    pub model: Option<&'static model::Code>,
+    /// The scene table its parameters are keys of ("system", or
+    /// "model.parameters"), for messages.
+    pub table: &'static str,
+    /// The names of its walls (a model's events), one output column each;
+    /// empty for the built-ins, whose one wall is `impacts_per_period`.
+    pub events: &'static [&'static str],
 }
 
 impl SystemInfo {
@@ -96,6 +105,16 @@ impl SystemInfo {
 
     pub fn parameter_index(&self, name: &str) -> Option<usize> {
         self.parameters.iter().position(|p| p.name == name)
+    }
+
+    /// The scene key of parameter (or other key) `name` in messages: a
+    /// name with a dot is a whole key already ("model.map.period").
+    pub fn key(&self, name: &str) -> String {
+        if name.contains('.') {
+            name.to_owned()
+        } else {
+            format!("{}.{name}", self.table)
+        }
     }
 
     pub fn parameter_names(&self) -> String {

@@ -1,0 +1,558 @@
+//! A system given as data: a scene's `[model]` table (see `crate::model`),
+//! compiled once per run into the tape the CPU integrator evaluates, with
+//! its events as walls, and described to the rest of the tool like a
+//! built-in system.
+//!
+//! Events so far are stops: a surface `x - c` or `c - x` on one state x
+//! (c of parameters alone) whose equation is another state v (x' = v), with
+//! a reset of v alone that is linear in v (`v = "-e*v"`). That covers
+//! impacts of masses on rigid stops, one-sided or two-sided, in any number
+//! of degrees of freedom; each crossing multiplies phase-space volume by e²
+//! (the saltation determinant, e² for a stop whatever the flow), which the
+//! sum rule adds. Other surfaces are refused with their key.
+
+use nalgebra::{DMatrix, SMatrix};
+
+use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
+use crate::error::{Error, Result};
+use crate::integrate::clock::Phase;
+use crate::integrate::impact::MAX_WALLS;
+use crate::integrate::{part_map_many, rk4, time_map, time_map_many, Flow, Wall};
+use crate::model::expr::{Expr, Var, Written};
+use crate::model::tape::{Registers, Tape};
+use crate::model::{Map, Model};
+
+/// The largest model dimension the CPU path is compiled for.
+pub const MAX_STATES: usize = 6;
+
+/// A model compiled for the integrator, built once per scene.
+#[derive(Debug)]
+pub struct Code {
+    pub model: Model,
+    /// The equations, one output per state.
+    pub equations: Tape,
+    pub walls: Vec<Stop>,
+    /// div F = Σ ∂F_i/∂x_i when it is a function of the parameters alone
+    /// (then the flow contracts volume at a constant rate); `None` when it
+    /// depends on the state.
+    pub divergence: Option<Expr>,
+    /// ∂F_i/∂x_j, row-major: the time scales of the flow (see
+    /// [`ModelFlow::stiffness`]).
+    pub jacobian: Vec<Expr>,
+}
+
+/// An event that is a stop: a rigid wall on one state, from one side.
+#[derive(Debug)]
+pub struct Stop {
+    pub name: String,
+    pub coordinate: usize,
+    pub velocity: usize,
+    pub side: f64,
+    /// Where the wall is (parameters alone).
+    pub position: Expr,
+    /// e in v → -e·v (parameters alone).
+    pub restitution: Expr,
+    /// The key of the reset, for messages about e.
+    pub reset_key: String,
+}
+
+fn reads_state_or_time(e: &Expr) -> bool {
+    match e {
+        Expr::Num(_) => false,
+        Expr::Var(v) => !matches!(v, Var::Param(_)),
+        Expr::Neg(a) => reads_state_or_time(a),
+        Expr::Bin(_, a, b) => reads_state_or_time(a) || reads_state_or_time(b),
+        Expr::Call(_, args) => args.iter().any(reads_state_or_time),
+    }
+}
+
+/// The states an expression reads.
+fn states_read(e: &Expr, n: usize) -> Vec<usize> {
+    (0..n).filter(|&i| e.uses(Var::State(i))).collect()
+}
+
+impl Code {
+    /// Compiles a parsed model; errors name the model's key (`key` is
+    /// "model").
+    pub fn compile(model: Model, key: &str) -> Result<Code> {
+        let n = model.names.states.len();
+        let states = &model.names.states;
+        if let Map::Section { .. } = model.map {
+            return Err(Error::invalid(
+                format!("{key}.map.section"),
+                "Poincaré sections are not run yet: give period = \"...\" (a stroboscopic map)",
+            ));
+        }
+        if n > MAX_STATES {
+            return Err(Error::invalid(
+                format!("{key}.states"),
+                format!("{n} states: at most {MAX_STATES} are supported"),
+            ));
+        }
+        let equations = Tape::compile(&model.equations, n, None).map_err(|(i, why)| {
+            Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
+        })?;
+        if model.events.len() > MAX_WALLS {
+            return Err(Error::invalid(
+                format!("{key}.events"),
+                format!(
+                    "{} events: at most {MAX_WALLS} are supported",
+                    model.events.len()
+                ),
+            ));
+        }
+        let mut walls = Vec::new();
+        for (j, event) in model.events.iter().enumerate() {
+            walls.push(stop(&model, event, &format!("{key}.events[{j}]"))?);
+        }
+        let divergence = (0..n)
+            .map(|i| model.equations[i].derivative(Var::State(i)))
+            .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
+            .filter(|d| !reads_state_or_time(d));
+        let jacobian = (0..n * n)
+            .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
+            .collect();
+        Ok(Code {
+            model,
+            equations,
+            walls,
+            divergence,
+            jacobian,
+        })
+    }
+
+    pub fn dimension(&self) -> usize {
+        self.model.names.states.len()
+    }
+
+    /// The map period at `params`.
+    pub fn period(&self, params: &[f64]) -> f64 {
+        self.model.period(params).expect("a period map")
+    }
+}
+
+/// Event j as a stop, or why it is not one.
+fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Result<Stop> {
+    let n = model.names.states.len();
+    let states = &model.names.states;
+    let surface_key = format!("{key}.surface");
+    let not_a_stop = |why: String| {
+        Error::invalid(
+            &surface_key,
+            format!(
+                "{why}; so far an event must be a stop: `x - c` or `c - x` on a state x whose \
+                 equation is a velocity state (x' = v), with c of the parameters"
+            ),
+        )
+    };
+    let read = states_read(&event.surface, n);
+    if event.surface.uses(Var::Time) || read.len() != 1 {
+        return Err(not_a_stop(format!(
+            "'{}' reads {}",
+            Written {
+                expr: &event.surface,
+                names: &model.names
+            },
+            if event.surface.uses(Var::Time) {
+                "the time".to_owned()
+            } else {
+                format!("{} states", read.len())
+            }
+        )));
+    }
+    let coordinate = read[0];
+    let side = match event.surface.derivative(Var::State(coordinate)) {
+        Expr::Num(s) if s == 1.0 || s == -1.0 => s,
+        _ => {
+            return Err(not_a_stop(format!(
+                "it is not ±{} plus parameters",
+                states[coordinate]
+            )))
+        }
+    };
+    let velocity = match &model.equations[coordinate] {
+        Expr::Var(Var::State(v)) if *v != coordinate => *v,
+        _ => {
+            return Err(not_a_stop(format!(
+                "the equation of {} is not a state",
+                states[coordinate]
+            )))
+        }
+    };
+    // g = side·(x - c) = side·x + r, so c = -side·r with r = g at x = 0.
+    let position = Expr::Neg(Box::new(Expr::Bin(
+        crate::model::expr::Op::Mul,
+        Box::new(Expr::Num(side)),
+        Box::new(at_zero(&event.surface, coordinate)),
+    )));
+    let reset_key = format!("{key}.reset");
+    let v = &states[velocity];
+    let linear = || {
+        Error::invalid(
+            &reset_key,
+            format!(
+                "so far a stop's reset must be `{v} = \"-e*{v}\"` (e of the parameters, \
+                 between 0 and 1) and reset nothing else"
+            ),
+        )
+    };
+    let [(state, reset)] = event.reset.as_slice() else {
+        return Err(linear());
+    };
+    if *state != velocity
+        || reset.uses(Var::Time)
+        || states_read(reset, n).iter().any(|&i| i != velocity)
+    {
+        return Err(linear());
+    }
+    let slope = reset.derivative(Var::State(velocity));
+    // Linear in v: a constant slope, and 0 at v = 0 (checked at the
+    // defaults and at other parameter values, so a term of parameters
+    // that vanishes at the defaults alone does not pass).
+    let at_rest = replace_state(reset, velocity);
+    let elsewhere: Vec<f64> = model.defaults.iter().map(|p| 1.37 * p + 0.11).collect();
+    if reads_state_or_time(&slope)
+        || at_rest.eval(&[], &model.defaults, 0.0) != 0.0
+        || at_rest.eval(&[], &elsewhere, 0.0) != 0.0
+    {
+        return Err(linear());
+    }
+    Ok(Stop {
+        name: event.name.clone(),
+        coordinate,
+        velocity,
+        side,
+        position,
+        restitution: Expr::Neg(Box::new(slope)),
+        reset_key: format!("{reset_key}.{v}"),
+    })
+}
+
+/// `e` with state i replaced by 0, folded where the result is a number.
+fn at_zero(e: &Expr, i: usize) -> Expr {
+    let replaced = replace_state(e, i);
+    if reads_state_or_time(&replaced) {
+        return replaced;
+    }
+    // An expression of numbers alone folds to its value.
+    if is_number(&replaced) {
+        return Expr::Num(replaced.eval(&[], &[], 0.0));
+    }
+    replaced
+}
+
+fn is_number(e: &Expr) -> bool {
+    match e {
+        Expr::Num(_) => true,
+        Expr::Var(_) => false,
+        Expr::Neg(a) => is_number(a),
+        Expr::Bin(_, a, b) => is_number(a) && is_number(b),
+        Expr::Call(_, args) => args.iter().all(is_number),
+    }
+}
+
+fn replace_state(e: &Expr, i: usize) -> Expr {
+    match e {
+        Expr::Var(Var::State(k)) if *k == i => Expr::Num(0.0),
+        Expr::Num(_) | Expr::Var(_) => e.clone(),
+        Expr::Neg(a) => Expr::Neg(Box::new(replace_state(a, i))),
+        Expr::Bin(op, a, b) => Expr::Bin(
+            *op,
+            Box::new(replace_state(a, i)),
+            Box::new(replace_state(b, i)),
+        ),
+        Expr::Call(f, args) => Expr::Call(*f, args.iter().map(|a| replace_state(a, i)).collect()),
+    }
+}
+
+type RunLane = fn(&crate::method::Lane) -> crate::method::LaneResult;
+type RunLanes = fn(&[crate::method::Lane]) -> Vec<crate::method::LaneResult>;
+type Plan = fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan;
+
+fn leak(s: &str) -> &'static str {
+    Box::leak(s.to_owned().into_boxed_str())
+}
+
+/// The system description of a compiled model, for the scene, the
+/// backends and the writers. Built once per scene and kept for the
+/// process (the description is static for the built-ins).
+pub fn info(code: Code) -> &'static SystemInfo {
+    let code: &'static Code = Box::leak(Box::new(code));
+    let model = &code.model;
+    let parameters: Vec<Parameter> = model
+        .names
+        .parameters
+        .iter()
+        .zip(&model.defaults)
+        .map(|(name, &default)| Parameter {
+            name: leak(name),
+            default,
+            doc: "",
+        })
+        .collect();
+    let state_names: Vec<&'static str> = model.names.states.iter().map(|s| leak(s)).collect();
+    let events: Vec<&'static str> = code.walls.iter().map(|w| leak(&w.name)).collect();
+    macro_rules! by_dimension {
+        ($($d:literal)*) => {
+            match code.dimension() {
+                $($d => (
+                    crate::method::run_lane::<$d, ModelFlow<$d>> as RunLane,
+                    crate::method::lane::run_lanes::<$d, ModelFlow<$d>> as RunLanes,
+                    crate::method::lane::plan_of::<$d, ModelFlow<$d>> as Plan,
+                    crate::method::lane::reestimate_of::<$d, ModelFlow<$d>> as super::Reestimate,
+                ),)*
+                n => unreachable!("{n} states passed the check"),
+            }
+        };
+    }
+    let (run_lane, run_lanes, plan, reestimate) = by_dimension!(1 2 3 4 5 6);
+    Box::leak(Box::new(SystemInfo {
+        kind: leak(&model.name),
+        parameters: Box::leak(parameters.into_boxed_slice()),
+        state_names: Box::leak(state_names.into_boxed_slice()),
+        default_sweep: leak(&model.names.parameters.first().cloned().unwrap_or_default()),
+        default_initial_state: Box::leak(vec![0.0; code.dimension()].into_boxed_slice()),
+        is_flow: true,
+        has_exact: false,
+        check,
+        check_state,
+        expected_sum,
+        period: |p| code_of(p).period(&p.values),
+        forcing_frequency: |p| code_of(p).equations.lane_values(&p.values).frequency,
+        run_lane,
+        run_lanes,
+        gpu_refuses: |_| None,
+        reestimate,
+        plan,
+        wgsl: None,
+        wall_reachable: if code.walls.is_empty() {
+            None
+        } else {
+            Some(|_, _| true)
+        },
+        model: Some(code),
+        table: "model.parameters",
+        events: Box::leak(events.into_boxed_slice()),
+    }))
+}
+
+fn code_of(p: &Params) -> &'static Code {
+    p.info.model.expect("a model's parameters")
+}
+
+fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
+    let code = code_of(p);
+    super::check_finite(p)?;
+    let t = code.period(&p.values);
+    if !(t.is_finite() && t > 0.0) {
+        return Err((
+            "model.map.period",
+            format!("must be a finite number > 0, got {t}"),
+        ));
+    }
+    for w in &code.walls {
+        let e = w.restitution.eval(&[], &p.values, 0.0);
+        if !(0.0..=1.0).contains(&e) {
+            return Err((
+                w.reset_key.as_str(),
+                format!("the restitution e must lie in [0, 1], got {e}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
+    let code = code_of(p);
+    for w in walls_at(code, &p.values) {
+        if w.side * (x[w.coordinate] - w.position) > 0.0 {
+            return Err(format!(
+                "{} = {} lies behind the stop at {}",
+                code.model.names.states[w.coordinate], x[w.coordinate], w.position
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The exponents per unit time sum to div F (constant here) plus, per
+/// unit time, 2·ln e of every crossing of a stop (each multiplies volume
+/// by e²); NaN where div F depends on the state (not yet averaged along
+/// the orbit).
+fn expected_sum(p: &Params, crossings_per_time: &[f64]) -> f64 {
+    let code = code_of(p);
+    let Some(divergence) = &code.divergence else {
+        return f64::NAN;
+    };
+    let mut sum = divergence.eval(&[], &p.values, 0.0);
+    for (w, &rate) in code.walls.iter().zip(crossings_per_time) {
+        if rate != 0.0 {
+            sum += 2.0 * w.restitution.eval(&[], &p.values, 0.0).ln() * rate;
+        }
+    }
+    sum
+}
+
+fn walls_at(code: &Code, params: &[f64]) -> Vec<Wall> {
+    code.walls
+        .iter()
+        .map(|w| Wall {
+            position: w.position.eval(&[], params, 0.0),
+            restitution: w.restitution.eval(&[], params, 0.0),
+            coordinate: w.coordinate,
+            velocity: w.velocity,
+            side: w.side,
+        })
+        .collect()
+}
+
+/// A model at one lane's parameter values.
+#[derive(Clone, Debug)]
+pub struct ModelFlow<const D: usize> {
+    code: &'static Code,
+    params: Vec<f64>,
+    /// The tape's lane constants at these parameters.
+    constants: Vec<f64>,
+    frequency: f64,
+    period: f64,
+    walls: Vec<Wall>,
+}
+
+impl<const D: usize> Flow<D> for ModelFlow<D> {
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+        let out: [[f64; 1]; D] = self
+            .code
+            .equations
+            .eval(|j| [self.constants[j]], &[*phase], &y);
+        std::array::from_fn(|i| out[i][0])
+    }
+
+    fn forcing_frequency(&self) -> f64 {
+        self.frequency
+    }
+
+    fn walls(&self) -> &[Wall] {
+        &self.walls
+    }
+
+    #[inline(always)]
+    fn step_shared<const W: usize>(
+        &self,
+        stages: &[Phase; 3],
+        y: &[[f64; W]; D],
+        h: f64,
+    ) -> [[f64; W]; D] {
+        let tape = &self.code.equations;
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| [self.constants[j]; W]);
+        rk4::step_batch(
+            #[inline(always)]
+            |s, y| tape.run(&mut registers, &[stages[s]; W], y),
+            y,
+            &[h; W],
+        )
+    }
+
+    #[inline(always)]
+    fn step_each<const W: usize>(
+        flows: &[&Self; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D] {
+        let tape = &flows[0].code.equations;
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| {
+            std::array::from_fn(|k| flows[k].constants[j])
+        });
+        rk4::step_batch(
+            #[inline(always)]
+            |s, y| tape.run(&mut registers, &std::array::from_fn(|k| stages[k][s]), y),
+            y,
+            h,
+        )
+    }
+}
+
+impl<const D: usize> ModelFlow<D> {
+    /// The flow's Jacobian at the origin, at t = 0, as a matrix.
+    fn jacobian_at_origin(&self) -> DMatrix<f64> {
+        let values: Vec<f64> = self
+            .code
+            .jacobian
+            .iter()
+            .map(|e| e.eval(&[0.0; D], &self.params, 0.0))
+            .collect();
+        DMatrix::from_row_slice(D, D, &values)
+    }
+}
+
+impl<const D: usize> System<D> for ModelFlow<D> {
+    fn new(p: &Params) -> Self {
+        let code = code_of(p);
+        let lane = code.equations.lane_values(&p.values);
+        ModelFlow {
+            code,
+            params: p.values.clone(),
+            constants: lane.constants,
+            frequency: lane.frequency,
+            period: code.period(&p.values),
+            walls: walls_at(code, &p.values),
+        }
+    }
+
+    fn period(&self) -> f64 {
+        self.period
+    }
+
+    fn iterate(&self, x: &[f64; D], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; D] {
+        time_map(self, x, self.period, flow, stats)
+    }
+
+    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; D]], flow: &FlowSettings) {
+        super::time_map_lanes(systems, xs, flow)
+    }
+
+    fn iterate_many(&self, ys: &mut [[f64; D]], flow: &FlowSettings, stats: &mut [IterationStats]) {
+        time_map_many(self, ys, self.period, flow, stats)
+    }
+
+    fn part_many(
+        &self,
+        ys: &mut [[f64; D]],
+        flow: &FlowSettings,
+        part: Part,
+        phase: &mut Phase,
+        stats: &mut [IterationStats],
+    ) {
+        part_map_many(self, ys, self.period, flow, part, phase, stats)
+    }
+
+    fn iterate_exact(
+        &self,
+        _x: &[f64; D],
+        _part: Part,
+        _stats: &mut IterationStats,
+    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
+        None
+    }
+
+    /// The largest |eigenvalue| of the Jacobian at the origin: exact for a
+    /// flow linear between impacts (the seed's oscillator gives 1, as its
+    /// hand-written twin does), an estimate for a nonlinear one.
+    fn stiffness(&self) -> f64 {
+        let eigen = self.jacobian_at_origin().complex_eigenvalues();
+        eigen.iter().map(|l| l.norm()).fold(0.0, f64::max)
+    }
+
+    /// The fastest decay rate at the origin, -min Re λ (0 if none decays).
+    fn contraction(&self) -> f64 {
+        let eigen = self.jacobian_at_origin().complex_eigenvalues();
+        eigen.iter().map(|l| -l.re).fold(0.0, f64::max)
+    }
+
+    fn admits(&self, y: &[f64; D]) -> bool {
+        self.walls.iter().all(|w| w.gap(y) <= 0.0)
+    }
+}
