@@ -69,11 +69,14 @@ pub fn estimate<const D: usize, S: System<D>>(
         &mut st[..1 + copies],
     );
     stats.impacts += st[0].impacts;
+    for (c, r) in stats.crossings.iter_mut().zip(st[0].crossings) {
+        *c += r;
+    }
     stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
 
     let image = ys[0];
-    let same = |t: usize| admitted[t] && st[t].impacts == st[0].impacts;
+    let same = |t: usize| admitted[t] && st[t].crossings == st[0].crossings;
     // How far a copy's impacts moved, relative to the reference's: near
     // grazing, an impact at speed v moves by δ·a/v² of itself (a the
     // acceleration at the wall), and so does the difference quotient.

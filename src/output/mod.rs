@@ -46,24 +46,26 @@ pub fn spectrum_file(scene: &Scene) -> &'static str {
 }
 
 /// The header of `spectrum.csv` (`grid.csv`): the swept parameters, then
-/// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,status`:
+/// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period`, for a
+/// model one `<event>_per_period` column per event, then `grazing,grazing_bound,status`:
 /// `grazing` counts the averaging iterations re-estimated near grazing and
 /// `grazing_bound` their estimated exponent error per unit time.
 pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-    header.extend(
-        [
-            "lambda_sum",
-            "expected_sum",
-            "impacts_per_period",
-            "grazing",
-            "grazing_bound",
-            "status",
-        ]
-        .map(String::from),
-    );
+    header.extend(["lambda_sum", "expected_sum", "impacts_per_period"].map(String::from));
+    header.extend(scene.system.events.iter().map(|e| event_column(e)));
+    header.extend(["grazing", "grazing_bound", "status"].map(String::from));
     header
+}
+
+/// The column of a model's event: its crossings per period.
+pub fn event_column(event: &str) -> String {
+    let name: String = event
+        .chars()
+        .map(|c| if c.is_alphanumeric() { c } else { '_' })
+        .collect();
+    format!("{name}_per_period")
 }
 
 /// The header of `bifurcation.csv`: the swept parameters, then the state.
@@ -221,6 +223,12 @@ fn spectrum_rows<'a>(
         row.push(number(lane.exponent_sum()));
         row.push(number(report.expected_sums[j]));
         row.push(number(lane.impacts_per_period));
+        let events = scene.system.events.len();
+        row.extend(
+            lane.crossings_per_period[..events]
+                .iter()
+                .map(|&c| number(c)),
+        );
         row.push(lane.grazing.to_string());
         row.push(number(lane.grazing_bound));
         row.push(lane.status.to_string());

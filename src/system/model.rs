@@ -103,6 +103,19 @@ impl Code {
         }
         let mut walls = Vec::new();
         for (j, event) in model.events.iter().enumerate() {
+            let column = crate::output::event_column(&event.name);
+            if model.events[..j]
+                .iter()
+                .any(|e| crate::output::event_column(&e.name) == column)
+            {
+                return Err(Error::invalid(
+                    format!("{key}.events[{j}].name"),
+                    format!(
+                        "'{}' names the column {column} of an earlier event: give each event its own name",
+                        event.name
+                    ),
+                ));
+            }
             walls.push(stop(&model, event, &format!("{key}.events[{j}]"))?);
         }
         let divergence = (0..n)

@@ -1,0 +1,309 @@
+//! Models run: the seed oscillator written as a model is the built-in to
+//! the bit; the impact pair and the two-mass chain agree with an
+//! independent reference written here (RK4 at 40 000 steps per period with
+//! the variational equation, crossings located by bisection, saltation
+//! matrices at the stops) and keep the sum rule; a model's parameters are
+//! swept and overridden like a built-in's.
+
+mod common;
+
+use lyapsweep::method::LaneStatus;
+use lyapsweep::{scene, Report, Scene};
+use nalgebra::{DMatrix, SMatrix, SVector};
+
+fn model_path(name: &str) -> String {
+    format!("{}/models/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A scene running `models/<name>` over `values` of η.
+fn model_scene(name: &str, body: &str, overrides: &[&str]) -> Scene {
+    let text = format!("model = {:?}\n{body}", model_path(name));
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    scene::parse(&text, "test scene", "test", &overrides).expect("a valid scene")
+}
+
+fn run(scene: &Scene) -> Report {
+    lyapsweep::run(scene).expect("runs")
+}
+
+#[test]
+fn the_seed_oscillator_as_a_model_is_the_built_in_to_the_bit() {
+    let body = "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = 41\n[integration]\nsteps_per_period = 300\ntransient = 100\niterations = 100\n[output]\nbifurcation_points = 10\n[run]\nbackend = \"cpu\"\n";
+    let builtin = format!("[system]\nkind = \"impact-oscillator\"\n{body}");
+    for (model_e, builtin_e) in [
+        ("model.parameters.e=1.0", "system.restitution=1.0"),
+        ("model.parameters.e=0.8", "system.restitution=0.8"),
+    ] {
+        let model = run(&model_scene("seed-oscillator.toml", body, &[model_e]));
+        let reference = run(&common::scene(&builtin, &[builtin_e]));
+        let mut impacts = 0.0;
+        for (k, (a, b)) in model.lanes.iter().zip(&reference.lanes).enumerate() {
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&a.exponents),
+                bits(&b.exponents),
+                "{model_e}, lane {k}"
+            );
+            assert_eq!(
+                bits(&a.bifurcation),
+                bits(&b.bifurcation),
+                "{model_e}, lane {k}"
+            );
+            assert_eq!(a.impacts_per_period, b.impacts_per_period);
+            assert_eq!(a.crossings_per_period[0], a.impacts_per_period);
+            assert_eq!(a.status, b.status);
+            impacts += a.impacts_per_period;
+        }
+        assert!(impacts > 10.0, "the sweep must exercise the wall");
+        // The model's sum rule is derived from its expressions: div F = -2ζ
+        // and e² per impact, the built-in's by hand.
+        for (a, b) in model.expected_sums.iter().zip(&reference.expected_sums) {
+            assert!((a - b).abs() <= 1e-15, "{a} vs {b}");
+        }
+    }
+}
+
+/// A stop of the reference: wall on `coordinate` (rate `velocity`) at
+/// `position`, from `side`, with restitution e.
+struct RefStop {
+    coordinate: usize,
+    velocity: usize,
+    side: f64,
+    position: f64,
+    e: f64,
+}
+
+/// An independent reference for a forced flow that is linear between
+/// impacts, y' = A·y + b·cos(ηt): RK4 at 40 000 steps per period for the
+/// state, the exact flow matrix exp(A·s) (RK4's polynomial, exact to
+/// O(s⁵)) for its fundamental matrix, crossings located by bisection on
+/// re-stepped RK4 to the last bits, the reset y_v → -e·y_v with Φ → S·Φ,
+/// S = DR + (F⁺ - DR·F⁻)·∇gᵀ/(∇g·F⁻), and QR accumulated once per period
+/// over `iterations` periods after `transient`. Returns the exponents
+/// (sorted) and the crossings per period of each stop.
+fn reference_exponents<const N: usize>(
+    a: SMatrix<f64, N, N>,
+    b: [f64; N],
+    eta: f64,
+    stops: &[RefStop],
+    transient: usize,
+    iterations: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    let period = std::f64::consts::TAU / eta;
+    let steps = 40_000;
+    let h = period / steps as f64;
+    let field = |t: f64, y: &SVector<f64, N>| -> SVector<f64, N> {
+        a * y + SVector::from(b) * (eta * t).cos()
+    };
+    let rk4 = |t: f64, y: &SVector<f64, N>, s: f64| -> SVector<f64, N> {
+        let k1 = field(t, y);
+        let k2 = field(t + 0.5 * s, &(y + k1 * (0.5 * s)));
+        let k3 = field(t + 0.5 * s, &(y + k2 * (0.5 * s)));
+        let k4 = field(t + s, &(y + k3 * s));
+        y + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (s / 6.0)
+    };
+    let flow_matrix = |s: f64| -> SMatrix<f64, N, N> {
+        let m = a * s;
+        let m2 = m * m;
+        let m3 = m2 * m;
+        SMatrix::identity() + m + m2 / 2.0 + m3 / 6.0 + m3 * m / 24.0
+    };
+    let gap =
+        |stop: &RefStop, y: &SVector<f64, N>| stop.side * (y[stop.coordinate] - stop.position);
+    let mut y = SVector::<f64, N>::zeros();
+    let mut q = SMatrix::<f64, N, N>::identity();
+    let mut logs = [0.0; N];
+    let mut crossings = vec![0usize; stops.len()];
+    let full_step = flow_matrix(h);
+    for iteration in 0..transient + iterations {
+        let averaging = iteration >= transient;
+        let mut phi = SMatrix::<f64, N, N>::identity();
+        for step in 0..steps {
+            let t0 = step as f64 * h;
+            let mut done = 0.0;
+            let mut y1 = rk4(t0, &y, h);
+            // Every crossing inside the step, in order.
+            while let Some(j) = stops.iter().position(|s| gap(s, &y1) > 0.0) {
+                let stop = &stops[j];
+                let (mut lo, mut hi) = (0.0, h - done);
+                loop {
+                    let mid = 0.5 * (lo + hi);
+                    if mid == lo || mid == hi {
+                        break;
+                    }
+                    if gap(stop, &rk4(t0 + done, &y, mid)) > 0.0 {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                let mut yc = rk4(t0 + done, &y, hi);
+                phi = flow_matrix(hi) * phi;
+                done += hi;
+                yc[stop.coordinate] = stop.position;
+                let before = field(t0 + done, &yc);
+                yc[stop.velocity] *= -stop.e;
+                let after = field(t0 + done, &yc);
+                let mut dr = SMatrix::<f64, N, N>::identity();
+                dr[(stop.velocity, stop.velocity)] = -stop.e;
+                let mut grad = SMatrix::<f64, 1, N>::zeros();
+                grad[(0, stop.coordinate)] = stop.side;
+                let rate = stop.side * before[stop.coordinate];
+                let saltation = dr + (after - dr * before) * grad / rate;
+                phi = saltation * phi;
+                if averaging {
+                    crossings[j] += 1;
+                }
+                y = yc;
+                y1 = rk4(t0 + done, &y, h - done);
+            }
+            phi = if done == 0.0 {
+                full_step * phi
+            } else {
+                flow_matrix(h - done) * phi
+            };
+            y = y1;
+        }
+        if averaging {
+            let qr = DMatrix::from_column_slice(N, N, (phi * q).as_slice()).qr();
+            let r = qr.r();
+            q = SMatrix::from_column_slice(qr.q().as_slice());
+            for (i, l) in logs.iter_mut().enumerate() {
+                *l += r[(i, i)].abs().ln();
+            }
+        }
+    }
+    let mut exponents: Vec<f64> = logs
+        .iter()
+        .map(|l| l / (iterations as f64 * period))
+        .collect();
+    exponents.sort_by(|a, b| b.total_cmp(a));
+    let per_period = crossings
+        .iter()
+        .map(|&c| c as f64 / iterations as f64)
+        .collect();
+    (exponents, per_period)
+}
+
+fn assert_agree(report: &Report, references: &[(Vec<f64>, Vec<f64>)], what: &str) {
+    for (k, (lane, (exponents, crossings))) in report.lanes.iter().zip(references).enumerate() {
+        assert_eq!(lane.status, LaneStatus::Ok, "{what}, lane {k}");
+        for (i, c) in crossings.iter().enumerate() {
+            assert_eq!(
+                lane.crossings_per_period[i], *c,
+                "{what}, lane {k}, stop {i}"
+            );
+        }
+        for (x, y) in lane.exponents.iter().zip(exponents) {
+            assert!(
+                (x - y).abs() <= 1e-7,
+                "{what}, lane {k}: model {:?} vs reference {exponents:?}",
+                lane.exponents
+            );
+        }
+        let expected = report.expected_sums[k];
+        assert!(
+            (lane.exponent_sum() - expected).abs() <= 1e-8,
+            "{what}, lane {k}: sum {} vs expected {expected}",
+            lane.exponent_sum()
+        );
+        // The reference's sum is the volume law too.
+        let reference_sum: f64 = exponents.iter().sum();
+        assert!((reference_sum - expected).abs() <= 1e-9, "{what}, lane {k}");
+    }
+}
+
+const RUN: &str = "[integration]\nsteps_per_period = 1800\ntransient = 200\niterations = 200\n[run]\nbackend = \"cpu\"\n";
+
+#[test]
+fn the_impact_pair_agrees_with_an_independent_reference_and_keeps_the_sum_rule() {
+    let etas = [0.5, 0.8, 1.2];
+    let values: Vec<String> = etas.iter().map(|v| v.to_string()).collect();
+    let body = format!(
+        "[sweep]\nparameter = \"eta\"\nvalues = [{}]\n{RUN}",
+        values.join(", ")
+    );
+    let report = run(&model_scene("impact-pair.toml", &body, &[]));
+    let (zeta, f, gap, e) = (0.05, 1.0, 1.0, 0.8);
+    let a = SMatrix::<f64, 2, 2>::from_row_slice(&[0.0, 1.0, -1.0, -2.0 * zeta]);
+    let stops = [
+        RefStop {
+            coordinate: 0,
+            velocity: 1,
+            side: 1.0,
+            position: gap,
+            e,
+        },
+        RefStop {
+            coordinate: 0,
+            velocity: 1,
+            side: -1.0,
+            position: -gap,
+            e,
+        },
+    ];
+    let references: Vec<_> = etas
+        .iter()
+        .map(|&eta| reference_exponents(a, [0.0, f], eta, &stops, 200, 200))
+        .collect();
+    // Both stops are hit at every η.
+    assert!(references.iter().all(|(_, c)| c.iter().all(|&c| c >= 1.0)));
+    assert_agree(&report, &references, "impact pair");
+}
+
+#[test]
+fn the_two_mass_chain_has_four_exponents_that_agree_with_an_independent_reference() {
+    let etas = [0.6, 0.9, 1.7];
+    let values: Vec<String> = etas.iter().map(|v| v.to_string()).collect();
+    let body = format!(
+        "[sweep]\nparameter = \"eta\"\nvalues = [{}]\n{RUN}",
+        values.join(", ")
+    );
+    let report = run(&model_scene("two-mass-chain.toml", &body, &[]));
+    let (zeta, k, m, f, gap, e) = (0.05, 1.0, 1.0, 1.0, 1.0, 0.8);
+    #[rustfmt::skip]
+    let a = SMatrix::<f64, 4, 4>::from_row_slice(&[
+        0.0, 1.0, 0.0, 0.0,
+        -1.0 - k, -2.0 * zeta, k, 0.0,
+        0.0, 0.0, 0.0, 1.0,
+        k / m, 0.0, -k / m, -2.0 * zeta / m,
+    ]);
+    let stops = [RefStop {
+        coordinate: 2,
+        velocity: 3,
+        side: 1.0,
+        position: gap,
+        e,
+    }];
+    let references: Vec<_> = etas
+        .iter()
+        .map(|&eta| reference_exponents(a, [0.0, f, 0.0, 0.0], eta, &stops, 200, 200))
+        .collect();
+    assert!(references.iter().all(|(_, c)| c[0] >= 0.5));
+    for lane in &report.lanes {
+        assert_eq!(lane.exponents.len(), 4);
+    }
+    assert_agree(&report, &references, "two-mass chain");
+}
+
+#[test]
+fn a_model_parameter_is_overridden_and_swept_like_a_built_in_s() {
+    let body = "[sweep]\nparameter = \"e\"\nvalues = [0.5, 0.9]\n[integration]\nsteps_per_period = 600\ntransient = 100\niterations = 100\n[run]\nbackend = \"cpu\"\n";
+    let report = run(&model_scene(
+        "impact-pair.toml",
+        body,
+        &["model.parameters.eta=1.2"],
+    ));
+    for (lane, (expected, e)) in report
+        .lanes
+        .iter()
+        .zip(report.expected_sums.iter().zip([0.5_f64, 0.9]))
+    {
+        let crossings: f64 = lane.crossings_per_period[..2].iter().sum();
+        assert!(crossings > 0.0);
+        let rule = -0.1 + 2.0 * e.ln() * crossings / lane.period;
+        assert!((expected - rule).abs() < 1e-14, "{expected} vs {rule}");
+        assert!((lane.exponent_sum() - expected).abs() < 1e-6);
+        assert!((lane.period - std::f64::consts::TAU / 1.2).abs() < 1e-15);
+    }
+}
