@@ -530,6 +530,7 @@ fn parse_in(
     inline_model_file(&mut table, base)?;
     let mut overridden = Vec::new();
     for o in overrides {
+        check_model_override(&table, o)?;
         overridden.push((apply_override(&mut table, o)?, o));
     }
     // The name goes into the written scene, so that it reads back the same
@@ -836,6 +837,29 @@ fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()>
     };
     table.insert("model".into(), model);
     Ok(())
+}
+
+/// `--set model.parameters.NAME=...` must name a parameter the model has:
+/// a new key there would be a parameter nothing reads (a typo, silently).
+fn check_model_override(table: &toml::Table, assignment: &str) -> Result<()> {
+    let path = assignment.split_once('=').map_or(assignment, |(p, _)| p).trim();
+    let Some(name) = path.strip_prefix("model.parameters.") else {
+        return Ok(());
+    };
+    let parameters = table
+        .get("model")
+        .and_then(|m| m.get("parameters"))
+        .and_then(|p| p.as_table());
+    match parameters {
+        Some(p) if !p.contains_key(name) => Err(Error::invalid(
+            format!("--set {assignment}"),
+            format!(
+                "the model has no parameter `{name}` (its parameters: {})",
+                p.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> {

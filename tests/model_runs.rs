@@ -307,3 +307,183 @@ fn a_model_parameter_is_overridden_and_swept_like_a_built_in_s() {
         assert!((lane.period - std::f64::consts::TAU / 1.2).abs() < 1e-15);
     }
 }
+
+/// The impact pair inline, for malformed variants.
+const PAIR: &str = r#"
+[model]
+name = "impact-pair"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 1.0
+gap = 1.0
+e = 0.8
+eta = 0.8
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v" }
+[integration]
+steps_per_period = 100
+transient = 2
+iterations = 2
+"#;
+
+/// Runs `scene` with the binary and checks: exit code 2, one line naming
+/// `message`, nothing written.
+fn refused(scene: &str, extra: &[&str], message: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, scene).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .arg("run")
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .args(extra)
+        .output()
+        .expect("the binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{message}: {stderr}");
+    assert!(
+        stderr.contains(message),
+        "expected {message:?} in: {stderr}"
+    );
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(
+        !dir.path().join("out").exists(),
+        "output written for {message}"
+    );
+}
+
+#[test]
+fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "v = \"-2*zeta*v - x + f*cos(eta*t)\"",
+            "v = \"-2*zeta2*v - x + f*cos(eta*t)\"",
+            "model.equations.v: unknown name 'zeta2' (column 4)",
+        ),
+        (
+            "x = \"v\"\n",
+            "",
+            "model.equations: no equation for the state 'x'",
+        ),
+        (
+            "x = \"v\"\n",
+            "x = \"v\"\ny = \"x\"\n",
+            "model.equations.y: 'y' is not a state",
+        ),
+        (
+            "reset = { v = \"-e*v\" }\n[[",
+            "reset = { w = \"-e*v\" }\n[[",
+            "model.events[0].reset.w: 'w' is not a state",
+        ),
+        (
+            "zeta = 0.05",
+            "zeta = 0.05\nx = 1.0",
+            "model.parameters.x: 'x' is both a state and a parameter",
+        ),
+        (
+            "x = \"v\"",
+            "x = \"v*t\"",
+            "model.equations.x: time may appear only as cos(w*t) or sin(w*t)",
+        ),
+        (
+            "surface = \"x - gap\"",
+            "surface = \"x*x - gap\"",
+            "model.events[0].surface:",
+        ),
+        (
+            "surface = \"x - gap\"",
+            "surface = \"v - gap\"",
+            "model.events[0].surface:",
+        ),
+        (
+            "reset = { v = \"-e*v\" }\n[[",
+            "reset = { v = \"-e*v + 1\" }\n[[",
+            "model.events[0].reset:",
+        ),
+        (
+            "e = 0.8",
+            "e = 1.5",
+            "model.events[0].reset.v: the restitution e must lie in [0, 1], got 1.5",
+        ),
+        (
+            "period = \"2*pi/eta\"",
+            "period = \"2*pi/(eta - 1)\"",
+            "model.map.period: must be a finite number > 0",
+        ),
+        (
+            "name = \"left stop\"",
+            "name = \"right-stop\"",
+            "model.events[1].name: 'right-stop' names the column right_stop_per_period",
+        ),
+    ];
+    for (from, to, message) in cases {
+        assert!(PAIR.contains(from), "{from}");
+        refused(&PAIR.replacen(from, to, 1), &[], message);
+    }
+    // A swept value at which the period is not > 0 is named.
+    refused(
+        &format!("{PAIR}[sweep]\nparameter = \"eta\"\nvalues = [0.8, -0.5]\n"),
+        &[],
+        "model.map.period: must be a finite number > 0, got -12.566370614359172 (with eta = -0.5)",
+    );
+    // Overrides of a model's parameters are checked like the file.
+    refused(
+        PAIR,
+        &["--set", "model.parameters.e=-0.1"],
+        "model.events[0].reset.v",
+    );
+    refused(
+        PAIR,
+        &["--set", "model.parameters.zeta2=1"],
+        "model.parameters",
+    );
+    // A model file that is not there, and a scene with both a system and a model.
+    refused("model = \"no-such-model.toml\"\n", &[], "model: ");
+    refused(
+        &format!("[system]\nkind = \"impact-oscillator\"\n{PAIR}"),
+        &[],
+        "model: a scene gives [system] or [model], not both",
+    );
+}
+
+#[test]
+fn a_model_file_is_read_relative_to_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir(dir.path().join("models")).unwrap();
+    std::fs::copy(
+        model_path("impact-pair.toml"),
+        dir.path().join("models/pair.toml"),
+    )
+    .unwrap();
+    let scene = dir.path().join("scene.toml");
+    std::fs::write(
+        &scene,
+        "model = \"models/pair.toml\"\n[integration]\nsteps_per_period = 200\ntransient = 10\niterations = 10\n[run]\nbackend = \"cpu\"\n",
+    )
+    .unwrap();
+    let loaded = scene::load(&scene, &["model.parameters.e=0.5".into()]).unwrap();
+    assert_eq!(loaded.system.kind, "impact-pair");
+    assert_eq!(loaded.params.values[0], 0.5, "e is the first parameter");
+    // The written scene holds the model itself, so that it reads back
+    // wherever it is copied.
+    assert!(
+        loaded.source.contains("surface = \"x - gap\""),
+        "{}",
+        loaded.source
+    );
+    let report = run(&loaded);
+    assert!(report.lanes[0].exponents.iter().all(|e| e.is_finite()));
+}
