@@ -692,14 +692,20 @@ fn resolve(
         ));
     }
     let state = &integration.initial_state;
-    if state.len() != info.dimension() {
+    let states = info.default_initial_state.len();
+    if state.len() != states {
+        let names = match info.model {
+            Some(code) if states != info.dimension() => format!(
+                "a point of the flow from which it reaches its Poincaré section: {}",
+                code.model.names.states.join(", ")
+            ),
+            _ => info.state_names.join(", "),
+        };
         return Err(Error::invalid(
             "integration.initial_state",
             format!(
-                "{} has a {}-dimensional state ({}), got {} numbers",
+                "{} has a {states}-dimensional state ({names}), got {} numbers",
                 info.kind,
-                info.dimension(),
-                info.state_names.join(", "),
                 state.len()
             ),
         ));
@@ -842,7 +848,10 @@ fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()>
 /// `--set model.parameters.NAME=...` must name a parameter the model has:
 /// a new key there would be a parameter nothing reads (a typo, silently).
 fn check_model_override(table: &toml::Table, assignment: &str) -> Result<()> {
-    let path = assignment.split_once('=').map_or(assignment, |(p, _)| p).trim();
+    let path = assignment
+        .split_once('=')
+        .map_or(assignment, |(p, _)| p)
+        .trim();
     let Some(name) = path.strip_prefix("model.parameters.") else {
         return Ok(());
     };

@@ -467,7 +467,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
         .enumerate()
         .map(|(k, lane)| {
             let rates = lane.crossings_per_period.map(|c| c / lane.period);
-            (scene.system.expected_sum)(&scene.lane_params(k), &rates)
+            (scene.system.expected_sum)(&scene.lane_params(k), &rates) + lane.orbit_term
         })
         .collect();
     Ok(Report {

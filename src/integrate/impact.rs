@@ -464,12 +464,12 @@ fn newton_in_bracket<const D: usize, F: Flow<D>>(
 
 /// The cubic Hermite interpolant of g = X - X_w over one step, in θ ∈ [0, 1],
 /// from the values and derivatives (velocities) at both ends.
-struct Hermite {
+pub(crate) struct Hermite {
     c: [f64; 4],
 }
 
 impl Hermite {
-    fn new(g0: f64, v0: f64, g1: f64, v1: f64, h: f64) -> Self {
+    pub(crate) fn new(g0: f64, v0: f64, g1: f64, v1: f64, h: f64) -> Self {
         let (d0, d1) = (v0 * h, v1 * h);
         // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³
         let c2 = 3.0 * (g1 - g0) - 2.0 * d0 - d1;
@@ -525,7 +525,7 @@ impl Hermite {
 
     /// The first upward root of the cubic in [a, b] (g(a) <= 0 < g(b)), by
     /// bisection refined with Newton; used only as Newton's starting guess.
-    fn first_root(&self, mut a: f64, mut b: f64) -> f64 {
+    pub(crate) fn first_root(&self, mut a: f64, mut b: f64) -> f64 {
         let mut th =
             a + (b - a) * (-self.value(a) / (self.value(b) - self.value(a))).clamp(0.0, 1.0);
         for _ in 0..8 {

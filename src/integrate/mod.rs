@@ -6,6 +6,7 @@ pub mod clock;
 pub mod closed_form;
 pub mod impact;
 pub mod rk4;
+pub mod section;
 
 pub use impact::{ImpactLocation, Wall};
 

@@ -69,6 +69,8 @@ pub fn estimate<const D: usize, S: System<D>>(
         &mut st[..1 + copies],
     );
     stats.impacts += st[0].impacts;
+    stats.time += st[0].time;
+    stats.log_flux += st[0].log_flux;
     for (c, r) in stats.crossings.iter_mut().zip(st[0].crossings) {
         *c += r;
     }
@@ -85,7 +87,8 @@ pub fn estimate<const D: usize, S: System<D>>(
             0.0
         } else if !admitted[t] {
             f64::INFINITY
-        } else if st[0].impacts == 0 {
+        } else if st[0].slowest_impact == f64::INFINITY {
+            // No impact (nor section crossing) to move.
             0.0
         } else if !same(t) {
             f64::INFINITY

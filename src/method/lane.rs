@@ -122,6 +122,7 @@ pub fn not_run(
         impacts_per_period: f64::NAN,
         crossings_per_period: [f64::NAN; MAX_WALLS],
         period,
+        orbit_term: f64::NAN,
         bifurcation: Vec::new(),
         jacobians: Vec::new(),
         grazing: 0,
@@ -336,8 +337,12 @@ pub struct LaneResult {
     /// Of these, the impacts on each wall of the system, in its order
     /// (`MAX_WALLS` numbers; NaN like `impacts_per_period` when it is).
     pub crossings_per_period: [f64; MAX_WALLS],
-    /// The map period T.
+    /// The map period T (of a Poincaré map, the mean return time).
     pub period: f64,
+    /// A term of the sum rule that depends on the orbit, per unit time: a
+    /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0
+    /// for a period map).
+    pub orbit_term: f64,
     /// The last `bifurcation_points` reference points, D numbers each.
     pub bifurcation: Vec<f64>,
     /// Every iteration's Jacobian, row-major, when `keep_jacobians` is set.
@@ -374,7 +379,7 @@ where
         steps_per_period: plan.steps_per_period,
         ..settings.flow
     };
-    let mut x: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
+    let mut x = system.start(&settings.initial_state, flow);
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
         // The exact backend's transient is exact too: it is the ground truth.
@@ -422,8 +427,10 @@ where
         steps_per_period: plans[0].steps_per_period,
         ..settings.flow
     };
-    let start: [f64; D] = std::array::from_fn(|i| settings.initial_state[i]);
-    let mut xs = vec![start; lanes.len()];
+    let mut xs: Vec<[f64; D]> = systems
+        .iter()
+        .map(|s| s.start(&settings.initial_state, flow))
+        .collect();
     // A lane that fails goes on being stepped with the others (its
     // numbers touch no other lane's) but is reported at its first failure.
     let mut failed: Vec<Option<usize>> = vec![None; lanes.len()];
@@ -491,6 +498,9 @@ pub struct LaneAccumulator<const D: usize> {
     done: usize,
     impacts: u64,
     crossings: [u64; MAX_WALLS],
+    /// Σ of the iterations' own times and flux terms (Poincaré maps).
+    time: f64,
+    log_flux: f64,
     chattering: usize,
     grazing: usize,
     grazing_error: f64,
@@ -531,6 +541,8 @@ where
             done: 0,
             impacts: 0,
             crossings: [0; MAX_WALLS],
+            time: 0.0,
+            log_flux: 0.0,
             chattering: 0,
             grazing: 0,
             grazing_error: 0.0,
@@ -612,6 +624,8 @@ where
         for (c, &s) in self.crossings.iter_mut().zip(&stats.crossings) {
             *c += u64::from(s);
         }
+        self.time += stats.time;
+        self.log_flux += stats.log_flux;
         self.chattering += usize::from(stats.chattering);
         self.grazing += usize::from(stats.grazing);
         self.grazing_error += stats.grazing_error;
@@ -633,7 +647,15 @@ where
     }
 
     /// The lane's result after all its iterations.
-    pub fn finish(self) -> LaneResult {
+    pub fn finish(mut self) -> LaneResult {
+        // A Poincaré map's iterations take their own times: the period is
+        // their mean, so that exponents are per unit of the total time.
+        let orbit_term = if self.time > 0.0 {
+            self.period = self.time / self.done.max(1) as f64;
+            self.log_flux / self.time
+        } else {
+            0.0
+        };
         if let Some(iteration) = self.failed_at {
             return LaneResult {
                 exponents: if self.lyapunov {
@@ -644,6 +666,7 @@ where
                 impacts_per_period: f64::NAN,
                 crossings_per_period: [f64::NAN; MAX_WALLS],
                 period: self.period,
+                orbit_term: f64::NAN,
                 bifurcation: self.bifurcation,
                 jacobians: self.jacobians.unwrap_or_default(),
                 grazing: self.grazing,
@@ -657,11 +680,20 @@ where
         // parts) of time τ each that bounds the exponent error by
         // (⟨ε²⟩/2 + √(⟨ε²⟩/N)) / τ.
         let taken = self.parts_done.max(1) as f64;
-        let part_time = self.period / self.plan.parts as f64;
+        let part_time = if self.time > 0.0 {
+            self.time / taken
+        } else {
+            self.period / self.plan.parts as f64
+        };
         let mean_square = self.noise_squares / taken;
         let resolution_bound = (0.5 * mean_square + (mean_square / taken).sqrt()) / part_time;
         let exponents = if self.lyapunov {
-            let mut e = self.qr.exponents(part_time).to_vec();
+            let mut e = if self.time > 0.0 {
+                self.qr.exponents_over(self.time)
+            } else {
+                self.qr.exponents(part_time)
+            }
+            .to_vec();
             e.sort_by(|a, b| b.total_cmp(a));
             for x in &mut e[D - self.rank_loss..] {
                 *x = f64::NEG_INFINITY;
@@ -696,6 +728,7 @@ where
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
             crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
+            orbit_term,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),
             grazing: self.grazing,
@@ -736,6 +769,9 @@ where
             y
         }
         Tangent::FiniteDifference if settings.lyapunov => {
+            if let Some(next) = system.tangent_factors(x, flow, settings, stats, jacobians) {
+                return next;
+            }
             let (mut y, mut phase) = (*x, ZERO_PHASE);
             for part in Part::all(plan.parts) {
                 let mut part_stats = IterationStats::default();

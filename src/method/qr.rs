@@ -73,6 +73,12 @@ where
         &self.q
     }
 
+    /// λ_i = Σ ln R_ii / time, over a total `time` however many matrices
+    /// it took (a Poincaré map's factors of return times of their own).
+    pub fn exponents_over(&self, time: f64) -> [f64; D] {
+        self.log_r.map(|s| s / time)
+    }
+
     /// λ_i = Σ ln R_ii / (steps · period), in the order of the frame's columns.
     pub fn exponents(&self, period: f64) -> [f64; D] {
         let time = self.steps as f64 * period;

@@ -12,6 +12,7 @@ pub mod henon;
 pub mod impact_oscillator;
 pub mod lorenz;
 pub mod model;
+pub mod section;
 
 use nalgebra::SMatrix;
 
@@ -243,6 +244,13 @@ pub struct IterationStats {
     /// estimate, measured as the change between neighbouring rungs of the
     /// ladder (0 for other iterations).
     pub grazing_error: f64,
+    /// The time the iteration took, where it is not the system's period
+    /// (a Poincaré section's return time); 0 otherwise.
+    pub time: f64,
+    /// ln |F_k(start) / F_k(end)| of a section map on state k: the
+    /// iteration's volume change beyond the flow's divergence (its
+    /// determinant is exp(∫ div F dt)·F_k(start)/F_k(end)); 0 otherwise.
+    pub log_flux: f64,
 }
 
 impl IterationStats {
@@ -258,6 +266,8 @@ impl IterationStats {
         self.nonlinearity = self.nonlinearity.max(part.nonlinearity);
         self.grazing |= part.grazing;
         self.grazing_error += part.grazing_error;
+        self.time += part.time;
+        self.log_flux += part.log_flux;
     }
 }
 
@@ -272,6 +282,8 @@ impl Default for IterationStats {
             nonlinearity: 0.0,
             grazing: false,
             grazing_error: 0.0,
+            time: 0.0,
+            log_flux: 0.0,
         }
     }
 }
@@ -344,6 +356,28 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     /// sets how many parts an iteration needs (see [`Part`]).
     fn contraction(&self) -> f64 {
         0.0
+    }
+
+    /// One iteration's image with its tangent map pushed onto `factors` as
+    /// a product of D×D factors (first applied first), where the system
+    /// estimates it itself rather than by the method's perturbed copies
+    /// per part (a Poincaré map, see `system::section`); `None` otherwise.
+    fn tangent_factors(
+        &self,
+        _x: &[f64; D],
+        _flow: &FlowSettings,
+        _settings: &crate::method::MethodSettings,
+        _stats: &mut IterationStats,
+        _factors: &mut Vec<SMatrix<f64, D, D>>,
+    ) -> Option<[f64; D]> {
+        None
+    }
+
+    /// The map's first point from the scene's initial state: the state
+    /// itself, or for a Poincaré map the first crossing of its section from
+    /// a point of the flow (NaN where there is none).
+    fn start(&self, initial: &[f64], _flow: &FlowSettings) -> [f64; D] {
+        std::array::from_fn(|i| initial[i])
     }
 
     /// Whether a trajectory may start at y: not behind a wall. A perturbed

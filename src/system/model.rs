@@ -13,6 +13,7 @@
 
 use nalgebra::{DMatrix, SMatrix};
 
+use super::section::SectionFlow;
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
 use crate::error::{Error, Result};
 use crate::integrate::clock::Phase;
@@ -39,6 +40,16 @@ pub struct Code {
     /// ∂F_i/∂x_j, row-major: the time scales of the flow (see
     /// [`ModelFlow::stiffness`]).
     pub jacobian: Vec<Expr>,
+    /// The Poincaré section of a section map (see `system::section`).
+    pub section: Option<SectionSpec>,
+}
+
+/// A section y_state = at (parameters alone), crossed increasing or not.
+#[derive(Debug)]
+pub struct SectionSpec {
+    pub state: usize,
+    pub at: Expr,
+    pub increasing: bool,
 }
 
 /// An event that is a stop: a rigid wall on one state, from one side.
@@ -77,12 +88,6 @@ impl Code {
     pub fn compile(model: Model, key: &str) -> Result<Code> {
         let n = model.names.states.len();
         let states = &model.names.states;
-        if let Map::Section { .. } = model.map {
-            return Err(Error::invalid(
-                format!("{key}.map.section"),
-                "Poincaré sections are not run yet: give period = \"...\" (a stroboscopic map)",
-            ));
-        }
         if n > MAX_STATES {
             return Err(Error::invalid(
                 format!("{key}.states"),
@@ -92,6 +97,33 @@ impl Code {
         let equations = Tape::compile(&model.equations, n, None).map_err(|(i, why)| {
             Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
         })?;
+        let section = match &model.map {
+            Map::Period(_) => None,
+            Map::Section {
+                state,
+                at,
+                increasing,
+            } => {
+                if equations.frequency.is_some() {
+                    return Err(Error::invalid(
+                        format!("{key}.map.section"),
+                        "a Poincaré section needs an autonomous flow, and the equations read \
+                         the time (cos(w*t) or sin(w*t)): give period = \"...\" instead",
+                    ));
+                }
+                if !model.events.is_empty() {
+                    return Err(Error::invalid(
+                        format!("{key}.events"),
+                        "events in a model with a Poincaré section are not supported yet",
+                    ));
+                }
+                Some(SectionSpec {
+                    state: *state,
+                    at: at.clone(),
+                    increasing: *increasing,
+                })
+            }
+        };
         if model.events.len() > MAX_WALLS {
             return Err(Error::invalid(
                 format!("{key}.events"),
@@ -131,16 +163,26 @@ impl Code {
             walls,
             divergence,
             jacobian,
+            section,
         })
     }
 
-    pub fn dimension(&self) -> usize {
+    /// The flow's states.
+    pub fn states(&self) -> usize {
         self.model.names.states.len()
     }
 
-    /// The map period at `params`.
+    /// The map's dimension (its exponents): the states, or one fewer on a
+    /// Poincaré section.
+    pub fn dimension(&self) -> usize {
+        self.states() - usize::from(self.section.is_some())
+    }
+
+    /// The map period at `params`; for a Poincaré map the unit of time
+    /// over which `steps_per_period` counts steps (its iterations take
+    /// their own return times).
     pub fn period(&self, params: &[f64]) -> f64 {
-        self.model.period(params).expect("a period map")
+        self.model.period(params).unwrap_or(1.0)
     }
 }
 
@@ -303,7 +345,15 @@ pub fn info(code: Code) -> &'static SystemInfo {
             doc: "",
         })
         .collect();
-    let state_names: Vec<&'static str> = model.names.states.iter().map(|s| leak(s)).collect();
+    let on_section = code.section.as_ref().map(|s| s.state);
+    let state_names: Vec<&'static str> = model
+        .names
+        .states
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| Some(*i) != on_section)
+        .map(|(_, s)| leak(s))
+        .collect();
     let events: Vec<&'static str> = code.walls.iter().map(|w| leak(&w.name)).collect();
     macro_rules! by_dimension {
         ($($d:literal)*) => {
@@ -318,13 +368,32 @@ pub fn info(code: Code) -> &'static SystemInfo {
             }
         };
     }
-    let (run_lane, run_lanes, plan, reestimate) = by_dimension!(1 2 3 4 5 6);
+    macro_rules! by_section_dimension {
+        ($($d:literal $n:literal)*) => {
+            match code.dimension() {
+                $($d => (
+                    crate::method::run_lane::<$d, SectionFlow<$d, $n>> as RunLane,
+                    crate::method::lane::run_lanes::<$d, SectionFlow<$d, $n>> as RunLanes,
+                    crate::method::lane::plan_of::<$d, SectionFlow<$d, $n>> as Plan,
+                    crate::method::lane::reestimate_of::<$d, SectionFlow<$d, $n>> as super::Reestimate,
+                ),)*
+                n => unreachable!("{n} map dimensions passed the check"),
+            }
+        };
+    }
+    let (run_lane, run_lanes, plan, reestimate) = if code.section.is_some() {
+        by_section_dimension!(1 2 2 3 3 4 4 5 5 6)
+    } else {
+        by_dimension!(1 2 3 4 5 6)
+    };
+    // A Poincaré map starts from a point of the flow (all states).
+    let initial = if code.section.is_some() { 1.0 } else { 0.0 };
     Box::leak(Box::new(SystemInfo {
         kind: leak(&model.name),
         parameters: Box::leak(parameters.into_boxed_slice()),
         state_names: Box::leak(state_names.into_boxed_slice()),
         default_sweep: leak(&model.names.parameters.first().cloned().unwrap_or_default()),
-        default_initial_state: Box::leak(vec![0.0; code.dimension()].into_boxed_slice()),
+        default_initial_state: Box::leak(vec![initial; code.states()].into_boxed_slice()),
         is_flow: true,
         has_exact: false,
         check,
@@ -362,6 +431,12 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
             "model.map.period",
             format!("must be a finite number > 0, got {t}"),
         ));
+    }
+    if let Some(section) = &code.section {
+        let at = section.at.eval(&[], &p.values, 0.0);
+        if !at.is_finite() {
+            return Err(("model.map.section.at", format!("must be finite, got {at}")));
+        }
     }
     for w in &code.walls {
         let e = w.restitution.eval(&[], &p.values, 0.0);

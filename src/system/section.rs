@@ -1,0 +1,251 @@
+//! A model's Poincaré map: an autonomous flow in N states reduced to its
+//! returns to a section y_k = c (seed eq. 1-2). The map's coordinates are
+//! the other N - 1 states in order; perturbations are taken in them on the
+//! section, and each trajectory runs to its own next crossing
+//! (`integrate::section`). One iteration lasts its return time; exponents
+//! are per unit of the total time, and the sum rule gains the section's
+//! flux term ln |F_k(x_0)/F_k(x_n)| (see `IterationStats::log_flux`).
+//!
+//! A section has no period: `steps_per_period` counts RK4 steps per unit
+//! time. Iterations are not cut into parts (the method's sub-maps), so a
+//! strongly contracting direction is resolved only as far as one return's
+//! finite difference does (the lane's resolution bound says how far).
+
+use nalgebra::{DMatrix, SMatrix};
+
+use super::model::{Code, ModelFlow};
+use super::{FlowSettings, IterationStats, Params, Part, System};
+use crate::integrate::clock::{Phase, ZERO_PHASE};
+use crate::integrate::section::{advance, next_crossings, Section};
+use crate::integrate::Flow;
+use crate::method::jacobian::Difference;
+use crate::method::lane::perturbation_at;
+use crate::method::MethodSettings;
+
+/// The contraction one part of a return may have, e^PART_CONTRACTION: far
+/// above the finite difference's rounding noise (see `tangent_factors`).
+const PART_CONTRACTION: f64 = 4.0;
+
+/// A return that takes longer than this many time units is no return:
+/// the trajectory does not come back to the section (NaN, a failed lane).
+const MAX_RETURN_TIME: f64 = 1e4;
+
+/// The Poincaré map of a model's flow in N = D + 1 states.
+#[derive(Clone, Debug)]
+pub struct SectionFlow<const D: usize, const N: usize> {
+    flow: ModelFlow<N>,
+    section: Section,
+}
+
+impl<const D: usize, const N: usize> SectionFlow<D, N> {
+    /// The point of the flow on the section with map coordinates x.
+    fn lift(&self, x: &[f64; D]) -> [f64; N] {
+        let k = self.section.state;
+        std::array::from_fn(|i| match i.cmp(&k) {
+            std::cmp::Ordering::Less => x[i],
+            std::cmp::Ordering::Equal => self.section.at,
+            std::cmp::Ordering::Greater => x[i - 1],
+        })
+    }
+
+    /// The map coordinates of a point of the flow (on the section).
+    fn project(&self, y: &[f64; N]) -> [f64; D] {
+        let k = self.section.state;
+        std::array::from_fn(|i| if i < k { y[i] } else { y[i + 1] })
+    }
+
+    /// The next crossing of each of `ys`: the map point, the time, the
+    /// flux term and the speed through the section.
+    fn returns(&self, ys: &[[f64; N]], flow: &FlowSettings) -> Vec<([f64; D], f64, f64, f64)> {
+        let h = 1.0 / flow.steps_per_period as f64;
+        let max_steps = (MAX_RETURN_TIME * flow.steps_per_period as f64) as usize;
+        let velocity = |y: &[f64; N]| self.flow.rhs(&ZERO_PHASE, y)[self.section.state];
+        next_crossings(&self.flow, &self.section, ys, h, max_steps)
+            .into_iter()
+            .zip(ys)
+            .map(|(crossing, start)| match crossing {
+                Some((y, time)) => (
+                    self.project(&y),
+                    time,
+                    (velocity(start) / velocity(&y)).abs().ln(),
+                    velocity(&y).abs(),
+                ),
+                None => ([f64::NAN; D], f64::NAN, f64::NAN, f64::NAN),
+            })
+            .collect()
+    }
+}
+
+impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
+    fn new(p: &Params) -> Self {
+        let code: &Code = p.info.model.expect("a model's parameters");
+        let section = code.section.as_ref().expect("a section model");
+        SectionFlow {
+            flow: ModelFlow::new(p),
+            section: Section {
+                state: section.state,
+                at: section.at.eval(&[], &p.values, 0.0),
+                direction: if section.increasing { 1.0 } else { -1.0 },
+            },
+        }
+    }
+
+    /// The unit of time over which `steps_per_period` counts steps.
+    fn period(&self) -> f64 {
+        1.0
+    }
+
+    fn iterate(&self, x: &[f64; D], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; D] {
+        let mut ys = [*x];
+        self.iterate_many(&mut ys, flow, std::slice::from_mut(stats));
+        ys[0]
+    }
+
+    fn iterate_many(&self, xs: &mut [[f64; D]], flow: &FlowSettings, stats: &mut [IterationStats]) {
+        let starts: Vec<[f64; N]> = xs.iter().map(|x| self.lift(x)).collect();
+        for ((x, st), (image, time, log_flux, speed)) in xs
+            .iter_mut()
+            .zip(stats.iter_mut())
+            .zip(self.returns(&starts, flow))
+        {
+            *x = image;
+            st.time += time;
+            st.log_flux += log_flux;
+            // A slow crossing is a near-tangency of the section, where a
+            // copy may cross elsewhere (or a loop later): the grazing test
+            // of impacts applies to it as it is.
+            st.slowest_impact = st.slowest_impact.min(speed);
+        }
+    }
+
+    fn part_many(
+        &self,
+        xs: &mut [[f64; D]],
+        flow: &FlowSettings,
+        part: Part,
+        _phase: &mut Phase,
+        stats: &mut [IterationStats],
+    ) {
+        assert_eq!(part, Part::WHOLE, "a Poincaré map is not cut into parts");
+        self.iterate_many(xs, flow, stats);
+    }
+
+    fn iterate_exact(
+        &self,
+        _x: &[f64; D],
+        _part: Part,
+        _stats: &mut IterationStats,
+    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
+        None
+    }
+
+    /// The tangent map of one return, U'(x) = P·Φ(τ)·E, as factors: E
+    /// embeds the section's coordinates in the flow's, Φ(τ) is the flow's
+    /// tangent map over the reference's return time τ and P projects onto
+    /// the section along the flow at the return point y (P = S·(I - F
+    /// e_kᵀ/F_k), S dropping coordinate k). Φ is estimated by the paper's
+    /// perturbed copies, but of the flow over fixed times, in parts short
+    /// enough that no column contracts below the rounding noise: the
+    /// copies start along the columns of an orthonormal frame Q (N×D), and
+    /// each part's Φ_j·Q = Q'·R_j gives the factor R_j and the next frame.
+    /// The last factor is P·Q. No copy has to find the section, so a
+    /// near-tangent return (F_k small) is as well resolved as any other.
+    fn tangent_factors(
+        &self,
+        x: &[f64; D],
+        flow: &FlowSettings,
+        settings: &MethodSettings,
+        stats: &mut IterationStats,
+        factors: &mut Vec<SMatrix<f64, D, D>>,
+    ) -> Option<[f64; D]> {
+        let start = self.lift(x);
+        let (image, tau, log_flux, speed) = self.returns(&[start], flow)[0];
+        stats.time += tau;
+        stats.log_flux += log_flux;
+        stats.slowest_impact = stats.slowest_impact.min(speed);
+        if !tau.is_finite() {
+            return Some(image);
+        }
+        let h = 1.0 / flow.steps_per_period as f64;
+        let parts = ((self.flow.contraction() * tau / PART_CONTRACTION).ceil() as usize).max(1);
+        let k = self.section.state;
+        // The frame: the section's coordinates, as directions of the flow.
+        let mut frame = DMatrix::<f64>::zeros(N, D);
+        for i in 0..D {
+            frame[(if i < k { i } else { i + 1 }, i)] = 1.0;
+        }
+        let mut y = start;
+        let copies = settings.difference.copies(D);
+        for _ in 0..parts {
+            let span = tau / parts as f64;
+            let steps = (span / h).ceil().max(1.0) as usize;
+            let delta = perturbation_at(settings.perturbation, &y);
+            let mut ys = vec![y; 1 + copies];
+            for c in 0..copies {
+                let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
+                for r in 0..N {
+                    ys[1 + c][r] += sign * delta * frame[(r, i)];
+                }
+            }
+            advance(&self.flow, &mut ys, span / steps as f64, steps);
+            let mut columns = DMatrix::<f64>::zeros(N, D);
+            for i in 0..D {
+                for r in 0..N {
+                    columns[(r, i)] = match settings.difference {
+                        Difference::Forward => (ys[1 + i][r] - ys[0][r]) / delta,
+                        Difference::Central => (ys[1 + i][r] - ys[1 + D + i][r]) / (2.0 * delta),
+                    };
+                }
+            }
+            // Remove the flow direction: the projection onto the section at
+            // the return kills it (P·Φ(τ, t)·F(y(t)) = P·F(y(τ)) = 0), and
+            // left in, the neutral direction would crowd the contracting
+            // one out of the frame, to be cancelled at the end.
+            let f = self.flow.rhs(&ZERO_PHASE, &ys[0]);
+            let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                for i in 0..D {
+                    let along: f64 = (0..N).map(|r| f[r] * columns[(r, i)]).sum::<f64>() / norm;
+                    for r in 0..N {
+                        columns[(r, i)] -= along * f[r] / norm;
+                    }
+                }
+            }
+            let qr = columns.qr();
+            let (mut q, mut r) = (qr.q(), qr.r());
+            for i in 0..D {
+                if r[(i, i)] < 0.0 {
+                    q.column_mut(i).neg_mut();
+                    r.row_mut(i).neg_mut();
+                }
+            }
+            factors.push(SMatrix::from_fn(|a, b| r[(a, b)]));
+            frame = q;
+            y = ys[0];
+        }
+        // P·Q at the return point (the located crossing, on the section).
+        let end = self.lift(&image);
+        let f = self.flow.rhs(&ZERO_PHASE, &end);
+        let last = SMatrix::<f64, D, D>::from_fn(|a, b| {
+            let row = if a < k { a } else { a + 1 };
+            frame[(row, b)] - f[row] / f[k] * frame[(k, b)]
+        });
+        factors.push(last);
+        Some(image)
+    }
+
+    /// From a point of the flow (all N states) to its first crossing.
+    fn start(&self, initial: &[f64], flow: &FlowSettings) -> [f64; D] {
+        let y: [f64; N] = std::array::from_fn(|i| initial[i]);
+        self.returns(&[y], flow)[0].0
+    }
+
+    fn stiffness(&self) -> f64 {
+        self.flow.stiffness()
+    }
+
+    /// Parts are not taken (see the module's note).
+    fn contraction(&self) -> f64 {
+        0.0
+    }
+}
