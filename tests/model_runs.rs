@@ -487,3 +487,84 @@ fn a_model_file_is_read_relative_to_the_scene() {
     let report = run(&loaded);
     assert!(report.lanes[0].exponents.iter().all(|e| e.is_finite()));
 }
+
+#[test]
+fn lorenz_on_its_section_has_the_flow_s_exponents_and_keeps_the_sum_rule() {
+    // σ = 10, ρ = 28, β = 8/3 on z = 27: published 0.9056 and -14.5723.
+    let body = "[integration]\nsteps_per_period = 2000\ntransient = 100\niterations = 3000\ninitial_state = [1.0, 1.0, 1.0]\n[run]\nbackend = \"cpu\"\n";
+    let report = run(&model_scene("lorenz.toml", body, &[]));
+    let lane = &report.lanes[0];
+    assert_eq!(lane.status, LaneStatus::Ok);
+    assert_eq!(lane.exponents.len(), 2);
+    assert!(
+        (lane.exponents[0] - 0.9056).abs() < 0.01,
+        "{:?}",
+        lane.exponents
+    );
+    assert!(
+        (lane.exponents[1] + 14.5723).abs() < 0.02,
+        "{:?}",
+        lane.exponents
+    );
+    // The sum rule: -(σ + 1 + β) plus the section's flux term, which
+    // telescopes to ln |F_z(x_0)/F_z(x_n)| over the averaging time.
+    let divergence = -(10.0 + 1.0 + 8.0 / 3.0);
+    let expected = report.expected_sums[0];
+    assert!(
+        (expected - divergence).abs() < 1e-2,
+        "flux term {}",
+        expected - divergence
+    );
+    assert!(
+        (lane.exponent_sum() - expected).abs() <= 1e-8,
+        "sum {} vs expected {expected}",
+        lane.exponent_sum()
+    );
+    // The map period is the mean return time.
+    assert!(lane.period > 0.5 && lane.period < 1.0, "{}", lane.period);
+}
+
+#[test]
+fn rossler_s_strongly_contracting_direction_is_resolved_on_its_section() {
+    // a = b = 0.2, c = 5.7: about 0.0714 and -5.39; one return contracts
+    // by e^-32, far below what one finite difference resolves.
+    let body = "[integration]\nsteps_per_period = 400\ntransient = 100\niterations = 2000\n[run]\nbackend = \"cpu\"\n";
+    let report = run(&model_scene("rossler.toml", body, &[]));
+    let lane = &report.lanes[0];
+    assert_eq!(lane.status, LaneStatus::Ok);
+    assert!(
+        (lane.exponents[0] - 0.0714).abs() < 0.005,
+        "{:?}",
+        lane.exponents
+    );
+    assert!(
+        (lane.exponents[1] + 5.39).abs() < 0.02,
+        "{:?}",
+        lane.exponents
+    );
+    // Its divergence a + x - c depends on the state: not averaged yet.
+    assert!(report.expected_sums[0].is_nan());
+}
+
+#[test]
+fn a_section_needs_an_autonomous_flow_without_events() {
+    let lorenz = std::fs::read_to_string(model_path("lorenz.toml")).unwrap();
+    let forced = lorenz.replace("x = \"sigma*(y - x)\"", "x = \"sigma*(y - x) + cos(2*t)\"");
+    refused(
+        &forced,
+        &[],
+        "model.map.section: a Poincaré section needs an autonomous flow",
+    );
+    let with_event =
+        format!("{lorenz}\n[[model.events]]\nsurface = \"x - 30\"\nreset = {{ y = \"-y\" }}\n");
+    refused(
+        &with_event,
+        &[],
+        "model.events: events in a model with a Poincaré section",
+    );
+    refused(
+        &format!("{lorenz}\n[integration]\ninitial_state = [1.0, 1.0]\n"),
+        &[],
+        "integration.initial_state: lorenz has a 3-dimensional state (a point of the flow from which it reaches its Poincaré section: x, y, z)",
+    );
+}
