@@ -137,6 +137,16 @@ enum Plan {
 fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
+            if scene.system.wgsl.is_none() {
+                return Ok((
+                    Plan::Cpu,
+                    Precision::F64,
+                    Some(format!(
+                        "auto: CPU path, since {} has no GPU kernel",
+                        scene.system.kind
+                    )),
+                ));
+            }
             let gpu_settings = method_settings(scene, Backend::Gpu, scene.precision);
             if let Err(Error::Invalid { reason, .. }) = gpu_plan(scene, &gpu_settings) {
                 return Ok((
