@@ -16,11 +16,14 @@
 //! 4. how a run's cost grows with iterations and with steps per period;
 //! 5. the GPU's workgroup size;
 //! 6. impacts: the same sweep with a wall the orbits reach and one they never
-//!    reach (kernels without impact code), on every path.
+//!    reach (kernels without impact code), on every path;
+//! 7. models: the seed's oscillator built in against the same system written
+//!    as a model, on the CPU path.
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
-//! `-- --quick paper cost` (first, paper, scaling, cost, workgroups, impacts).
+//! `-- --quick paper cost` (first, paper, scaling, cost, workgroups, impacts,
+//! models).
 
 use std::time::Instant;
 
@@ -373,6 +376,49 @@ fn main() {
     }
     if wanted("impacts") {
         impacts(repeats);
+    }
+    if wanted("models") {
+        models(repeats);
+    }
+}
+
+/// Section 7: the seed's oscillator built in against the same system
+/// written as a model (models/seed-oscillator.toml, the built-in's bits),
+/// on the CPU path, on the impacts section's sweep (4096 values of η,
+/// 200 steps per period, transient 20, iterations 20, f64).
+fn models(repeats: usize) {
+    let (values, steps, transient, iterations) = (4096, 200, 20, 20);
+    let lane_steps = (values * steps * (transient + 5 * iterations)) as f64;
+    println!(
+        "\nModels ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}; CPU path, {} threads; medians of {repeats} runs after a warm-up)\n",
+        rayon::current_num_threads()
+    );
+    println!("| system | run s | lane-steps/s | vs built-in |");
+    println!("|---|---|---|---|");
+    let rest = format!(
+        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"cpu\"\nvalidate = 0\n"
+    );
+    let model = format!("{}/models/seed-oscillator.toml", env!("CARGO_MANIFEST_DIR"));
+    let scenes = [
+        (
+            "built-in impact-oscillator",
+            format!("[system]\nkind = \"impact-oscillator\"\n{rest}"),
+        ),
+        (
+            "model seed-oscillator",
+            format!("model = {model:?}\n{rest}"),
+        ),
+    ];
+    let mut builtin = None;
+    for (name, text) in scenes {
+        let scene = scene::parse(&text, "bench", "bench", &[]).expect("scene");
+        let (seconds, _) = time_runs(&scene, &Default::default(), repeats).expect("cpu runs");
+        let reference = *builtin.get_or_insert(seconds);
+        println!(
+            "| {name} | {seconds:.3} | {:.3e} | {:.2}× |",
+            lane_steps / seconds,
+            reference / seconds
+        );
     }
 }
 

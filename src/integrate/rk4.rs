@@ -58,20 +58,34 @@ pub fn step_batch<const D: usize, const W: usize>(
     y: &[[f64; W]; D],
     h: &[f64; W],
 ) -> [[f64; W]; D] {
-    let h2: [f64; W] = std::array::from_fn(|k| 0.5 * h[k]);
+    // Plain loops rather than `array::from_fn`, whose closures the
+    // compiler may leave out of line (and out of the vectorised code).
+    let mut h2 = [0.0; W];
+    let mut sixth = [0.0; W];
+    for w in 0..W {
+        h2[w] = 0.5 * h[w];
+        sixth[w] = h[w] / 6.0;
+    }
     let axpy = |a: &[f64; W], k: &[[f64; W]; D]| -> [[f64; W]; D] {
-        std::array::from_fn(|i| std::array::from_fn(|w| y[i][w] + a[w] * k[i][w]))
+        let mut out = *y;
+        for i in 0..D {
+            for w in 0..W {
+                out[i][w] = y[i][w] + a[w] * k[i][w];
+            }
+        }
+        out
     };
     let k1 = rhs(0, y);
     let k2 = rhs(1, &axpy(&h2, &k1));
     let k3 = rhs(1, &axpy(&h2, &k2));
     let k4 = rhs(2, &axpy(h, &k3));
-    let sixth: [f64; W] = std::array::from_fn(|k| h[k] / 6.0);
-    std::array::from_fn(|i| {
-        std::array::from_fn(|w| {
-            y[i][w] + sixth[w] * (k1[i][w] + 2.0 * (k2[i][w] + k3[i][w]) + k4[i][w])
-        })
-    })
+    let mut out = *y;
+    for i in 0..D {
+        for w in 0..W {
+            out[i][w] = y[i][w] + sixth[w] * (k1[i][w] + 2.0 * (k2[i][w] + k3[i][w]) + k4[i][w]);
+        }
+    }
+    out
 }
 
 /// y + a·k

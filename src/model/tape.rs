@@ -195,8 +195,15 @@ impl Tape {
         for i in 0..D {
             file[i] = MaybeUninit::new(y[i]);
         }
-        file[D] = MaybeUninit::new(std::array::from_fn(|k| phases[k][0]));
-        file[D + 1] = MaybeUninit::new(std::array::from_fn(|k| phases[k][1]));
+        // Plain loops, not `array::from_fn`: its closure was left out of
+        // line (and out of the AVX2 code) here, a call per element.
+        let (mut cos, mut sin) = ([0.0; W], [0.0; W]);
+        for k in 0..W {
+            cos[k] = phases[k][0];
+            sin[k] = phases[k][1];
+        }
+        file[D] = MaybeUninit::new(cos);
+        file[D + 1] = MaybeUninit::new(sin);
         let results = D + 2 + self.lane_constants.len() + self.numbers.len();
         // SAFETY: the lowering points every operand at a slot written above
         // or by `prepare`, or at an earlier instruction's result
@@ -228,7 +235,11 @@ impl Tape {
             };
             file[results + i] = MaybeUninit::new(value);
         }
-        std::array::from_fn(|o| read(file, self.output_slots[o]))
+        let mut out = [[0.0; W]; N];
+        for (o, &slot) in out.iter_mut().zip(&self.output_slots) {
+            *o = read(file, slot);
+        }
+        out
     }
 
     /// Rewrites the instructions over register-file slots (see
