@@ -283,3 +283,34 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
         assert!(choice.contains("one stop on the first state"), "{choice}");
     }
 }
+
+#[test]
+fn a_model_of_one_or_five_states_is_left_to_the_cpu() {
+    // The kernels' State is a WGSL vector: vec2 to vec4.
+    for (states, equations, why) in [
+        (r#"["x"]"#, r#"x = "-k*x + cos(t)""#, "1 state:"),
+        (
+            r#"["a", "b", "c", "d", "e"]"#,
+            r#"a = "b"
+b = "c"
+c = "d"
+d = "e"
+e = "-k*a + cos(t)""#,
+            "5 states:",
+        ),
+    ] {
+        let text = format!(
+            "[model]\nname = \"wide\"\nstates = {states}\n[model.parameters]\nk = 1.0\n\
+             [model.equations]\n{equations}\n\
+             [model.map]\nperiod = \"2*pi\"\n[integration]\ntransient = 1\niterations = 1\n\
+             [run]\nbackend = \"gpu\"\n"
+        );
+        let scene = scene::parse(&text, "test", "test", &[]).expect("a valid scene");
+        assert!(scene.system.wgsl.is_none());
+        let err = lyapsweep::run(&scene).unwrap_err().to_string();
+        assert!(
+            err.contains(why) && err.contains("the GPU kernels run 2 to 4"),
+            "{err}"
+        );
+    }
+}

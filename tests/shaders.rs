@@ -29,6 +29,28 @@ w = "-u/exp(b)"
 period = "2*pi/eta"
 "#;
 
+/// A model without parameters: WGSL has no empty struct, so its Params
+/// holds one unused field and load_params builds `Params()`. (A scene
+/// cannot run it, having no parameter to sweep; the system is built from
+/// the table directly.)
+const NO_PARAMETERS: &str = r#"
+name = "no-parameters"
+states = ["x", "v"]
+[equations]
+x = "v"
+v = "-0.1*v - x + cos(t)"
+[map]
+period = "2*pi"
+"#;
+
+fn no_parameters() -> &'static SystemInfo {
+    use lyapsweep::model::Model;
+    use lyapsweep::system::model::{info, Code};
+    let table: toml::Value = toml::from_str(NO_PARAMETERS).unwrap();
+    let model = Model::parse(&table, "model").unwrap();
+    info(Code::compile(model, "model").unwrap())
+}
+
 fn scene_system(text: &str) -> &'static SystemInfo {
     lyapsweep::scene::parse(text, "test", "test", &[])
         .expect("a valid scene")
@@ -62,6 +84,7 @@ fn gpu_systems() -> Vec<&'static SystemInfo> {
             .filter(|s| s.wgsl.is_some()),
     );
     systems.push(scene_system(EVERY_FUNCTION));
+    systems.push(no_parameters());
     systems
 }
 
@@ -328,8 +351,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
     ];
     let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     assert_eq!(runs, expected);
-    let every = scene_system(EVERY_FUNCTION);
-    assert!(every.wgsl.is_some());
+    assert!(scene_system(EVERY_FUNCTION).wgsl.is_some());
+    assert!(no_parameters().wgsl.unwrap().contains("unused: real"));
 }
 
 #[test]
