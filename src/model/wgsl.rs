@@ -12,7 +12,10 @@
 //!   (`((-2*zeta)*v - x) + f*phase.x`), so in f64 the GPU rounds where the
 //!   CPU does. The CPU computes a parameter-only subexpression once per lane
 //!   with [`Expr::eval`]; the GPU recomputes it per call with the same
-//!   operations in the same order, which gives the same bits;
+//!   operations in the same order, which gives the same bits. (A driver may
+//!   still fuse a product into the sum that uses it, as lavapipe does: the
+//!   seed oscillator as a model is then the built-in kernel to the bit, and
+//!   the CPU path to rounding.)
 //! - `cos(w*t)` and `sin(w*t)` read the forcing clock, `phase.x` and
 //!   `phase.y`, exactly where the tape reads its clock (`Tape::compile`);
 //! - numbers are `real(…)` of Rust's shortest round-trip form, so an f64
