@@ -1,17 +1,96 @@
-//! Every shader variant validates with naga, without an adapter; f64
-//! variants call no transcendental builtin; variants leave out what a scene
-//! does not need.
+//! Every shader variant validates with naga, without an adapter, the
+//! built-ins' and those of the system files generated from models
+//! (src/model/wgsl.rs); f64 variants call no transcendental builtin;
+//! variants leave out what a scene does not need.
 
 use lyapsweep::backend::gpu::shader::{Kernel, Variant};
 use lyapsweep::integrate::ImpactLocation;
 use lyapsweep::method::jacobian::Difference;
 use lyapsweep::scene::Precision;
-use lyapsweep::system::SYSTEMS;
+use lyapsweep::system::{SystemInfo, SYSTEMS};
 use naga::valid::{Capabilities, ValidationFlags, Validator};
+
+/// A model that calls every function an expression may, on four states
+/// (the widest State), with the forcing clock in two places.
+const EVERY_FUNCTION: &str = r#"
+[model]
+name = "every-function"
+states = ["x", "v", "u", "w"]
+[model.parameters]
+a = 0.5
+b = 2.0
+eta = 1.0
+[model.equations]
+x = "v"
+v = "sin(x) + cos(v) + tan(a*x) + exp(-v) + log(1 + x*x) + sqrt(abs(v)) - tanh(u) + atan2(v, x)*min(x, w) / max(1, a) + pow(abs(x), b) - x^3 + 0.1*cos(eta*t)"
+u = "-a*u + sin(t*eta)*x - 1e-300*w"
+w = "-u/exp(b)"
+[model.map]
+period = "2*pi/eta"
+"#;
+
+/// A model without parameters: WGSL has no empty struct, so its Params
+/// holds one unused field and load_params builds `Params()`. (A scene
+/// cannot run it, having no parameter to sweep; the system is built from
+/// the table directly.)
+const NO_PARAMETERS: &str = r#"
+name = "no-parameters"
+states = ["x", "v"]
+[equations]
+x = "v"
+v = "-0.1*v - x + cos(t)"
+[map]
+period = "2*pi"
+"#;
+
+fn no_parameters() -> &'static SystemInfo {
+    use lyapsweep::model::Model;
+    use lyapsweep::system::model::{info, Code};
+    let table: toml::Value = toml::from_str(NO_PARAMETERS).unwrap();
+    let model = Model::parse(&table, "model").unwrap();
+    info(Code::compile(model, "model").unwrap())
+}
+
+fn scene_system(text: &str) -> &'static SystemInfo {
+    lyapsweep::scene::parse(text, "test", "test", &[])
+        .expect("a valid scene")
+        .system
+}
+
+/// Every models/*.toml, by file name, as its scene's system.
+fn model_files() -> Vec<(String, &'static SystemInfo)> {
+    let folder = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let mut models: Vec<(String, &'static SystemInfo)> = std::fs::read_dir(&folder)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .filter(|path| path.extension().is_some_and(|e| e == "toml"))
+        .map(|path| {
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            (name, scene_system(&format!("model = {path:?}\n")))
+        })
+        .collect();
+    models.sort_by(|a, b| a.0.cmp(&b.0));
+    models
+}
+
+/// Every system with a WGSL file: the built-ins, the models of models/
+/// that the kernels run, and the every-function model.
+fn gpu_systems() -> Vec<&'static SystemInfo> {
+    let mut systems: Vec<&'static SystemInfo> = SYSTEMS.to_vec();
+    systems.extend(
+        model_files()
+            .into_iter()
+            .map(|(_, s)| s)
+            .filter(|s| s.wgsl.is_some()),
+    );
+    systems.push(scene_system(EVERY_FUNCTION));
+    systems.push(no_parameters());
+    systems
+}
 
 fn all_variants() -> Vec<Variant> {
     let mut variants = Vec::new();
-    for &system in SYSTEMS {
+    for system in gpu_systems() {
         for precision in [Precision::F64, Precision::F32] {
             for lyapunov in [true, false] {
                 for points in [true, false] {
@@ -96,6 +175,12 @@ fn no_variant_calls_a_transcendental_builtin() {
         M::Pow,
     ];
     for v in all_variants() {
+        // A model's f32 variant may: its functions are WGSL's on f32
+        // (shaders/shared/model_functions.wgsl). Built-in kernels call none
+        // in either precision.
+        if v.precision == Precision::F32 && v.system.model.is_some() {
+            continue;
+        }
         for kernel in Kernel::ALL {
             let m = module(&v, kernel);
             let functions = m
@@ -247,4 +332,63 @@ fn a_scene_picks_only_the_parts_it_needs() {
     );
     assert!(!bifurcation_only.lyapunov && bifurcation_only.points);
     assert_eq!(bifurcation_only.trajectories(), 1);
+}
+
+#[test]
+fn the_models_the_kernels_run_and_why_not_the_others() {
+    let runs: Vec<(String, bool)> = model_files()
+        .into_iter()
+        .map(|(name, s)| (name, s.wgsl.is_some()))
+        .collect();
+    let expected = [
+        ("duffing.toml", true),
+        ("forced-pendulum.toml", true),
+        // Two stops; the kernels know one wall.
+        ("impact-pair.toml", false),
+        ("seed-oscillator.toml", true),
+        // A stop on the third of four states.
+        ("two-mass-chain.toml", false),
+    ];
+    let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
+    assert_eq!(runs, expected);
+    assert!(scene_system(EVERY_FUNCTION).wgsl.is_some());
+    assert!(no_parameters().wgsl.unwrap().contains("unused: real"));
+}
+
+#[test]
+fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
+    let systems = model_files();
+    let system = |name: &str| systems.iter().find(|(n, _)| n == name).unwrap().1;
+    let variant = |system, precision| Variant {
+        system,
+        precision,
+        lyapunov: true,
+        difference: Difference::Central,
+        wall: system.wall_reachable.is_some(),
+        points: true,
+        impact_location: ImpactLocation::Newton,
+    };
+    let pendulum = system("forced-pendulum.toml");
+    // sin θ: the wrapper, math64 behind it in f64, WGSL's sin in f32.
+    let f64_source = variant(pendulum, Precision::F64).source(Kernel::Integrate);
+    assert!(f64_source.contains("sin_r(y.x)") && f64_source.contains("fn sin64("));
+    let f32_source = variant(pendulum, Precision::F32).source(Kernel::Integrate);
+    assert!(f32_source.contains("fn sin_r(") && !f32_source.contains("fn sin64("));
+    // cos(ηt) is the clock, not a call; no other function: neither file.
+    for name in ["seed-oscillator.toml", "duffing.toml"] {
+        let source = variant(system(name), Precision::F64).source(Kernel::Finish);
+        assert!(source.contains("phase.x"), "{name}");
+        assert!(
+            !source.contains("fn sin64(") && !source.contains("fn sin_r("),
+            "{name}"
+        );
+    }
+    // The seed as a model: the hand-written file's tree, fully bracketed,
+    // its wall from the stop.
+    let seed = system("seed-oscillator.toml").wgsl.unwrap();
+    assert!(
+        seed.contains("((((-real(2.0)) * p.p_zeta) * y.y) - y.x) + (p.p_f * phase.x)"),
+        "{seed}"
+    );
+    assert!(seed.contains("fn wall_position(p: Params)"), "{seed}");
 }

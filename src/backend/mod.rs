@@ -137,14 +137,11 @@ enum Plan {
 fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
-            if scene.system.wgsl.is_none() {
+            if let Some(why) = no_kernels(scene) {
                 return Ok((
                     Plan::Cpu,
                     Precision::F64,
-                    Some(format!(
-                        "auto: CPU path, since {} has no GPU kernel",
-                        scene.system.kind
-                    )),
+                    Some(format!("auto: CPU path, since {why}")),
                 ));
             }
             let gpu_settings = method_settings(scene, Backend::Gpu, scene.precision);
@@ -189,10 +186,10 @@ fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option
             Ok((Plan::Gpu(chosen.0, chosen.1), scene.precision, Some(why)))
         }
         Backend::Gpu => {
-            if scene.system.wgsl.is_none() {
+            if let Some(why) = no_kernels(scene) {
                 return Err(Error::Backend {
                     backend: "gpu".into(),
-                    reason: format!("{} has no WGSL kernel", scene.system.kind),
+                    reason: format!("{why}: use backend = \"cpu\" (\"auto\" does)"),
                 });
             }
             let (adapter, summary) = context::choose(Want::Any, scene.precision, device)?
@@ -227,6 +224,19 @@ fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option
             ))
         }
     }
+}
+
+/// Why the GPU kernels cannot run the scene's system at all, if they
+/// cannot: a built-in without a WGSL twin, or a model whose generated WGSL
+/// the kernels do not run yet (`model::wgsl::check`, the same for every
+/// lane, so the first lane's parameters ask).
+fn no_kernels(scene: &Scene) -> Option<String> {
+    let system = scene.system;
+    system.wgsl.is_none().then(|| {
+        let why = (system.gpu_refuses)(&scene.params_at(0))
+            .unwrap_or_else(|| "it has no WGSL kernel".into());
+        format!("{}: {why}", system.kind)
+    })
 }
 
 /// The per-lane settings a scene implies for a backend and precision.

@@ -403,10 +403,10 @@ pub fn info(code: Code) -> &'static SystemInfo {
         forcing_frequency: |p| code_of(p).equations.lane_values(&p.values).frequency,
         run_lane,
         run_lanes,
-        gpu_refuses: |_| None,
+        gpu_refuses,
         reestimate,
         plan,
-        wgsl: None,
+        wgsl: crate::model::wgsl::system_file(code),
         wall_reachable: if code.walls.is_empty() {
             None
         } else {
@@ -643,4 +643,12 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     fn admits(&self, y: &[f64; D]) -> bool {
         self.walls.iter().all(|w| w.gap(y) <= 0.0)
     }
+}
+
+/// Why the GPU kernels cannot run this model, the same for every lane
+/// (`model::wgsl::check`); `None` when its generated WGSL runs.
+fn gpu_refuses(p: &Params) -> Option<String> {
+    crate::model::wgsl::check(code_of(p))
+        .err()
+        .map(|why| why.to_string())
 }

@@ -29,6 +29,14 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/impact.wgsl"),
     ),
     (
+        "shared/math64.wgsl",
+        include_str!("../../../shaders/shared/math64.wgsl"),
+    ),
+    (
+        "shared/model_functions.wgsl",
+        include_str!("../../../shaders/shared/model_functions.wgsl"),
+    ),
+    (
         "integrate.wgsl",
         include_str!("../../../shaders/integrate.wgsl"),
     ),
@@ -124,8 +132,13 @@ impl Variant {
         if !self.system.is_flow {
             d.insert("MAP");
         }
-        if self.precision == Precision::F32 {
-            d.insert("COMPENSATED");
+        match self.precision {
+            Precision::F32 => {
+                d.insert("COMPENSATED");
+            }
+            Precision::F64 => {
+                d.insert("F64");
+            }
         }
         d
     }
@@ -166,6 +179,17 @@ impl Variant {
         let defines = self.defines();
         let mut out = self.prelude();
         out.push_str(&preprocess(system, &defines));
+        // A generated model's functions (`model::wgsl`): f64 builds them
+        // from arithmetic; a system that calls none gets neither file.
+        if crate::model::wgsl::calls_wrappers(system) {
+            if self.precision == Precision::F64 {
+                out.push_str(&preprocess(include("shared/math64.wgsl"), &defines));
+            }
+            out.push_str(&preprocess(
+                include("shared/model_functions.wgsl"),
+                &defines,
+            ));
+        }
         out.push_str(&preprocess(include("shared/clock.wgsl"), &defines));
         if self.system.is_flow {
             out.push_str(&preprocess(include("shared/rk4.wgsl"), &defines));

@@ -1,0 +1,338 @@
+//! Models compiled for the GPU: the system file the kernels include
+//! (`SystemInfo::wgsl`), generated from the model's expression trees, the
+//! twin of a built-in's hand-written `shaders/system/<kind>.wgsl`.
+//!
+//! The file has the built-ins' shape: `struct Params` (every parameter, in
+//! the model's order), `fn rhs(p, phase, y) -> State` (one expression per
+//! state) and, for a model with a wall, `wall_position(p)` and
+//! `wall_restitution(p)`. It is emitted from the same trees the CPU tape is
+//! compiled from (`model::tape`), so that the equations exist once:
+//!
+//! - every operation keeps the tree's association, fully parenthesised
+//!   (`((-2*zeta)*v - x) + f*phase.x`), so in f64 the GPU rounds where the
+//!   CPU does. The CPU computes a parameter-only subexpression once per lane
+//!   with [`Expr::eval`]; the GPU recomputes it per call with the same
+//!   operations in the same order, which gives the same bits. (A driver may
+//!   still fuse a product into the sum that uses it, as lavapipe does: the
+//!   seed oscillator as a model is then the built-in kernel to the bit, and
+//!   the CPU path to rounding.)
+//! - `cos(w*t)` and `sin(w*t)` read the forcing clock, `phase.x` and
+//!   `phase.y`, exactly where the tape reads its clock (`Tape::compile`);
+//! - numbers are `real(…)` of Rust's shortest round-trip form, so an f64
+//!   variant has the tree's very number;
+//! - `abs`, `sqrt`, `min`, `max` and `sign` are WGSL builtins (defined on
+//!   f64); every other function calls a `*_r` wrapper of
+//!   `shaders/shared/model_functions.wgsl`, which `backend::gpu::shader`
+//!   includes per precision: `shaders/shared/math64.wgsl` (arithmetic
+//!   alone) for f64, whose transcendental builtins Vulkan leaves undefined,
+//!   WGSL's builtins for f32. Those wrappers are within a few ulp of Rust's
+//!   functions, not to the bit: a model that calls one matches the CPU to
+//!   rounding, not bit for bit.
+//!
+//! What the kernels run so far ([`check`]): a flow of 2 to 4 states (the
+//! kernels' `State` is a WGSL vector) with no events, or a model of two
+//! states whose one event is a stop on the first state, with the second its
+//! velocity, approached from below: the one wall `shaders/shared/impact.wgsl`
+//! knows (its sticking code also sets every other state to 0, right for two
+//! states only).
+
+use std::fmt::{self, Write};
+
+use super::expr::{Expr, Func, Op, Var, Written};
+use crate::system::model::Code;
+
+/// The wrappers a generated file may call, defined per precision in
+/// `shaders/shared/model_functions.wgsl`: a system file that calls none of
+/// them gets neither that file nor `math64.wgsl`.
+pub const WRAPPERS: [&str; 7] = [
+    "sin_r", "cos_r", "tan_r", "exp_r", "log_r", "tanh_r", "atan2_r",
+];
+
+/// The one wrapper with two names in the trees (`x^y` and `pow(x, y)`).
+const POW: &str = "pow_r";
+
+/// Whether a system file calls a wrapper of `model_functions.wgsl`.
+pub fn calls_wrappers(system: &str) -> bool {
+    WRAPPERS
+        .iter()
+        .chain(&[POW])
+        .any(|name| system.contains(&format!("{name}(")))
+}
+
+/// Why the GPU kernels cannot run a model (yet).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Unsupported {
+    /// The kernels' `State` is `vec2`..`vec4`.
+    States(usize),
+    /// Events other than the one wall the impact code knows.
+    Events(String),
+    /// A number with no WGSL literal (∞ or NaN from folding).
+    Number(f64),
+    /// `t` outside the forcing clock (the CPU compiler refuses it first).
+    Time,
+}
+
+impl fmt::Display for Unsupported {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Unsupported::States(n) => write!(
+                f,
+                "the model has {n} state{}: the GPU kernels run 2 to 4 so far",
+                if *n == 1 { "" } else { "s" }
+            ),
+            Unsupported::Events(why) => write!(
+                f,
+                "{why}: the GPU kernels handle one stop on the first state so far \
+                 (surface `x - c` with x' = v the second state, in a model of two states)"
+            ),
+            Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
+            Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
+        }
+    }
+}
+
+/// Whether the kernels can run `code`, and if not why not.
+pub fn check(code: &Code) -> Result<(), Unsupported> {
+    let n = code.dimension();
+    if !(2..=4).contains(&n) {
+        return Err(Unsupported::States(n));
+    }
+    match code.walls.as_slice() {
+        [] => {}
+        [stop] => {
+            let states = &code.model.names.states;
+            if n != 2 || stop.coordinate != 0 || stop.velocity != 1 || stop.side != 1.0 {
+                return Err(Unsupported::Events(format!(
+                    "the stop '{}' acts on {} from {} in a model of {n} states",
+                    stop.name,
+                    states[stop.coordinate],
+                    if stop.side > 0.0 { "below" } else { "above" },
+                )));
+            }
+        }
+        walls => return Err(Unsupported::Events(format!("{} stops", walls.len()))),
+    }
+    let mut trees: Vec<&Expr> = code.model.equations.iter().collect();
+    for stop in &code.walls {
+        trees.push(&stop.position);
+        trees.push(&stop.restitution);
+    }
+    for e in trees {
+        emittable(e)?;
+    }
+    Ok(())
+}
+
+/// Every number of `e` has a literal and `t` appears only in the clock.
+fn emittable(e: &Expr) -> Result<(), Unsupported> {
+    match e {
+        Expr::Num(v) if !v.is_finite() => Err(Unsupported::Number(*v)),
+        Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_)) => Ok(()),
+        Expr::Var(Var::Time) => Err(Unsupported::Time),
+        // The clock: its argument is not emitted (the tape compiler has
+        // checked that it is w*t with w of the parameters).
+        Expr::Call(Func::Cos | Func::Sin, args) if args[0].uses(Var::Time) => Ok(()),
+        Expr::Neg(a) => emittable(a),
+        Expr::Bin(_, a, b) => emittable(a).and(emittable(b)),
+        Expr::Call(_, args) => args.iter().try_for_each(emittable),
+    }
+}
+
+/// The system file of `code`, or why the kernels cannot run it.
+pub fn system_source(code: &Code) -> Result<String, Unsupported> {
+    check(code)?;
+    let model = &code.model;
+    let names = &model.names;
+    let mut out = String::new();
+    // Writing to a String cannot fail.
+    let w = &mut out;
+    let _ = writeln!(
+        w,
+        "// Generated by src/model/wgsl.rs from the model '{}' (the twin of its\n\
+         // CPU tape): the same expression trees, the same association.",
+        model.name
+    );
+    for (state, e) in names.states.iter().zip(&model.equations) {
+        let _ = writeln!(w, "//   {state}' = {}", Written { expr: e, names });
+    }
+    let _ = writeln!(w, "\nstruct Params {{");
+    for i in 0..names.parameters.len() {
+        let _ = writeln!(w, "    {}: real,", field(names, i));
+    }
+    if names.parameters.is_empty() {
+        // WGSL has no empty struct; load_params builds `Params()`.
+        let _ = writeln!(w, "    unused: real,");
+    }
+    let _ = writeln!(w, "}}\n");
+    let _ = writeln!(
+        w,
+        "// phase = (cos ωt, sin ωt) of the forcing clock.\n\
+         fn rhs(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State("
+    );
+    for (i, e) in model.equations.iter().enumerate() {
+        let _ = writeln!(
+            w,
+            "        {}, // {}'",
+            Emit { expr: e, code },
+            names.states[i]
+        );
+    }
+    let _ = writeln!(w, "    );\n}}");
+    if let [stop] = code.walls.as_slice() {
+        let _ = writeln!(
+            w,
+            "\n// The stop '{}'.\nfn wall_position(p: Params) -> real {{\n    return {};\n}}\n\n\
+             fn wall_restitution(p: Params) -> real {{\n    return {};\n}}",
+            stop.name,
+            Emit {
+                expr: &stop.position,
+                code
+            },
+            Emit {
+                expr: &stop.restitution,
+                code
+            },
+        );
+    }
+    Ok(out)
+}
+
+/// The system file of `code` for `SystemInfo::wgsl` (kept for the
+/// process, as the rest of a model's description is), or `None` when the
+/// kernels cannot run it ([`check`] says why).
+pub fn system_file(code: &Code) -> Option<&'static str> {
+    let source = system_source(code).ok()?;
+    Some(Box::leak(source.into_boxed_str()))
+}
+
+/// The WGSL field of parameter i: `p_<name>`, which no WGSL keyword or
+/// reserved word starts with; `p<i>` for a name WGSL may not accept as an
+/// identifier (the model table allows any Unicode letter). The two forms
+/// cannot clash: only the first has an underscore after the `p`.
+pub fn field(names: &super::expr::Names, i: usize) -> String {
+    let name = &names.parameters[i];
+    if name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        format!("p_{name}")
+    } else {
+        format!("p{i}")
+    }
+}
+
+/// A number as a WGSL `real`: Rust's shortest representation that reads
+/// back to the same f64 (`{:?}` always has a `.` or an exponent, so WGSL
+/// reads a float, an abstract one that `real(…)` converts exactly in f64).
+pub fn literal(v: f64) -> String {
+    format!("real({v:?})")
+}
+
+/// An expression of `code`'s model as WGSL, fully parenthesised.
+struct Emit<'a> {
+    expr: &'a Expr,
+    code: &'a Code,
+}
+
+impl fmt::Display for Emit<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        emit(f, self.expr, self.code)
+    }
+}
+
+fn emit(f: &mut fmt::Formatter<'_>, e: &Expr, code: &Code) -> fmt::Result {
+    const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
+    let args = |f: &mut fmt::Formatter<'_>, args: &[Expr]| -> fmt::Result {
+        for (k, a) in args.iter().enumerate() {
+            if k > 0 {
+                write!(f, ", ")?;
+            }
+            emit(f, a, code)?;
+        }
+        Ok(())
+    };
+    match e {
+        Expr::Num(v) => write!(f, "{}", literal(*v)),
+        Expr::Var(Var::State(i)) => write!(f, "y.{}", COMPONENTS[*i]),
+        Expr::Var(Var::Param(i)) => write!(f, "p.{}", field(&code.model.names, *i)),
+        Expr::Var(Var::Time) => unreachable!("check refuses t outside the clock"),
+        // The forcing clock, as the tape reads it (`Compiler::clock`).
+        Expr::Call(Func::Cos, a) if a[0].uses(Var::Time) => write!(f, "phase.x"),
+        Expr::Call(Func::Sin, a) if a[0].uses(Var::Time) => write!(f, "phase.y"),
+        Expr::Neg(a) => {
+            write!(f, "(-")?;
+            emit(f, a, code)?;
+            write!(f, ")")
+        }
+        Expr::Bin(Op::Pow, a, b) => {
+            write!(f, "{POW}(")?;
+            emit(f, a, code)?;
+            write!(f, ", ")?;
+            emit(f, b, code)?;
+            write!(f, ")")
+        }
+        Expr::Bin(op, a, b) => {
+            let symbol = match op {
+                Op::Add => "+",
+                Op::Sub => "-",
+                Op::Mul => "*",
+                Op::Div => "/",
+                Op::Pow => unreachable!("pow is a call"),
+            };
+            write!(f, "(")?;
+            emit(f, a, code)?;
+            write!(f, " {symbol} ")?;
+            emit(f, b, code)?;
+            write!(f, ")")
+        }
+        Expr::Call(func, a) => {
+            let name = match func {
+                // Defined on f64 under Vulkan (docs: NOTES on WGSL f64).
+                Func::Abs | Func::Sqrt | Func::Min | Func::Max | Func::Sign => func.name(),
+                Func::Pow => POW,
+                Func::Sin => "sin_r",
+                Func::Cos => "cos_r",
+                Func::Tan => "tan_r",
+                Func::Exp => "exp_r",
+                Func::Log => "log_r",
+                Func::Tanh => "tanh_r",
+                Func::Atan2 => "atan2_r",
+            };
+            write!(f, "{name}(")?;
+            args(f, a)?;
+            write!(f, ")")
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn literals_read_back_to_the_same_bits_and_are_floats() {
+        for v in [
+            0.1,
+            2.0,
+            -2.0,
+            std::f64::consts::PI,
+            1e300,
+            1e-7,
+            1.0 / 3.0,
+            123456789.0,
+            5e-324,
+        ] {
+            let text = literal(v);
+            let inner = &text["real(".len()..text.len() - 1];
+            assert!(inner.contains('.') || inner.contains('e'), "{text}");
+            assert_eq!(inner.parse::<f64>().unwrap().to_bits(), v.to_bits());
+        }
+    }
+
+    #[test]
+    fn every_wrapper_is_named_by_a_function() {
+        // `emit` maps functions to these names by hand; keep them one list.
+        for name in WRAPPERS {
+            assert!(calls_wrappers(&format!("x = {name}(y);")));
+        }
+        assert!(calls_wrappers("pow_r(y.x, real(3.0))"));
+        assert!(!calls_wrappers("abs(y.x) + sqrt(y.y)"));
+    }
+}

@@ -1,0 +1,316 @@
+//! Models on the GPU: the system file generated from a model's expression
+//! trees (src/model/wgsl.rs) run by the same kernels as the built-ins, on
+//! whatever adapter exists (lavapipe in CI, where skipping is an error):
+//! the seed oscillator written as a model is the built-in on the GPU to the
+//! bit; the forced pendulum and the Duffing oscillator agree with the CPU
+//! path in f64 and, loosely, in f32; a model the kernels cannot run yet is
+//! refused by `gpu` with its reason and left to the CPU by `auto`.
+
+mod common;
+
+use common::gpu_or_skip;
+use lyapsweep::method::LaneStatus;
+use lyapsweep::scene::{Backend, Precision};
+use lyapsweep::{scene, Error, Report, Scene};
+
+fn model_scene(name: &str, body: &str, overrides: &[&str]) -> Scene {
+    let path = format!("{}/models/{name}", env!("CARGO_MANIFEST_DIR"));
+    let text = format!("model = {path:?}\n{body}");
+    let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
+    scene::parse(&text, "test scene", "test", &overrides).expect("a valid scene")
+}
+
+fn run(scene: &Scene) -> Report {
+    lyapsweep::run(scene).expect("runs")
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The largest |a - b| over two lanes' exponents.
+fn exponent_difference(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_seed_oscillator_as_a_model_is_the_built_in_on_the_gpu_to_the_bit() {
+    if !gpu_or_skip(
+        "the_seed_oscillator_as_a_model_is_the_built_in_on_the_gpu_to_the_bit",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // η over [0.5, 1.5]: non-impacting, periodic impacting and chaotic
+    // lanes, the same sweep as the CPU's bit test (tests/model_runs.rs) at
+    // fewer lanes and iterations.
+    let body = "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = 11\n\
+                [integration]\nsteps_per_period = 300\ntransient = 50\niterations = 100\n\
+                [output]\nbifurcation_points = 10\n\
+                [run]\nbackend = \"gpu\"\nprecision = \"f64\"\n";
+    let builtin = format!("[system]\nkind = \"impact-oscillator\"\n{body}");
+    for (model_e, builtin_e) in [
+        ("model.parameters.e=1.0", "system.restitution=1.0"),
+        ("model.parameters.e=0.8", "system.restitution=0.8"),
+    ] {
+        let model = run(&model_scene("seed-oscillator.toml", body, &[model_e]));
+        let reference = run(&common::scene(&builtin, &[builtin_e]));
+        assert_eq!(model.backend, Backend::Gpu);
+        let variant = &model.gpu.as_ref().unwrap().variant;
+        assert!(variant.contains("/f64/wall+"), "{variant}");
+        let mut impacts = 0.0;
+        for (k, (a, b)) in model.lanes.iter().zip(&reference.lanes).enumerate() {
+            // The generated rhs and wall functions perform the hand-written
+            // file's operations in its order (`(-2ζ)·v - x + f·cos`), so the
+            // compiled kernels compute the same bits.
+            assert_eq!(
+                bits(&a.exponents),
+                bits(&b.exponents),
+                "{model_e}, lane {k}"
+            );
+            assert_eq!(
+                bits(&a.bifurcation),
+                bits(&b.bifurcation),
+                "{model_e}, lane {k}"
+            );
+            assert_eq!(a.impacts_per_period, b.impacts_per_period);
+            assert_eq!(a.crossings_per_period[0], a.impacts_per_period);
+            assert_eq!(a.status, b.status, "{model_e}, lane {k}");
+            impacts += a.impacts_per_period;
+        }
+        assert!(impacts > 5.0, "the sweep must exercise the wall: {impacts}");
+    }
+}
+
+/// The forced pendulum's periodic lanes (λ1 < 0 at each): a period-1
+/// orbit (f = 0.9) and orbits on the way into the cascade.
+const PENDULUM: &str = "[sweep]\nparameter = \"f\"\nvalues = [0.9, 1.0, 1.05, 1.07]\n\
+                        [integration]\ntransient = 100\niterations = 200\n";
+
+#[test]
+fn the_forced_pendulum_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "the_forced_pendulum_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let pair = |delta: &str| {
+        let with = |backend: &str| {
+            run(&model_scene(
+                "forced-pendulum.toml",
+                PENDULUM,
+                &[
+                    &format!("run.backend=\"{backend}\""),
+                    &format!("integration.perturbation={delta}"),
+                ],
+            ))
+        };
+        (with("cpu"), with("gpu"))
+    };
+    // The exponents come from finite-difference Jacobians, which multiply
+    // every rounding difference between the two paths by 1/δ. lavapipe
+    // contracts a·b + c into fused multiply-adds (the seed oscillator, with
+    // no function call, already differs from the CPU by ~1e-12 at δ =
+    // 1e-6), and sin θ is math64's sin64 (within 1.3 ulp) against the C
+    // library's; on a periodic orbit the same points recur every
+    // iteration, so those differences do not average out. At δ = 1e-4 the
+    // amplification is 1e4 and the two paths agree to 1e-10 (issue 14's
+    // requirement; measured 1.2e-11).
+    let (cpu, gpu) = pair("1e-4");
+    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+        assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+        assert_eq!(c.plan, g.plan, "lane {k}: the same steps and parts");
+        assert!(
+            c.exponents[0] < 0.0,
+            "lane {k} is periodic: {:?}",
+            c.exponents
+        );
+        let d = exponent_difference(&c.exponents, &g.exponents);
+        eprintln!("pendulum lane {k}, δ = 1e-4: CPU - GPU {d:e}");
+        assert!(
+            d <= 1e-10,
+            "lane {k}: CPU {:?} vs GPU {:?} ({d:e})",
+            c.exponents,
+            g.exponents
+        );
+    }
+    // At the default δ = 1e-6 the same differences are amplified 100 times
+    // more: measured up to 2.4e-9 (at f = 1.07, the slowest-converging
+    // orbit); 2e-8 bounds it with the rounding's spread between adapters.
+    // The states themselves carry no 1/δ: the reference orbit's Poincaré
+    // points agree to rounding.
+    let (cpu, gpu) = pair("1e-6");
+    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+        let d = exponent_difference(&c.exponents, &g.exponents);
+        eprintln!("pendulum lane {k}, δ = 1e-6: CPU - GPU {d:e}");
+        assert!(d <= 2e-8, "lane {k}: δ = 1e-6, {d:e}");
+        // The sum rule, div F = -2ζ = -0.5, on both paths (measured within
+        // 3e-9, and 6e-8 at f = 1.07).
+        for lane in [c, g] {
+            let error = (lane.exponent_sum() - -0.5).abs();
+            assert!(error < 1e-7, "lane {k}: sum off by {error:e}");
+        }
+    }
+    let gpu_points = run(&model_scene(
+        "forced-pendulum.toml",
+        PENDULUM,
+        &["run.backend=\"gpu\"", "output.bifurcation_points=5"],
+    ));
+    let cpu_points = run(&model_scene(
+        "forced-pendulum.toml",
+        PENDULUM,
+        &["run.backend=\"cpu\"", "output.bifurcation_points=5"],
+    ));
+    for (c, g) in cpu_points.lanes.iter().zip(&gpu_points.lanes) {
+        assert_eq!(c.bifurcation.len(), 10);
+        for (a, b) in c.bifurcation.iter().zip(&g.bifurcation) {
+            assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0), "{a} vs {b}");
+        }
+    }
+}
+
+#[test]
+fn models_run_in_f32_close_to_f64() {
+    if !gpu_or_skip("models_run_in_f32_close_to_f64", Precision::F32) {
+        return;
+    }
+    // The f32 kernels call WGSL's own sin (model_functions.wgsl), round
+    // every state to 6e-8 and take δ = 2e-4 (the f32 default). The tool
+    // marks an f32 lane whose exponents differ from its CPU recomputation
+    // by more than validation_tolerance(F32) = 1e-3; on these clearly
+    // contracting orbits the difference measured at most 1e-4. (Near a
+    // bifurcation, λ1 → 0, it grows: 1.04e-3 at f = 1.0 of the pendulum,
+    // λ1 = -0.007, which the tool then marks gpu-mismatch.)
+    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let lanes = |values: &str| {
+        format!(
+            "[sweep]\nparameter = \"f\"\nvalues = {values}\n\
+             [integration]\ntransient = 100\niterations = 200\n"
+        )
+    };
+    for (name, body) in [
+        ("forced-pendulum.toml", lanes("[0.3, 0.5, 0.8, 0.9]")),
+        // Small forcing: the particle stays in one well, periodically.
+        ("duffing.toml", lanes("[0.1, 0.2, 0.25]")),
+    ] {
+        let body = body.as_str();
+        let f64_cpu = run(&model_scene(name, body, &["run.backend=\"cpu\""]));
+        let f32_gpu = run(&model_scene(
+            name,
+            body,
+            &["run.backend=\"gpu\"", "run.precision=\"f32\""],
+        ));
+        assert_eq!(f32_gpu.precision, Precision::F32);
+        for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
+            assert_eq!(g.status, LaneStatus::Ok, "{name} lane {k}");
+            assert!(c.exponents[0] < 0.0, "{name} lane {k}: {:?}", c.exponents);
+            let d = exponent_difference(&c.exponents, &g.exponents);
+            eprintln!("{name} lane {k}: f32 vs f64 {d:e}");
+            assert!(
+                d < tolerance,
+                "{name} lane {k}: f64 {:?} vs f32 {:?}",
+                c.exponents,
+                g.exponents
+            );
+        }
+    }
+}
+
+#[test]
+fn the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu() {
+    if !gpu_or_skip(
+        "the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The classic chaotic parameters (the model's defaults) and a periodic
+    // lane: chaos decorrelates the two paths' orbits, so the chaotic lane is
+    // compared through its sum (div F = -2ζ = -0.3, local to each
+    // iteration) and the sign of λ1.
+    let body = "[sweep]\nparameter = \"f\"\nvalues = [0.2, 0.5]\n\
+                [integration]\ntransient = 100\niterations = 200\n";
+    let cpu = run(&model_scene("duffing.toml", body, &["run.backend=\"cpu\""]));
+    let gpu = run(&model_scene("duffing.toml", body, &["run.backend=\"gpu\""]));
+    let (periodic, chaotic) = (0, 1);
+    assert!(cpu.lanes[chaotic].exponents[0] > 0.05, "{:?}", cpu.lanes[1]);
+    assert!(gpu.lanes[chaotic].exponents[0] > 0.05, "{:?}", gpu.lanes[1]);
+    let d = exponent_difference(
+        &cpu.lanes[periodic].exponents,
+        &gpu.lanes[periodic].exponents,
+    );
+    // No function call (βx³ is written x*x*x): only the contraction's
+    // differences, measured 2.2e-12 at δ = 1e-6.
+    assert!(d <= 1e-10, "periodic lane: {d:e}");
+    for lane in cpu.lanes.iter().chain(&gpu.lanes) {
+        assert!(
+            (lane.exponent_sum() - -0.3).abs() < 1e-6,
+            "sum {}",
+            lane.exponent_sum()
+        );
+    }
+}
+
+#[test]
+fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
+    // Two stops (the impact pair) and a stop on a third state of four (the
+    // two-mass chain): the GPU's impact code knows one wall on the first
+    // state. No adapter is needed: the refusal comes first.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n\
+                [integration]\ntransient = 2\niterations = 2\n";
+    for (name, why) in [
+        ("impact-pair.toml", "2 stops"),
+        ("two-mass-chain.toml", "acts on x2"),
+    ] {
+        let scene = model_scene(name, body, &["run.backend=\"gpu\""]);
+        assert!(scene.system.wgsl.is_none(), "{name}");
+        let err = lyapsweep::run(&scene).unwrap_err();
+        let text = err.to_string();
+        assert!(matches!(err, Error::Backend { .. }), "{name}: {text}");
+        assert!(err.is_input_error(), "exit 2");
+        assert!(
+            text.contains("one stop on the first state") && text.contains(why),
+            "{name}: {text}"
+        );
+        let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
+        assert_eq!(auto.backend, Backend::Cpu);
+        let choice = auto.choice.unwrap();
+        assert!(choice.contains("one stop on the first state"), "{choice}");
+    }
+}
+
+#[test]
+fn a_model_of_one_or_five_states_is_left_to_the_cpu() {
+    // The kernels' State is a WGSL vector: vec2 to vec4.
+    for (states, equations, why) in [
+        (r#"["x"]"#, r#"x = "-k*x + cos(t)""#, "1 state:"),
+        (
+            r#"["a", "b", "c", "d", "e"]"#,
+            r#"a = "b"
+b = "c"
+c = "d"
+d = "e"
+e = "-k*a + cos(t)""#,
+            "5 states:",
+        ),
+    ] {
+        let text = format!(
+            "[model]\nname = \"wide\"\nstates = {states}\n[model.parameters]\nk = 1.0\n\
+             [model.equations]\n{equations}\n\
+             [model.map]\nperiod = \"2*pi\"\n[integration]\ntransient = 1\niterations = 1\n\
+             [run]\nbackend = \"gpu\"\n"
+        );
+        let scene = scene::parse(&text, "test", "test", &[]).expect("a valid scene");
+        assert!(scene.system.wgsl.is_none());
+        let err = lyapsweep::run(&scene).unwrap_err().to_string();
+        assert!(
+            err.contains(why) && err.contains("the GPU kernels run 2 to 4"),
+            "{err}"
+        );
+    }
+}
