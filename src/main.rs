@@ -67,6 +67,11 @@ enum Command {
     },
     /// List the GPU adapters wgpu finds (honours WGPU_BACKEND and WGPU_ADAPTER_NAME for runs).
     Devices,
+    /// Tools for writing models.
+    Model {
+        #[command(subcommand)]
+        command: ModelCommand,
+    },
     /// Error against run time over a grid of configurations (writes bench.csv, bench.md, bench.png).
     Bench {
         /// A CI-sized grid: fewer configurations, shorter runs.
@@ -78,10 +83,22 @@ enum Command {
     },
 }
 
+#[derive(Subcommand)]
+enum ModelCommand {
+    /// Parse and compile a model file (its [model] table, or the whole file) and print its equations, the derivatives the sum rule uses, its events, what each backend runs and the generated WGSL; problems are reported with their key and column (exit code 2).
+    Check {
+        /// The model file (TOML).
+        file: PathBuf,
+    },
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Devices => exit_code(print_devices()),
+        Command::Model {
+            command: ModelCommand::Check { file },
+        } => exit_code(check_model(&file)),
         Command::Bench { quick, out } => exit_code(bench(
             quick,
             out.unwrap_or_else(|| PathBuf::from("out/bench")),
@@ -110,6 +127,15 @@ fn main() -> ExitCode {
         Command::Plot { dir, out } => exit_code(plot(&dir, out.as_deref().unwrap_or(&dir))),
         Command::Merge { out, shards } => exit_code(merge(&out, &shards)),
     }
+}
+
+/// `lyapsweep model check FILE`.
+fn check_model(file: &std::path::Path) -> Result<(), Error> {
+    let table = lyapsweep::model::read_table(file)?;
+    let model = lyapsweep::model::Model::parse(&table, "model")?;
+    let code = lyapsweep::system::model::Code::compile(model, "model")?;
+    print!("{}", lyapsweep::model::describe::describe(&code));
+    Ok(())
 }
 
 /// Success, or the error on stderr with exit code 2 for bad input, 1 otherwise.

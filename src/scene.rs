@@ -825,22 +825,7 @@ fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()>
         return Ok(());
     };
     let path = base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file));
-    let bad = |reason: String| Error::invalid("model", format!("{}: {reason}", path.display()));
-    let text = std::fs::read_to_string(&path).map_err(|e| bad(e.to_string()))?;
-    let mut read: toml::Table = text.parse().map_err(|e: toml::de::Error| {
-        let line = e
-            .span()
-            .map(|span| format!("line {}: ", text[..span.start].matches('\n').count() + 1));
-        bad(format!(
-            "{}{}",
-            line.unwrap_or_default(),
-            e.message().trim()
-        ))
-    })?;
-    let model = match read.remove("model") {
-        Some(model) => model,
-        None => toml::Value::Table(read),
-    };
+    let model = crate::model::read_table(&path)?;
     table.insert("model".into(), model);
     Ok(())
 }

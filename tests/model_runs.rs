@@ -568,3 +568,56 @@ fn a_section_needs_an_autonomous_flow_without_events() {
         "integration.initial_state: lorenz has a 3-dimensional state (a point of the flow from which it reaches its Poincaré section: x, y, z)",
     );
 }
+
+fn model_check(path: &std::path::Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(["model", "check"])
+        .arg(path)
+        .output()
+        .expect("the binary runs")
+}
+
+#[test]
+fn model_check_prints_the_equations_the_sum_rule_the_events_and_the_kernel() {
+    let out = model_check(std::path::Path::new(&model_path("impact-pair.toml")));
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8(out.stdout).unwrap();
+    for line in [
+        "v' = (-2) * zeta * v - x + f * cos(eta * t)",
+        "div F = (-2) * zeta (a function of the parameters)",
+        "+ 2·ln(e) per impact on 'right stop'",
+        "'left stop': x >= -gap, velocity v, reset v -> -(e)·v",
+        "GPU: not run on the GPU kernels: 2 stops",
+    ] {
+        assert!(text.contains(line), "{line:?} not in:\n{text}");
+    }
+    // A model the kernels run shows its generated system file.
+    let seed = model_check(std::path::Path::new(&model_path("seed-oscillator.toml")));
+    let text = String::from_utf8(seed.stdout).unwrap();
+    assert!(
+        text.contains("fn rhs(p: Params, phase: vec2<real>, y: State) -> State"),
+        "{text}"
+    );
+    assert!(
+        text.contains("fn wall_position(p: Params) -> real"),
+        "{text}"
+    );
+    let lorenz = model_check(std::path::Path::new(&model_path("lorenz.toml")));
+    let text = String::from_utf8(lorenz.stdout).unwrap();
+    assert!(
+        text.contains("Poincaré section z = rho - 1, crossed increasing; coordinates x, y"),
+        "{text}"
+    );
+    assert!(text.contains("ln|F_z(x_0) / F_z(x_n)|"), "{text}");
+    // A problem is reported with its key and column, exit code 2.
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, PAIR.replace("-2*zeta*v", "-2*zeta2*v")).unwrap();
+    let out = model_check(&bad);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("model.equations.v: unknown name 'zeta2' (column 4)"),
+        "{stderr}"
+    );
+}

@@ -345,6 +345,9 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("forced-pendulum.toml", true),
         // Two stops; the kernels know one wall.
         ("impact-pair.toml", false),
+        // Poincaré sections: the kernels run period maps.
+        ("lorenz.toml", false),
+        ("rossler.toml", false),
         ("seed-oscillator.toml", true),
         // A stop on the third of four states.
         ("two-mass-chain.toml", false),

@@ -7,9 +7,31 @@
 //! compiled evaluator ([`tape`]) and the GPU's generated system file
 //! ([`wgsl`]) are both built from those trees.
 
+pub mod describe;
 pub mod expr;
 pub mod table;
 pub mod tape;
 pub mod wgsl;
 
 pub use table::{Event, Map, Model};
+
+/// A model file's `[model]` table (or, without one, the whole file as the
+/// model table), unparsed: what a scene's `model = "file"` stands for.
+pub fn read_table(path: &std::path::Path) -> crate::Result<toml::Value> {
+    let bad =
+        |reason: String| crate::Error::invalid("model", format!("{}: {reason}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let mut read: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        let line = e
+            .span()
+            .map(|span| format!("line {}: ", text[..span.start].matches('\n').count() + 1));
+        bad(format!(
+            "{}{}",
+            line.unwrap_or_default(),
+            e.message().trim()
+        ))
+    })?;
+    Ok(read
+        .remove("model")
+        .unwrap_or_else(|| toml::Value::Table(read)))
+}

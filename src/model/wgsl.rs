@@ -70,6 +70,8 @@ pub enum Unsupported {
     Number(f64),
     /// `t` outside the forcing clock (the CPU compiler refuses it first).
     Time,
+    /// A Poincaré section: the kernels run time-T maps.
+    Section,
 }
 
 impl fmt::Display for Unsupported {
@@ -87,12 +89,19 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
+            Unsupported::Section => write!(
+                f,
+                "its map is a Poincaré section: the GPU kernels run period maps so far"
+            ),
         }
     }
 }
 
 /// Whether the kernels can run `code`, and if not why not.
 pub fn check(code: &Code) -> Result<(), Unsupported> {
+    if code.section.is_some() {
+        return Err(Unsupported::Section);
+    }
     let n = code.dimension();
     if !(2..=4).contains(&n) {
         return Err(Unsupported::States(n));

@@ -1,0 +1,195 @@
+//! `lyapsweep model check FILE`: what a compiled model is, in words and
+//! expressions — its equations, the derivatives the sum rule uses, its
+//! events as the integrator sees them, what each backend runs, and the
+//! generated WGSL — for a user writing a model to read before a sweep.
+
+use std::fmt::Write;
+
+use super::expr::{Expr, Op, Var, Written};
+use super::wgsl;
+use crate::system::model::Code;
+
+/// The report of a model that compiled.
+pub fn describe(code: &Code) -> String {
+    let model = &code.model;
+    let names = &model.names;
+    let show = |e: &Expr| {
+        Written {
+            expr: &tidy(e),
+            names,
+        }
+        .to_string()
+    };
+    let mut out = String::new();
+    // Writing to a String cannot fail.
+    let w = &mut out;
+    let parameters: Vec<String> = names
+        .parameters
+        .iter()
+        .zip(&model.defaults)
+        .map(|(p, v)| format!("{p} = {v}"))
+        .collect();
+    let _ = writeln!(
+        w,
+        "model {}: {} states ({}), parameters {}",
+        model.name,
+        names.states.len(),
+        names.states.join(", "),
+        if parameters.is_empty() {
+            "none".to_owned()
+        } else {
+            parameters.join(", ")
+        }
+    );
+    let _ = writeln!(w, "\nequations:");
+    for (s, e) in names.states.iter().zip(&model.equations) {
+        let _ = writeln!(w, "  {s}' = {}", show(e));
+    }
+    let _ = writeln!(w, "\nmap:");
+    match (&model.map, &code.section) {
+        (crate::model::Map::Period(t), _) => {
+            let _ = writeln!(
+                w,
+                "  stroboscopic, period T = {}; {} exponents; t restarts at 0 each period",
+                show(t),
+                code.dimension()
+            );
+        }
+        (_, Some(section)) => {
+            let others: Vec<&str> = names
+                .states
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != section.state)
+                .map(|(_, s)| s.as_str())
+                .collect();
+            let _ = writeln!(
+                w,
+                "  Poincaré section {} = {}, crossed {}; coordinates {} ({} exponents, per unit of return time)",
+                names.states[section.state],
+                show(&section.at),
+                if section.increasing { "increasing" } else { "decreasing" },
+                others.join(", "),
+                code.dimension()
+            );
+        }
+        _ => unreachable!("a section map has its section"),
+    }
+    if let Some(w_expr) = &code.equations.frequency {
+        let _ = writeln!(
+            w,
+            "  forcing: cos and sin of ({})·t read from the exactly rotated clock",
+            show(w_expr)
+        );
+    }
+    let _ = writeln!(w, "\nsum rule (exponents per unit time add up to):");
+    match &code.divergence {
+        Some(d) => {
+            let _ = writeln!(w, "  div F = {} (a function of the parameters)", show(d));
+        }
+        None => {
+            let terms: Vec<String> = (0..names.states.len())
+                .map(|i| show(&model.equations[i].derivative(Var::State(i))))
+                .collect();
+            let _ = writeln!(
+                w,
+                "  div F = {} depends on the state: not averaged along the orbit yet, so expected_sum is NaN",
+                terms.join(" + ")
+            );
+        }
+    }
+    for stop in &code.walls {
+        let _ = writeln!(
+            w,
+            "  + 2·ln({}) per impact on '{}' (its saltation determinant e²)",
+            show(&stop.restitution),
+            stop.name
+        );
+    }
+    if let Some(section) = &code.section {
+        let _ = writeln!(
+            w,
+            "  + ln|F_{0}(x_0) / F_{0}(x_n)| over the averaging time (the section's flux term)",
+            names.states[section.state]
+        );
+    }
+    if !code.walls.is_empty() {
+        let _ = writeln!(w, "\nevents (stops):");
+        for stop in &code.walls {
+            let _ = writeln!(
+                w,
+                "  '{}': {} {} {}, velocity {}, reset {} -> -({})·{}",
+                stop.name,
+                names.states[stop.coordinate],
+                if stop.side > 0.0 { "<=" } else { ">=" },
+                show(&stop.position),
+                names.states[stop.velocity],
+                names.states[stop.velocity],
+                show(&stop.restitution),
+                names.states[stop.velocity],
+            );
+        }
+    }
+    let n = names.states.len();
+    let _ = writeln!(
+        w,
+        "\nJacobian ∂F_i/∂x_j (the time scales that set the steps):"
+    );
+    for i in 0..n {
+        let row: Vec<String> = (0..n).map(|j| show(&code.jacobian[i * n + j])).collect();
+        let _ = writeln!(w, "  [{}]", row.join(", "));
+    }
+    let _ = writeln!(
+        w,
+        "\nCPU: a tape of {} instructions, {} lane constants (parameter-only subexpressions, once per lane)",
+        code.equations.instructions.len(),
+        code.equations.lane_constants.len()
+    );
+    match wgsl::system_source(code) {
+        Ok(source) => {
+            let _ = writeln!(w, "GPU: runs on the kernels; the generated system file:\n");
+            let _ = write!(w, "{source}");
+        }
+        Err(why) => {
+            let _ = writeln!(w, "GPU: not run on the GPU kernels: {why}");
+        }
+    }
+    out
+}
+
+/// `e` with the zeros, ones and double negations that building
+/// derivatives and stops leaves behind folded away, for reading only (the
+/// integrator evaluates the trees as built, whose values these equal).
+fn tidy(e: &Expr) -> Expr {
+    let num = |e: &Expr| match e {
+        Expr::Num(v) => Some(*v),
+        _ => None,
+    };
+    let neg = |a: Expr| match a {
+        Expr::Neg(inner) => *inner,
+        Expr::Num(v) => Expr::Num(-v),
+        a => Expr::Neg(Box::new(a)),
+    };
+    match e {
+        Expr::Neg(a) => neg(tidy(a)),
+        Expr::Bin(op, a, b) => {
+            let (a, b) = (tidy(a), tidy(b));
+            match (op, num(&a), num(&b)) {
+                (Op::Add, Some(x), _) if x == 0.0 => b,
+                (Op::Add | Op::Sub, _, Some(y)) if y == 0.0 => a,
+                (Op::Sub, Some(x), _) if x == 0.0 => neg(b),
+                (Op::Mul, Some(x), _) if x == 1.0 => b,
+                (Op::Mul | Op::Div, _, Some(y)) if y == 1.0 => a,
+                (Op::Mul, Some(x), _) if x == -1.0 => neg(b),
+                (Op::Mul, _, Some(y)) if y == -1.0 => neg(a),
+                (Op::Add, _, _) if matches!(b, Expr::Neg(_)) => {
+                    let Expr::Neg(inner) = b else { unreachable!() };
+                    Expr::Bin(Op::Sub, Box::new(a), inner)
+                }
+                _ => Expr::Bin(*op, Box::new(a), Box::new(b)),
+            }
+        }
+        Expr::Call(f, args) => Expr::Call(*f, args.iter().map(tidy).collect()),
+        e => e.clone(),
+    }
+}
