@@ -175,13 +175,13 @@ fn tidy(e: &Expr) -> Expr {
         Expr::Bin(op, a, b) => {
             let (a, b) = (tidy(a), tidy(b));
             match (op, num(&a), num(&b)) {
-                (Op::Add, Some(x), _) if x == 0.0 => b,
-                (Op::Add | Op::Sub, _, Some(y)) if y == 0.0 => a,
-                (Op::Sub, Some(x), _) if x == 0.0 => neg(b),
-                (Op::Mul, Some(x), _) if x == 1.0 => b,
-                (Op::Mul | Op::Div, _, Some(y)) if y == 1.0 => a,
-                (Op::Mul, Some(x), _) if x == -1.0 => neg(b),
-                (Op::Mul, _, Some(y)) if y == -1.0 => neg(a),
+                (Op::Add, Some(0.0), _) => b,
+                (Op::Add | Op::Sub, _, Some(0.0)) => a,
+                (Op::Sub, Some(0.0), _) => neg(b),
+                (Op::Mul, Some(1.0), _) => b,
+                (Op::Mul | Op::Div, _, Some(1.0)) => a,
+                (Op::Mul, Some(-1.0), _) => neg(b),
+                (Op::Mul, _, Some(-1.0)) => neg(a),
                 (Op::Add, _, _) if matches!(b, Expr::Neg(_)) => {
                     let Expr::Neg(inner) = b else { unreachable!() };
                     Expr::Bin(Op::Sub, Box::new(a), inner)
