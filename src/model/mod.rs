@@ -31,7 +31,8 @@ pub fn read_table(path: &std::path::Path) -> crate::Result<toml::Value> {
             e.message().trim()
         ))
     })?;
-    Ok(read
-        .remove("model")
-        .unwrap_or_else(|| toml::Value::Table(read)))
+    match read.remove("model") {
+        Some(model) => Ok(model),
+        None => Ok(toml::Value::Table(read)),
+    }
 }
