@@ -93,8 +93,13 @@ pub fn describe(code: &Code) -> String {
                 .collect();
             let _ = writeln!(
                 w,
-                "  div F = {} depends on the state: not averaged along the orbit yet, so expected_sum is NaN",
-                terms.join(" + ")
+                "  div F = {} depends on the state: {}",
+                terms.join(" + "),
+                if code.divergence_along.is_some() {
+                    "integrated along the reference's returns (its time average)"
+                } else {
+                    "not averaged along a period map's orbit yet, so expected_sum is NaN"
+                }
             );
         }
     }

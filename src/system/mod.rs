@@ -247,9 +247,11 @@ pub struct IterationStats {
     /// The time the iteration took, where it is not the system's period
     /// (a Poincaré section's return time); 0 otherwise.
     pub time: f64,
-    /// ln |F_k(start) / F_k(end)| of a section map on state k: the
-    /// iteration's volume change beyond the flow's divergence (its
-    /// determinant is exp(∫ div F dt)·F_k(start)/F_k(end)); 0 otherwise.
+    /// ln |F_k(start) / F_k(end)| of a section map on state k, plus
+    /// ∫ div F dt along the reference where div F depends on the state:
+    /// the iteration's ln |det| beyond what the system's expected sum has
+    /// (the determinant is exp(∫ div F dt)·F_k(start)/F_k(end)); 0
+    /// otherwise.
     pub log_flux: f64,
 }
 

@@ -37,6 +37,10 @@ pub struct Code {
     /// (then the flow contracts volume at a constant rate); `None` when it
     /// depends on the state.
     pub divergence: Option<Expr>,
+    /// div F compiled, where it depends on the state and the map is a
+    /// Poincaré section: integrated along the reference's returns (see
+    /// `system::section`), its time average enters the sum rule.
+    pub divergence_along: Option<Tape>,
     /// ∂F_i/∂x_j, row-major: the time scales of the flow (see
     /// [`ModelFlow::stiffness`]).
     pub jacobian: Vec<Expr>,
@@ -150,10 +154,29 @@ impl Code {
             }
             walls.push(stop(&model, event, &format!("{key}.events[{j}]"))?);
         }
-        let divergence = (0..n)
+        let whole_divergence = (0..n)
             .map(|i| model.equations[i].derivative(Var::State(i)))
             .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
-            .filter(|d| !reads_state_or_time(d));
+            .expect("a model has a state");
+        let (divergence, divergence_along) = if !reads_state_or_time(&whole_divergence) {
+            (Some(whole_divergence), None)
+        } else if section.is_some() {
+            let tape = Tape::compile([&whole_divergence], n, None).map_err(|(_, why)| {
+                Error::invalid(
+                    format!("{key}.equations"),
+                    format!(
+                        "their divergence {}: {why}",
+                        Written {
+                            expr: &whole_divergence,
+                            names: &model.names
+                        }
+                    ),
+                )
+            })?;
+            (None, Some(tape))
+        } else {
+            (None, None)
+        };
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
@@ -162,6 +185,7 @@ impl Code {
             equations,
             walls,
             divergence,
+            divergence_along,
             jacobian,
             section,
         })
@@ -465,14 +489,16 @@ fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
 
 /// The exponents per unit time sum to div F (constant here) plus, per
 /// unit time, 2·ln e of every crossing of a stop (each multiplies volume
-/// by e²); NaN where div F depends on the state (not yet averaged along
-/// the orbit).
+/// by e²). Where div F depends on the state, a Poincaré map integrates it
+/// along its returns (its average is in the lane's orbit term, 0 here);
+/// a period map does not yet (NaN).
 fn expected_sum(p: &Params, crossings_per_time: &[f64]) -> f64 {
     let code = code_of(p);
-    let Some(divergence) = &code.divergence else {
-        return f64::NAN;
+    let mut sum = match (&code.divergence, &code.divergence_along) {
+        (Some(divergence), _) => divergence.eval(&[], &p.values, 0.0),
+        (None, Some(_)) => 0.0,
+        (None, None) => return f64::NAN,
     };
-    let mut sum = divergence.eval(&[], &p.values, 0.0);
     for (w, &rate) in code.walls.iter().zip(crossings_per_time) {
         if rate != 0.0 {
             sum += 2.0 * w.restitution.eval(&[], &p.values, 0.0).ln() * rate;

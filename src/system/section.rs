@@ -16,11 +16,12 @@ use nalgebra::{DMatrix, SMatrix};
 use super::model::{Code, ModelFlow};
 use super::{FlowSettings, IterationStats, Params, Part, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
-use crate::integrate::section::{advance, next_crossings, Section};
+use crate::integrate::section::{advance, advance_integrating, next_crossings, Section};
 use crate::integrate::Flow;
 use crate::method::jacobian::Difference;
 use crate::method::lane::perturbation_at;
 use crate::method::MethodSettings;
+use crate::model::tape::Tape;
 
 /// The contraction one part of a return may have, e^PART_CONTRACTION: far
 /// above the finite difference's rounding noise (see `tangent_factors`).
@@ -35,6 +36,9 @@ const MAX_RETURN_TIME: f64 = 1e4;
 pub struct SectionFlow<const D: usize, const N: usize> {
     flow: ModelFlow<N>,
     section: Section,
+    /// div F where it depends on the state, with its lane constants: its
+    /// integral along the reference's return joins the flux term.
+    divergence: Option<(&'static Tape, Vec<f64>)>,
 }
 
 impl<const D: usize, const N: usize> SectionFlow<D, N> {
@@ -81,6 +85,10 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
         let code: &Code = p.info.model.expect("a model's parameters");
         let section = code.section.as_ref().expect("a section model");
         SectionFlow {
+            divergence: code
+                .divergence_along
+                .as_ref()
+                .map(|tape| (tape, tape.lane_values(&p.values).constants)),
             flow: ModelFlow::new(p),
             section: Section {
                 state: section.state,
@@ -188,6 +196,19 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
                 }
             }
             advance(&self.flow, &mut ys, span / steps as f64, steps);
+            if let Some((tape, constants)) = &self.divergence {
+                // The same steps again for the reference alone, with div F
+                // integrated along them (its end is ys[0] to the bit).
+                let density = |y: &[f64; N]| -> f64 {
+                    let y: [[f64; 1]; N] = std::array::from_fn(|i| [y[i]]);
+                    let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[ZERO_PHASE], &y);
+                    out[0][0]
+                };
+                let (end, integral) =
+                    advance_integrating(&self.flow, &y, span / steps as f64, steps, density);
+                debug_assert_eq!(end, ys[0]);
+                stats.log_flux += integral;
+            }
             let mut columns = DMatrix::<f64>::zeros(N, D);
             for i in 0..D {
                 for r in 0..N {
