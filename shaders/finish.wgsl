@@ -18,13 +18,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let r = lane * TRAJ;
     var cr = counts[r];
-    let y = load_state(r * TRAJ_STRIDE);
     var flags = cr.z;
     // The end of a whole iteration (always, in the transient), or of a part
     // (a sub-map), after which the reference runs on at its phase. A failed
     // reference stopped where it failed: its iterations end at once, each
     // reporting the failure in its last part.
     let last = cr.x >= control.steps_per_period || (cr.z & FLAG_NONFINITE) != 0u;
+#ifdef WRAP
+    // A model's angles into [-π, π) at the end of an iteration (twin of
+    // System::wrap on the CPU): the point, the restart and the copies'
+    // seeds, not the Jacobian, whose columns are differences of the
+    // copies' unwrapped images.
+    let y = select(load_state(r * TRAJ_STRIDE), wrap_angles(load_state(r * TRAJ_STRIDE)), last);
+#else
+    let y = load_state(r * TRAJ_STRIDE);
+#endif
     if (control.transient == 0u) {
         let part = select(cr.x / control.part_steps - 1u, control.parts - 1u, last);
         let slot = ((cr.w % control.ring) * control.parts + part) * control.lane_count + lane;

@@ -392,6 +392,7 @@ where
                     .0
             }
         };
+        system.wrap(&mut x);
         if !all_finite(&x) {
             return LaneAccumulator::<D>::new(settings, system.period(), plan).failed(n);
         }
@@ -436,6 +437,9 @@ where
     let mut failed: Vec<Option<usize>> = vec![None; lanes.len()];
     for n in 0..settings.transient {
         S::iterate_lanes(&systems, &mut xs, flow);
+        for (system, x) in systems.iter().zip(xs.iter_mut()) {
+            system.wrap(x);
+        }
         for (k, x) in xs.iter().enumerate() {
             if failed[k].is_none() && !all_finite(x) {
                 failed[k] = Some(n);
@@ -472,7 +476,9 @@ where
     for _ in 0..settings.iterations {
         let mut stats = IterationStats::default();
         jacobians.clear();
-        let next = step::<D, S>(system, flow, settings, plan, &x, &mut stats, &mut jacobians);
+        let mut next = step::<D, S>(system, flow, settings, plan, &x, &mut stats, &mut jacobians);
+        // After the Jacobian: its columns are differences of unwrapped images.
+        system.wrap(&mut next);
         if !acc.push(&next, &jacobians, &stats) {
             break;
         }

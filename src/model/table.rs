@@ -18,6 +18,10 @@ pub struct Model {
     pub equations: Vec<Expr>,
     pub map: Map,
     pub events: Vec<Event>,
+    /// States that are angles (`angles = ["theta"]`): wrapped into
+    /// [-π, π) at the end of every map iteration, so that a rotating
+    /// pendulum's angle stays of size π and its perturbation with it.
+    pub angles: Vec<usize>,
 }
 
 /// How the flow is reduced to a map.
@@ -140,7 +144,15 @@ impl Model {
             root,
             key,
             "a model",
-            &["name", "states", "parameters", "equations", "map", "events"],
+            &[
+                "name",
+                "states",
+                "parameters",
+                "equations",
+                "map",
+                "events",
+                "angles",
+            ],
         )?;
         let name = match root.get("name") {
             Some(v) => string(v, &at("name"))?.to_owned(),
@@ -357,6 +369,32 @@ impl Model {
                 });
             }
         }
+        let angles_key = at("angles");
+        let mut angles = Vec::new();
+        if let Some(value) = root.get("angles") {
+            let items = value
+                .as_array()
+                .ok_or_else(|| invalid(&angles_key, "expected an array of state names"))?;
+            for item in items {
+                let name = string(item, &angles_key)?;
+                let state = states.iter().position(|s| s == name).ok_or_else(|| {
+                    invalid(
+                        &angles_key,
+                        format!("'{name}' is not a state (states: {})", states.join(", ")),
+                    )
+                })?;
+                if angles.contains(&state) {
+                    return Err(invalid(&angles_key, format!("'{name}' is listed twice")));
+                }
+                if matches!(map, Map::Section { .. }) {
+                    return Err(invalid(
+                        &angles_key,
+                        "angles in a model with a Poincaré section are not supported yet",
+                    ));
+                }
+                angles.push(state);
+            }
+        }
         Ok(Model {
             name,
             names,
@@ -364,6 +402,7 @@ impl Model {
             equations,
             map,
             events,
+            angles,
         })
     }
 

@@ -203,7 +203,32 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
             },
         );
     }
+    if !model.angles.is_empty() {
+        // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
+        // with Rust's π and 2π to the bit.
+        let _ = writeln!(
+            w,
+            "\n// The angles, into [-π, π) at the end of each map iteration.\n\
+             fn wrap_angles(y: State) -> State {{\n    var w = y;"
+        );
+        for &i in &model.angles {
+            let _ = writeln!(
+                w,
+                "    w[{i}] = w[{i}] - {tau} * floor((w[{i}] + {pi}) / {tau}); // {}",
+                names.states[i],
+                tau = literal(std::f64::consts::TAU),
+                pi = literal(std::f64::consts::PI),
+            );
+        }
+        let _ = writeln!(w, "    return w;\n}}");
+    }
     Ok(out)
+}
+
+/// Whether a system file wraps angles (`wrap_angles`), for the `WRAP`
+/// define of the finish kernel.
+pub fn wraps_angles(system: &str) -> bool {
+    system.contains("fn wrap_angles(")
 }
 
 /// The system file of `code` for `SystemInfo::wgsl` (kept for the

@@ -375,6 +375,11 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         None
     }
 
+    /// Brings a map point to its canonical form at the end of an iteration:
+    /// a model's angles into [-π, π) (see `model::Model::angles`); nothing
+    /// for most systems.
+    fn wrap(&self, _x: &mut [f64; D]) {}
+
     /// The map's first point from the scene's initial state: the state
     /// itself, or for a Poincaré map the first crossing of its section from
     /// a point of the flow (NaN where there is none).

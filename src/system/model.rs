@@ -507,6 +507,13 @@ fn expected_sum(p: &Params, crossings_per_time: &[f64]) -> f64 {
     sum
 }
 
+/// θ in [-π, π): θ - 2π·floor((θ + π)/2π). Twin of the generated
+/// `wrap_angles` of `model::wgsl`, operation for operation.
+pub fn wrap_angle(theta: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    theta - TAU * ((theta + PI) / TAU).floor()
+}
+
 fn walls_at(code: &Code, params: &[f64]) -> Vec<Wall> {
     code.walls
         .iter()
@@ -668,6 +675,12 @@ impl<const D: usize> System<D> for ModelFlow<D> {
 
     fn admits(&self, y: &[f64; D]) -> bool {
         self.walls.iter().all(|w| w.gap(y) <= 0.0)
+    }
+
+    fn wrap(&self, x: &mut [f64; D]) {
+        for &i in &self.code.model.angles {
+            x[i] = wrap_angle(x[i]);
+        }
     }
 }
 

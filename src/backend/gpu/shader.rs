@@ -132,6 +132,13 @@ impl Variant {
         if !self.system.is_flow {
             d.insert("MAP");
         }
+        if self
+            .system
+            .wgsl
+            .is_some_and(crate::model::wgsl::wraps_angles)
+        {
+            d.insert("WRAP");
+        }
         match self.precision {
             Precision::F32 => {
                 d.insert("COMPENSATED");
