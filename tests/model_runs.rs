@@ -666,3 +666,21 @@ fn an_angle_is_wrapped_after_the_jacobian_and_keeps_the_pendulum_s_sum_rule() {
         worst(&wrapped)
     );
 }
+
+#[test]
+fn a_state_dependent_divergence_is_averaged_along_a_period_map_s_reference() {
+    // van der Pol: div F = μ(1 - x²), far from constant on the relaxation
+    // cycle.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [1.0, 1.5, 2.0]\n[integration]\nsteps_per_period = 1800\nsubmaps = 16\ntransient = 100\niterations = 100\n[run]\nbackend = \"cpu\"\n";
+    let report = run(&model_scene("van-der-pol.toml", body, &[]));
+    for (lane, expected) in report.lanes.iter().zip(&report.expected_sums) {
+        assert_eq!(lane.status, LaneStatus::Ok);
+        // μ = 3 at x = 0; the average over the cycle is far below.
+        assert!(*expected < -1.0, "{expected}");
+        assert!(
+            (lane.exponent_sum() - expected).abs() <= 1e-6,
+            "sum {} vs expected {expected}",
+            lane.exponent_sum()
+        );
+    }
+}

@@ -351,6 +351,7 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("seed-oscillator.toml", true),
         // A stop on the third of four states.
         ("two-mass-chain.toml", false),
+        ("van-der-pol.toml", true),
     ];
     let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     assert_eq!(runs, expected);

@@ -235,6 +235,47 @@ fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
     }
 }
 
+/// Steps one trajectory of a (forced) flow by `steps` RK4 steps of h from
+/// the forcing phase `phase`, as [`part_map_many`] steps it between impacts
+/// (the same stage phases and operations, so the same end), and integrates
+/// `density` along it by the same RK4: a quadrature state q' = density
+/// riding along, evaluated at the stage states. Returns the end and ∫
+/// density dt. For a flow without walls.
+pub fn advance_integrating<const D: usize, F: Flow<D>>(
+    flow: &F,
+    y: &[f64; D],
+    mut phase: Phase,
+    h: f64,
+    steps: usize,
+    density: impl Fn(&Phase, &[f64; D]) -> f64,
+) -> ([f64; D], f64) {
+    debug_assert!(flow.walls().is_empty());
+    let half = cos_sin(0.5 * flow.forcing_frequency() * h);
+    let h2 = 0.5 * h;
+    let sixth = h / 6.0;
+    let axpy = |y: &[f64; D], a: f64, k: &[f64; D]| -> [f64; D] {
+        std::array::from_fn(|i| y[i] + a * k[i])
+    };
+    let (mut y, mut integral) = (*y, 0.0);
+    for _ in 0..steps {
+        let [start, mid, end] = rk4::stage_phases(&phase, &half);
+        let k1 = flow.rhs(&start, &y);
+        let y2 = axpy(&y, h2, &k1);
+        let k2 = flow.rhs(&mid, &y2);
+        let y3 = axpy(&y, h2, &k2);
+        let k3 = flow.rhs(&mid, &y3);
+        let y4 = axpy(&y, h, &k3);
+        let k4 = flow.rhs(&end, &y4);
+        integral += sixth
+            * (density(&start, &y)
+                + 2.0 * (density(&mid, &y2) + density(&mid, &y3))
+                + density(&end, &y4));
+        y = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+        phase = end;
+    }
+    (y, integral)
+}
+
 /// The flows of the trajectories a batch steps, and their map periods.
 trait Flows<const D: usize> {
     type F: Flow<D>;

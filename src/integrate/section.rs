@@ -133,37 +133,6 @@ fn advance_batch<const N: usize, const W: usize, F: Flow<N>>(
     }
 }
 
-/// Steps one trajectory by `steps` RK4 steps of h, and integrates
-/// `density` along it by the same RK4 (a quadrature state q' = density(y)
-/// riding along, evaluated at the stage states): the end state, exactly
-/// [`advance`]'s, and ∫ density dt over the steps.
-pub fn advance_integrating<const N: usize, F: Flow<N>>(
-    flow: &F,
-    y: &[f64; N],
-    h: f64,
-    steps: usize,
-    density: impl Fn(&[f64; N]) -> f64,
-) -> ([f64; N], f64) {
-    let h2 = 0.5 * h;
-    let sixth = h / 6.0;
-    let axpy = |y: &[f64; N], a: f64, k: &[f64; N]| -> [f64; N] {
-        std::array::from_fn(|i| y[i] + a * k[i])
-    };
-    let (mut y, mut integral) = (*y, 0.0);
-    for _ in 0..steps {
-        let k1 = flow.rhs(&ZERO_PHASE, &y);
-        let y2 = axpy(&y, h2, &k1);
-        let k2 = flow.rhs(&ZERO_PHASE, &y2);
-        let y3 = axpy(&y, h2, &k2);
-        let k3 = flow.rhs(&ZERO_PHASE, &y3);
-        let y4 = axpy(&y, h, &k3);
-        let k4 = flow.rhs(&ZERO_PHASE, &y4);
-        integral += sixth * (density(&y) + 2.0 * (density(&y2) + density(&y3)) + density(&y4));
-        y = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
-    }
-    (y, integral)
-}
-
 /// The crossing inside the step from y0 to y1 (distance < 0 before, ≥ 0
 /// after): its offset s into the step and the state RK4 reaches there,
 /// with the section coordinate set to the plane exactly.

@@ -659,6 +659,8 @@ where
         let orbit_term = if self.time > 0.0 {
             self.period = self.time / self.done.max(1) as f64;
             self.log_flux / self.time
+        } else if self.log_flux != 0.0 {
+            self.log_flux / (self.done.max(1) as f64 * self.period)
         } else {
             0.0
         };

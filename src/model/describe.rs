@@ -96,9 +96,9 @@ pub fn describe(code: &Code) -> String {
                 "  div F = {} depends on the state: {}",
                 terms.join(" + "),
                 if code.divergence_along.is_some() {
-                    "integrated along the reference's returns (its time average)"
+                    "integrated along the reference (its time average)"
                 } else {
-                    "not averaged along a period map's orbit yet, so expected_sum is NaN"
+                    "not integrated through events yet, so expected_sum is NaN"
                 }
             );
         }

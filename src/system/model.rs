@@ -160,8 +160,9 @@ impl Code {
             .expect("a model has a state");
         let (divergence, divergence_along) = if !reads_state_or_time(&whole_divergence) {
             (Some(whole_divergence), None)
-        } else if section.is_some() {
-            let tape = Tape::compile([&whole_divergence], n, None).map_err(|(_, why)| {
+        } else if section.is_some() || walls.is_empty() {
+            let clock = equations.frequency.clone();
+            let tape = Tape::compile([&whole_divergence], n, clock).map_err(|(_, why)| {
                 Error::invalid(
                     format!("{key}.equations"),
                     format!(
@@ -189,6 +190,15 @@ impl Code {
             jacobian,
             section,
         })
+    }
+
+    /// The compiled divergence of a period map without walls whose
+    /// divergence depends on the state (see `ModelFlow::part_many`).
+    fn equations_divergence(&self) -> Option<&Tape> {
+        match (&self.section, self.walls.is_empty()) {
+            (None, true) => self.divergence_along.as_ref(),
+            _ => None,
+        }
     }
 
     /// The flow's states.
@@ -496,6 +506,7 @@ fn expected_sum(p: &Params, crossings_per_time: &[f64]) -> f64 {
     let code = code_of(p);
     let mut sum = match (&code.divergence, &code.divergence_along) {
         (Some(divergence), _) => divergence.eval(&[], &p.values, 0.0),
+        // Integrated along the orbit: in the lane's orbit term.
         (None, Some(_)) => 0.0,
         (None, None) => return f64::NAN,
     };
@@ -647,7 +658,24 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         phase: &mut Phase,
         stats: &mut [IterationStats],
     ) {
-        part_map_many(self, ys, self.period, flow, part, phase, stats)
+        let (start, start_phase) = (ys.first().copied(), *phase);
+        part_map_many(self, ys, self.period, flow, part, phase, stats);
+        // A divergence that depends on the state: integrated along the
+        // reference (the same steps again, alone), for the sum rule.
+        if let (Some(tape), Some(start)) = (&self.code.equations_divergence(), start) {
+            let h = self.period / flow.steps_per_period as f64;
+            let steps = part.steps(flow.steps_per_period).len();
+            let constants = tape.lane_values(&self.params).constants;
+            let density = |phase: &Phase, y: &[f64; D]| -> f64 {
+                let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+                let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[*phase], &y);
+                out[0][0]
+            };
+            let (end, integral) =
+                crate::integrate::advance_integrating(self, &start, start_phase, h, steps, density);
+            debug_assert_eq!(end, ys[0]);
+            stats[0].log_flux += integral;
+        }
     }
 
     fn iterate_exact(

@@ -16,7 +16,7 @@ use nalgebra::{DMatrix, SMatrix};
 use super::model::{Code, ModelFlow};
 use super::{FlowSettings, IterationStats, Params, Part, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
-use crate::integrate::section::{advance, advance_integrating, next_crossings, Section};
+use crate::integrate::section::{advance, next_crossings, Section};
 use crate::integrate::Flow;
 use crate::method::jacobian::Difference;
 use crate::method::lane::perturbation_at;
@@ -199,13 +199,19 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
             if let Some((tape, constants)) = &self.divergence {
                 // The same steps again for the reference alone, with div F
                 // integrated along them (its end is ys[0] to the bit).
-                let density = |y: &[f64; N]| -> f64 {
+                let density = |_: &Phase, y: &[f64; N]| -> f64 {
                     let y: [[f64; 1]; N] = std::array::from_fn(|i| [y[i]]);
                     let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[ZERO_PHASE], &y);
                     out[0][0]
                 };
-                let (end, integral) =
-                    advance_integrating(&self.flow, &y, span / steps as f64, steps, density);
+                let (end, integral) = crate::integrate::advance_integrating(
+                    &self.flow,
+                    &y,
+                    ZERO_PHASE,
+                    span / steps as f64,
+                    steps,
+                    density,
+                );
                 debug_assert_eq!(end, ys[0]);
                 stats.log_flux += integral;
             }
