@@ -482,10 +482,20 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
         report.validation = validate(scene, precision, &mut lanes);
         report
     });
+    // The kernels do not integrate a state-dependent divergence along the
+    // reference: on the GPU such a model's sum rule is unknown, not 0.
+    let orbit_unknown = gpu_report.is_some()
+        && scene
+            .system
+            .model
+            .is_some_and(|code| code.divergence_along.is_some());
     let expected_sums = lanes
         .iter()
         .enumerate()
         .map(|(k, lane)| {
+            if orbit_unknown {
+                return f64::NAN;
+            }
             let rates = lane.crossings_per_period.map(|c| c / lane.period);
             (scene.system.expected_sum)(&scene.lane_params(k), &rates) + lane.orbit_term
         })
