@@ -384,19 +384,26 @@ fn main() {
 
 /// Section 7: the seed's oscillator built in against the same system
 /// written as a model (models/seed-oscillator.toml, the built-in's bits),
-/// on the CPU path, on the impacts section's sweep (4096 values of η,
-/// 200 steps per period, transient 20, iterations 20, f64).
+/// on the CPU path and on the GPU adapter (f64), on the impacts section's
+/// sweep (4096 values of η, 200 steps per period, transient 20,
+/// iterations 20).
 fn models(repeats: usize) {
+    for backend in ["cpu", "gpu"] {
+        models_on(backend, repeats);
+    }
+}
+
+fn models_on(backend: &str, repeats: usize) {
     let (values, steps, transient, iterations) = (4096, 200, 20, 20);
     let lane_steps = (values * steps * (transient + 5 * iterations)) as f64;
     println!(
-        "\nModels ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}; CPU path, {} threads; medians of {repeats} runs after a warm-up)\n",
+        "\nModels on the {backend} path ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}, f64; {} CPU threads; medians of {repeats} runs after a warm-up)\n",
         rayon::current_num_threads()
     );
-    println!("| system | run s | lane-steps/s | vs built-in |");
-    println!("|---|---|---|---|");
+    println!("| system | run s | device s | lane-steps/s | vs built-in |");
+    println!("|---|---|---|---|---|");
     let rest = format!(
-        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"cpu\"\nvalidate = 0\n"
+        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"f64\"\nvalidate = 0\n"
     );
     let model = format!("{}/models/seed-oscillator.toml", env!("CARGO_MANIFEST_DIR"));
     let scenes = [
@@ -412,10 +419,14 @@ fn models(repeats: usize) {
     let mut builtin = None;
     for (name, text) in scenes {
         let scene = scene::parse(&text, "bench", "bench", &[]).expect("scene");
-        let (seconds, _) = time_runs(&scene, &Default::default(), repeats).expect("cpu runs");
+        let Some((seconds, device)) = time_runs(&scene, &Default::default(), repeats) else {
+            println!("| {name} | – | – | – | – |");
+            continue;
+        };
         let reference = *builtin.get_or_insert(seconds);
         println!(
-            "| {name} | {seconds:.3} | {:.3e} | {:.2}× |",
+            "| {name} | {seconds:.3} | {} | {:.3e} | {:.2}× |",
+            device.map_or("–".into(), |d| format!("{d:.3}")),
             lane_steps / seconds,
             reference / seconds
         );
