@@ -256,10 +256,17 @@ fn every_committed_scene_is_valid() {
         names,
         [
             "chaotic-window",
+            "duffing",
             "eta-f-map",
+            "forced-pendulum",
             "henon",
+            "impact-pair",
             "lorenz",
-            "seed-fig3"
+            "lorenz-section",
+            "rossler-section",
+            "seed-fig3",
+            "two-mass-chain",
+            "van-der-pol"
         ]
     );
 }
