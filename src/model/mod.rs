@@ -4,11 +4,13 @@
 //! So far: the expression tree ([`expr`]), with its parser, evaluation,
 //! symbolic derivatives (for the sum rule) and text form, and the `[model]`
 //! table checked and parsed into a [`Model`] ([`table`]); the CPU's
-//! compiled evaluator ([`tape`]) and the GPU's generated system file
+//! compiled evaluator ([`tape`], and its native code, [`jit`]) and the
+//! GPU's generated system file
 //! ([`wgsl`]) are both built from those trees.
 
 pub mod describe;
 pub mod expr;
+pub mod jit;
 pub mod table;
 pub mod tape;
 pub mod wgsl;

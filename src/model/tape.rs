@@ -242,6 +242,15 @@ impl Tape {
         out
     }
 
+    /// The tape as [`Tape::run`] runs it, for the JIT (`model::jit`): the
+    /// lowered instructions, the numbers (slots after the lane constants)
+    /// and the slot of each output. Slots are the states, cos and sin of
+    /// the clock, the lane constants, the numbers, then one result per
+    /// instruction, in that order.
+    pub(crate) fn lowered(&self) -> (&[Lowered], &[f64], &[u16]) {
+        (&self.lowered, &self.numbers, &self.output_slots)
+    }
+
     /// Rewrites the instructions over register-file slots (see
     /// [`Tape::run`]), fusing each product used once, by a sum or a
     /// difference, into it. Fails when the file would not fit.
@@ -386,7 +395,7 @@ impl<const W: usize> Registers<W> {
 
 /// An operation of the lowered tape.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Code {
+pub(crate) enum Code {
     Neg,
     Add,
     Sub,
@@ -403,11 +412,11 @@ enum Code {
 
 /// An instruction over register-file slots (see [`Tape::run`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct Lowered {
-    code: Code,
-    a: u16,
-    b: u16,
-    c: u16,
+pub(crate) struct Lowered {
+    pub(crate) code: Code,
+    pub(crate) a: u16,
+    pub(crate) b: u16,
+    pub(crate) c: u16,
 }
 
 /// A tape's lane constants and clock frequency at one lane's parameters.

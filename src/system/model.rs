@@ -20,6 +20,7 @@ use crate::integrate::clock::Phase;
 use crate::integrate::impact::MAX_WALLS;
 use crate::integrate::{part_map_many, rk4, time_map, time_map_many, Flow, Wall};
 use crate::model::expr::{Expr, Var, Written};
+use crate::model::jit::{Kind, Layout, Native};
 use crate::model::tape::{Registers, Tape};
 use crate::model::{Map, Model};
 
@@ -32,6 +33,9 @@ pub struct Code {
     pub model: Model,
     /// The equations, one output per state.
     pub equations: Tape,
+    /// The equations as native code, where the host allows (else the
+    /// tape's interpreter runs them).
+    pub native: Option<Native>,
     pub walls: Vec<Stop>,
     /// div F = Σ ∂F_i/∂x_i when it is a function of the parameters alone
     /// (then the flow contracts volume at a constant rate); `None` when it
@@ -181,9 +185,11 @@ impl Code {
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
+        let native = Native::compile(&equations);
         Ok(Code {
             model,
             equations,
+            native,
             walls,
             divergence,
             divergence_along,
@@ -553,10 +559,13 @@ pub struct ModelFlow<const D: usize> {
 impl<const D: usize> Flow<D> for ModelFlow<D> {
     fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
-        let out: [[f64; 1]; D] = self
-            .code
-            .equations
-            .eval(|j| [self.constants[j]], &[*phase], &y);
+        let out: [[f64; 1]; D] = match &self.code.native {
+            Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, &self.constants, &[]),
+            None => self
+                .code
+                .equations
+                .eval(|j| [self.constants[j]], &[*phase], &y),
+        };
         std::array::from_fn(|i| out[i][0])
     }
 
@@ -575,6 +584,10 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         y: &[[f64; W]; D],
         h: f64,
     ) -> [[f64; W]; D] {
+        if let Some(native) = self.native::<W>() {
+            let clock = stages.as_flattened();
+            return native.call(Kind::Step, Layout::Shared, y, clock, &self.constants, &[h]);
+        }
         let tape = &self.code.equations;
         let mut registers = Registers::new();
         tape.prepare(&mut registers, |j| [self.constants[j]; W]);
@@ -593,6 +606,25 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
+        let l = flows[0].constants.len();
+        if let Some(native) = flows[0].native::<W>().filter(|_| l <= EACH_CONSTANTS) {
+            // The slots' constants and stage phases side by side.
+            let mut lane = [[0.0; W]; EACH_CONSTANTS];
+            for (j, row) in lane[..l].iter_mut().enumerate() {
+                for k in 0..W {
+                    row[k] = flows[k].constants[j];
+                }
+            }
+            let mut clock = [[0.0; W]; 6];
+            for s in 0..3 {
+                for k in 0..W {
+                    clock[2 * s][k] = stages[k][s][0];
+                    clock[2 * s + 1][k] = stages[k][s][1];
+                }
+            }
+            let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
+            return native.call(Kind::Step, Layout::Each, y, clock, lane, h);
+        }
         let tape = &flows[0].code.equations;
         let mut registers = Registers::new();
         tape.prepare(&mut registers, |j| {
@@ -607,7 +639,17 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     }
 }
 
+/// The most lane constants [`ModelFlow::step_each`] gathers for the native
+/// code (on the stack, per step); a model with more runs the interpreter.
+const EACH_CONSTANTS: usize = 32;
+
 impl<const D: usize> ModelFlow<D> {
+    /// The native code of the equations, if there is one for batches of W.
+    #[inline(always)]
+    fn native<const W: usize>(&self) -> Option<&'static Native> {
+        self.code.native.as_ref().filter(|_| Native::has::<W>())
+    }
+
     /// The flow's Jacobian at the origin, at t = 0, as a matrix.
     fn jacobian_at_origin(&self) -> DMatrix<f64> {
         let values: Vec<f64> = self
