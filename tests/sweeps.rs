@@ -110,6 +110,70 @@ fn a_merged_sharded_grid_equals_one_run_byte_for_byte() {
     merged_equals_whole(&grid, 5, &["grid.csv", "bifurcation.csv"]);
 }
 
+/// The models issue's impact pair, inline, over a grid of (η, e).
+const MODEL_GRID: &str = r#"
+name = "model-grid"
+[model]
+name = "impact-pair"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 1.0
+gap = 1.0
+e = 0.8
+eta = 0.8
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v" }
+[sweep]
+parameter = "eta"
+values = [0.6, 0.9, 1.2, 1.8]
+[sweep.second]
+parameter = "e"
+values = [0.5, 0.9]
+[integration]
+steps_per_period = 120
+transient = 20
+iterations = 40
+[run]
+backend = "cpu"
+[output]
+bifurcation_points = 6
+plot = false
+"#;
+
+#[test]
+fn a_model_s_grid_shards_and_merges_like_a_built_in_s() {
+    merged_equals_whole(MODEL_GRID, 3, &["grid.csv", "bifurcation.csv"]);
+    // The grid's figure is drawn from a model's files too, and its columns
+    // name the events.
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(
+        dir.path(),
+        &MODEL_GRID.replace("plot = false", "plot = true"),
+        "out",
+        &[],
+    );
+    assert!(out.join("heat-map.png").exists());
+    let grid = std::fs::read_to_string(out.join("grid.csv")).unwrap();
+    let header = grid.lines().next().unwrap();
+    assert!(
+        header.starts_with("eta,e,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,right_stop_per_period,left_stop_per_period,"),
+        "{header}"
+    );
+    assert_eq!(grid.lines().count(), 1 + 8);
+}
+
 #[test]
 fn a_two_parameter_sweep_writes_the_grid_first_axis_fastest() {
     let dir = tempfile::tempdir().unwrap();
