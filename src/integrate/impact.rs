@@ -416,7 +416,14 @@ fn locate_newton<const D: usize, F: Flow<D>>(
     } else {
         return None;
     };
-    Some(newton_in_bracket(sub, wall, phase0, y0, hi, guess * h))
+    Some(newton_in_bracket(
+        |s| sub.step(phase0, y0, s).0,
+        |y| wall.gap(y),
+        |y| wall.speed(y),
+        wall.position,
+        hi,
+        guess * h,
+    ))
 }
 
 /// Iterations of the Hermite peak's safeguarded Newton: far more than it
@@ -424,22 +431,25 @@ fn locate_newton<const D: usize, F: Flow<D>>(
 /// bisection.
 const PEAK_ITERATIONS: usize = 64;
 
-/// Safeguarded Newton on g(s) = the gap of RK4(y0, s), with g'(s) ≈ the
-/// speed, in the bracket [0, hi]: bisects whenever Newton would leave the
-/// bracket.
-fn newton_in_bracket<const D: usize, F: Flow<D>>(
-    sub: &SubStep<F>,
-    wall: &Wall,
-    phase0: &Phase,
-    y0: &[f64; D],
+/// Safeguarded Newton on a crossing: g(s) = distance(at(s)), with g'(s) ≈
+/// rate(at(s)), in the bracket [0, hi] from s, bisecting whenever Newton
+/// would leave the bracket; g is resolved to 4 ulp of `scale` (where the
+/// surface lies). `at(s)` is RK4 re-stepped from the step's start, so the
+/// crossing lies on the integrator's own solution. The impact's and the
+/// Poincaré section's location.
+pub(crate) fn newton_in_bracket<const D: usize>(
+    at: impl Fn(f64) -> [f64; D],
+    distance: impl Fn(&[f64; D]) -> f64,
+    rate: impl Fn(&[f64; D]) -> f64,
+    scale: f64,
     mut hi: f64,
     mut s: f64,
 ) -> (f64, [f64; D]) {
-    let tolerance = 4.0 * f64::EPSILON * wall.position.abs().max(1.0);
+    let tolerance = 4.0 * f64::EPSILON * scale.abs().max(1.0);
     let mut lo = 0.0;
-    let mut y = sub.step(phase0, y0, s).0;
+    let mut y = at(s);
     for _ in 0..32 {
-        let g = wall.gap(&y);
+        let g = distance(&y);
         if g.abs() <= tolerance {
             break;
         }
@@ -448,7 +458,7 @@ fn newton_in_bracket<const D: usize, F: Flow<D>>(
         } else {
             lo = s;
         }
-        let newton = s - g / wall.speed(&y);
+        let newton = s - g / rate(&y);
         s = if newton > lo && newton < hi && newton.is_finite() {
             newton
         } else {
@@ -457,7 +467,7 @@ fn newton_in_bracket<const D: usize, F: Flow<D>>(
         if hi - lo <= f64::EPSILON * hi.abs() {
             break;
         }
-        y = sub.step(phase0, y0, s).0;
+        y = at(s);
     }
     (s, y)
 }

@@ -8,7 +8,7 @@
 //! structure-of-arrays batch, and each leaves the batch when it crosses.
 
 use super::clock::{Phase, ZERO_PHASE};
-use super::impact::Hermite;
+use super::impact::{newton_in_bracket, Hermite};
 use super::{rk4, vectorised, Flow};
 
 /// The plane y_state = at, crossed in `direction` (+1: increasing).
@@ -151,31 +151,14 @@ fn locate<const N: usize, F: Flow<N>>(
         section.rate(flow, y1),
         h,
     );
-    let tolerance = 4.0 * f64::EPSILON * section.at.abs().max(1.0);
-    let (mut lo, mut hi) = (0.0, h);
-    let mut s = hermite.first_root(0.0, 1.0) * h;
-    let mut y = at(s);
-    for _ in 0..32 {
-        let g = section.distance(&y);
-        if g.abs() <= tolerance {
-            break;
-        }
-        if g > 0.0 {
-            hi = s;
-        } else {
-            lo = s;
-        }
-        let newton = s - g / section.rate(flow, &y);
-        s = if newton > lo && newton < hi && newton.is_finite() {
-            newton
-        } else {
-            0.5 * (lo + hi)
-        };
-        if hi - lo <= f64::EPSILON * h {
-            break;
-        }
-        y = at(s);
-    }
+    let (s, mut y) = newton_in_bracket(
+        at,
+        |y| section.distance(y),
+        |y| section.rate(flow, y),
+        section.at,
+        h,
+        hermite.first_root(0.0, 1.0) * h,
+    );
     y[section.state] = section.at;
     (s, y)
 }
