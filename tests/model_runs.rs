@@ -714,3 +714,28 @@ fn the_seed_oscillator_as_a_model_agrees_with_the_exact_backend_at_periodic_eta(
     }
     assert!(worst <= 1e-9, "model against exact: {worst:e}");
 }
+
+#[test]
+fn a_mass_that_sticks_to_its_stop_collapses_its_own_two_exponents_only() {
+    // e = 0 on the chain's stop: at η = 0.6 the second mass is pressed onto
+    // the stop and rests there while the first moves on (the held flow),
+    // so its position and velocity are forgotten (two exponents -∞) and
+    // the first mass's two stay finite.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.6]\n[integration]\ntransient = 100\niterations = 100\n[run]\nbackend = \"cpu\"\n";
+    let report = run(&model_scene(
+        "two-mass-chain.toml",
+        body,
+        &["model.parameters.e=0.0"],
+    ));
+    let lane = &report.lanes[0];
+    assert_eq!(lane.status, LaneStatus::Collapsed { exponents: 2 });
+    assert!(
+        lane.exponents[..2]
+            .iter()
+            .all(|e| e.is_finite() && *e < 0.0),
+        "{:?}",
+        lane.exponents
+    );
+    assert!(lane.exponents[2..].iter().all(|e| *e == f64::NEG_INFINITY));
+    assert!(lane.crossings_per_period[0] > 0.0);
+}
