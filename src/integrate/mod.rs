@@ -1,6 +1,7 @@
 //! Integrating one map iteration of a flow: classical RK4 with fixed steps,
-//! wall impacts located inside the step that crosses the wall, and the
-//! closed-form propagator of the impact oscillator that serves as ground truth.
+//! wall impacts located inside the step that crosses the wall, returns to a
+//! Poincaré section ([`section`]), and the closed-form propagator of the
+//! impact oscillator that serves as ground truth.
 
 pub mod clock;
 pub mod closed_form;

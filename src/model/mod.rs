@@ -1,12 +1,13 @@
 //! A system as data (the models issue): what a scene's `[model]` table
 //! says, parsed once and read by every backend.
 //!
-//! So far: the expression tree ([`expr`]), with its parser, evaluation,
-//! symbolic derivatives (for the sum rule) and text form, and the `[model]`
-//! table checked and parsed into a [`Model`] ([`table`]); the CPU's
-//! compiled evaluator ([`tape`], and its native code, [`jit`]) and the
-//! GPU's generated system file
-//! ([`wgsl`]) are both built from those trees.
+//! The expression tree ([`expr`]), with its parser, evaluation, symbolic
+//! derivatives (for the sum rule) and text form; the `[model]` table
+//! checked and parsed into a [`Model`] ([`table`]); the CPU's compiled
+//! evaluator ([`tape`], and its native code, [`jit`]) and the GPU's
+//! generated system file ([`wgsl`]), both built from those trees; and
+//! `model check`'s report ([`describe`]). `system::model` and
+//! `system::section` make a compiled model a system like the built-ins.
 
 pub mod describe;
 pub mod expr;

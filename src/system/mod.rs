@@ -4,9 +4,10 @@
 //! iteration x_{n+1} = U(x_n) is computed (a map formula, or a flow integrated
 //! over one period with an optional wall), the period T of that iteration,
 //! the sum of exponents the divergence theorem predicts, and, when a closed
-//! form exists, the exact tangent map. Adding a system means adding its file
-//! here (and, for the GPU backend, its WGSL twin in `shaders/`) and one line in
-//! [`SYSTEMS`].
+//! form exists, the exact tangent map. A built-in system is its file here
+//! (and, for the GPU backend, its WGSL twin in `shaders/`) and one line in
+//! [`SYSTEMS`]; a user's system is a model ([`model`], [`section`]),
+//! described at run time from a scene's `[model]` table.
 
 pub mod henon;
 pub mod impact_oscillator;
