@@ -10,7 +10,7 @@
 //! tape's, one IEEE operation each in the tape's order (cranelift neither
 //! fuses a multiply into an add nor reassociates), so the bits are the
 //! interpreter's. The functions that are not one instruction call back
-//! into [`Func::apply`] (the same libm calls); `sqrt`, `abs` and negation
+//! into `Func::apply` (the same libm calls); `sqrt`, `abs` and negation
 //! are exact single instructions, the same in both.
 //!
 //! The interpreter stays the reference and the fallback: off x86_64, or

@@ -411,7 +411,7 @@ pub fn period_of<const D: usize, S: System<D>>(params: &Params) -> f64 {
     S::new(params).period()
 }
 
-/// [`SystemInfo::forcing_frequency`] from the flow's own [`Flow::forcing_frequency`].
+/// [`SystemInfo::forcing_frequency`] from the flow's own [`crate::integrate::Flow::forcing_frequency`].
 pub fn forcing_of<const D: usize, S: System<D> + crate::integrate::Flow<D>>(
     params: &Params,
 ) -> f64 {
