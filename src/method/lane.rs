@@ -138,7 +138,8 @@ pub fn not_run(
 pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSettings) -> LanePlan {
     let period = system.period();
     let requested = settings.flow.steps_per_period;
-    let needed = (period * system.stiffness() / MAX_STEP_RATE).ceil();
+    let (stiffness, contraction) = system.time_scales(&settings.initial_state, &settings.flow);
+    let needed = (period * stiffness / MAX_STEP_RATE).ceil();
     // A plan over MAX_STEPS_PER_PERIOD is not run (`LanePlan::affordable`);
     // `as` saturates an infinite or overflowing need.
     let steps_per_period = if needed > requested as f64 {
@@ -146,7 +147,7 @@ pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSett
     } else {
         requested
     };
-    let contraction = period * system.contraction();
+    let contraction = period * contraction;
     let parts = if let Some(fixed) = settings.submaps {
         fixed.clamp(1, steps_per_period)
     } else if settings.lyapunov && contraction > 0.0 {

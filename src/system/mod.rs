@@ -388,6 +388,14 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         std::array::from_fn(|i| initial[i])
     }
 
+    /// The stiffness and contraction ([`stiffness`](Self::stiffness),
+    /// [`contraction`](Self::contraction)) the lane's plan uses, given where
+    /// it starts (`initial`, the scene's initial state) and the requested
+    /// steps: by default the system's own estimates.
+    fn time_scales(&self, _initial: &[f64], _flow: &FlowSettings) -> (f64, f64) {
+        (self.stiffness(), self.contraction())
+    }
+
     /// Whether a trajectory may start at y: not behind a wall. A perturbed
     /// copy of a reference within δ of the wall would start behind it.
     fn admits(&self, _y: &[f64; D]) -> bool {

@@ -531,6 +531,20 @@ pub fn wrap_angle(theta: f64) -> f64 {
     theta - TAU * ((theta + PI) / TAU).floor()
 }
 
+/// Periods of the pilot that finds a nonlinear model's time scales.
+const PILOT_PERIODS: usize = 2;
+/// Samples of the Jacobian per pilot period.
+const PILOT_SAMPLES: usize = 32;
+
+/// (max |λ|, max -Re λ, at least 0) of a Jacobian's eigenvalues.
+fn eigen_scales(j: &DMatrix<f64>) -> (f64, f64) {
+    let eigen = j.complex_eigenvalues();
+    (
+        eigen.iter().map(|l| l.norm()).fold(0.0, f64::max),
+        eigen.iter().map(|l| -l.re).fold(0.0, f64::max),
+    )
+}
+
 fn walls_at(code: &Code, params: &[f64]) -> Vec<Wall> {
     code.walls
         .iter()
@@ -650,13 +664,13 @@ impl<const D: usize> ModelFlow<D> {
         self.code.native.as_ref().filter(|_| Native::has::<W>())
     }
 
-    /// The flow's Jacobian at the origin, at t = 0, as a matrix.
-    fn jacobian_at_origin(&self) -> DMatrix<f64> {
+    /// The flow's Jacobian at y and time t, as a matrix.
+    fn jacobian_at(&self, y: &[f64; D], t: f64) -> DMatrix<f64> {
         let values: Vec<f64> = self
             .code
             .jacobian
             .iter()
-            .map(|e| e.eval(&[0.0; D], &self.params, 0.0))
+            .map(|e| e.eval(y, &self.params, t))
             .collect();
         DMatrix::from_row_slice(D, D, &values)
     }
@@ -731,16 +745,55 @@ impl<const D: usize> System<D> for ModelFlow<D> {
 
     /// The largest |eigenvalue| of the Jacobian at the origin: exact for a
     /// flow linear between impacts (the seed's oscillator gives 1, as its
-    /// hand-written twin does), an estimate for a nonlinear one.
+    /// hand-written twin does), an estimate for a nonlinear one (see
+    /// `time_scales`).
     fn stiffness(&self) -> f64 {
-        let eigen = self.jacobian_at_origin().complex_eigenvalues();
-        eigen.iter().map(|l| l.norm()).fold(0.0, f64::max)
+        eigen_scales(&self.jacobian_at(&[0.0; D], 0.0)).0
     }
 
     /// The fastest decay rate at the origin, -min Re λ (0 if none decays).
     fn contraction(&self) -> f64 {
-        let eigen = self.jacobian_at_origin().complex_eigenvalues();
-        eigen.iter().map(|l| -l.re).fold(0.0, f64::max)
+        eigen_scales(&self.jacobian_at(&[0.0; D], 0.0)).1
+    }
+
+    /// A flow whose Jacobian depends on the state (or time) has its time
+    /// scales where its orbit goes, not at the origin (van der Pol's
+    /// origin is unstable; it contracts on its relaxation cycle): the
+    /// largest over the origin and a pilot of [`PILOT_PERIODS`] periods
+    /// from the initial state, sampled [`PILOT_SAMPLES`] times a period. A
+    /// constant Jacobian (a flow linear between impacts) is read at the
+    /// origin alone, as [`stiffness`](System::stiffness) does.
+    fn time_scales(&self, initial: &[f64], flow: &FlowSettings) -> (f64, f64) {
+        let at_origin = (self.stiffness(), self.contraction());
+        if self.code.jacobian.iter().all(|e| !reads_state_or_time(e)) || initial.len() != D {
+            return at_origin;
+        }
+        let mut y: [f64; D] = std::array::from_fn(|i| initial[i]);
+        let mut scales = at_origin;
+        let mut stats = [IterationStats::default()];
+        for _ in 0..PILOT_PERIODS {
+            let mut phase = crate::integrate::clock::ZERO_PHASE;
+            for part in Part::all(PILOT_SAMPLES) {
+                let t = self.period * part.index as f64 / PILOT_SAMPLES as f64;
+                let (stiffness, contraction) = eigen_scales(&self.jacobian_at(&y, t));
+                scales = (scales.0.max(stiffness), scales.1.max(contraction));
+                let mut ys = [y];
+                part_map_many(
+                    self,
+                    &mut ys,
+                    self.period,
+                    flow,
+                    part,
+                    &mut phase,
+                    &mut stats,
+                );
+                y = ys[0];
+                if !y.iter().all(|v| v.is_finite()) {
+                    return scales;
+                }
+            }
+        }
+        scales
     }
 
     fn admits(&self, y: &[f64; D]) -> bool {
