@@ -110,57 +110,32 @@ fn a_merged_sharded_grid_equals_one_run_byte_for_byte() {
     merged_equals_whole(&grid, 5, &["grid.csv", "bifurcation.csv"]);
 }
 
-/// The models issue's impact pair, inline, over a grid of (η, e).
-const MODEL_GRID: &str = r#"
-name = "model-grid"
-[model]
-name = "impact-pair"
-states = ["x", "v"]
-[model.parameters]
-zeta = 0.05
-f = 1.0
-gap = 1.0
-e = 0.8
-eta = 0.8
-[model.equations]
-x = "v"
-v = "-2*zeta*v - x + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-[[model.events]]
-name = "right stop"
-surface = "x - gap"
-reset = { v = "-e*v" }
-[[model.events]]
-name = "left stop"
-surface = "-gap - x"
-reset = { v = "-e*v" }
-[sweep]
-parameter = "eta"
-values = [0.6, 0.9, 1.2, 1.8]
-[sweep.second]
-parameter = "e"
-values = [0.5, 0.9]
-[integration]
-steps_per_period = 120
-transient = 20
-iterations = 40
-[run]
-backend = "cpu"
-[output]
-bifurcation_points = 6
-plot = false
-"#;
+/// The models issue's impact pair (models/impact-pair.toml, inlined so
+/// that the scene stands alone in a temporary folder) over a grid of (η, e).
+fn model_grid() -> String {
+    let model = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("models/impact-pair.toml"),
+    )
+    .unwrap();
+    format!(
+        "name = \"model-grid\"\n{model}\n\
+         [sweep]\nparameter = \"eta\"\nvalues = [0.6, 0.9, 1.2, 1.8]\n\
+         [sweep.second]\nparameter = \"e\"\nvalues = [0.5, 0.9]\n\
+         [integration]\nsteps_per_period = 120\ntransient = 20\niterations = 40\n\
+         [run]\nbackend = \"cpu\"\n[output]\nbifurcation_points = 6\nplot = false\n"
+    )
+}
 
 #[test]
 fn a_model_s_grid_shards_and_merges_like_a_built_in_s() {
-    merged_equals_whole(MODEL_GRID, 3, &["grid.csv", "bifurcation.csv"]);
+    let scene = model_grid();
+    merged_equals_whole(&scene, 3, &["grid.csv", "bifurcation.csv"]);
     // The grid's figure is drawn from a model's files too, and its columns
     // name the events.
     let dir = tempfile::tempdir().unwrap();
     let out = run(
         dir.path(),
-        &MODEL_GRID.replace("plot = false", "plot = true"),
+        &scene.replace("plot = false", "plot = true"),
         "out",
         &[],
     );

@@ -252,27 +252,18 @@ pub fn advance_integrating<const D: usize, F: Flow<D>>(
 ) -> ([f64; D], f64) {
     debug_assert!(flow.walls().is_empty());
     let half = cos_sin(0.5 * flow.forcing_frequency() * h);
-    let h2 = 0.5 * h;
     let sixth = h / 6.0;
-    let axpy = |y: &[f64; D], a: f64, k: &[f64; D]| -> [f64; D] {
-        std::array::from_fn(|i| y[i] + a * k[i])
-    };
     let (mut y, mut integral) = (*y, 0.0);
     for _ in 0..steps {
-        let [start, mid, end] = rk4::stage_phases(&phase, &half);
-        let k1 = flow.rhs(&start, &y);
-        let y2 = axpy(&y, h2, &k1);
-        let k2 = flow.rhs(&mid, &y2);
-        let y3 = axpy(&y, h2, &k2);
-        let k3 = flow.rhs(&mid, &y3);
-        let y4 = axpy(&y, h, &k3);
-        let k4 = flow.rhs(&end, &y4);
+        let phases = rk4::stage_phases(&phase, &half);
+        let [start, mid, end] = &phases;
+        let (next, [y1, y2, y3, y4]) = rk4::step_with_stages(flow, &phases, &y, h);
         integral += sixth
-            * (density(&start, &y)
-                + 2.0 * (density(&mid, &y2) + density(&mid, &y3))
-                + density(&end, &y4));
-        y = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
-        phase = end;
+            * (density(start, &y1)
+                + 2.0 * (density(mid, &y2) + density(mid, &y3))
+                + density(end, &y4));
+        y = next;
+        phase = *end;
     }
     (y, integral)
 }

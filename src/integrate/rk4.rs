@@ -38,14 +38,32 @@ pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
     y: &[f64; D],
     h: f64,
 ) -> [f64; D] {
+    step_with_stages(flow, phases, y, h).0
+}
+
+/// [`step_at`], also returning the four stage states the right-hand side
+/// was evaluated at (y, y + h/2·k1, y + h/2·k2, y + h·k3): what a quantity
+/// integrated along the step by the same RK4 needs (a quadrature riding
+/// along, `integrate::advance_integrating`). Unused, they cost nothing.
+#[inline]
+pub fn step_with_stages<const D: usize, F: Flow<D> + ?Sized>(
+    flow: &F,
+    phases: &[Phase; 3],
+    y: &[f64; D],
+    h: f64,
+) -> ([f64; D], [[f64; D]; 4]) {
     let [start, mid, end] = phases;
     let h2 = 0.5 * h;
     let k1 = flow.rhs(start, y);
-    let k2 = flow.rhs(mid, &axpy(y, h2, &k1));
-    let k3 = flow.rhs(mid, &axpy(y, h2, &k2));
-    let k4 = flow.rhs(end, &axpy(y, h, &k3));
+    let y2 = axpy(y, h2, &k1);
+    let k2 = flow.rhs(mid, &y2);
+    let y3 = axpy(y, h2, &k2);
+    let k3 = flow.rhs(mid, &y3);
+    let y4 = axpy(y, h, &k3);
+    let k4 = flow.rhs(end, &y4);
     let sixth = h / 6.0;
-    std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+    let next = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+    (next, [*y, y2, y3, y4])
 }
 
 /// [`step_at`] for W trajectories held as structure of arrays, each with
