@@ -36,24 +36,7 @@ fn the_seed_oscillator_as_a_model_is_the_built_in_to_the_bit() {
     ] {
         let model = run(&model_scene("seed-oscillator.toml", body, &[model_e]));
         let reference = run(&common::scene(&builtin, &[builtin_e]));
-        let mut impacts = 0.0;
-        for (k, (a, b)) in model.lanes.iter().zip(&reference.lanes).enumerate() {
-            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-            assert_eq!(
-                bits(&a.exponents),
-                bits(&b.exponents),
-                "{model_e}, lane {k}"
-            );
-            assert_eq!(
-                bits(&a.bifurcation),
-                bits(&b.bifurcation),
-                "{model_e}, lane {k}"
-            );
-            assert_eq!(a.impacts_per_period, b.impacts_per_period);
-            assert_eq!(a.crossings_per_period[0], a.impacts_per_period);
-            assert_eq!(a.status, b.status);
-            impacts += a.impacts_per_period;
-        }
+        let impacts = common::assert_same_bits(&model, &reference, model_e);
         assert!(impacts > 10.0, "the sweep must exercise the wall");
         // The model's sum rule is derived from its expressions: div F = -2ζ
         // and e² per impact, the built-in's by hand.

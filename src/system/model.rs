@@ -11,7 +11,7 @@
 //! (the saltation determinant, e² for a stop whatever the flow), which the
 //! sum rule adds. Other surfaces are refused with their key.
 
-use nalgebra::{DMatrix, SMatrix};
+use nalgebra::DMatrix;
 
 use super::section::SectionFlow;
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
@@ -732,15 +732,6 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             debug_assert_eq!(end, ys[0]);
             stats[0].log_flux += integral;
         }
-    }
-
-    fn iterate_exact(
-        &self,
-        _x: &[f64; D],
-        _part: Part,
-        _stats: &mut IterationStats,
-    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
-        None
     }
 
     /// The largest |eigenvalue| of the Jacobian at the origin: exact for a

@@ -14,7 +14,7 @@
 use nalgebra::{DMatrix, SMatrix};
 
 use super::model::{Code, ModelFlow};
-use super::{FlowSettings, IterationStats, Params, Part, System};
+use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
 use crate::integrate::section::{advance, next_crossings, Section};
 use crate::integrate::Flow;
@@ -124,27 +124,6 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
             // of impacts applies to it as it is.
             st.slowest_impact = st.slowest_impact.min(speed);
         }
-    }
-
-    fn part_many(
-        &self,
-        xs: &mut [[f64; D]],
-        flow: &FlowSettings,
-        part: Part,
-        _phase: &mut Phase,
-        stats: &mut [IterationStats],
-    ) {
-        assert_eq!(part, Part::WHOLE, "a Poincaré map is not cut into parts");
-        self.iterate_many(xs, flow, stats);
-    }
-
-    fn iterate_exact(
-        &self,
-        _x: &[f64; D],
-        _part: Part,
-        _stats: &mut IterationStats,
-    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
-        None
     }
 
     /// The tangent map of one return, U'(x) = P·Φ(τ)·E, as factors: E

@@ -130,3 +130,32 @@ pub fn assert_answered_or_flagged(report: &Report, delta: f64) {
         }
     }
 }
+
+/// Asserts that two runs of the same sweep gave the same lanes to the bit
+/// (exponents, Poincaré points, impacts, status), with the impacts on the
+/// first wall all of them; returns the impacts per period summed over the
+/// lanes, for the caller to check the sweep met the wall. `what` names
+/// the comparison in messages.
+pub fn assert_same_bits(model: &Report, reference: &Report, what: &str) -> f64 {
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let mut impacts = 0.0;
+    for (k, (a, b)) in model.lanes.iter().zip(&reference.lanes).enumerate() {
+        assert_eq!(bits(&a.exponents), bits(&b.exponents), "{what}, lane {k}");
+        assert_eq!(
+            bits(&a.bifurcation),
+            bits(&b.bifurcation),
+            "{what}, lane {k}"
+        );
+        assert_eq!(
+            a.impacts_per_period, b.impacts_per_period,
+            "{what}, lane {k}"
+        );
+        assert_eq!(
+            a.crossings_per_period[0], a.impacts_per_period,
+            "{what}, lane {k}"
+        );
+        assert_eq!(a.status, b.status, "{what}, lane {k}");
+        impacts += a.impacts_per_period;
+    }
+    impacts
+}
