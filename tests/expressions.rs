@@ -9,6 +9,7 @@ fn names() -> Names {
     Names {
         states: vec!["x".into(), "v".into()],
         parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+        switches: Vec::new(),
     }
 }
 

@@ -383,18 +383,28 @@ fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
         ),
         (
             "surface = \"x - gap\"",
-            "surface = \"x*x - gap\"",
-            "model.events[0].surface:",
-        ),
-        (
-            "surface = \"x - gap\"",
-            "surface = \"v - gap\"",
-            "model.events[0].surface:",
+            "surface = \"x - gap*cos(eta*t)\"",
+            "model.events[0].surface: an event surface that reads the time is not supported yet",
         ),
         (
             "reset = { v = \"-e*v\" }\n[[",
-            "reset = { v = \"-e*v + 1\" }\n[[",
-            "model.events[0].reset:",
+            "reset = { v = \"-e*v*cos(t)\" }\n[[",
+            "model.events[0].reset.v: a reset that reads the time is not supported yet",
+        ),
+        (
+            "x = \"v\"\n",
+            "x = \"v*step(contact)\"\n",
+            "model.equations.x: step(...) takes the name of a switch (the model has none: declare [[model.switches]]) (column 8)",
+        ),
+        (
+            "[model.map]",
+            "[[model.switches]]\nname = \"contact\"\nsurface = \"x - t\"\n[model.map]",
+            "model.switches[0].surface: may not use the time 't'",
+        ),
+        (
+            "[model.map]",
+            "[[model.switches]]\nname = \"zeta\"\nsurface = \"x\"\n[model.map]",
+            "model.switches[0].name: 'zeta' is already a state or a parameter",
         ),
         (
             "e = 0.8",
@@ -550,7 +560,7 @@ fn a_section_needs_an_autonomous_flow_without_events() {
     refused(
         &with_event,
         &[],
-        "model.events: events in a model with a Poincaré section",
+        "model.events: events and switches in a model with a Poincaré section",
     );
     refused(
         &format!("{lorenz}\n[integration]\ninitial_state = [1.0, 1.0]\n"),

@@ -10,6 +10,7 @@
 use serde::Deserialize;
 
 use super::clock::{cos_sin, rotate, Phase};
+use super::surface::{self, InRegion, Surface};
 use super::{rk4, Flow};
 use crate::system::IterationStats;
 
@@ -138,8 +139,8 @@ impl<const D: usize, F: Flow<D>> Flow<D> for Held<'_, F> {
 /// from (with two coordinates, the whole state).
 #[allow(clippy::too_many_arguments)]
 pub fn stuck_step<const D: usize, F: Flow<D>>(
-    flow: &F,
-    walls: &[Wall],
+    base: &F,
+    region: &mut u32,
     stuck: usize,
     location: ImpactLocation,
     omega: f64,
@@ -148,13 +149,18 @@ pub fn stuck_step<const D: usize, F: Flow<D>>(
     h: f64,
     stats: &mut IterationStats,
 ) -> [f64; D] {
+    let flow = &InRegion {
+        flow: base,
+        region: *region,
+    };
+    let walls = base.walls();
     let wall = &walls[stuck];
     let rest = wall.on_wall(*y, 0.0);
     let at = |s: f64| rotate(phase, &cos_sin(omega * s));
     if pressing(flow, wall, phase, &rest) <= 0.0 {
         // Not pressed: a free departure from rest, like any other step.
-        let half = cos_sin(0.5 * omega * h);
-        return step(flow, walls, location, omega, phase, &half, &rest, h, stats).0;
+        let (y1, _) = rk4::step(flow, phase, &cos_sin(0.5 * omega * h), &rest, h);
+        return resolve(base, region, location, omega, phase, &rest, h, y1, stats);
     }
     stats.rank_loss = stats.rank_loss.max(2.min(D as u32));
     let held = Held { flow, wall: *wall };
@@ -186,27 +192,33 @@ pub fn stuck_step<const D: usize, F: Flow<D>>(
     }
     let release = at(hi);
     let rest_of_step = h - hi;
-    step(
+    let from = held_for(hi);
+    let (y1, _) = rk4::step(
         flow,
-        walls,
+        &release,
+        &cos_sin(0.5 * omega * rest_of_step),
+        &from,
+        rest_of_step,
+    );
+    resolve(
+        base,
+        region,
         location,
         omega,
         &release,
-        &cos_sin(0.5 * omega * rest_of_step),
-        &held_for(hi),
+        &from,
         rest_of_step,
+        y1,
         stats,
     )
-    .0
 }
 
 /// One RK4 step of size h from y at forcing phase `phase` (`half` rotates
-/// through ωh/2), with every impact inside it applied. Returns the state and
-/// the phase at the end of the step.
+/// through ωh/2) of a flow with walls alone, with every impact inside it
+/// applied. Returns the state and the phase at the end of the step.
 #[allow(clippy::too_many_arguments)]
 pub fn step<const D: usize, F: Flow<D>>(
     flow: &F,
-    walls: &[Wall],
     location: ImpactLocation,
     omega: f64,
     phase: &Phase,
@@ -215,14 +227,13 @@ pub fn step<const D: usize, F: Flow<D>>(
     h: f64,
     stats: &mut IterationStats,
 ) -> ([f64; D], Phase) {
+    debug_assert!(flow.surfaces().is_empty());
     let (y1, end) = rk4::step(flow, phase, half, y, h);
-    if !walls.iter().any(|w| reaches_wall(w, y, &y1)) {
+    if !flow.walls().iter().any(|w| reaches_wall(w, y, &y1)) {
         return (y1, end);
     }
-    (
-        resolve(flow, walls, location, omega, phase, y, h, y1, stats),
-        end,
-    )
+    let y1 = resolve(flow, &mut 0, location, omega, phase, y, h, y1, stats);
+    (y1, end)
 }
 
 /// Whether a step from y to y1 may contain an impact: it ends beyond the
@@ -232,12 +243,16 @@ pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], y1: &[f64; D]) ->
     wall.gap(y1) > 0.0 || (wall.speed(y) > 0.0 && wall.speed(y1) < 0.0)
 }
 
-/// Applies every impact inside the step [0, h] from (phase, y), whose plain
-/// RK4 image y1 reaches a wall ([`reaches_wall`]), in the order they happen.
+/// Applies every crossing inside the step [0, h] from (phase, y) of a
+/// trajectory in region `region` (which it updates), whose plain RK4 image
+/// y1 reaches a wall ([`reaches_wall`]) or a surface
+/// ([`surface::may_cross`]), in the order they happen: impacts, event
+/// resets, and switches of the field, each located on the RK4 solution of
+/// the field in force.
 #[allow(clippy::too_many_arguments)]
 pub fn resolve<const D: usize, F: Flow<D>>(
-    flow: &F,
-    walls: &[Wall],
+    base: &F,
+    region: &mut u32,
     location: ImpactLocation,
     omega: f64,
     phase: &Phase,
@@ -246,37 +261,112 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     y1: [f64; D],
     stats: &mut IterationStats,
 ) -> [f64; D] {
+    let walls = base.walls();
+    let surfaces = base.surfaces();
     // Sub-steps from (phase0, y0), `done` into the step.
-    let sub = SubStep { flow, omega };
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
+        let flow = &InRegion {
+            flow: base,
+            region: *region,
+        };
+        let sub = SubStep { flow, omega };
         let rest = h - done;
-        // The first wall met in the rest of the step.
+        // The first wall or surface met in the rest of the step: its index
+        // (walls first), offset and state.
         let mut first: Option<(usize, f64, [f64; D])> = None;
-        for (j, wall) in walls.iter().enumerate() {
-            let hit = match location {
-                ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
-                ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
-            };
+        let mut earliest = |j: usize, hit: Option<(f64, [f64; D])>| {
             if let Some((s, yc)) = hit {
                 if first.is_none_or(|(_, earliest, _)| s < earliest) {
                     first = Some((j, s, yc));
                 }
             }
+        };
+        for (j, wall) in walls.iter().enumerate() {
+            earliest(
+                j,
+                match location {
+                    ImpactLocation::Linear => locate_linear(wall, &y0, rest, &y1),
+                    ImpactLocation::Newton => locate_newton(&sub, wall, &phase0, &y0, rest, &y1),
+                },
+            );
+        }
+        if !surfaces.is_empty() {
+            let end = rotate(&phase0, &cos_sin(omega * rest));
+            let before = base.surface_values(*region, &phase0, &y0);
+            let after = base.surface_values(*region, &end, &y1);
+            for (j, &kind) in surfaces.iter().enumerate() {
+                let o = kind.orientation(*region);
+                let distance = |y: &[f64; D]| o * base.surface_values(*region, &phase0, y).g[j];
+                let rate = |y: &[f64; D]| o * base.surface_values(*region, &phase0, y).rate[j];
+                earliest(
+                    walls.len() + j,
+                    locate(
+                        &sub,
+                        location,
+                        &phase0,
+                        &y0,
+                        rest,
+                        &y1,
+                        (o * before.g[j], o * before.rate[j]),
+                        (o * after.g[j], o * after.rate[j]),
+                        distance,
+                        rate,
+                    ),
+                );
+            }
         }
         let Some((j, s, yc)) = first else {
             return y1;
         };
-        let wall = &walls[j];
         let phase_c = rotate(&phase0, &cos_sin(omega * s));
         done += s;
+        if j >= walls.len() {
+            // A general surface.
+            let j = j - walls.len();
+            match cross(base, region, j, &phase_c, &yc, stats) {
+                Some(after) => {
+                    phase0 = phase_c;
+                    y0 = after;
+                    let flow = &InRegion {
+                        flow: base,
+                        region: *region,
+                    };
+                    y1 = rk4::step(
+                        flow,
+                        &phase0,
+                        &cos_sin(0.5 * omega * (h - done)),
+                        &y0,
+                        h - done,
+                    )
+                    .0;
+                    continue;
+                }
+                // Not resolved (flagged): the rest of the step in the field now in force.
+                None => {
+                    let flow = &InRegion {
+                        flow: base,
+                        region: *region,
+                    };
+                    return rk4::step(
+                        flow,
+                        &phase_c,
+                        &cos_sin(0.5 * omega * (h - done)),
+                        &yc,
+                        h - done,
+                    )
+                    .0;
+                }
+            }
+        }
+        let wall = &walls[j];
         let speed = wall.speed(&yc);
         if speed <= 0.0 {
             // Reaching the wall without approaching it: the mass arrives at
             // rest, pressed into the wall. It sticks.
             return stuck_step(
-                flow,
-                walls,
+                base,
+                region,
                 j,
                 location,
                 omega,
@@ -290,7 +380,12 @@ pub fn resolve<const D: usize, F: Flow<D>>(
         stats.impacts += 1;
         stats.crossings[j] += 1;
         let rebound = wall.restitution * speed;
-        let push = pressing(flow, wall, &phase_c, &wall.on_wall(yc, 0.0));
+        let push = pressing(
+            &flow_in(base, *region),
+            wall,
+            &phase_c,
+            &wall.on_wall(yc, 0.0),
+        );
         // e = 0 stops the mass dead; a rebound whose bounces accumulate (the
         // flight time 2v/a shrinks by e each bounce, summing to
         // 2v/(a(1 - e))) within a sliver of the step ends at rest as well.
@@ -300,8 +395,8 @@ pub fn resolve<const D: usize, F: Flow<D>>(
         {
             stats.rank_loss = stats.rank_loss.max(1);
             return stuck_step(
-                flow,
-                walls,
+                base,
+                region,
                 j,
                 location,
                 omega,
@@ -313,7 +408,12 @@ pub fn resolve<const D: usize, F: Flow<D>>(
         }
         phase0 = phase_c;
         y0 = wall.on_wall(yc, -rebound);
-        y1 = sub.step(&phase0, &y0, h - done).0;
+        y1 = SubStep {
+            flow: &flow_in(base, *region),
+            omega,
+        }
+        .step(&phase0, &y0, h - done)
+        .0;
     }
     // Bounces this dense under a force pressing into the wall are a mass
     // effectively at rest (with e = 1 and damping their heights shrink only
@@ -321,11 +421,16 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     // the iteration cannot be trusted.
     for (j, wall) in walls.iter().enumerate() {
         if y0[wall.coordinate] == wall.position
-            && pressing(flow, wall, &phase0, &wall.on_wall(y0, 0.0)) > 0.0
+            && pressing(
+                &flow_in(base, *region),
+                wall,
+                &phase0,
+                &wall.on_wall(y0, 0.0),
+            ) > 0.0
         {
             return stuck_step(
-                flow,
-                walls,
+                base,
+                region,
                 j,
                 location,
                 omega,
@@ -338,6 +443,115 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     }
     stats.chattering = true;
     walls.iter().fold(y1, |y, w| clamp_to_wall(w, y))
+}
+
+fn flow_in<F>(flow: &F, region: u32) -> InRegion<'_, F> {
+    InRegion { flow, region }
+}
+
+/// Crosses general surface j of `base` at y (on it, at phase `phase`) for a
+/// trajectory in `region`: an event's reset, or a switch's flip of the
+/// region; counts it and adds ln |det S| to the iteration's volume record.
+/// `None` where the crossing cannot be resolved (the iteration is
+/// flagged): a reset that leaves the state on or behind its surface, or a
+/// switch into sliding.
+fn cross<const D: usize, F: Flow<D>>(
+    base: &F,
+    region: &mut u32,
+    j: usize,
+    phase: &Phase,
+    y: &[f64; D],
+    stats: &mut IterationStats,
+) -> Option<[f64; D]> {
+    let walls = base.walls().len();
+    let kind = base.surfaces()[j];
+    let before = base.surface_values(*region, phase, y);
+    let approach = kind.orientation(*region) * before.rate[j];
+    stats.slowest_impact = stats.slowest_impact.min(approach);
+    stats.crossings[walls + j] += 1;
+    match kind {
+        Surface::Event => {
+            let (after, dr) = base.reset(j, y);
+            let now = base.surface_values(*region, phase, &after);
+            if !(now.g[j] <= 0.0 && now.rate[j] < 0.0) {
+                // The reset does not send the motion back where it lives.
+                stats.chattering = true;
+                return None;
+            }
+            stats.log_flux += surface::event_log_det(
+                &dr,
+                &base.surface_gradient(j, y),
+                &base.rhs_in(*region, phase, y),
+                &base.rhs_in(*region, phase, &after),
+            );
+            if !stats.log_flux.is_finite() {
+                stats.rank_loss = stats.rank_loss.max(1);
+            }
+            Some(after)
+        }
+        Surface::Switch { bit } => {
+            *region ^= 1 << bit;
+            let leaving = base.surface_values(*region, phase, y).rate[j];
+            if leaving * before.rate[j] <= 0.0 {
+                // Both fields point into the surface: Filippov sliding.
+                stats.sliding = true;
+                return None;
+            }
+            // det S = (∇g·F⁺)/(∇g·F⁻).
+            stats.log_flux += (leaving / before.rate[j]).ln();
+            Some(*y)
+        }
+    }
+}
+
+/// Locates the crossing of a general surface inside the step [0, h] from
+/// (phase0, y0) to y1, given its oriented distance and rate (> 0 beyond
+/// and approaching) at both ends, as [`locate_newton`] locates an impact:
+/// the root of the Hermite interpolant, then Newton on re-stepped RK4; an
+/// excursion across and back inside the step is found at the Hermite peak.
+#[allow(clippy::too_many_arguments)]
+fn locate<const D: usize, F: Flow<D>>(
+    sub: &SubStep<F>,
+    location: ImpactLocation,
+    phase0: &Phase,
+    y0: &[f64; D],
+    h: f64,
+    y1: &[f64; D],
+    start: (f64, f64),
+    end: (f64, f64),
+    distance: impl Fn(&[f64; D]) -> f64,
+    rate: impl Fn(&[f64; D]) -> f64,
+) -> Option<(f64, [f64; D])> {
+    if location == ImpactLocation::Linear {
+        if end.0 <= 0.0 {
+            return None;
+        }
+        let theta = (-start.0 / (end.0 - start.0)).clamp(0.0, 1.0);
+        return Some((
+            theta * h,
+            std::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
+        ));
+    }
+    let hermite = Hermite::new(start.0, start.1, end.0, end.1, h);
+    let (hi, guess) = if end.0 > 0.0 {
+        (h, hermite.first_root(0.0, 1.0))
+    } else if start.1 > 0.0 && end.1 < 0.0 {
+        let peak = hermite.peak()?;
+        if distance(&sub.step(phase0, y0, peak * h).0) <= 0.0 {
+            return None;
+        }
+        (peak * h, hermite.first_root(0.0, peak))
+    } else {
+        return None;
+    };
+    Some(newton_in_bracket(
+        |s| sub.step(phase0, y0, s).0,
+        distance,
+        rate,
+        y0.iter().fold(1.0, |m: f64, v| m.max(v.abs())),
+        hi,
+        guess * h,
+    ))
 }
 
 /// RK4 steps of any size s from a given phase: the re-steps of impact location.
@@ -571,8 +785,7 @@ mod tests {
         stats: &mut IterationStats,
     ) -> [f64; D] {
         step(
-            flow,
-            std::slice::from_ref(wall),
+            &Walled { flow, wall: *wall },
             location,
             0.0,
             &ZERO_PHASE,
@@ -582,6 +795,22 @@ mod tests {
             stats,
         )
         .0
+    }
+
+    /// A flow with one wall added.
+    struct Walled<'a, F> {
+        flow: &'a F,
+        wall: Wall,
+    }
+
+    impl<const D: usize, F: Flow<D>> Flow<D> for Walled<'_, F> {
+        fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+            self.flow.rhs(phase, y)
+        }
+
+        fn walls(&self) -> &[Wall] {
+            std::slice::from_ref(&self.wall)
+        }
     }
 
     /// X'' = a > 0: a ball thrown at a ceiling by constant gravity. RK4 is

@@ -8,8 +8,14 @@ pub mod closed_form;
 pub mod impact;
 pub mod rk4;
 pub mod section;
+pub mod surface;
 
 pub use impact::{ImpactLocation, Wall};
+pub use surface::{InRegion, Surface, SurfaceValues};
+
+/// Crossings counted apart per iteration: the walls', then the general
+/// surfaces' (the output's event columns).
+pub const MAX_EVENTS: usize = impact::MAX_WALLS + surface::MAX_SURFACES;
 
 use crate::system::{FlowSettings, IterationStats, Part};
 use clock::{cos_sin, Phase, ZERO_PHASE};
@@ -32,6 +38,64 @@ pub trait Flow<const D: usize>: Sync {
     /// flow of one batch has the same number.
     fn walls(&self) -> &[Wall] {
         &[]
+    }
+
+    /// The flow's general surfaces ([`surface`]): events with resets and
+    /// switches of the field, at most [`surface::MAX_SURFACES`]; their
+    /// crossings are counted after the walls'. Every flow of one batch
+    /// has the same.
+    fn surfaces(&self) -> &[Surface] {
+        &[]
+    }
+
+    /// g of every surface at y, and its rate ∇g·F along the field of
+    /// `region`, at forcing phase `phase`.
+    fn surface_values(&self, _region: u32, _phase: &Phase, _y: &[f64; D]) -> SurfaceValues {
+        unreachable!("a flow with surfaces evaluates them")
+    }
+
+    /// ∇g of surface j at y.
+    fn surface_gradient(&self, _j: usize, _y: &[f64; D]) -> [f64; D] {
+        unreachable!("a flow with surfaces evaluates them")
+    }
+
+    /// Event j's reset of y (on its surface) and the reset's Jacobian DR.
+    fn reset(&self, _j: usize, _y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
+        unreachable!("a flow with events resets")
+    }
+
+    /// The field in region `region` of the switches (bit b set: on the
+    /// positive side of switch b); a flow without switches has one.
+    #[inline(always)]
+    fn rhs_in(&self, _region: u32, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        self.rhs(phase, y)
+    }
+
+    /// [`step_shared`](Self::step_shared) in region `region`.
+    #[inline(always)]
+    fn step_shared_in<const W: usize>(
+        &self,
+        _region: u32,
+        stages: &[Phase; 3],
+        y: &[[f64; W]; D],
+        h: f64,
+    ) -> [[f64; W]; D] {
+        self.step_shared(stages, y, h)
+    }
+
+    /// [`step_each`](Self::step_each), each trajectory in its region.
+    #[inline(always)]
+    fn step_each_in<const W: usize>(
+        flows: &[&Self; W],
+        _regions: &[u32; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D]
+    where
+        Self: Sized,
+    {
+        Self::step_each(flows, stages, y, h)
     }
 
     /// One RK4 step ([`rk4::step_at`]) of W trajectories of this flow (a
@@ -268,6 +332,12 @@ pub fn advance_integrating<const D: usize, F: Flow<D>>(
     (y, integral)
 }
 
+/// Trajectory k of a structure-of-arrays batch.
+#[inline(always)]
+fn column<const D: usize, const W: usize>(y: &[[f64; W]; D], k: usize) -> [f64; D] {
+    std::array::from_fn(|i| y[i][k])
+}
+
 /// The flows of the trajectories a batch steps, and their map periods.
 trait Flows<const D: usize> {
     type F: Flow<D>;
@@ -282,6 +352,14 @@ trait Flows<const D: usize> {
     /// stage phases (when shared, the first's) with its step size.
     fn step<const W: usize>(
         &self,
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D];
+    /// [`step`](Self::step), each trajectory in its region of the switches.
+    fn step_in<const W: usize>(
+        &self,
+        regions: &[u32; W],
         stages: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
@@ -311,6 +389,20 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
     ) -> [[f64; W]; D] {
         self.0.step_shared(&stages[0], y, h[0])
     }
+    #[inline(always)]
+    fn step_in<const W: usize>(
+        &self,
+        regions: &[u32; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D] {
+        if regions.iter().all(|&r| r == regions[0]) {
+            self.0.step_shared_in(regions[0], &stages[0], y, h[0])
+        } else {
+            F::step_each_in(&[self.0; W], regions, stages, y, h)
+        }
+    }
 }
 
 /// A flow and a period per trajectory (unused slots repeat the first).
@@ -338,6 +430,16 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         h: &[f64; W],
     ) -> [[f64; W]; D] {
         F::step_each(&std::array::from_fn(|k| self.of(k)), stages, y, h)
+    }
+    #[inline(always)]
+    fn step_in<const W: usize>(
+        &self,
+        regions: &[u32; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D] {
+        F::step_each_in(&std::array::from_fn(|k| self.of(k)), regions, stages, y, h)
     }
 }
 
@@ -373,6 +475,18 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
         std::array::from_fn(|j| std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side)));
     let mut y: [[f64; W]; D] =
         std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
+    // General surfaces: each trajectory's region of the switches, and its
+    // surfaces' values and rates at the step's start.
+    let surfaces = flows.of(0).surfaces();
+    let mut regions = [0u32; W];
+    let mut at_start = [SurfaceValues::default(); W];
+    if !surfaces.is_empty() {
+        for k in 0..n {
+            let (flow, yk) = (flows.of(k), column(&y, k));
+            regions[k] = surface::region_of(flow, &phases[k], &yk);
+            at_start[k] = flow.surface_values(regions[k], &phases[k], &yk);
+        }
+    }
     for _ in part.steps(steps) {
         // The batch's step (see `Flow::step_shared`), then detection.
         let shared = rk4::stage_phases(&phases[0], &half[0]);
@@ -383,12 +497,16 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
                 rk4::stage_phases(&phases[k], &half[k])
             }
         });
-        let mut y1 = flows.step(&stages, &y, &h);
+        let mut y1 = if surfaces.is_empty() {
+            flows.step(&stages, &y, &h)
+        } else {
+            flows.step_in(&regions, &stages, &y, &h)
+        };
         let next: [Phase; W] = std::array::from_fn(|k| stages[k][2]);
+        let mut meets = [false; W];
         if count > 0 {
             // Detection only: at rest on a wall before the step, or
             // reaching it (or turning back inside the step) after it.
-            let mut meets = [false; W];
             for (j, wall) in walls[0].iter().enumerate() {
                 let (c, v) = (wall.coordinate, wall.velocity);
                 let (position, side) = (&position[j], &side[j]);
@@ -398,49 +516,68 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
                         | ((side[k] * y[v][k] > 0.0) & (side[k] * y1[v][k] < 0.0));
                 }
             }
-            let mut any = false;
-            for &m in &meets[..n] {
-                any |= m;
+        }
+        let mut at_end = [SurfaceValues::default(); W];
+        if !surfaces.is_empty() {
+            for k in 0..n {
+                at_end[k] = flows
+                    .of(k)
+                    .surface_values(regions[k], &next[k], &column(&y1, k));
+                for (j, &kind) in surfaces.iter().enumerate() {
+                    meets[k] |= surface::may_cross(
+                        kind,
+                        regions[k],
+                        (at_start[k].g[j], at_start[k].rate[j]),
+                        (at_end[k].g[j], at_end[k].rate[j]),
+                    );
+                }
             }
-            if any {
-                for k in (0..n).filter(|&k| meets[k]) {
-                    let w = walls[k];
-                    let flow = flows.of(k);
-                    let before: [f64; D] = std::array::from_fn(|i| y[i][k]);
-                    let after = if let Some(j) = impact::resting_on(w, &before) {
-                        impact::stuck_step(
-                            flow,
-                            w,
-                            j,
-                            location,
-                            omega[k],
-                            &phases[k],
-                            &before,
-                            h[k],
-                            &mut stats[k],
-                        )
-                    } else {
-                        let plain: [f64; D] = std::array::from_fn(|i| y1[i][k]);
-                        impact::resolve(
-                            flow,
-                            w,
-                            location,
-                            omega[k],
-                            &phases[k],
-                            &before,
-                            h[k],
-                            plain,
-                            &mut stats[k],
-                        )
-                    };
-                    for i in 0..D {
-                        y1[i][k] = after[i];
-                    }
+        }
+        let mut any = false;
+        for &m in &meets[..n] {
+            any |= m;
+        }
+        if any {
+            for k in (0..n).filter(|&k| meets[k]) {
+                let w = walls[k];
+                let flow = flows.of(k);
+                let before = column(&y, k);
+                let after = if let Some(j) = impact::resting_on(w, &before) {
+                    impact::stuck_step(
+                        flow,
+                        &mut regions[k],
+                        j,
+                        location,
+                        omega[k],
+                        &phases[k],
+                        &before,
+                        h[k],
+                        &mut stats[k],
+                    )
+                } else {
+                    impact::resolve(
+                        flow,
+                        &mut regions[k],
+                        location,
+                        omega[k],
+                        &phases[k],
+                        &before,
+                        h[k],
+                        column(&y1, k),
+                        &mut stats[k],
+                    )
+                };
+                for i in 0..D {
+                    y1[i][k] = after[i];
+                }
+                if !surfaces.is_empty() {
+                    at_end[k] = flow.surface_values(regions[k], &next[k], &after);
                 }
             }
         }
         y = y1;
         phases = next;
+        at_start = at_end;
     }
     for (k, out) in ys.iter_mut().enumerate() {
         *out = std::array::from_fn(|i| y[i][k]);

@@ -76,6 +76,7 @@ pub fn estimate<const D: usize, S: System<D>>(
     }
     stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
+    stats.sliding |= st[..1 + copies].iter().any(|s| s.sliding);
 
     let image = ys[0];
     let same = |t: usize| admitted[t] && st[t].crossings == st[0].crossings;

@@ -6,7 +6,7 @@
 //! accumulate QR. A lane that goes non-finite stops and says so; it never
 //! touches another lane.
 
-use crate::integrate::impact::MAX_WALLS;
+use crate::integrate::MAX_EVENTS;
 use nalgebra::{Const, DimMin, SMatrix};
 
 use super::jacobian;
@@ -120,7 +120,7 @@ pub fn not_run(
             Vec::new()
         },
         impacts_per_period: f64::NAN,
-        crossings_per_period: [f64::NAN; MAX_WALLS],
+        crossings_per_period: [f64::NAN; MAX_EVENTS],
         period,
         orbit_term: f64::NAN,
         bifurcation: Vec::new(),
@@ -248,6 +248,12 @@ pub enum LaneStatus {
     Chattering {
         iterations: usize,
     },
+    /// The motion met a switch whose fields on both sides point into it
+    /// (Filippov sliding), in this many iterations: sliding is not
+    /// integrated yet, so the exponents are not to be trusted.
+    Sliding {
+        iterations: usize,
+    },
     /// A direction contracts, in one iteration, to near the rounding noise of
     /// the finite difference, so the most negative exponents are not to be
     /// trusted: `bound` estimates their error per unit time from the relative
@@ -287,6 +293,7 @@ impl LaneStatus {
             LaneStatus::Ok => "ok",
             LaneStatus::NonFinite { .. } => "non-finite",
             LaneStatus::Chattering { .. } => "chattering",
+            LaneStatus::Sliding { .. } => "sliding",
             LaneStatus::Unresolved { .. } => "unresolved",
             LaneStatus::Collapsed { .. } => "collapsed",
             LaneStatus::Grazing { .. } => "grazing",
@@ -313,6 +320,7 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::Chattering { iterations } => {
                 write!(f, "chattering(iterations={iterations})")
             }
+            LaneStatus::Sliding { iterations } => write!(f, "sliding(iterations={iterations})"),
             LaneStatus::Unresolved { bound } => write!(f, "unresolved(bound={bound:.1e})"),
             LaneStatus::Collapsed { exponents } => write!(f, "collapsed(exponents={exponents})"),
             // The count is in the `grazing` column; no comma in a CSV field.
@@ -336,8 +344,8 @@ pub struct LaneResult {
     /// Reference impacts per map iteration, over the averaging iterations.
     pub impacts_per_period: f64,
     /// Of these, the impacts on each wall of the system, in its order
-    /// (`MAX_WALLS` numbers; NaN like `impacts_per_period` when it is).
-    pub crossings_per_period: [f64; MAX_WALLS],
+    /// (`MAX_EVENTS` numbers; NaN like `impacts_per_period` when it is).
+    pub crossings_per_period: [f64; MAX_EVENTS],
     /// The map period T (of a Poincaré map, the mean return time).
     pub period: f64,
     /// A term of the sum rule that depends on the orbit, per unit time: a
@@ -504,11 +512,12 @@ pub struct LaneAccumulator<const D: usize> {
     noise: Option<(f64, f64, usize)>,
     done: usize,
     impacts: u64,
-    crossings: [u64; MAX_WALLS],
+    crossings: [u64; MAX_EVENTS],
     /// Σ of the iterations' own times and flux terms (Poincaré maps).
     time: f64,
     log_flux: f64,
     chattering: usize,
+    sliding: usize,
     grazing: usize,
     grazing_error: f64,
     /// Jacobians taken (iterations × parts).
@@ -547,10 +556,11 @@ where
             )),
             done: 0,
             impacts: 0,
-            crossings: [0; MAX_WALLS],
+            crossings: [0; MAX_EVENTS],
             time: 0.0,
             log_flux: 0.0,
             chattering: 0,
+            sliding: 0,
             grazing: 0,
             grazing_error: 0.0,
             parts_done: 0,
@@ -634,6 +644,7 @@ where
         self.time += stats.time;
         self.log_flux += stats.log_flux;
         self.chattering += usize::from(stats.chattering);
+        self.sliding += usize::from(stats.sliding);
         self.grazing += usize::from(stats.grazing);
         self.grazing_error += stats.grazing_error;
         if let (true, Some(point)) = (n >= self.first_kept, point) {
@@ -673,7 +684,7 @@ where
                     Vec::new()
                 },
                 impacts_per_period: f64::NAN,
-                crossings_per_period: [f64::NAN; MAX_WALLS],
+                crossings_per_period: [f64::NAN; MAX_EVENTS],
                 period: self.period,
                 orbit_term: f64::NAN,
                 bifurcation: self.bifurcation,
@@ -715,6 +726,10 @@ where
         let status = if self.chattering > 0 {
             LaneStatus::Chattering {
                 iterations: self.chattering,
+            }
+        } else if self.sliding > 0 {
+            LaneStatus::Sliding {
+                iterations: self.sliding,
             }
         } else if resolution_bound > RESOLUTION_BOUND {
             LaneStatus::Unresolved {

@@ -15,7 +15,8 @@
 //! ```
 //!
 //! Names are the model's states and parameters, `t` (time) and `pi`;
-//! functions are `sin cos tan exp log sqrt abs tanh atan2 min max pow`.
+//! functions are `sin cos tan exp log sqrt abs tanh atan2 min max pow`,
+//! and `step(s)`, `sign(s)` of a switch s (1 or 0, ±1 by its side).
 
 use std::fmt;
 
@@ -28,6 +29,12 @@ pub enum Var {
     Param(usize),
     /// Time `t`.
     Time,
+    /// The side of switch j (`step(name)`): 1 where its surface is > 0, 0
+    /// on the other side. Constant along a step: the integrator stops at
+    /// every crossing, and each region's field is compiled with its sides
+    /// substituted ([`Expr::in_region`]), so nothing evaluates it from the
+    /// raw state.
+    Side(usize),
 }
 
 /// The functions an expression may call, with their arity. `Sign` is not
@@ -162,6 +169,8 @@ pub enum Expr {
 pub struct Names {
     pub states: Vec<String>,
     pub parameters: Vec<String>,
+    /// The model's switches, which `step(...)` and `sign(...)` name.
+    pub switches: Vec<String>,
 }
 
 impl Names {
@@ -354,6 +363,9 @@ impl Parser<'_> {
             }
             Token::Name(name) => {
                 self.at += 1;
+                if *self.peek() == Token::Sym('(') && (name == "step" || name == "sign") {
+                    return self.side(&name);
+                }
                 if *self.peek() == Token::Sym('(') {
                     let Some(func) = Func::by_name(&name) else {
                         return Err(ParseError {
@@ -397,6 +409,42 @@ impl Parser<'_> {
     }
 }
 
+impl Parser<'_> {
+    /// `step(s)` or `sign(s)` of a switch s, after its name: the switch's
+    /// side, or 2·side - 1.
+    fn side(&mut self, function: &str) -> Result<Expr, ParseError> {
+        self.expect('(')?;
+        let argument = self.column();
+        let switch = match self.peek().clone() {
+            Token::Name(n) => self.names.switches.iter().position(|s| *s == n),
+            _ => None,
+        };
+        let Some(j) = switch else {
+            let known = if self.names.switches.is_empty() {
+                "the model has none: declare [[model.switches]]".to_owned()
+            } else {
+                format!("switches: {}", self.names.switches.join(", "))
+            };
+            return Err(ParseError {
+                column: argument,
+                message: format!("{function}(...) takes the name of a switch ({known})"),
+            });
+        };
+        self.at += 1;
+        self.expect(')')?;
+        let side = Expr::Var(Var::Side(j));
+        Ok(if function == "step" {
+            side
+        } else {
+            Expr::Bin(
+                Op::Sub,
+                Box::new(Expr::Bin(Op::Mul, Box::new(Expr::Num(2.0)), Box::new(side))),
+                Box::new(Expr::Num(1.0)),
+            )
+        })
+    }
+}
+
 fn describe(token: &Token) -> String {
     match token {
         Token::Num(v) => format!("the number {v}"),
@@ -432,6 +480,9 @@ impl Expr {
             Expr::Var(Var::State(i)) => states[*i],
             Expr::Var(Var::Param(i)) => params[*i],
             Expr::Var(Var::Time) => t,
+            Expr::Var(Var::Side(_)) => {
+                unreachable!("a switch's side is substituted per region (Expr::in_region)")
+            }
             Expr::Neg(a) => -a.eval(states, params, t),
             Expr::Bin(op, a, b) => {
                 let (x, y) = (a.eval(states, params, t), b.eval(states, params, t));
@@ -447,6 +498,40 @@ impl Expr {
                 let values: Vec<f64> = args.iter().map(|a| a.eval(states, params, t)).collect();
                 f.apply(&values)
             }
+        }
+    }
+
+    /// The expression in region `region` of the model's switches: the side
+    /// of switch j (bit j of `region`, 1 where its surface is > 0)
+    /// substituted, folded where it multiplies.
+    pub fn in_region(&self, region: u32) -> Expr {
+        match self {
+            Expr::Var(Var::Side(j)) => Expr::Num(f64::from((region >> j) & 1)),
+            Expr::Num(_) | Expr::Var(_) => self.clone(),
+            Expr::Neg(a) => neg(a.in_region(region)),
+            Expr::Bin(op, a, b) => {
+                let (a, b) = (a.in_region(region), b.in_region(region));
+                match op {
+                    Op::Add => add(a, b),
+                    Op::Sub => sub(a, b),
+                    Op::Mul => mul(a, b),
+                    _ => Expr::Bin(*op, Box::new(a), Box::new(b)),
+                }
+            }
+            Expr::Call(f, args) => {
+                Expr::Call(*f, args.iter().map(|a| a.in_region(region)).collect())
+            }
+        }
+    }
+
+    /// Whether the expression reads a switch's side.
+    pub fn reads_sides(&self) -> bool {
+        match self {
+            Expr::Num(_) => false,
+            Expr::Var(v) => matches!(v, Var::Side(_)),
+            Expr::Neg(a) => a.reads_sides(),
+            Expr::Bin(_, a, b) => a.reads_sides() || b.reads_sides(),
+            Expr::Call(_, args) => args.iter().any(Expr::reads_sides),
         }
     }
 
@@ -633,6 +718,7 @@ fn write_expr(f: &mut fmt::Formatter<'_>, e: &Expr, names: &Names, outer: u8) ->
         Expr::Var(Var::State(i)) => write!(f, "{}", names.states[*i]),
         Expr::Var(Var::Param(i)) => write!(f, "{}", names.parameters[*i]),
         Expr::Var(Var::Time) => write!(f, "t"),
+        Expr::Var(Var::Side(j)) => write!(f, "step({})", names.switches[*j]),
         Expr::Neg(a) => {
             // Unary minus binds like a product's operand.
             let wrap = outer > 2;

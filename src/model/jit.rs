@@ -487,6 +487,7 @@ mod tests {
         let names = Names {
             states: vec!["x".into(), "v".into()],
             parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+            switches: Vec::new(),
         };
         let texts = [
             "-2*zeta*v - x + f*cos(eta*t) + sqrt(abs(v)) - sqrt(x) + min(x, v) - max(0*x, -0*v)",

@@ -18,6 +18,9 @@ pub struct Model {
     pub equations: Vec<Expr>,
     pub map: Map,
     pub events: Vec<Event>,
+    /// Surfaces across which the field switches (no reset): `step(name)`
+    /// and `sign(name)` in the equations read their sides.
+    pub switches: Vec<Switch>,
     /// States that are angles (`angles = ["theta"]`): wrapped into
     /// [-π, π) at the end of every map iteration, so that a rotating
     /// pendulum's angle stays of size π and its perturbation with it.
@@ -48,14 +51,27 @@ pub struct Event {
     pub reset: Vec<(usize, Expr)>,
 }
 
+/// A switch: the field is discontinuous across `surface` = 0, and the
+/// equations read which side the motion is on.
+#[derive(Clone, Debug)]
+pub struct Switch {
+    pub name: String,
+    pub surface: Expr,
+}
+
+/// Switches a model may have: each doubles the fields compiled (one per
+/// region of the sides).
+pub const MAX_SWITCHES: usize = 3;
+
 fn invalid(key: &str, reason: impl Into<String>) -> Error {
     Error::invalid(key, reason)
 }
 
 /// Words an expression gives a meaning of its own.
 const RESERVED: [&str; 2] = ["t", "pi"];
-const FUNCTIONS: [&str; 12] = [
-    "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max", "pow",
+const FUNCTIONS: [&str; 14] = [
+    "sin", "cos", "tan", "exp", "log", "sqrt", "abs", "tanh", "atan2", "min", "max", "pow", "step",
+    "sign",
 ];
 
 fn check_name(key: &str, name: &str) -> Result<()> {
@@ -151,6 +167,7 @@ impl Model {
                 "equations",
                 "map",
                 "events",
+                "switches",
                 "angles",
             ],
         )?;
@@ -205,10 +222,68 @@ impl Model {
                 defaults.push(number);
             }
         }
-        let names = Names {
+        let mut names = Names {
             states: states.clone(),
             parameters,
+            switches: Vec::new(),
         };
+
+        let switches_key = at("switches");
+        let mut switches = Vec::new();
+        if let Some(value) = root.get("switches") {
+            let items = value
+                .as_array()
+                .ok_or_else(|| invalid(&switches_key, "expected [[model.switches]] tables"))?;
+            for (n, item) in items.iter().enumerate() {
+                let key = format!("{switches_key}[{n}]");
+                let switch = table(item, &key)?;
+                known_keys(switch, &key, "a switch", &["name", "surface"])?;
+                let name_key = format!("{key}.name");
+                let name = string(
+                    switch.get("name").ok_or_else(|| {
+                        invalid(&name_key, "is required: step(name) and sign(name) read it")
+                    })?,
+                    &name_key,
+                )?
+                .to_owned();
+                check_name(&name_key, &name)?;
+                if names.states.contains(&name) || names.parameters.contains(&name) {
+                    return Err(invalid(
+                        &name_key,
+                        format!("'{name}' is already a state or a parameter"),
+                    ));
+                }
+                if switches.iter().any(|s: &Switch| s.name == name) {
+                    return Err(invalid(&name_key, format!("'{name}' names two switches")));
+                }
+                let surface_key = format!("{key}.surface");
+                let surface = expression(
+                    switch.get("surface").ok_or_else(|| {
+                        invalid(
+                            &surface_key,
+                            "is required: the field switches where it crosses 0",
+                        )
+                    })?,
+                    &surface_key,
+                    &names,
+                    |v| match v {
+                        Var::Time => Some("a switching surface is a function of the state"),
+                        _ => None,
+                    },
+                )?;
+                switches.push(Switch { name, surface });
+            }
+            if switches.len() > MAX_SWITCHES {
+                return Err(invalid(
+                    &switches_key,
+                    format!(
+                        "{} switches: at most {MAX_SWITCHES} are supported",
+                        switches.len()
+                    ),
+                ));
+            }
+        }
+        names.switches = switches.iter().map(|s| s.name.clone()).collect();
 
         let equations_key = at("equations");
         let written = root
@@ -402,6 +477,7 @@ impl Model {
             equations,
             map,
             events,
+            switches,
             angles,
         })
     }

@@ -456,6 +456,9 @@ impl Compiler {
             Expr::Var(Var::State(i)) => return Ok(Src::State(*i as u32)),
             Expr::Var(Var::Param(_)) => unreachable!("parameters are lane constants"),
             Expr::Var(Var::Time) => return Err(time_outside_clock()),
+            Expr::Var(Var::Side(_)) => {
+                unreachable!("each region's tape has its switches' sides substituted")
+            }
             Expr::Call(f @ (Func::Cos | Func::Sin), args) if args[0].uses(Var::Time) => {
                 return self.clock(*f, &args[0]);
             }
@@ -528,6 +531,7 @@ mod tests {
         Names {
             states: vec!["x".into(), "v".into()],
             parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+            switches: Vec::new(),
         }
     }
 

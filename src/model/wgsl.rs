@@ -106,6 +106,16 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     if !(2..=4).contains(&n) {
         return Err(Unsupported::States(n));
     }
+    if let Some(first) = code.surfaces.first() {
+        return Err(Unsupported::Events(format!(
+            "the {} '{}' is not a stop",
+            match first.kind {
+                crate::integrate::Surface::Event => "event",
+                crate::integrate::Surface::Switch { .. } => "switch",
+            },
+            first.name
+        )));
+    }
     match code.walls.as_slice() {
         [] => {}
         [stop] => {
@@ -138,6 +148,7 @@ fn emittable(e: &Expr) -> Result<(), Unsupported> {
         Expr::Num(v) if !v.is_finite() => Err(Unsupported::Number(*v)),
         Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_)) => Ok(()),
         Expr::Var(Var::Time) => Err(Unsupported::Time),
+        Expr::Var(Var::Side(_)) => Err(Unsupported::Events("a switch".into())),
         // The clock: its argument is not emitted (the tape compiler has
         // checked that it is w*t with w of the parameters).
         Expr::Call(Func::Cos | Func::Sin, args) if args[0].uses(Var::Time) => Ok(()),
@@ -287,6 +298,7 @@ fn emit(f: &mut fmt::Formatter<'_>, e: &Expr, code: &Code) -> fmt::Result {
         Expr::Var(Var::State(i)) => write!(f, "y.{}", COMPONENTS[*i]),
         Expr::Var(Var::Param(i)) => write!(f, "p.{}", field(&code.model.names, *i)),
         Expr::Var(Var::Time) => unreachable!("check refuses t outside the clock"),
+        Expr::Var(Var::Side(_)) => unreachable!("check refuses switches"),
         // The forcing clock, as the tape reads it (`Compiler::clock`).
         Expr::Call(Func::Cos, a) if a[0].uses(Var::Time) => write!(f, "phase.x"),
         Expr::Call(Func::Sin, a) if a[0].uses(Var::Time) => write!(f, "phase.y"),

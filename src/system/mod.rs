@@ -217,11 +217,16 @@ impl Part {
 pub struct IterationStats {
     /// Wall impacts during the iteration.
     pub impacts: u32,
-    /// Of these, the impacts on each wall of the flow, in its order.
-    pub crossings: [u32; crate::integrate::impact::MAX_WALLS],
+    /// The crossings of each wall of the flow, in its order, then of each
+    /// general surface (events and switches).
+    pub crossings: [u32; crate::integrate::MAX_EVENTS],
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
+    /// A switch was met where the fields on both sides point into it: the
+    /// motion slides on the surface (Filippov), which is not integrated
+    /// yet, so the iteration is not trustworthy.
+    pub sliding: bool,
     /// Dimensions the iteration collapsed: 1 after an impact with e = 0 (the
     /// velocity is forgotten), D after sticking (the state on release depends
     /// on the forcing alone). The map's Jacobian then has rank D - rank_loss
@@ -249,10 +254,11 @@ pub struct IterationStats {
     /// (a Poincaré section's return time); 0 otherwise.
     pub time: f64,
     /// ln |F_k(start) / F_k(end)| of a section map on state k, plus
-    /// ∫ div F dt along the reference where div F depends on the state:
-    /// the iteration's ln |det| beyond what the system's expected sum has
-    /// (the determinant is exp(∫ div F dt)·F_k(start)/F_k(end)); 0
-    /// otherwise.
+    /// ∫ div F dt along the reference where div F depends on the state,
+    /// plus ln |det S| of every crossing of a general surface: the
+    /// iteration's ln |det| beyond what the system's expected sum has
+    /// (the determinant is exp(∫ div F dt)·F_k(start)/F_k(end)·Π det S);
+    /// 0 otherwise.
     pub log_flux: f64,
 }
 
@@ -271,6 +277,7 @@ impl IterationStats {
         self.grazing_error += part.grazing_error;
         self.time += part.time;
         self.log_flux += part.log_flux;
+        self.sliding |= part.sliding;
     }
 }
 
@@ -278,7 +285,8 @@ impl Default for IterationStats {
     fn default() -> Self {
         IterationStats {
             impacts: 0,
-            crossings: [0; crate::integrate::impact::MAX_WALLS],
+            crossings: [0; crate::integrate::MAX_EVENTS],
+            sliding: false,
             chattering: false,
             rank_loss: 0,
             slowest_impact: f64::INFINITY,

@@ -18,7 +18,10 @@ use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, Syste
 use crate::error::{Error, Result};
 use crate::integrate::clock::Phase;
 use crate::integrate::impact::MAX_WALLS;
-use crate::integrate::{part_map_many, rk4, time_map, time_map_many, Flow, Wall};
+use crate::integrate::surface::MAX_SURFACES;
+use crate::integrate::{
+    part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceValues, Wall,
+};
 use crate::model::expr::{Expr, Var, Written};
 use crate::model::jit::{Kind, Layout, Native};
 use crate::model::tape::{Registers, Tape};
@@ -31,11 +34,9 @@ pub const MAX_STATES: usize = 6;
 #[derive(Debug)]
 pub struct Code {
     pub model: Model,
-    /// The equations, one output per state.
+    /// The equations (of region 0, where there are switches), one output
+    /// per state: the forcing clock and `model check`'s figures.
     pub equations: Tape,
-    /// The equations as native code, where the host allows (else the
-    /// tape's interpreter runs them).
-    pub native: Option<Native>,
     pub walls: Vec<Stop>,
     /// div F = Σ ∂F_i/∂x_i when it is a function of the parameters alone
     /// (then the flow contracts volume at a constant rate); `None` when it
@@ -50,6 +51,44 @@ pub struct Code {
     pub jacobian: Vec<Expr>,
     /// The Poincaré section of a section map (see `system::section`).
     pub section: Option<SectionSpec>,
+    /// Events that are not stops, then the switches: the integrator's
+    /// general surfaces (`integrate::surface`), counted after the walls.
+    pub surfaces: Vec<GeneralSurface>,
+    /// Their kinds, in the same order (what `Flow::surfaces` gives).
+    pub kinds: Vec<Surface>,
+    /// The field of every region of the switches (one without switches),
+    /// indexed by the region's bits.
+    pub regions: Vec<Field>,
+}
+
+/// An event that is not a stop, or a switch of the field.
+#[derive(Debug)]
+pub struct GeneralSurface {
+    pub name: String,
+    pub kind: Surface,
+    /// g(y), parameters and states.
+    pub g: Expr,
+    /// ∇g, one derivative per state.
+    pub gradient: Vec<Expr>,
+    /// An event's reset: every state's value after it (the states it does
+    /// not name keep theirs), and its Jacobian DR, row-major. Empty for a
+    /// switch.
+    pub reset: Vec<Expr>,
+    pub reset_jacobian: Vec<Expr>,
+}
+
+/// One region's field, compiled.
+#[derive(Debug)]
+pub struct Field {
+    pub equations: Tape,
+    /// The equations as native code, where the host allows (else the
+    /// tape's interpreter runs them).
+    pub native: Option<Native>,
+    /// g of every general surface, padded to `MAX_SURFACES`, then their
+    /// rates ∇g·F along this field, padded the same.
+    pub surfaces: Tape,
+    /// ∂F_i/∂x_j of this field, row-major.
+    pub jacobian: Vec<Expr>,
 }
 
 /// A section y_state = at (parameters alone), crossed increasing or not.
@@ -102,7 +141,8 @@ impl Code {
                 format!("{n} states: at most {MAX_STATES} are supported"),
             ));
         }
-        let equations = Tape::compile(&model.equations, n, None).map_err(|(i, why)| {
+        let region_zero: Vec<Expr> = model.equations.iter().map(|e| e.in_region(0)).collect();
+        let equations = Tape::compile(&region_zero, n, None).map_err(|(i, why)| {
             Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
         })?;
         let section = match &model.map {
@@ -119,10 +159,18 @@ impl Code {
                          the time (cos(w*t) or sin(w*t)): give period = \"...\" instead",
                     ));
                 }
-                if !model.events.is_empty() {
+                if !model.events.is_empty() || !model.switches.is_empty() {
                     return Err(Error::invalid(
-                        format!("{key}.events"),
-                        "events in a model with a Poincaré section are not supported yet",
+                        format!(
+                            "{key}.{}",
+                            if model.events.is_empty() {
+                                "switches"
+                            } else {
+                                "events"
+                            }
+                        ),
+                        "events and switches in a model with a Poincaré section are not \
+                         supported yet",
                     ));
                 }
                 Some(SectionSpec {
@@ -132,16 +180,8 @@ impl Code {
                 })
             }
         };
-        if model.events.len() > MAX_WALLS {
-            return Err(Error::invalid(
-                format!("{key}.events"),
-                format!(
-                    "{} events: at most {MAX_WALLS} are supported",
-                    model.events.len()
-                ),
-            ));
-        }
         let mut walls = Vec::new();
+        let mut surfaces = Vec::new();
         for (j, event) in model.events.iter().enumerate() {
             let column = crate::output::event_column(&event.name);
             if model.events[..j]
@@ -156,45 +196,123 @@ impl Code {
                     ),
                 ));
             }
-            walls.push(stop(&model, event, &format!("{key}.events[{j}]"))?);
+            let event_key = format!("{key}.events[{j}]");
+            match stop(&model, event, &event_key) {
+                Some(stop) => walls.push(stop),
+                None => surfaces.push(general_event(&model, event, &event_key)?),
+            }
         }
+        if walls.len() > MAX_WALLS {
+            return Err(Error::invalid(
+                format!("{key}.events"),
+                format!("{} stops: at most {MAX_WALLS} are supported", walls.len()),
+            ));
+        }
+        for (b, switch) in model.switches.iter().enumerate() {
+            surfaces.push(GeneralSurface {
+                name: switch.name.clone(),
+                kind: Surface::Switch { bit: b as u32 },
+                g: switch.surface.clone(),
+                gradient: (0..n)
+                    .map(|i| switch.surface.derivative(Var::State(i)))
+                    .collect(),
+                reset: Vec::new(),
+                reset_jacobian: Vec::new(),
+            });
+        }
+        if surfaces.len() > MAX_SURFACES {
+            return Err(Error::invalid(
+                format!("{key}.events"),
+                format!(
+                    "{} events that are not stops and switches together: at most \
+                     {MAX_SURFACES} are supported",
+                    surfaces.len()
+                ),
+            ));
+        }
+        for (j, s) in surfaces.iter().enumerate() {
+            let column = crate::output::event_column(&s.name);
+            let earlier = walls
+                .iter()
+                .map(|w| &w.name)
+                .chain(surfaces[..j].iter().map(|s| &s.name));
+            if let Some(other) = earlier
+                .into_iter()
+                .find(|o| crate::output::event_column(o) == column)
+            {
+                return Err(Error::invalid(
+                    format!("{key}.switches"),
+                    format!(
+                        "'{}' and '{other}' name the same column {column}: give each its own name",
+                        s.name
+                    ),
+                ));
+            }
+        }
+        let kinds: Vec<Surface> = surfaces.iter().map(|s| s.kind).collect();
+        let regions = (0..1u32 << model.switches.len())
+            .map(|r| field(&model, &surfaces, r, equations.frequency.clone(), key))
+            .collect::<Result<Vec<_>>>()?;
         let whole_divergence = (0..n)
             .map(|i| model.equations[i].derivative(Var::State(i)))
             .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
             .expect("a model has a state");
-        let (divergence, divergence_along) = if !reads_state_or_time(&whole_divergence) {
-            (Some(whole_divergence), None)
-        } else if section.is_some() || walls.is_empty() {
-            let clock = equations.frequency.clone();
-            let tape = Tape::compile([&whole_divergence], n, clock).map_err(|(_, why)| {
-                Error::invalid(
-                    format!("{key}.equations"),
-                    format!(
-                        "their divergence {}: {why}",
-                        Written {
-                            expr: &whole_divergence,
-                            names: &model.names
-                        }
-                    ),
-                )
-            })?;
-            (None, Some(tape))
+        // A divergence that reads the switches' sides is the same
+        // everywhere only when every region's is the same.
+        let whole_divergence = if whole_divergence.reads_sides() {
+            let first = whole_divergence.in_region(0);
+            if regions
+                .iter()
+                .enumerate()
+                .all(|(r, _)| whole_divergence.in_region(r as u32) == first)
+            {
+                Some(first)
+            } else {
+                None
+            }
         } else {
-            (None, None)
+            Some(whole_divergence)
+        };
+        let (divergence, divergence_along) = match whole_divergence {
+            None => (None, None),
+            Some(whole_divergence) => {
+                if !reads_state_or_time(&whole_divergence) {
+                    (Some(whole_divergence), None)
+                } else if section.is_some() || walls.is_empty() {
+                    let clock = equations.frequency.clone();
+                    let tape =
+                        Tape::compile([&whole_divergence], n, clock).map_err(|(_, why)| {
+                            Error::invalid(
+                                format!("{key}.equations"),
+                                format!(
+                                    "their divergence {}: {why}",
+                                    Written {
+                                        expr: &whole_divergence,
+                                        names: &model.names
+                                    }
+                                ),
+                            )
+                        })?;
+                    (None, Some(tape))
+                } else {
+                    (None, None)
+                }
+            }
         };
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
-        let native = Native::compile(&equations);
         Ok(Code {
             model,
             equations,
-            native,
             walls,
             divergence,
             divergence_along,
             jacobian,
             section,
+            surfaces,
+            kinds,
+            regions,
         })
     }
 
@@ -226,53 +344,26 @@ impl Code {
     }
 }
 
-/// Event j as a stop, or why it is not one.
-fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Result<Stop> {
+/// The event as a stop, if it is one: a surface `x - c` or `c - x` on one
+/// state x (c of parameters alone) whose equation is another state v
+/// (x' = v), with a reset of v alone that is linear in v (`v = "-e*v"`).
+/// Stops run through the walls' code (vectorised detection, sticking);
+/// any other event is a general surface.
+fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Option<Stop> {
     let n = model.names.states.len();
     let states = &model.names.states;
-    let surface_key = format!("{key}.surface");
-    let not_a_stop = |why: String| {
-        Error::invalid(
-            &surface_key,
-            format!(
-                "{why}; so far an event must be a stop: `x - c` or `c - x` on a state x whose \
-                 equation is a velocity state (x' = v), with c of the parameters"
-            ),
-        )
-    };
     let read = states_read(&event.surface, n);
     if event.surface.uses(Var::Time) || read.len() != 1 {
-        return Err(not_a_stop(format!(
-            "'{}' reads {}",
-            Written {
-                expr: &event.surface,
-                names: &model.names
-            },
-            if event.surface.uses(Var::Time) {
-                "the time".to_owned()
-            } else {
-                format!("{} states", read.len())
-            }
-        )));
+        return None;
     }
     let coordinate = read[0];
     let side = match event.surface.derivative(Var::State(coordinate)) {
         Expr::Num(s) if s == 1.0 || s == -1.0 => s,
-        _ => {
-            return Err(not_a_stop(format!(
-                "it is not ±{} plus parameters",
-                states[coordinate]
-            )))
-        }
+        _ => return None,
     };
     let velocity = match &model.equations[coordinate] {
         Expr::Var(Var::State(v)) if *v != coordinate => *v,
-        _ => {
-            return Err(not_a_stop(format!(
-                "the equation of {} is not a state",
-                states[coordinate]
-            )))
-        }
+        _ => return None,
     };
     // g = side·(x - c) = side·x + r, so c = -side·r with r = g at x = 0.
     let position = Expr::Neg(Box::new(Expr::Bin(
@@ -280,25 +371,14 @@ fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Result<Stop> {
         Box::new(Expr::Num(side)),
         Box::new(at_zero(&event.surface, coordinate)),
     )));
-    let reset_key = format!("{key}.reset");
-    let v = &states[velocity];
-    let linear = || {
-        Error::invalid(
-            &reset_key,
-            format!(
-                "so far a stop's reset must be `{v} = \"-e*{v}\"` (e of the parameters, \
-                 between 0 and 1) and reset nothing else"
-            ),
-        )
-    };
     let [(state, reset)] = event.reset.as_slice() else {
-        return Err(linear());
+        return None;
     };
     if *state != velocity
         || reset.uses(Var::Time)
         || states_read(reset, n).iter().any(|&i| i != velocity)
     {
-        return Err(linear());
+        return None;
     }
     let slope = reset.derivative(Var::State(velocity));
     // Linear in v: a constant slope, and 0 at v = 0 (checked at the
@@ -310,16 +390,117 @@ fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Result<Stop> {
         || at_rest.eval(&[], &model.defaults, 0.0) != 0.0
         || at_rest.eval(&[], &elsewhere, 0.0) != 0.0
     {
-        return Err(linear());
+        return None;
     }
-    Ok(Stop {
+    Some(Stop {
         name: event.name.clone(),
         coordinate,
         velocity,
         side,
         position,
         restitution: Expr::Neg(Box::new(slope)),
-        reset_key: format!("{reset_key}.{v}"),
+        reset_key: format!("{key}.reset.{}", states[velocity]),
+    })
+}
+
+/// An event that is not a stop, as a general surface: any g(y) and any
+/// reset of the states (time not yet).
+fn general_event(model: &Model, event: &crate::model::Event, key: &str) -> Result<GeneralSurface> {
+    let n = model.names.states.len();
+    if event.surface.uses(Var::Time) {
+        return Err(Error::invalid(
+            format!("{key}.surface"),
+            "an event surface that reads the time is not supported yet",
+        ));
+    }
+    let mut reset: Vec<Expr> = (0..n).map(|i| Expr::Var(Var::State(i))).collect();
+    for (state, value) in &event.reset {
+        if value.uses(Var::Time) {
+            return Err(Error::invalid(
+                format!("{key}.reset.{}", model.names.states[*state]),
+                "a reset that reads the time is not supported yet",
+            ));
+        }
+        reset[*state] = value.clone();
+    }
+    if event.reset.is_empty() {
+        return Err(Error::invalid(
+            format!("{key}.reset"),
+            "an event needs a reset (a surface without one is a switch: [[model.switches]])",
+        ));
+    }
+    let reset_jacobian = (0..n * n)
+        .map(|ik| reset[ik / n].derivative(Var::State(ik % n)))
+        .collect();
+    Ok(GeneralSurface {
+        name: event.name.clone(),
+        kind: Surface::Event,
+        g: event.surface.clone(),
+        gradient: (0..n)
+            .map(|i| event.surface.derivative(Var::State(i)))
+            .collect(),
+        reset,
+        reset_jacobian,
+    })
+}
+
+/// The field of region `region` of the switches, compiled, with its
+/// surfaces' values and rates.
+fn field(
+    model: &Model,
+    surfaces: &[GeneralSurface],
+    region: u32,
+    frequency: Option<Expr>,
+    key: &str,
+) -> Result<Field> {
+    let n = model.names.states.len();
+    let states = &model.names.states;
+    let equations: Vec<Expr> = model
+        .equations
+        .iter()
+        .map(|e| e.in_region(region))
+        .collect();
+    let tape = Tape::compile(&equations, n, frequency.clone()).map_err(|(i, why)| {
+        Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
+    })?;
+    let zero = Expr::Num(0.0);
+    let pad = |v: Vec<Expr>| -> Vec<Expr> {
+        let mut v = v;
+        v.resize(MAX_SURFACES, zero.clone());
+        v
+    };
+    let values = pad(surfaces.iter().map(|s| s.g.clone()).collect());
+    let rates = pad(surfaces
+        .iter()
+        .map(|s| {
+            (0..n)
+                .map(|i| {
+                    Expr::Bin(
+                        crate::model::expr::Op::Mul,
+                        Box::new(s.gradient[i].clone()),
+                        Box::new(equations[i].clone()),
+                    )
+                })
+                .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
+                .expect("a model has a state")
+        })
+        .collect());
+    let surface_tape =
+        Tape::compile(values.iter().chain(&rates), n, frequency).map_err(|(i, why)| {
+            let s = &surfaces[i % MAX_SURFACES];
+            Error::invalid(
+                format!("{key}: the surface of '{}'", s.name),
+                why.to_string(),
+            )
+        })?;
+    let jacobian = (0..n * n)
+        .map(|ij| equations[ij / n].derivative(Var::State(ij % n)))
+        .collect();
+    Ok(Field {
+        native: Native::compile(&tape),
+        equations: tape,
+        surfaces: surface_tape,
+        jacobian,
     })
 }
 
@@ -394,7 +575,12 @@ pub fn info(code: Code) -> &'static SystemInfo {
         .filter(|(i, _)| Some(*i) != on_section)
         .map(|(_, s)| leak(s))
         .collect();
-    let events: Vec<&'static str> = code.walls.iter().map(|w| leak(&w.name)).collect();
+    let events: Vec<&'static str> = code
+        .walls
+        .iter()
+        .map(|w| leak(&w.name))
+        .chain(code.surfaces.iter().map(|s| leak(&s.name)))
+        .collect();
     macro_rules! by_dimension {
         ($($d:literal)*) => {
             match code.dimension() {
@@ -447,7 +633,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
         reestimate,
         plan,
         wgsl: crate::model::wgsl::system_file(code),
-        wall_reachable: if code.walls.is_empty() {
+        wall_reachable: if code.walls.is_empty() && code.surfaces.is_empty() {
             None
         } else {
             Some(|_, _| true)
@@ -492,6 +678,15 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
 
 fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
     let code = code_of(p);
+    for s in code.surfaces.iter().filter(|s| s.kind == Surface::Event) {
+        let g = s.g.eval(x, &p.values, 0.0);
+        if g > 0.0 {
+            return Err(format!(
+                "it lies beyond the event '{}' (its surface is {g} > 0 there)",
+                s.name
+            ));
+        }
+    }
     for w in walls_at(code, &p.values) {
         if w.side * (x[w.coordinate] - w.position) > 0.0 {
             return Err(format!(
@@ -563,24 +758,67 @@ fn walls_at(code: &Code, params: &[f64]) -> Vec<Wall> {
 pub struct ModelFlow<const D: usize> {
     code: &'static Code,
     params: Vec<f64>,
-    /// The tape's lane constants at these parameters.
-    constants: Vec<f64>,
+    /// Each region's tape's lane constants at these parameters.
+    constants: Vec<Vec<f64>>,
+    /// Each region's surface tape's lane constants.
+    surface_constants: Vec<Vec<f64>>,
     frequency: f64,
     period: f64,
     walls: Vec<Wall>,
 }
 
 impl<const D: usize> Flow<D> for ModelFlow<D> {
+    /// The field of the region y lies in (integration goes through
+    /// [`rhs_in`](Flow::rhs_in), each step in its trajectory's region).
     fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        self.rhs_in(
+            crate::integrate::surface::region_of(self, phase, y),
+            phase,
+            y,
+        )
+    }
+
+    fn rhs_in(&self, region: u32, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        let field = &self.code.regions[region as usize];
+        let constants = &self.constants[region as usize];
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
-        let out: [[f64; 1]; D] = match &self.code.native {
-            Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, &self.constants, &[]),
-            None => self
-                .code
-                .equations
-                .eval(|j| [self.constants[j]], &[*phase], &y),
+        let out: [[f64; 1]; D] = match &field.native {
+            Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, constants, &[]),
+            None => field.equations.eval(|j| [constants[j]], &[*phase], &y),
         };
         std::array::from_fn(|i| out[i][0])
+    }
+
+    fn surfaces(&self) -> &[Surface] {
+        &self.code.kinds
+    }
+
+    fn surface_values(&self, region: u32, phase: &Phase, y: &[f64; D]) -> SurfaceValues {
+        let constants = &self.surface_constants[region as usize];
+        let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+        let out: [[f64; 1]; 2 * MAX_SURFACES] =
+            self.code.regions[region as usize]
+                .surfaces
+                .eval(|j| [constants[j]], &[*phase], &y);
+        SurfaceValues {
+            g: std::array::from_fn(|j| out[j][0]),
+            rate: std::array::from_fn(|j| out[MAX_SURFACES + j][0]),
+        }
+    }
+
+    fn surface_gradient(&self, j: usize, y: &[f64; D]) -> [f64; D] {
+        let gradient = &self.code.surfaces[j].gradient;
+        std::array::from_fn(|i| gradient[i].eval(y, &self.params, 0.0))
+    }
+
+    fn reset(&self, j: usize, y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
+        let s = &self.code.surfaces[j];
+        (
+            std::array::from_fn(|i| s.reset[i].eval(y, &self.params, 0.0)),
+            std::array::from_fn(|i| {
+                std::array::from_fn(|k| s.reset_jacobian[i * D + k].eval(y, &self.params, 0.0))
+            }),
+        )
     }
 
     fn forcing_frequency(&self) -> f64 {
@@ -598,13 +836,25 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         y: &[[f64; W]; D],
         h: f64,
     ) -> [[f64; W]; D] {
-        if let Some(native) = self.native::<W>() {
+        self.step_shared_in(0, stages, y, h)
+    }
+
+    #[inline(always)]
+    fn step_shared_in<const W: usize>(
+        &self,
+        region: u32,
+        stages: &[Phase; 3],
+        y: &[[f64; W]; D],
+        h: f64,
+    ) -> [[f64; W]; D] {
+        let constants = &self.constants[region as usize];
+        if let Some(native) = self.native::<W>(region) {
             let clock = stages.as_flattened();
-            return native.call(Kind::Step, Layout::Shared, y, clock, &self.constants, &[h]);
+            return native.call(Kind::Step, Layout::Shared, y, clock, constants, &[h]);
         }
-        let tape = &self.code.equations;
+        let tape = &self.code.regions[region as usize].equations;
         let mut registers = Registers::new();
-        tape.prepare(&mut registers, |j| [self.constants[j]; W]);
+        tape.prepare(&mut registers, |j| [constants[j]; W]);
         rk4::step_batch(
             #[inline(always)]
             |s, y| tape.run(&mut registers, &[stages[s]; W], y),
@@ -620,13 +870,70 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        let l = flows[0].constants.len();
-        if let Some(native) = flows[0].native::<W>().filter(|_| l <= EACH_CONSTANTS) {
+        Self::step_each_region(0, flows, stages, y, h)
+    }
+
+    /// Slots in different regions are stepped once per region present,
+    /// each region's code over the whole batch, its slots kept.
+    #[inline(always)]
+    fn step_each_in<const W: usize>(
+        flows: &[&Self; W],
+        regions: &[u32; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D] {
+        let first = regions[0];
+        let mut out = Self::step_each_region(first, flows, stages, y, h);
+        let mut done = 1u32 << first;
+        for &r in regions {
+            if done & (1 << r) == 0 {
+                done |= 1 << r;
+                let other = Self::step_each_region(r, flows, stages, y, h);
+                for k in (0..W).filter(|&k| regions[k] == r) {
+                    for i in 0..D {
+                        out[i][k] = other[i][k];
+                    }
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The most lane constants [`ModelFlow::step_each`] gathers for the native
+/// code (on the stack, per step); a model with more runs the interpreter.
+const EACH_CONSTANTS: usize = 32;
+
+impl<const D: usize> ModelFlow<D> {
+    /// The native code of a region's equations, if there is one for
+    /// batches of W.
+    #[inline(always)]
+    fn native<const W: usize>(&self, region: u32) -> Option<&'static Native> {
+        self.code.regions[region as usize]
+            .native
+            .as_ref()
+            .filter(|_| Native::has::<W>())
+    }
+
+    /// One RK4 step of one trajectory of each of W flows, all in region
+    /// `region` (see `Flow::step_each`).
+    #[inline(always)]
+    fn step_each_region<const W: usize>(
+        region: u32,
+        flows: &[&Self; W],
+        stages: &[[Phase; 3]; W],
+        y: &[[f64; W]; D],
+        h: &[f64; W],
+    ) -> [[f64; W]; D] {
+        let r = region as usize;
+        let l = flows[0].constants[r].len();
+        if let Some(native) = flows[0].native::<W>(region).filter(|_| l <= EACH_CONSTANTS) {
             // The slots' constants and stage phases side by side.
             let mut lane = [[0.0; W]; EACH_CONSTANTS];
             for (j, row) in lane[..l].iter_mut().enumerate() {
                 for k in 0..W {
-                    row[k] = flows[k].constants[j];
+                    row[k] = flows[k].constants[r][j];
                 }
             }
             let mut clock = [[0.0; W]; 6];
@@ -639,10 +946,10 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
             return native.call(Kind::Step, Layout::Each, y, clock, lane, h);
         }
-        let tape = &flows[0].code.equations;
+        let tape = &flows[0].code.regions[r].equations;
         let mut registers = Registers::new();
         tape.prepare(&mut registers, |j| {
-            std::array::from_fn(|k| flows[k].constants[j])
+            std::array::from_fn(|k| flows[k].constants[r][j])
         });
         rk4::step_batch(
             #[inline(always)]
@@ -651,28 +958,25 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             h,
         )
     }
-}
-
-/// The most lane constants [`ModelFlow::step_each`] gathers for the native
-/// code (on the stack, per step); a model with more runs the interpreter.
-const EACH_CONSTANTS: usize = 32;
-
-impl<const D: usize> ModelFlow<D> {
-    /// The native code of the equations, if there is one for batches of W.
-    #[inline(always)]
-    fn native<const W: usize>(&self) -> Option<&'static Native> {
-        self.code.native.as_ref().filter(|_| Native::has::<W>())
-    }
 
     /// The flow's Jacobian at y and time t, as a matrix.
-    fn jacobian_at(&self, y: &[f64; D], t: f64) -> DMatrix<f64> {
-        let values: Vec<f64> = self
-            .code
+    fn jacobian_at(&self, y: &[f64; D], t: f64, region: u32) -> DMatrix<f64> {
+        let values: Vec<f64> = self.code.regions[region as usize]
             .jacobian
             .iter()
             .map(|e| e.eval(y, &self.params, t))
             .collect();
         DMatrix::from_row_slice(D, D, &values)
+    }
+}
+
+impl<const D: usize> ModelFlow<D> {
+    /// (max |λ|, max -Re λ) of every region's Jacobian at the origin: a
+    /// piecewise-linear model's time scales, all of its regions'.
+    fn scales_at_origin(&self) -> (f64, f64) {
+        (0..self.code.regions.len() as u32)
+            .map(|r| eigen_scales(&self.jacobian_at(&[0.0; D], 0.0, r)))
+            .fold((0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)))
     }
 }
 
@@ -683,7 +987,16 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         ModelFlow {
             code,
             params: p.values.clone(),
-            constants: lane.constants,
+            constants: code
+                .regions
+                .iter()
+                .map(|f| f.equations.lane_values(&p.values).constants)
+                .collect(),
+            surface_constants: code
+                .regions
+                .iter()
+                .map(|f| f.surfaces.lane_values(&p.values).constants)
+                .collect(),
             frequency: lane.frequency,
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
@@ -739,12 +1052,12 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     /// hand-written twin does), an estimate for a nonlinear one (see
     /// `time_scales`).
     fn stiffness(&self) -> f64 {
-        eigen_scales(&self.jacobian_at(&[0.0; D], 0.0)).0
+        self.scales_at_origin().0
     }
 
     /// The fastest decay rate at the origin, -min Re λ (0 if none decays).
     fn contraction(&self) -> f64 {
-        eigen_scales(&self.jacobian_at(&[0.0; D], 0.0)).1
+        self.scales_at_origin().1
     }
 
     /// A flow whose Jacobian depends on the state (or time) has its time
@@ -756,7 +1069,12 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     /// origin alone, as [`stiffness`](System::stiffness) does.
     fn time_scales(&self, initial: &[f64], flow: &FlowSettings) -> (f64, f64) {
         let at_origin = (self.stiffness(), self.contraction());
-        if self.code.jacobian.iter().all(|e| !reads_state_or_time(e)) || initial.len() != D {
+        let constant = self
+            .code
+            .regions
+            .iter()
+            .all(|f| f.jacobian.iter().all(|e| !reads_state_or_time(e)));
+        if constant || initial.len() != D {
             return at_origin;
         }
         let mut y: [f64; D] = std::array::from_fn(|i| initial[i]);
@@ -766,7 +1084,8 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             let mut phase = crate::integrate::clock::ZERO_PHASE;
             for part in Part::all(PILOT_SAMPLES) {
                 let t = self.period * part.index as f64 / PILOT_SAMPLES as f64;
-                let (stiffness, contraction) = eigen_scales(&self.jacobian_at(&y, t));
+                let region = crate::integrate::surface::region_of(self, &phase, &y);
+                let (stiffness, contraction) = eigen_scales(&self.jacobian_at(&y, t, region));
                 scales = (scales.0.max(stiffness), scales.1.max(contraction));
                 let mut ys = [y];
                 part_map_many(
@@ -789,6 +1108,11 @@ impl<const D: usize> System<D> for ModelFlow<D> {
 
     fn admits(&self, y: &[f64; D]) -> bool {
         self.walls.iter().all(|w| w.gap(y) <= 0.0)
+            && self
+                .code
+                .surfaces
+                .iter()
+                .all(|s| s.kind != Surface::Event || s.g.eval(y, &self.params, 0.0) <= 0.0)
     }
 
     fn wrap(&self, x: &mut [f64; D]) {

@@ -982,7 +982,7 @@ where
                         let mut part = IterationStats {
                             impacts,
                             // The kernels know one wall so far.
-                            crossings: [impacts, 0, 0, 0],
+                            crossings: std::array::from_fn(|j| if j == 0 { impacts } else { 0 }),
                             chattering: flags & FLAG_CHATTERING != 0,
                             rank_loss: if flags & FLAG_RANK_ALL != 0 {
                                 D as u32
