@@ -559,7 +559,7 @@ impl PiecewiseLinear {
             // rounding turned over.
             let rate = normal.dot(&p.field);
             let approach = p.g1[j];
-            if !(approach > 0.0) {
+            if approach.is_nan() || approach <= 0.0 {
                 break (p, PiecewiseStatus::Grazing);
             }
             min_crossing_rate = min_crossing_rate.min(approach);
@@ -572,7 +572,8 @@ impl PiecewiseLinear {
                     let next_region = segment.region ^ (1 << bit);
                     let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
                     let onward = normal.dot(&f_plus);
-                    if !(segment.sign[j] * onward > 0.0) {
+                    let carried = segment.sign[j] * onward;
+                    if carried.is_nan() || carried <= 0.0 {
                         // The new field does not carry the state on across:
                         // both point into the surface (Filippov sliding).
                         break (p, PiecewiseStatus::Sliding);
@@ -952,7 +953,8 @@ fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
         return g1 <= 0.0 && g1 + h * (0.5 * g2 + h * jerk / 6.0) < 0.0;
     }
     let q = |s: f64| g0 + s * (g1 + s * (0.5 * g2 + s * jerk / 6.0));
-    if !(q(h) < 0.0) {
+    let end = q(h);
+    if end.is_nan() || end >= 0.0 {
         return false;
     }
     // An interior maximum is the smaller root of q'(s) = g₁ + g₂s + Ls²/2,
@@ -964,7 +966,8 @@ fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
             let denominator = disc.sqrt() - g2;
             if denominator > 0.0 {
                 let s = 2.0 * g1 / denominator;
-                if s < h && !(q(s) < 0.0) {
+                let top = q(s);
+                if s < h && (top.is_nan() || top >= 0.0) {
                     return false;
                 }
             }
@@ -983,7 +986,7 @@ fn certified_increasing(g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
 mod tests {
     use super::*;
     use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
-    use std::f64::consts::TAU;
+    use std::f64::consts::{PI, TAU};
 
     fn vector(v: &[f64]) -> DVector<f64> {
         DVector::from_column_slice(v)
@@ -1188,8 +1191,8 @@ mod tests {
                 let (reference, rk4_crossings) =
                     rk4_soft_stop((zeta, f, eta, ks, gap), [y[0], y[1]], 200_000);
                 assert_eq!(it.crossings, vec![rk4_crossings], "η={eta}");
-                for i in 0..2 {
-                    worst_state = worst_state.max((it.state[i] - reference[i]).abs());
+                for (x, r) in it.state.iter().zip(reference) {
+                    worst_state = worst_state.max((x - r).abs());
                 }
                 worst_fd = worst_fd.max(finite_difference_error(&system, &y, region, period));
                 // Continuous field: det S = n·F⁺/n·F⁻ = v/v = 1, and
@@ -1287,7 +1290,7 @@ mod tests {
             let (_, x_max) = free_maximum(eta, y0);
             let y = vector(&y0);
             let free = seed(0.05, 1.0, eta, 1e9, 1.0).iterate(&y, 0, period);
-            for gap in [1e-5, 1e-9, 1e-12] {
+            for gap in [1e-5, 1e-9, 1e-12, 1e-13] {
                 // h = x - X_w peaks at -gap: no event.
                 let miss = seed(0.05, 1.0, eta, x_max + gap, 1.0).iterate(&y, 0, period);
                 assert_eq!(miss.crossings, vec![0], "gap +{gap}, η={eta}");
@@ -1321,6 +1324,145 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn resets_to_rest_and_accumulating_events_stop() {
+        // e = 0 with the force pulling off the wall (-X_w + f cos ηt < 0):
+        // propagated, the Jacobian of rank 1 (ln det S = -∞), as the
+        // closed form has it.
+        let eta = 0.8;
+        let osc = ForcedImpactOscillator::new(0.05, 1.0, eta, 2.0, 0.0).unwrap();
+        let system = seed(0.05, 1.0, eta, 2.0, 0.0);
+        let y = [0.0, 3.0];
+        let (exact, it) = (osc.iterate(y), system.iterate(&vector(&y), 0, osc.period()));
+        assert_eq!((exact.status, exact.rank_loss), (ExactStatus::Ok, 1));
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert_eq!(it.crossings, vec![exact.impacts]);
+        assert_eq!(it.log_det_saltation, f64::NEG_INFINITY);
+        for i in 0..2 {
+            assert!((it.state[i] - exact.state[i]).abs() < 1e-13);
+            for j in 0..2 {
+                assert!((it.jacobian[(i, j)] - exact.jacobian[(i, j)]).abs() < 1e-12);
+            }
+        }
+        // X_w = -2: the force -X_w + f cos ηt ≥ 1 presses into the wall.
+        // e = 0 comes to rest on it: sticking, stopped after the reset.
+        let stick = seed(0.05, 1.0, eta, -2.0, 0.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(
+            (stick.status, stick.crossings[0]),
+            (PiecewiseStatus::Sticking, 1)
+        );
+        // At the refined contact (the nearer end of the final bracket).
+        assert!((stick.state[0] + 2.0).abs() < 1e-15 && stick.state[1] == 0.0);
+        assert!(stick.time < TAU / eta);
+        // e = 0.5: a Zeno sequence of bounces, stopped at its tail.
+        let zeno = seed(0.05, 1.0, eta, -2.0, 0.5).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(zeno.status, PiecewiseStatus::Chattering);
+        assert!(
+            zeno.crossings[0] > 10 && zeno.crossings[0] < 100,
+            "{:?}",
+            zeno.crossings
+        );
+        assert!(zeno.time < TAU / eta);
+        // e = 1 bounces all period long and completes it.
+        let bounce = seed(0.05, 1.0, eta, -2.0, 1.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(bounce.status, PiecewiseStatus::Ok);
+        assert!(bounce.crossings[0] >= 2);
+    }
+
+    #[test]
+    fn grazing_crossing_is_flagged() {
+        // On the wall, moving into it at 1e-14: an event at t = 0 whose
+        // saltation matrix is ~1e14. The period completes, flagged.
+        let system = seed(0.05, 1.0, 0.8, 2.0, 0.8);
+        let it = system.iterate(&vector(&[2.0, 1e-14]), 0, TAU / 0.8);
+        assert_eq!(it.status, PiecewiseStatus::Grazing);
+        assert_eq!(it.time, TAU / 0.8);
+        assert_eq!(it.min_crossing_rate, 1e-14);
+        // Moving away from it: no event.
+        let away = system.iterate(&vector(&[2.0, -0.5]), 0, TAU / 0.8);
+        assert_eq!((away.status, away.crossings[0]), (PiecewiseStatus::Ok, 0));
+    }
+
+    #[test]
+    fn resets_across_a_switch_change_the_region() {
+        // The seed with a switch on v = 0 between two equal fields: every
+        // reset v ↦ -ev flips its region bit without a crossing, and every
+        // turning point in flight crosses it. The map and its Jacobian are
+        // the seed's (S = I at the switch).
+        let eta = 1.3;
+        let plain = seed(0.05, 1.0, eta, 2.0, 0.8);
+        let mut surfaces = plain.surfaces().to_vec();
+        surfaces.push(LinearSurface::switch(vector(&[0.0, 1.0]), 0.0));
+        let field = plain.fields()[0].clone();
+        let split = PiecewiseLinear::new(eta, vec![field.clone(), field], surfaces).unwrap();
+        let period = TAU / eta;
+        let mut y = vector(&[0.0, 3.0]);
+        let mut region = split.region(&y);
+        let (mut impacts, mut turns) = (0, 0);
+        for _ in 0..10 {
+            let reference = plain.iterate(&y, 0, period);
+            let it = split.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok);
+            assert_eq!(it.crossings[0], reference.crossings[0]);
+            assert!((&it.state - &reference.state).norm() < 1e-12);
+            assert!((&it.jacobian - &reference.jacobian).norm() < 1e-10);
+            assert_eq!(it.region, split.region(&it.state));
+            impacts += it.crossings[0];
+            turns += it.crossings[1];
+            (y, region) = (it.state, it.region);
+        }
+        assert!(
+            impacts >= 3 && turns >= 10,
+            "{impacts} impacts, {turns} turns"
+        );
+    }
+
+    #[test]
+    fn resonant_and_singular_fields_are_exact() {
+        // Undamped resonance x'' = -x + cos t, which the closed form cannot
+        // take: x = x₀ cos t + v₀ sin t + (t/2) sin t, so one period adds
+        // π to v and the flow matrix is exp(2πA) = I.
+        let resonant =
+            PiecewiseLinear::new(1.0, vec![oscillator_field(0.0, 1.0, 0.0, 1.0)], vec![]).unwrap();
+        let it = resonant.iterate(&vector(&[0.3, -0.2]), 0, TAU);
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert!((it.state[0] - 0.3).abs() < 1e-14 && (it.state[1] - (-0.2 + PI)).abs() < 1e-14);
+        assert!((it.jacobian.clone() - DMatrix::identity(2, 2)).abs().max() < 1e-14);
+
+        // A bouncing ball x'' = -g over a floor, h = -x ≤ 0, A nilpotent
+        // (A³ = 0: the bound on h''' needs no bound on |y|). Dropped from
+        // rest at height H, elastic: it lands at t₁ = √(2H/g) with speed
+        // v₁ = g t₁ and leaves upwards.
+        let (g, height) = (9.81, 1.0);
+        let ball = PiecewiseLinear::new(
+            1.0,
+            vec![LinearField::autonomous(
+                matrix([[0.0, 1.0], [0.0, 0.0]]),
+                vector(&[0.0, -g]),
+            )],
+            vec![LinearSurface::event(
+                vector(&[-1.0, 0.0]),
+                0.0,
+                matrix([[1.0, 0.0], [0.0, -1.0]]),
+                DVector::zeros(2),
+            )],
+        )
+        .unwrap();
+        let y = vector(&[height, 0.0]);
+        let it = ball.iterate(&y, 0, 1.0);
+        assert_eq!((it.status, it.crossings[0]), (PiecewiseStatus::Ok, 1));
+        let t1 = (2.0 * height / g).sqrt();
+        let (v1, s) = (g * t1, 1.0 - t1);
+        assert!((it.state[0] - (v1 * s - 0.5 * g * s * s)).abs() < 1e-13);
+        assert!((it.state[1] - (v1 - g * s)).abs() < 1e-13);
+        assert!((it.min_crossing_rate - v1).abs() < 1e-13);
+        // det S = 1 (e = 1, tr A = 0).
+        assert!(it.log_det_saltation.abs() < 1e-14);
+        assert!((it.jacobian.determinant() - 1.0).abs() < 1e-13);
+        let fd = finite_difference_error(&ball, &y, 0, 1.0);
+        assert!(fd <= 1e-6, "{fd:e}");
     }
 
     #[test]
