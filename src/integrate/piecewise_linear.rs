@@ -515,6 +515,9 @@ impl PiecewiseLinear {
 
     /// [`iterate`](Self::iterate) over the part [t0, t1] of a period (a
     /// sub-map), from y at local time t0.
+    ///
+    /// Panics if y is not N-dimensional or `region` is not a region index
+    /// (below 2^switches).
     pub fn iterate_span(
         &self,
         y: &DVector<f64>,
@@ -523,6 +526,17 @@ impl PiecewiseLinear {
         t1: f64,
     ) -> PiecewiseIteration {
         let n = self.dimension();
+        assert_eq!(
+            y.len(),
+            n,
+            "state of length {} for a {n}-dimensional system",
+            y.len()
+        );
+        assert!(
+            region < self.fields.len(),
+            "region {region} of a system with {} regions",
+            self.fields.len()
+        );
         let length = t1 - t0;
         let span = Span {
             end: t1,
