@@ -1,11 +1,13 @@
 //! Integrating one map iteration of a flow: classical RK4 with fixed steps,
 //! wall impacts located inside the step that crosses the wall, returns to a
 //! Poincaré section ([`section`]), and the closed-form propagator of the
-//! impact oscillator that serves as ground truth.
+//! impact oscillator that serves as ground truth, with its generalisation to
+//! any piecewise-linear forced system ([`piecewise_linear`]).
 
 pub mod clock;
 pub mod closed_form;
 pub mod impact;
+pub mod piecewise_linear;
 pub mod rk4;
 pub mod section;
 pub mod surface;

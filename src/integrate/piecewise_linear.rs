@@ -1,0 +1,1517 @@
+//! Exact propagator of a piecewise-linear, harmonically forced system
+//!
+//! ```text
+//! y' = A_r y + c_r + p_r cos ωt + q_r sin ωt      in region r,
+//! h_j(y) = n_j·y − d_j                            surface j,
+//! ```
+//!
+//! with its exact tangent map: the general form of the ground truth that
+//! [`closed_form`](super::closed_form) is for the seed oscillator alone. A
+//! surface either *switches* the field (region r has bit j set where
+//! h_j > 0; the fields are indexed by those bits) or is an *event*: the
+//! motion is confined to h_j ≤ 0 and, reaching h_j = 0 from below, is
+//! reset, y ↦ R_j y + s_j (a stop: v ↦ −e v). One iteration is one period
+//! of the stroboscopic map in local time t ∈ [0, T], the forcing phase ωt
+//! restarting at 0.
+//!
+//! **Flow.** Between crossings the field is linear; appending the forcing
+//! coordinates w = (1, cos ωt, sin ωt), whose norm is √2 for ever, makes it
+//! homogeneous (Van Loan, "Computing integrals involving the matrix
+//! exponential", IEEE TAC 23, 1978):
+//!
+//! ```text
+//! z = [y; w],   z' = B z,   B = [[A, c, p, q],
+//!                                [0, 0, 0, 0 ],
+//!                                [0, 0, 0, −ω],
+//!                                [0, 0, ω, 0 ]],   z(t0 + s) = exp(B s) z(t0),
+//! ```
+//!
+//! exact for any A (singular, resonant with ω, unstable), and the top-left
+//! block of exp(B s) is exp(A s), the flow matrix of the tangent map. Every
+//! point of a segment is computed from the segment's start, so rounding does
+//! not accumulate along the search.
+//!
+//! **Crossings.** Each surface is watched through g = σ h with σ = ±1 chosen
+//! so that a crossing is g reaching 0 from below. A scan certified by a bound
+//! L ≥ |h'''| over each step (see [`PiecewiseLinear::iterate`]) cannot step
+//! over a near-grazing approach, and each root is refined by safeguarded
+//! Newton, h' = n·F, to machine precision. The earliest crossing over all
+//! surfaces is taken.
+//!
+//! **Tangent map.** The product of flow matrices and saltation matrices
+//! (Müller, "Calculation of Lyapunov exponents for dynamic systems with
+//! discontinuities", Chaos Solitons Fractals 5, 1995; Leine & Nijmeijer,
+//! *Dynamics and Bifurcations of Non-Smooth Mechanical Systems*, 2004, §3.3):
+//!
+//! ```text
+//! event:  S = R + (F⁺ − R F⁻) nᵀ / (n·F⁻),   F⁺ the field at R y⁻ + s,
+//! switch: S = I + (F⁺ − F⁻) nᵀ / (n·F⁻),     F⁺ the new region's field at y⁻,  det S = n·F⁺ / n·F⁻.
+//! ```
+//!
+//! Filippov sliding (at a switch, the new field points back into the
+//! surface) and sticking (after an event, at rest on the surface, pressed
+//! into it) are not propagated: the iteration stops and says so.
+
+use nalgebra::{DMatrix, DVector};
+use std::f64::consts::SQRT_2;
+
+/// Crossings allowed in one period, over all surfaces, before the iteration
+/// is abandoned with [`PiecewiseStatus::Chattering`].
+pub const MAX_CROSSINGS_PER_PERIOD: u32 = 10_000;
+
+/// A crossing whose approach rate n·F⁻ (towards the surface) is below this
+/// fraction of |n|·|F⁻| is grazing ([`PiecewiseStatus::Grazing`]): the
+/// saltation matrix grows like 1/(n·F⁻), so the Jacobian is dominated by
+/// rounding. For the seed oscillator |n|·|F⁻| ≈ |X''| ≈ 1, which makes this
+/// the closed form's `GRAZING_VELOCITY`.
+pub const GRAZING_RATE: f64 = 1e-12;
+
+/// Scan steps allowed in one period (a guard against pathological
+/// near-tangencies; a normal period needs a few dozen per surface).
+const MAX_SCAN_STEPS: u32 = 1_000_000;
+
+/// Largest scan step, as a fraction of the span. The scan is certified for
+/// any step; this only keeps the first trial of each step sensible.
+const H_MAX_FRACTION: f64 = 0.25;
+
+/// Smallest scan step, as a fraction of the span: below it the scan stops
+/// halving and decides from the values at both ends (a contact missed there
+/// would be L h³/6 deep, ~1e-36 of the span's scale).
+const H_MIN_FRACTION: f64 = 1e-12;
+
+/// A bounce off an event surface whose predicted flight 2|g'|/g'' is shorter
+/// than this fraction of the span is the tail of an accumulating (Zeno)
+/// sequence of events.
+const CHATTER_TIME_FRACTION: f64 = 1e-11;
+
+/// So is a bounce whose height g'²/(2g'') is below this many ulps of the
+/// surface's scale |d| + |n||y|.
+const CHATTER_HEIGHT_ULPS: f64 = 64.0;
+
+/// Iterations of the root refinement (it converges in a handful).
+const MAX_REFINE: usize = 200;
+
+/// Forcing coordinates appended to the state: 1, cos ωt, sin ωt.
+const FORCING: usize = 3;
+
+/// One region's field: y' = A y + c + p cos ωt + q sin ωt.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearField {
+    /// A, N×N.
+    pub a: DMatrix<f64>,
+    /// c.
+    pub constant: DVector<f64>,
+    /// p, the amplitude of cos ωt.
+    pub cos: DVector<f64>,
+    /// q, the amplitude of sin ωt.
+    pub sin: DVector<f64>,
+}
+
+impl LinearField {
+    /// y' = A y + c + p cos ωt + q sin ωt.
+    pub fn new(
+        a: DMatrix<f64>,
+        constant: DVector<f64>,
+        cos: DVector<f64>,
+        sin: DVector<f64>,
+    ) -> Self {
+        LinearField {
+            a,
+            constant,
+            cos,
+            sin,
+        }
+    }
+
+    /// An unforced field y' = A y + c.
+    pub fn autonomous(a: DMatrix<f64>, constant: DVector<f64>) -> Self {
+        let n = a.nrows();
+        LinearField::new(a, constant, DVector::zeros(n), DVector::zeros(n))
+    }
+
+    /// The state dimension N.
+    pub fn dimension(&self) -> usize {
+        self.a.nrows()
+    }
+
+    /// F(t, y) = A y + c + p cos ωt + q sin ωt.
+    pub fn eval(&self, omega: f64, t: f64, y: &DVector<f64>) -> DVector<f64> {
+        let (sin, cos) = (omega * t).sin_cos();
+        self.at_phase(cos, sin, y)
+    }
+
+    /// F at the forcing phase (cos ωt, sin ωt).
+    fn at_phase(&self, cos: f64, sin: f64, y: &DVector<f64>) -> DVector<f64> {
+        &self.a * y + &self.constant + &self.cos * cos + &self.sin * sin
+    }
+
+    /// The augmented generator B of z = [y; 1; cos ωt; sin ωt] (module docs).
+    pub fn augmented(&self, omega: f64) -> DMatrix<f64> {
+        let n = self.dimension();
+        let mut b = DMatrix::zeros(n + FORCING, n + FORCING);
+        b.view_mut((0, 0), (n, n)).copy_from(&self.a);
+        b.view_mut((0, n), (n, 1)).copy_from(&self.constant);
+        b.view_mut((0, n + 1), (n, 1)).copy_from(&self.cos);
+        b.view_mut((0, n + 2), (n, 1)).copy_from(&self.sin);
+        // cos' = −ω sin, sin' = ω cos.
+        b[(n + 1, n + 2)] = -omega;
+        b[(n + 2, n + 1)] = omega;
+        b
+    }
+}
+
+/// What happens where a surface's h crosses zero.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SurfaceKind {
+    /// The field switches across the surface; no reset. Region bit j is 1
+    /// where h_j > 0 (j counting the switches only, in order).
+    Switch,
+    /// An event: fires when h crosses 0 from below (the motion is confined
+    /// to h ≤ 0) and maps y ↦ reset·y + shift (a stop: v ↦ −e v).
+    Event {
+        /// R, N×N: the Jacobian of the reset.
+        reset: DMatrix<f64>,
+        /// s.
+        shift: DVector<f64>,
+    },
+}
+
+/// A surface h(y) = normal·y − offset (linear in the state, not in time).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearSurface {
+    /// n = ∇h.
+    pub normal: DVector<f64>,
+    /// d.
+    pub offset: f64,
+    /// Switch or event.
+    pub kind: SurfaceKind,
+}
+
+impl LinearSurface {
+    /// A switching surface n·y = d.
+    pub fn switch(normal: DVector<f64>, offset: f64) -> Self {
+        LinearSurface {
+            normal,
+            offset,
+            kind: SurfaceKind::Switch,
+        }
+    }
+
+    /// An event surface n·y = d, confining the motion to n·y ≤ d, with reset
+    /// y ↦ R y + s.
+    pub fn event(
+        normal: DVector<f64>,
+        offset: f64,
+        reset: DMatrix<f64>,
+        shift: DVector<f64>,
+    ) -> Self {
+        LinearSurface {
+            normal,
+            offset,
+            kind: SurfaceKind::Event { reset, shift },
+        }
+    }
+
+    /// h(y) = n·y − d.
+    pub fn value(&self, y: &DVector<f64>) -> f64 {
+        self.normal.dot(y) - self.offset
+    }
+}
+
+/// A system that cannot be propagated, with the numbers that say why.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PiecewiseError {
+    /// The fields are not one per region.
+    #[error("{switches} switching surfaces make {expected} regions, but {got} fields were given")]
+    FieldCount {
+        switches: usize,
+        expected: usize,
+        got: usize,
+    },
+    /// More switching surfaces than region indices can hold.
+    #[error("{switches} switching surfaces: at most {max} are supported")]
+    TooManySwitches { switches: usize, max: usize },
+    /// A matrix or vector does not match the state dimension.
+    #[error("{what} is {got}, but the state has dimension {dimension}")]
+    Shape {
+        what: String,
+        dimension: usize,
+        got: String,
+    },
+    /// A coefficient, ω or an offset is NaN or infinite.
+    #[error("{what} is not finite")]
+    NotFinite { what: String },
+}
+
+/// How an iteration ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PiecewiseStatus {
+    /// The span was completed; state and Jacobian are those at its end.
+    Ok,
+    /// Crossings accumulated (more than [`MAX_CROSSINGS_PER_PERIOD`], or a
+    /// bounce off an event surface below the time or position resolution,
+    /// the tail of a Zeno sequence), or the scan exhausted its step budget:
+    /// stopped at [`PiecewiseIteration::time`].
+    Chattering,
+    /// A crossing approached the surface at a rate |n·F⁻| below
+    /// [`GRAZING_RATE`]·|n||F⁻|: the state is right but the tangent map is
+    /// not to be trusted (it may be huge). The span was completed, unless the
+    /// rate was not positive at all (a tangency lost in rounding, where no
+    /// saltation matrix exists): then it stopped at the crossing.
+    Grazing,
+    /// At a switch, the new field points back into the surface as well
+    /// (Filippov sliding): not propagated; stopped at the crossing, before
+    /// the switch.
+    Sliding,
+    /// After an event the state is on the surface with zero rate n·F⁺ = 0
+    /// (a reset to rest, e = 0), pressed into it by the field: it would stick.
+    /// Not propagated; stopped after the reset.
+    Sticking,
+    /// The state left the floating-point range.
+    Diverged,
+}
+
+/// The result of one iteration.
+#[derive(Clone, Debug)]
+pub struct PiecewiseIteration {
+    /// y at the end of the span (at [`Self::time`] when stopped early).
+    pub state: DVector<f64>,
+    /// The region of the final state.
+    pub region: usize,
+    /// The exact tangent map ∂state/∂y(t0) = Φ_k S_k ··· S_1 Φ_0, Φ the flow
+    /// matrices exp(A_r Δt) of the segments, S the saltation matrices.
+    pub jacobian: DMatrix<f64>,
+    /// Crossings of each surface (switches in either direction, events).
+    pub crossings: Vec<u32>,
+    /// How the iteration ended.
+    pub status: PiecewiseStatus,
+    /// Σ ln|det S| over the crossings (−∞ after a singular reset, e = 0).
+    pub log_det_saltation: f64,
+    /// Σ tr(A_r) Δt over the segments: with [`Self::log_det_saltation`],
+    /// ln|det J| by Liouville's formula, the sum of the exponents.
+    pub trace_integral: f64,
+    /// Smallest approach rate |n·F⁻| of the crossings (∞ without any).
+    pub min_crossing_rate: f64,
+    /// Local time reached: the span's end unless stopped early.
+    pub time: f64,
+}
+
+/// Bounds of one region used by the certified scan.
+#[derive(Clone, Debug)]
+struct RegionBounds {
+    /// B, the augmented generator.
+    b: DMatrix<f64>,
+    /// tr A.
+    trace: f64,
+    /// max(μ₂(A), 0), μ₂ the logarithmic 2-norm λ_max((A + Aᵀ)/2).
+    growth: f64,
+    /// √2 |[c p q]|_F ≥ |c + p cos + q sin|.
+    drive: f64,
+    /// Per surface, (|r_y|, √2 |r_w|) with [r_y; r_w] = (Bᵀ)³ [n; −d; 0; 0],
+    /// so that |h'''| = |r_y·y + r_w·w| ≤ |r_y||y| + √2 |r_w|.
+    jerk: Vec<(f64, f64)>,
+}
+
+/// A piecewise-linear, harmonically forced system with its surfaces.
+#[derive(Clone, Debug)]
+pub struct PiecewiseLinear {
+    omega: f64,
+    fields: Vec<LinearField>,
+    surfaces: Vec<LinearSurface>,
+    /// The region bit of each surface (None for events).
+    bits: Vec<Option<u32>>,
+    regions: Vec<RegionBounds>,
+}
+
+/// The scan's settings for one span.
+#[derive(Clone, Copy, Debug)]
+struct Span {
+    end: f64,
+    h_max: f64,
+    h_min: f64,
+    chatter_time: f64,
+}
+
+/// A segment: the flow of one region from (t0, y0).
+#[derive(Clone, Debug)]
+struct Segment {
+    t0: f64,
+    region: usize,
+    /// z(t0) = [y0; 1; cos ωt0; sin ωt0].
+    z0: DVector<f64>,
+    /// σ_j: g_j = σ_j h_j rises through 0 at a crossing.
+    sign: Vec<f64>,
+}
+
+/// A point of a segment, with what the scan needs of every surface.
+#[derive(Clone, Debug)]
+struct Point {
+    t: f64,
+    y: DVector<f64>,
+    /// F(t, y) of the segment's region.
+    field: DVector<f64>,
+    /// g_j, g_j', g_j''.
+    g: Vec<f64>,
+    g1: Vec<f64>,
+    g2: Vec<f64>,
+}
+
+/// What ended a scan of a segment.
+enum Next {
+    End(Point),
+    Crossing(usize, Point),
+    Chattering(Point),
+    Sticking(Point),
+    Diverged(Point),
+}
+
+impl PiecewiseLinear {
+    /// Validates the shapes (2^switches fields, one per region, indexed by
+    /// the bits of the switches in the order they appear in `surfaces`;
+    /// every vector and matrix N-dimensional) and precomputes the bounds of
+    /// the certified scan.
+    pub fn new(
+        omega: f64,
+        fields: Vec<LinearField>,
+        surfaces: Vec<LinearSurface>,
+    ) -> Result<Self, PiecewiseError> {
+        if !omega.is_finite() {
+            return Err(PiecewiseError::NotFinite { what: "ω".into() });
+        }
+        let switches = surfaces
+            .iter()
+            .filter(|s| s.kind == SurfaceKind::Switch)
+            .count();
+        const MAX_SWITCHES: usize = 16;
+        if switches > MAX_SWITCHES {
+            return Err(PiecewiseError::TooManySwitches {
+                switches,
+                max: MAX_SWITCHES,
+            });
+        }
+        let expected = 1 << switches;
+        if fields.len() != expected {
+            return Err(PiecewiseError::FieldCount {
+                switches,
+                expected,
+                got: fields.len(),
+            });
+        }
+        let n = fields[0].dimension();
+        let square = |what: String, m: &DMatrix<f64>| {
+            if m.shape() != (n, n) {
+                return Err(PiecewiseError::Shape {
+                    what,
+                    dimension: n,
+                    got: format!("{}×{}", m.nrows(), m.ncols()),
+                });
+            }
+            finite(what, m.iter())
+        };
+        let vector = |what: String, v: &DVector<f64>| {
+            if v.len() != n {
+                return Err(PiecewiseError::Shape {
+                    what,
+                    dimension: n,
+                    got: format!("of length {}", v.len()),
+                });
+            }
+            finite(what, v.iter())
+        };
+        for (r, field) in fields.iter().enumerate() {
+            square(format!("field {r}: A"), &field.a)?;
+            vector(format!("field {r}: constant"), &field.constant)?;
+            vector(format!("field {r}: cos"), &field.cos)?;
+            vector(format!("field {r}: sin"), &field.sin)?;
+        }
+        for (j, surface) in surfaces.iter().enumerate() {
+            vector(format!("surface {j}: normal"), &surface.normal)?;
+            finite(format!("surface {j}: offset"), [surface.offset].iter())?;
+            if let SurfaceKind::Event { reset, shift } = &surface.kind {
+                square(format!("surface {j}: reset"), reset)?;
+                vector(format!("surface {j}: shift"), shift)?;
+            }
+        }
+        let mut next_bit = 0;
+        let bits = surfaces
+            .iter()
+            .map(|s| match s.kind {
+                SurfaceKind::Switch => {
+                    next_bit += 1;
+                    Some(next_bit - 1)
+                }
+                SurfaceKind::Event { .. } => None,
+            })
+            .collect();
+        let regions = fields
+            .iter()
+            .map(|field| region_bounds(field, omega, &surfaces))
+            .collect();
+        Ok(PiecewiseLinear {
+            omega,
+            fields,
+            surfaces,
+            bits,
+            regions,
+        })
+    }
+
+    /// ω of the forcing.
+    pub fn omega(&self) -> f64 {
+        self.omega
+    }
+
+    /// The fields, indexed by region.
+    pub fn fields(&self) -> &[LinearField] {
+        &self.fields
+    }
+
+    /// The surfaces.
+    pub fn surfaces(&self) -> &[LinearSurface] {
+        &self.surfaces
+    }
+
+    /// The state dimension N.
+    pub fn dimension(&self) -> usize {
+        self.fields[0].dimension()
+    }
+
+    /// The region of y: bit k set where the k-th switch has h > 0.
+    pub fn region(&self, y: &DVector<f64>) -> usize {
+        self.surfaces
+            .iter()
+            .zip(&self.bits)
+            .filter_map(|(s, bit)| bit.map(|b| ((s.value(y) > 0.0) as usize) << b))
+            .sum()
+    }
+
+    /// One map iteration: from y in `region` at local time 0 over
+    /// [0, period] (the forcing restarts at ωt = 0 every period).
+    ///
+    /// Preconditions: y is on the allowed side of every event surface
+    /// (h ≤ 0; a start on one moving into it, n·F > 0, fires at t = 0), and
+    /// `region` agrees with the switches' signs except on a surface itself,
+    /// where it says which field the motion starts in. An event exactly at
+    /// the end is applied: the state returned is the post-reset one.
+    ///
+    /// The scan over a step [a, a+h] certifies each surface with the cubic
+    /// majorant g(a+s) ≤ g(a) + g'(a)s + g''(a)s²/2 + Ls³/6, L ≥ |h'''| on
+    /// the step (as the closed form does with |X'''|). Writing
+    /// h''' = r_y·y + r_w·w ([r_y; r_w] = (Bᵀ)³[n; −d; 0; 0]) and bounding
+    /// |y| along the step through the logarithmic norm μ = μ₂(A),
+    /// d|y|/dt ≤ μ|y| + |C w|, |w| = √2:
+    ///
+    /// ```text
+    /// |y(a+s)| ≤ e^{μ⁺s} (|y(a)| + √2 |C|_F s),   L = |r_y| max|y| + √2 |r_w|.
+    /// ```
+    ///
+    /// A step is taken only when every surface's majorant stays below 0;
+    /// otherwise it is halved until each surface in doubt is certified to
+    /// rise through 0 once (a bracket, refined by safeguarded Newton), or
+    /// until h reaches 1e-12 of the span, where the ends decide.
+    pub fn iterate(&self, y: &DVector<f64>, region: usize, period: f64) -> PiecewiseIteration {
+        self.iterate_span(y, region, 0.0, period)
+    }
+
+    /// [`iterate`](Self::iterate) over the part [t0, t1] of a period (a
+    /// sub-map), from y at local time t0.
+    ///
+    /// Panics if y is not N-dimensional or `region` is not a region index
+    /// (below 2^switches).
+    pub fn iterate_span(
+        &self,
+        y: &DVector<f64>,
+        region: usize,
+        t0: f64,
+        t1: f64,
+    ) -> PiecewiseIteration {
+        let n = self.dimension();
+        assert_eq!(
+            y.len(),
+            n,
+            "state of length {} for a {n}-dimensional system",
+            y.len()
+        );
+        assert!(
+            region < self.fields.len(),
+            "region {region} of a system with {} regions",
+            self.fields.len()
+        );
+        let length = t1 - t0;
+        let span = Span {
+            end: t1,
+            h_max: H_MAX_FRACTION * length,
+            h_min: H_MIN_FRACTION * length,
+            chatter_time: CHATTER_TIME_FRACTION * length,
+        };
+        let mut segment = self.segment(t0, y, region);
+        let mut start = self.point(&segment, t0, y.clone());
+        let mut jacobian = DMatrix::identity(n, n);
+        let mut crossings = vec![0_u32; self.surfaces.len()];
+        let mut total = 0_u32;
+        let mut log_det_saltation = 0.0;
+        let mut trace_integral = 0.0;
+        let mut min_crossing_rate = f64::INFINITY;
+        let mut grazing = false;
+        let mut budget = MAX_SCAN_STEPS;
+
+        let (end, status) = loop {
+            let (j, p) = match self.next_crossing(&segment, start, &span, &mut budget) {
+                Next::End(p) => break (p, PiecewiseStatus::Ok),
+                Next::Chattering(p) => break (p, PiecewiseStatus::Chattering),
+                Next::Sticking(p) => break (p, PiecewiseStatus::Sticking),
+                Next::Diverged(p) => break (p, PiecewiseStatus::Diverged),
+                Next::Crossing(j, p) => (j, p),
+            };
+            if total == MAX_CROSSINGS_PER_PERIOD {
+                break (p, PiecewiseStatus::Chattering);
+            }
+            let surface = &self.surfaces[j];
+            let normal = &surface.normal;
+            // n·F⁻, whose sign is the crossing's direction; g' = σ n·F⁻ is
+            // the approach rate, positive unless the root is a tangency that
+            // rounding turned over.
+            let rate = normal.dot(&p.field);
+            let approach = p.g1[j];
+            if approach.is_nan() || approach <= 0.0 {
+                break (p, PiecewiseStatus::Grazing);
+            }
+            min_crossing_rate = min_crossing_rate.min(approach);
+            if approach < GRAZING_RATE * normal.norm() * p.field.norm() {
+                grazing = true;
+            }
+            let (next_region, y_plus, saltation, log_det) = match &surface.kind {
+                SurfaceKind::Switch => {
+                    let bit = self.bits[j].expect("a switch has a region bit");
+                    let next_region = segment.region ^ (1 << bit);
+                    let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
+                    let onward = normal.dot(&f_plus);
+                    let carried = segment.sign[j] * onward;
+                    if carried.is_nan() || carried <= 0.0 {
+                        // The new field does not carry the state on across:
+                        // both point into the surface (Filippov sliding).
+                        break (p, PiecewiseStatus::Sliding);
+                    }
+                    let s =
+                        DMatrix::identity(n, n) + (&f_plus - &p.field) * normal.transpose() / rate;
+                    // det(I + u nᵀ/(n·F⁻)) = 1 + n·u/(n·F⁻), written exactly.
+                    (next_region, p.y.clone(), s, (onward / rate).abs().ln())
+                }
+                SurfaceKind::Event { reset, shift } => {
+                    let y_plus = reset * &p.y + shift;
+                    let next_region = self.region_after_reset(segment.region, &p.y, &y_plus);
+                    let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_plus);
+                    let s = reset + (&f_plus - reset * &p.field) * normal.transpose() / rate;
+                    let det = s.clone().determinant();
+                    (next_region, y_plus, s, det.abs().ln())
+                }
+            };
+            let dt = p.t - segment.t0;
+            jacobian = saltation * self.flow(segment.region, dt) * jacobian;
+            trace_integral += self.regions[segment.region].trace * dt;
+            log_det_saltation += log_det;
+            crossings[j] += 1;
+            total += 1;
+            segment = self.segment(p.t, &y_plus, next_region);
+            start = self.point(&segment, p.t, y_plus);
+        };
+        let dt = end.t - segment.t0;
+        jacobian = self.flow(segment.region, dt) * jacobian;
+        trace_integral += self.regions[segment.region].trace * dt;
+        let status = match status {
+            PiecewiseStatus::Ok if grazing => PiecewiseStatus::Grazing,
+            s => s,
+        };
+        PiecewiseIteration {
+            state: end.y,
+            region: segment.region,
+            jacobian,
+            crossings,
+            status,
+            log_det_saltation,
+            trace_integral,
+            min_crossing_rate,
+            time: end.t,
+        }
+    }
+
+    /// The region after a reset from y⁻ to y⁺: a switch whose h changed sign
+    /// in the reset (a stop reversing the velocity across a friction
+    /// surface v = 0) flips its bit. A switch the reset leaves on its side
+    /// keeps its bit, so that a state on a switching surface keeps the
+    /// region it was given.
+    fn region_after_reset(
+        &self,
+        region: usize,
+        before: &DVector<f64>,
+        after: &DVector<f64>,
+    ) -> usize {
+        let mut region = region;
+        for (s, bit) in self.surfaces.iter().zip(&self.bits) {
+            if let Some(b) = bit {
+                let (h0, h1) = (s.value(before), s.value(after));
+                if (h0 > 0.0) != (h1 > 0.0) && h1 != 0.0 {
+                    region ^= 1 << b;
+                }
+            }
+        }
+        region
+    }
+
+    /// exp(A_r s), the top-left block of exp(B_r s).
+    fn flow(&self, region: usize, s: f64) -> DMatrix<f64> {
+        let n = self.dimension();
+        let e = (&self.regions[region].b * s).exp();
+        e.view((0, 0), (n, n)).into_owned()
+    }
+
+    fn segment(&self, t0: f64, y0: &DVector<f64>, region: usize) -> Segment {
+        let n = self.dimension();
+        let (sin, cos) = (self.omega * t0).sin_cos();
+        let mut z0 = DVector::zeros(n + FORCING);
+        z0.rows_mut(0, n).copy_from(y0);
+        z0[n] = 1.0;
+        z0[n + 1] = cos;
+        z0[n + 2] = sin;
+        let sign = self
+            .bits
+            .iter()
+            .map(|bit| match bit {
+                Some(b) if region & (1 << b) != 0 => -1.0,
+                _ => 1.0,
+            })
+            .collect();
+        Segment {
+            t0,
+            region,
+            z0,
+            sign,
+        }
+    }
+
+    /// The point of `segment` at t with state y (kept exactly as given).
+    fn point(&self, segment: &Segment, t: f64, y: DVector<f64>) -> Point {
+        let field = &self.fields[segment.region];
+        let (sin, cos) = (self.omega * t).sin_cos();
+        let f = field.at_phase(cos, sin, &y);
+        // y'' = A y' − ω p sin ωt + ω q cos ωt.
+        let acc = &field.a * &f - &field.cos * (self.omega * sin) + &field.sin * (self.omega * cos);
+        let mut g = Vec::with_capacity(self.surfaces.len());
+        let mut g1 = Vec::with_capacity(self.surfaces.len());
+        let mut g2 = Vec::with_capacity(self.surfaces.len());
+        for (s, sign) in self.surfaces.iter().zip(&segment.sign) {
+            g.push(sign * s.value(&y));
+            g1.push(sign * s.normal.dot(&f));
+            g2.push(sign * s.normal.dot(&acc));
+        }
+        Point {
+            t,
+            y,
+            field: f,
+            g,
+            g1,
+            g2,
+        }
+    }
+
+    /// The point of `segment` at t, always from the segment's start.
+    fn eval(&self, segment: &Segment, t: f64) -> Point {
+        let n = self.dimension();
+        let e = (&self.regions[segment.region].b * (t - segment.t0)).exp();
+        let y = e.rows(0, n) * &segment.z0;
+        self.point(segment, t, y)
+    }
+
+    /// L ≥ |h_j'''| on [t, t + step] along the segment of `region` through y
+    /// (see [`iterate`](Self::iterate)).
+    fn jerk_bound(&self, region: usize, j: usize, y_norm: f64, step: f64) -> f64 {
+        let bounds = &self.regions[region];
+        let (ry, rw) = bounds.jerk[j];
+        if ry == 0.0 {
+            // h''' does not see y (A³ᵀn = 0): no bound on |y| needed, and
+            // none to overflow into ∞·0.
+            return rw;
+        }
+        let reach = (bounds.growth * step).exp() * (y_norm + bounds.drive * step);
+        ry * reach + rw
+    }
+
+    /// The scale below which an event surface's bounce is rounding.
+    fn resolution(&self, j: usize, y: &DVector<f64>) -> f64 {
+        let s = &self.surfaces[j];
+        CHATTER_HEIGHT_ULPS * f64::EPSILON * (s.offset.abs() + s.normal.norm() * y.norm())
+    }
+
+    /// Scans `segment` from `start` for the first crossing in (start.t, end]
+    /// over all surfaces (see [`iterate`](Self::iterate)).
+    fn next_crossing(
+        &self,
+        segment: &Segment,
+        start: Point,
+        span: &Span,
+        budget: &mut u32,
+    ) -> Next {
+        let surfaces = self.surfaces.len();
+        let mut a = start;
+        let mut h = span.h_max;
+        for j in 0..surfaces {
+            if a.g1[j] < 0.0 && a.g2[j] > 0.0 && a.g[j] >= -self.resolution(j, &a.y) {
+                // Leaving a surface against a field pushing back: the bounce
+                // lasts about 2|g'|/g'', so start with half of that rather
+                // than halving down from h_max.
+                h = h.min(-a.g1[j] / a.g2[j]);
+            }
+        }
+        loop {
+            if !a.y.iter().all(|x| x.is_finite()) {
+                return Next::Diverged(a);
+            }
+            for j in 0..surfaces {
+                let event = self.bits[j].is_none();
+                if event && a.g[j] >= -self.resolution(j, &a.y) && a.g1[j] <= 0.0 && a.g2[j] > 0.0 {
+                    // On an event surface (to rounding), pressed into it.
+                    if a.g1[j] == 0.0 {
+                        return Next::Sticking(a);
+                    }
+                    // A bounce below the time or position resolution: the
+                    // tail of an accumulating sequence of events.
+                    let resolution = self.resolution(j, &a.y);
+                    if -2.0 * a.g1[j] < span.chatter_time * a.g2[j]
+                        || a.g1[j] * a.g1[j] < 2.0 * a.g2[j] * resolution
+                    {
+                        return Next::Chattering(a);
+                    }
+                }
+                if a.g[j] >= 0.0 && (a.g1[j] > 0.0 || (a.g1[j] == 0.0 && a.g2[j] > 0.0)) {
+                    // On (or past) the surface, moving into it: crossing now.
+                    return Next::Crossing(j, a);
+                }
+            }
+            if a.t >= span.end {
+                return Next::End(a);
+            }
+            if *budget == 0 {
+                return Next::Chattering(a);
+            }
+            *budget -= 1;
+            let remaining = span.end - a.t;
+            let (step, t_b) = if h >= remaining {
+                (remaining, span.end)
+            } else {
+                (h, a.t + h)
+            };
+            let b = self.eval(segment, t_b);
+            let y_norm = a.y.norm();
+            let mut in_doubt = Vec::new();
+            let mut bracketed = true;
+            for j in 0..surfaces {
+                let jerk = self.jerk_bound(segment.region, j, y_norm, step);
+                if certified_below(a.g[j], a.g1[j], a.g2[j], jerk, step) {
+                    continue;
+                }
+                in_doubt.push(j);
+                bracketed &= b.g[j] >= 0.0
+                    && a.g[j] < 0.0
+                    && certified_increasing(a.g1[j], a.g2[j], jerk, step);
+            }
+            if in_doubt.is_empty() {
+                a = b;
+                h = (2.0 * h).min(span.h_max);
+                continue;
+            }
+            let fine = step <= span.h_min;
+            if bracketed || fine {
+                // Each surface in doubt either rises through 0 once in the
+                // step (bracketed), or, at the finest step, is decided from
+                // the ends, including a maximum inside the step that
+                // reaches 0.
+                let mut first: Option<(usize, Point)> = None;
+                for &j in &in_doubt {
+                    let root = if b.g[j] >= 0.0 {
+                        Some(self.refine(segment, j, a.clone(), b.clone()))
+                    } else if a.g1[j] > 0.0 && b.g1[j] < 0.0 {
+                        let top = self.maximum(segment, j, a.clone(), b.clone());
+                        (top.g[j] >= 0.0).then(|| self.refine(segment, j, a.clone(), top))
+                    } else {
+                        None
+                    };
+                    if let Some(p) = root {
+                        if first.as_ref().is_none_or(|(_, q)| p.t < q.t) {
+                            first = Some((j, p));
+                        }
+                    }
+                }
+                if let Some((j, p)) = first {
+                    return Next::Crossing(j, p);
+                }
+                a = b;
+                h = (2.0 * step).min(span.h_max);
+                continue;
+            }
+            h = 0.5 * step;
+        }
+    }
+
+    /// The crossing of surface j in [lo, hi], where g_j(lo) < 0 (or lo is a
+    /// start on the surface moving away from it), g_j(hi) ≥ 0 and g_j has
+    /// no other root: Newton's method, falling back to bisection whenever a
+    /// Newton step would leave the bracket. Of the final bracket, the end
+    /// nearer the surface.
+    fn refine(&self, segment: &Segment, j: usize, mut lo: Point, mut hi: Point) -> Point {
+        let tol = 2.0 * f64::EPSILON * hi.t.abs().max(1.0);
+        let (mut t, mut g, mut g1) = (hi.t, hi.g[j], hi.g1[j]);
+        let mut lo_evaluated = false;
+        for _ in 0..MAX_REFINE {
+            if hi.t - lo.t <= tol {
+                break;
+            }
+            let newton = if g1 > 0.0 { t - g / g1 } else { f64::NAN };
+            let next = if newton > lo.t && newton < hi.t {
+                newton
+            } else {
+                0.5 * (lo.t + hi.t)
+            };
+            let moved = (next - t).abs();
+            let p = self.eval(segment, next);
+            (t, g, g1) = (p.t, p.g[j], p.g1[j]);
+            if g >= 0.0 {
+                hi = p;
+            } else {
+                lo = p;
+                lo_evaluated = true;
+            }
+            if g == 0.0 || moved <= tol {
+                break;
+            }
+        }
+        if lo_evaluated && -lo.g[j] < hi.g[j] {
+            lo
+        } else {
+            hi
+        }
+    }
+
+    /// The maximum of g_j between lo (g_j' > 0) and hi (g_j' < 0), by
+    /// bisection on g_j'; of the two final points, the higher.
+    fn maximum(&self, segment: &Segment, j: usize, mut lo: Point, mut hi: Point) -> Point {
+        let tol = 2.0 * f64::EPSILON * hi.t.abs().max(1.0);
+        for _ in 0..MAX_REFINE {
+            if hi.t - lo.t <= tol {
+                break;
+            }
+            let p = self.eval(segment, 0.5 * (lo.t + hi.t));
+            if p.g1[j] > 0.0 {
+                lo = p;
+            } else {
+                hi = p;
+            }
+        }
+        if lo.g[j] >= hi.g[j] {
+            lo
+        } else {
+            hi
+        }
+    }
+}
+
+/// Errs on the first NaN or infinity.
+fn finite<'a>(what: String, values: impl Iterator<Item = &'a f64>) -> Result<(), PiecewiseError> {
+    let mut values = values;
+    if values.all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(PiecewiseError::NotFinite { what })
+    }
+}
+
+/// The scan's bounds of one region (see [`RegionBounds`]).
+fn region_bounds(field: &LinearField, omega: f64, surfaces: &[LinearSurface]) -> RegionBounds {
+    let n = field.dimension();
+    let b = field.augmented(omega);
+    let symmetric = (&field.a + field.a.transpose()) * 0.5;
+    // The eigenvalues are exact to about ε|A|; the margin keeps the bound an
+    // upper one.
+    let margin = 64.0 * f64::EPSILON * field.a.norm();
+    let growth = (symmetric.symmetric_eigenvalues().max() + margin).max(0.0);
+    let drive = SQRT_2
+        * (field.constant.norm_squared() + field.cos.norm_squared() + field.sin.norm_squared())
+            .sqrt();
+    let bt = b.transpose();
+    let jerk = surfaces
+        .iter()
+        .map(|s| {
+            let mut m = DVector::zeros(n + FORCING);
+            m.rows_mut(0, n).copy_from(&s.normal);
+            m[n] = -s.offset;
+            let r = &bt * (&bt * (&bt * m));
+            (r.rows(0, n).norm(), SQRT_2 * r.rows(n, FORCING).norm())
+        })
+        .collect();
+    RegionBounds {
+        b,
+        trace: field.a.trace(),
+        growth,
+        drive,
+        jerk,
+    }
+}
+
+/// Whether q(s) = g₀ + g₁s + g₂s²/2 + Ls³/6 < 0 for all s ∈ (0, h]: the
+/// closed form's test, with a non-finite q counting as not certified.
+///
+/// A point on (or, by rounding, just beyond) the surface counts as g₀ = 0;
+/// it is then certified to leave when g₁ ≤ 0 and q(s)/s = g₁ + g₂s/2 +
+/// Ls²/6, a convex quadratic that starts at g₁ ≤ 0, is negative at h.
+fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
+    if g0 >= 0.0 {
+        return g1 <= 0.0 && g1 + h * (0.5 * g2 + h * jerk / 6.0) < 0.0;
+    }
+    let q = |s: f64| g0 + s * (g1 + s * (0.5 * g2 + s * jerk / 6.0));
+    let end = q(h);
+    if end.is_nan() || end >= 0.0 {
+        return false;
+    }
+    // An interior maximum is the smaller root of q'(s) = g₁ + g₂s + Ls²/2,
+    // which is positive only if g₁ > 0 and g₂ ≤ 0; written as
+    // 2g₁/(√disc − g₂) to avoid cancellation.
+    if g1 > 0.0 && g2 <= 0.0 {
+        let disc = g2 * g2 - 2.0 * jerk * g1;
+        if disc >= 0.0 {
+            let denominator = disc.sqrt() - g2;
+            if denominator > 0.0 {
+                let s = 2.0 * g1 / denominator;
+                let top = q(s);
+                if s < h && (top.is_nan() || top >= 0.0) {
+                    return false;
+                }
+            }
+        }
+    }
+    true
+}
+
+/// Whether g' > 0 on [0, h], from g'(s) ≥ g₁ + g₂s − Ls²/2 (concave, so
+/// checking both ends suffices).
+fn certified_increasing(g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
+    g1 > 0.0 && g1 + h * (g2 - 0.5 * h * jerk) > 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
+    use std::f64::consts::{PI, TAU};
+
+    fn vector(v: &[f64]) -> DVector<f64> {
+        DVector::from_column_slice(v)
+    }
+
+    fn matrix(rows: [[f64; 2]; 2]) -> DMatrix<f64> {
+        DMatrix::from_row_slice(2, 2, rows.as_flattened())
+    }
+
+    /// The damped oscillator's field X'' = -2ζX' - kX + s + f cos ηt.
+    fn oscillator_field(zeta: f64, stiffness: f64, constant: f64, f: f64) -> LinearField {
+        LinearField::new(
+            matrix([[0.0, 1.0], [-stiffness, -2.0 * zeta]]),
+            vector(&[0.0, constant]),
+            vector(&[0.0, f]),
+            DVector::zeros(2),
+        )
+    }
+
+    /// The seed oscillator X'' = -2ζX' - X + f cos ηt, X ≤ X_w, V ↦ -eV:
+    /// one field, one event surface X - X_w with reset diag(1, -e).
+    fn seed(zeta: f64, f: f64, eta: f64, wall: f64, e: f64) -> PiecewiseLinear {
+        let stop = LinearSurface::event(
+            vector(&[1.0, 0.0]),
+            wall,
+            matrix([[1.0, 0.0], [0.0, -e]]),
+            DVector::zeros(2),
+        );
+        PiecewiseLinear::new(eta, vec![oscillator_field(zeta, 1.0, 0.0, f)], vec![stop]).unwrap()
+    }
+
+    /// The soft stop x'' = -2ζx' - x - k_s(x - gap)·[x > gap] + f cos ηt:
+    /// two fields, one switch x - gap.
+    fn soft_stop(zeta: f64, f: f64, eta: f64, ks: f64, gap: f64) -> PiecewiseLinear {
+        let free = oscillator_field(zeta, 1.0, 0.0, f);
+        let stiff = oscillator_field(zeta, 1.0 + ks, ks * gap, f);
+        let contact = LinearSurface::switch(vector(&[1.0, 0.0]), gap);
+        PiecewiseLinear::new(eta, vec![free, stiff], vec![contact]).unwrap()
+    }
+
+    /// |a - b| / max(1, scale): the error, relative where the scale is large.
+    fn error(a: f64, b: f64, scale: f64) -> f64 {
+        (a - b).abs() / scale.max(1.0)
+    }
+
+    #[test]
+    fn seed_oscillator_matches_closed_form() {
+        let (mut worst_state, mut worst_jacobian) = (0.0_f64, 0.0_f64);
+        for e in [1.0, 0.8] {
+            for eta in [0.8, 1.3, 2.5, 4.0] {
+                let osc = ForcedImpactOscillator::new(0.05, 1.0, eta, 2.0, e).unwrap();
+                let system = seed(0.05, 1.0, eta, 2.0, e);
+                let period = osc.period();
+                for start in [[0.0, 3.0], [1.5, -1.0], [0.0, 0.0]] {
+                    let mut y = start;
+                    let mut impacts = 0;
+                    // Consecutive periods of the closed form's orbit, each
+                    // from the same state for both.
+                    for _ in 0..20 {
+                        let exact = osc.iterate(y);
+                        assert_eq!(exact.status, ExactStatus::Ok);
+                        let it = system.iterate(&vector(&y), 0, period);
+                        assert_eq!(it.status, PiecewiseStatus::Ok, "η={eta} e={e} from {y:?}");
+                        assert_eq!(
+                            it.crossings,
+                            vec![exact.impacts],
+                            "η={eta} e={e} from {y:?}"
+                        );
+                        assert_eq!(it.time, period);
+                        let scale = exact.state[0].abs().max(exact.state[1].abs());
+                        for i in 0..2 {
+                            worst_state =
+                                worst_state.max(error(it.state[i], exact.state[i], scale));
+                        }
+                        let scale = exact.jacobian.abs().max();
+                        for i in 0..2 {
+                            for j in 0..2 {
+                                worst_jacobian = worst_jacobian.max(error(
+                                    it.jacobian[(i, j)],
+                                    exact.jacobian[(i, j)],
+                                    scale,
+                                ));
+                            }
+                        }
+                        // Liouville: det J = e^{-2ζT} e^{2·impacts}.
+                        let expected = -2.0 * 0.05 * period + 2.0 * e.ln() * exact.impacts as f64;
+                        assert!(
+                            (it.trace_integral + it.log_det_saltation - expected).abs() < 1e-12
+                        );
+                        impacts += exact.impacts;
+                        y = exact.state;
+                    }
+                    if start[1] == 3.0 {
+                        assert!(impacts >= 1, "η={eta} e={e}: no impacts");
+                    }
+                }
+            }
+        }
+        eprintln!("seed vs closed form: state {worst_state:.2e}, Jacobian {worst_jacobian:.2e}");
+        assert!(worst_state <= 1e-10 && worst_jacobian <= 1e-10);
+    }
+
+    /// One period of the soft stop by n RK4 steps, each in the field of the
+    /// region at its start; a step that ends across x = gap is redone to the
+    /// crossing, located by bisection on the RK4 sub-step, and finished from
+    /// there in the other field. Returns the end and the crossings.
+    fn rk4_soft_stop(
+        (zeta, f, eta, ks, gap): (f64, f64, f64, f64, f64),
+        y0: [f64; 2],
+        n: usize,
+    ) -> ([f64; 2], u32) {
+        let rhs = |t: f64, y: [f64; 2], stiff: bool| {
+            let spring = if stiff { ks * (y[0] - gap) } else { 0.0 };
+            [
+                y[1],
+                -2.0 * zeta * y[1] - y[0] - spring + f * (eta * t).cos(),
+            ]
+        };
+        let step = |t: f64, y: [f64; 2], h: f64, stiff: bool| {
+            let add = |y: [f64; 2], k: [f64; 2], s: f64| [y[0] + s * k[0], y[1] + s * k[1]];
+            let k1 = rhs(t, y, stiff);
+            let k2 = rhs(t + 0.5 * h, add(y, k1, 0.5 * h), stiff);
+            let k3 = rhs(t + 0.5 * h, add(y, k2, 0.5 * h), stiff);
+            let k4 = rhs(t + h, add(y, k3, h), stiff);
+            std::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+        };
+        let h = TAU / eta / n as f64;
+        let (mut y, mut stiff, mut crossings) = (y0, y0[0] > gap, 0);
+        for k in 0..n {
+            let t = k as f64 * h;
+            let next = step(t, y, h, stiff);
+            if (next[0] > gap) == stiff {
+                y = next;
+                continue;
+            }
+            let (mut lo, mut hi) = (0.0, h);
+            for _ in 0..100 {
+                let mid = 0.5 * (lo + hi);
+                if (step(t, y, mid, stiff)[0] > gap) == stiff {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            let contact = step(t, y, hi, stiff);
+            stiff = !stiff;
+            crossings += 1;
+            y = step(t + hi, contact, h - hi, stiff);
+        }
+        (y, crossings)
+    }
+
+    /// Central differences (δ = 1e-6) of `iterate(..).state` against its
+    /// Jacobian; returns the worst error relative to max(1, |J|).
+    fn finite_difference_error(
+        system: &PiecewiseLinear,
+        y: &DVector<f64>,
+        region: usize,
+        period: f64,
+    ) -> f64 {
+        let it = system.iterate(y, region, period);
+        let delta = 1e-6;
+        let scale = it.jacobian.abs().max();
+        let mut worst = 0.0_f64;
+        for j in 0..y.len() {
+            let (mut plus, mut minus) = (y.clone(), y.clone());
+            plus[j] += delta;
+            minus[j] -= delta;
+            let (ip, im) = (
+                system.iterate(&plus, region, period),
+                system.iterate(&minus, region, period),
+            );
+            assert_eq!(
+                ip.crossings, it.crossings,
+                "perturbation changed the crossings"
+            );
+            assert_eq!(
+                im.crossings, it.crossings,
+                "perturbation changed the crossings"
+            );
+            for i in 0..y.len() {
+                let fd = (ip.state[i] - im.state[i]) / (2.0 * delta);
+                worst = worst.max(error(fd, it.jacobian[(i, j)], scale));
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn soft_stop_matches_rk4_and_finite_differences() {
+        let (zeta, f, ks, gap) = (0.05, 1.0, 20.0, 1.0);
+        let (mut worst_state, mut worst_fd, mut worst_det) = (0.0_f64, 0.0_f64, 0.0_f64);
+        for eta in [0.8, 1.3, 2.5] {
+            let system = soft_stop(zeta, f, eta, ks, gap);
+            let period = TAU / eta;
+            let mut y = vector(&[0.0, 2.0]);
+            let mut region = system.region(&y);
+            let mut crossings = 0;
+            for _ in 0..6 {
+                let it = system.iterate(&y, region, period);
+                assert_eq!(it.status, PiecewiseStatus::Ok);
+                let (reference, rk4_crossings) =
+                    rk4_soft_stop((zeta, f, eta, ks, gap), [y[0], y[1]], 200_000);
+                assert_eq!(it.crossings, vec![rk4_crossings], "η={eta}");
+                for (x, r) in it.state.iter().zip(reference) {
+                    worst_state = worst_state.max((x - r).abs());
+                }
+                worst_fd = worst_fd.max(finite_difference_error(&system, &y, region, period));
+                // Continuous field: det S = n·F⁺/n·F⁻ = v/v = 1, and
+                // ln|det J| = ∫ tr A = -2ζT.
+                assert_eq!(it.log_det_saltation, 0.0);
+                let log_det = it.jacobian.determinant().abs().ln();
+                worst_det = worst_det
+                    .max((log_det - (it.trace_integral + it.log_det_saltation)).abs())
+                    .max((it.trace_integral + 2.0 * zeta * period).abs());
+                crossings += it.crossings[0];
+                (y, region) = (it.state, it.region);
+            }
+            assert!(crossings >= 4, "η={eta}: {crossings} crossings");
+        }
+        eprintln!(
+            "soft stop: state vs RK4 {worst_state:.2e}, Jacobian vs FD {worst_fd:.2e}, \
+             ln det {worst_det:.2e}"
+        );
+        assert!(worst_state <= 1e-9);
+        assert!(worst_fd <= 1e-6);
+        assert!(worst_det <= 1e-10);
+    }
+
+    /// Dry friction x'' = -x - μ sign(v): region 0 (v ≤ 0) has +μ, region 1
+    /// (v > 0) has -μ; one switch v = 0.
+    fn dry_friction(mu: f64) -> PiecewiseLinear {
+        let a = matrix([[0.0, 1.0], [-1.0, 0.0]]);
+        let backward = LinearField::autonomous(a.clone(), vector(&[0.0, mu]));
+        let forward = LinearField::autonomous(a, vector(&[0.0, -mu]));
+        let v = LinearSurface::switch(vector(&[0.0, 1.0]), 0.0);
+        PiecewiseLinear::new(1.0, vec![backward, forward], vec![v]).unwrap()
+    }
+
+    #[test]
+    fn sliding_is_reported_not_propagated() {
+        let system = dry_friction(0.5);
+        // |x| < μ at v = 0: the backward field pushes v up (-x + μ > 0), the
+        // forward one down (-x - μ < 0): both into v = 0.
+        let y = vector(&[0.2, -0.1]);
+        let it = system.iterate(&y, system.region(&y), TAU);
+        assert_eq!(it.status, PiecewiseStatus::Sliding);
+        assert_eq!(it.crossings, vec![0]);
+        assert_eq!(it.region, 0);
+        assert!(it.time > 0.0 && it.time < 0.5, "{}", it.time);
+        assert!(it.state[1].abs() < 1e-15, "{}", it.state);
+
+        // |x| > μ: a genuine crossing (v' = -x ∓ μ > 0 on both sides), with
+        // a discontinuous field: det S = n·F⁺/n·F⁻ = (-x - μ)/(-x + μ) at
+        // the crossing, where (x - μ)² + v² has kept its initial value.
+        let y = vector(&[-2.0, -0.1]);
+        let it = system.iterate(&y, 0, 0.5);
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert_eq!((it.crossings[0], it.region), (1, 1));
+        let x = 0.5 - (2.5_f64 * 2.5 + 0.1 * 0.1).sqrt();
+        let expected = ((-x - 0.5) / (-x + 0.5)).ln();
+        assert!((it.log_det_saltation - expected).abs() < 1e-14);
+        let log_det = it.jacobian.determinant().abs().ln();
+        assert!((log_det - it.log_det_saltation).abs() < 1e-12, "tr A = 0");
+        let fd = finite_difference_error(&system, &y, 0, 0.5);
+        assert!(fd <= 1e-6, "{fd:e}");
+    }
+
+    /// The time and height of the highest point of the seed's free flight
+    /// from y0 over one period (an interior maximum), from the closed form.
+    fn free_maximum(eta: f64, y0: [f64; 2]) -> (f64, f64) {
+        let free = ForcedImpactOscillator::new(0.05, 1.0, eta, 1e9, 1.0).unwrap();
+        let n = 4000;
+        let h = free.period() / n as f64;
+        let mut best = (0.0, f64::NEG_INFINITY);
+        for k in 0..=n {
+            let t = k as f64 * h;
+            let x = free.free_flight(0.0, y0, t)[0];
+            if x > best.1 {
+                best = (t, x);
+            }
+        }
+        let (mut lo, mut hi) = (best.0 - h, best.0 + h);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if free.free_flight(0.0, y0, mid)[1] > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let x = free.free_flight(0.0, y0, lo)[0].max(free.free_flight(0.0, y0, hi)[0]);
+        (lo, x)
+    }
+
+    #[test]
+    fn near_grazing_is_not_stepped_over() {
+        // Starts whose free flight has one clear maximum in the period.
+        for (eta, y0) in [(1.1, [-3.0, 0.0]), (0.8, [-2.0, -2.0]), (1.1, [-1.0, 1.0])] {
+            let period = TAU / eta;
+            let (_, x_max) = free_maximum(eta, y0);
+            let y = vector(&y0);
+            let free = seed(0.05, 1.0, eta, 1e9, 1.0).iterate(&y, 0, period);
+            for gap in [1e-5, 1e-9, 1e-12, 1e-13] {
+                // h = x - X_w peaks at -gap: no event.
+                let miss = seed(0.05, 1.0, eta, x_max + gap, 1.0).iterate(&y, 0, period);
+                assert_eq!(miss.crossings, vec![0], "gap +{gap}, η={eta}");
+                assert_eq!(miss.status, PiecewiseStatus::Ok);
+                assert_eq!(miss.state, free.state);
+                // Peaks at +gap: one event, approached at v⁻ ≈ √(2|X''|gap).
+                let hit = seed(0.05, 1.0, eta, x_max - gap, 1.0).iterate(&y, 0, period);
+                assert_eq!(hit.crossings, vec![1], "gap -{gap}, η={eta}");
+                assert_eq!(hit.status, PiecewiseStatus::Ok);
+                let t_max = free_maximum(eta, y0).0;
+                let osc = ForcedImpactOscillator::new(0.05, 1.0, eta, 1e9, 1.0).unwrap();
+                let acc = osc.acceleration(t_max, osc.free_flight(0.0, y0, t_max));
+                let v = (2.0 * acc.abs() * gap).sqrt();
+                assert!(
+                    (hit.min_crossing_rate / v - 1.0).abs() < 0.02,
+                    "gap -{gap}: v⁻ = {} vs {v}",
+                    hit.min_crossing_rate
+                );
+                // The same surface as a switch between two equal fields:
+                // in and out again, or not at all.
+                for (wall, expected) in [(x_max + gap, 0), (x_max - gap, 2)] {
+                    let field = oscillator_field(0.05, 1.0, 0.0, 1.0);
+                    let switch = LinearSurface::switch(vector(&[1.0, 0.0]), wall);
+                    let system =
+                        PiecewiseLinear::new(eta, vec![field.clone(), field], vec![switch])
+                            .unwrap();
+                    let it = system.iterate(&y, 0, period);
+                    assert_eq!(it.crossings, vec![expected], "switch, gap {gap}, η={eta}");
+                    assert_eq!((it.status, it.region), (PiecewiseStatus::Ok, 0));
+                    assert!((&it.state - &free.state).norm() < 1e-13);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn resets_to_rest_and_accumulating_events_stop() {
+        // e = 0 with the force pulling off the wall (-X_w + f cos ηt < 0):
+        // propagated, the Jacobian of rank 1 (ln det S = -∞), as the
+        // closed form has it.
+        let eta = 0.8;
+        let osc = ForcedImpactOscillator::new(0.05, 1.0, eta, 2.0, 0.0).unwrap();
+        let system = seed(0.05, 1.0, eta, 2.0, 0.0);
+        let y = [0.0, 3.0];
+        let (exact, it) = (osc.iterate(y), system.iterate(&vector(&y), 0, osc.period()));
+        assert_eq!((exact.status, exact.rank_loss), (ExactStatus::Ok, 1));
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert_eq!(it.crossings, vec![exact.impacts]);
+        assert_eq!(it.log_det_saltation, f64::NEG_INFINITY);
+        for i in 0..2 {
+            assert!((it.state[i] - exact.state[i]).abs() < 1e-13);
+            for j in 0..2 {
+                assert!((it.jacobian[(i, j)] - exact.jacobian[(i, j)]).abs() < 1e-12);
+            }
+        }
+        // X_w = -2: the force -X_w + f cos ηt ≥ 1 presses into the wall.
+        // e = 0 comes to rest on it: sticking, stopped after the reset.
+        let stick = seed(0.05, 1.0, eta, -2.0, 0.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(
+            (stick.status, stick.crossings[0]),
+            (PiecewiseStatus::Sticking, 1)
+        );
+        // At the refined contact (the nearer end of the final bracket).
+        assert!((stick.state[0] + 2.0).abs() < 1e-15 && stick.state[1] == 0.0);
+        assert!(stick.time < TAU / eta);
+        // e = 0.5: a Zeno sequence of bounces, stopped at its tail.
+        let zeno = seed(0.05, 1.0, eta, -2.0, 0.5).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(zeno.status, PiecewiseStatus::Chattering);
+        assert!(
+            zeno.crossings[0] > 10 && zeno.crossings[0] < 100,
+            "{:?}",
+            zeno.crossings
+        );
+        assert!(zeno.time < TAU / eta);
+        // e = 1 bounces all period long and completes it.
+        let bounce = seed(0.05, 1.0, eta, -2.0, 1.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+        assert_eq!(bounce.status, PiecewiseStatus::Ok);
+        assert!(bounce.crossings[0] >= 2);
+    }
+
+    #[test]
+    fn grazing_crossing_is_flagged() {
+        // On the wall, moving into it at 1e-14: an event at t = 0 whose
+        // saltation matrix is ~1e14. The period completes, flagged.
+        let system = seed(0.05, 1.0, 0.8, 2.0, 0.8);
+        let it = system.iterate(&vector(&[2.0, 1e-14]), 0, TAU / 0.8);
+        assert_eq!(it.status, PiecewiseStatus::Grazing);
+        assert_eq!(it.time, TAU / 0.8);
+        assert_eq!(it.min_crossing_rate, 1e-14);
+        // Moving away from it: no event.
+        let away = system.iterate(&vector(&[2.0, -0.5]), 0, TAU / 0.8);
+        assert_eq!((away.status, away.crossings[0]), (PiecewiseStatus::Ok, 0));
+    }
+
+    #[test]
+    fn resets_across_a_switch_change_the_region() {
+        // The seed with a switch on v = 0 between two equal fields: every
+        // reset v ↦ -ev flips its region bit without a crossing, and every
+        // turning point in flight crosses it. The map and its Jacobian are
+        // the seed's (S = I at the switch).
+        let eta = 1.3;
+        let plain = seed(0.05, 1.0, eta, 2.0, 0.8);
+        let mut surfaces = plain.surfaces().to_vec();
+        surfaces.push(LinearSurface::switch(vector(&[0.0, 1.0]), 0.0));
+        let field = plain.fields()[0].clone();
+        let split = PiecewiseLinear::new(eta, vec![field.clone(), field], surfaces).unwrap();
+        let period = TAU / eta;
+        let mut y = vector(&[0.0, 3.0]);
+        let mut region = split.region(&y);
+        let (mut impacts, mut turns) = (0, 0);
+        for _ in 0..10 {
+            let reference = plain.iterate(&y, 0, period);
+            let it = split.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok);
+            assert_eq!(it.crossings[0], reference.crossings[0]);
+            assert!((&it.state - &reference.state).norm() < 1e-12);
+            assert!((&it.jacobian - &reference.jacobian).norm() < 1e-10);
+            assert_eq!(it.region, split.region(&it.state));
+            impacts += it.crossings[0];
+            turns += it.crossings[1];
+            (y, region) = (it.state, it.region);
+        }
+        assert!(
+            impacts >= 3 && turns >= 10,
+            "{impacts} impacts, {turns} turns"
+        );
+    }
+
+    #[test]
+    fn resonant_and_singular_fields_are_exact() {
+        // Undamped resonance x'' = -x + cos t, which the closed form cannot
+        // take: x = x₀ cos t + v₀ sin t + (t/2) sin t, so one period adds
+        // π to v and the flow matrix is exp(2πA) = I.
+        let resonant =
+            PiecewiseLinear::new(1.0, vec![oscillator_field(0.0, 1.0, 0.0, 1.0)], vec![]).unwrap();
+        let it = resonant.iterate(&vector(&[0.3, -0.2]), 0, TAU);
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert!((it.state[0] - 0.3).abs() < 1e-14 && (it.state[1] - (-0.2 + PI)).abs() < 1e-14);
+        assert!((it.jacobian.clone() - DMatrix::identity(2, 2)).abs().max() < 1e-14);
+
+        // A bouncing ball x'' = -g over a floor, h = -x ≤ 0, A nilpotent
+        // (A³ = 0: the bound on h''' needs no bound on |y|). Dropped from
+        // rest at height H, elastic: it lands at t₁ = √(2H/g) with speed
+        // v₁ = g t₁ and leaves upwards.
+        let (g, height) = (9.81, 1.0);
+        let ball = PiecewiseLinear::new(
+            1.0,
+            vec![LinearField::autonomous(
+                matrix([[0.0, 1.0], [0.0, 0.0]]),
+                vector(&[0.0, -g]),
+            )],
+            vec![LinearSurface::event(
+                vector(&[-1.0, 0.0]),
+                0.0,
+                matrix([[1.0, 0.0], [0.0, -1.0]]),
+                DVector::zeros(2),
+            )],
+        )
+        .unwrap();
+        let y = vector(&[height, 0.0]);
+        let it = ball.iterate(&y, 0, 1.0);
+        assert_eq!((it.status, it.crossings[0]), (PiecewiseStatus::Ok, 1));
+        let t1 = (2.0 * height / g).sqrt();
+        let (v1, s) = (g * t1, 1.0 - t1);
+        assert!((it.state[0] - (v1 * s - 0.5 * g * s * s)).abs() < 1e-13);
+        assert!((it.state[1] - (v1 - g * s)).abs() < 1e-13);
+        assert!((it.min_crossing_rate - v1).abs() < 1e-13);
+        // det S = 1 (e = 1, tr A = 0).
+        assert!(it.log_det_saltation.abs() < 1e-14);
+        assert!((it.jacobian.determinant() - 1.0).abs() < 1e-13);
+        let fd = finite_difference_error(&ball, &y, 0, 1.0);
+        assert!(fd <= 1e-6, "{fd:e}");
+    }
+
+    #[test]
+    fn shapes_are_validated() {
+        let field = oscillator_field(0.05, 1.0, 0.0, 1.0);
+        let switch = LinearSurface::switch(vector(&[1.0, 0.0]), 1.0);
+        assert_eq!(
+            PiecewiseLinear::new(1.0, vec![field.clone()], vec![switch.clone()]).unwrap_err(),
+            PiecewiseError::FieldCount {
+                switches: 1,
+                expected: 2,
+                got: 1
+            }
+        );
+        let wide = LinearSurface::switch(vector(&[1.0, 0.0, 0.0]), 1.0);
+        assert!(matches!(
+            PiecewiseLinear::new(1.0, vec![field.clone(), field.clone()], vec![wide]),
+            Err(PiecewiseError::Shape { .. })
+        ));
+        assert!(matches!(
+            PiecewiseLinear::new(f64::NAN, vec![field.clone()], vec![]),
+            Err(PiecewiseError::NotFinite { .. })
+        ));
+        // Region bits follow the switches' order, events between them
+        // taking none.
+        let stop = LinearSurface::event(
+            vector(&[0.0, 1.0]),
+            5.0,
+            DMatrix::identity(2, 2),
+            DVector::zeros(2),
+        );
+        let other = LinearSurface::switch(vector(&[0.0, 1.0]), 0.0);
+        let system = PiecewiseLinear::new(1.0, vec![field; 4], vec![switch, stop, other]).unwrap();
+        assert_eq!(system.region(&vector(&[2.0, -1.0])), 0b01);
+        assert_eq!(system.region(&vector(&[0.0, 1.0])), 0b10);
+        assert_eq!(system.region(&vector(&[1.0, 0.0])), 0b00);
+    }
+}
