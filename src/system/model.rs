@@ -11,13 +11,16 @@
 //! (the saltation determinant, e² for a stop whatever the flow), which the
 //! sum rule adds. Other surfaces are refused with their key.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector, SMatrix};
 
 use super::section::SectionFlow;
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
 use crate::error::{Error, Result};
 use crate::integrate::clock::Phase;
 use crate::integrate::impact::MAX_WALLS;
+use crate::integrate::piecewise_linear::{
+    LinearField, LinearSurface, PiecewiseLinear, PiecewiseStatus,
+};
 use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceValues, Wall,
@@ -59,6 +62,11 @@ pub struct Code {
     /// The field of every region of the switches (one without switches),
     /// indexed by the region's bits.
     pub regions: Vec<Field>,
+    /// Whether the model is piecewise linear (every region's field linear
+    /// with constant coefficients plus harmonic forcing, its surfaces and
+    /// resets linear): then it has an exact backend
+    /// ([`piecewise_linear`]).
+    pub is_piecewise_linear: bool,
 }
 
 /// An event that is not a stop, or a switch of the field.
@@ -302,7 +310,9 @@ impl Code {
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
+        let is_piecewise_linear = section_free_linear(&model, &regions, &surfaces);
         Ok(Code {
+            is_piecewise_linear,
             model,
             equations,
             walls,
@@ -401,6 +411,103 @@ fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Option<Stop> {
         restitution: Expr::Neg(Box::new(slope)),
         reset_key: format!("{key}.reset.{}", states[velocity]),
     })
+}
+
+/// Whether a period map's fields, surfaces and resets are all linear
+/// with constant coefficients (the forcing's harmonic form is checked per
+/// lane, [`piecewise_linear`]).
+fn section_free_linear(model: &Model, regions: &[Field], surfaces: &[GeneralSurface]) -> bool {
+    let constant = |e: &Expr| !reads_state_or_time(e);
+    matches!(model.map, Map::Period(_))
+        && model.angles.is_empty()
+        && regions.iter().all(|f| f.jacobian.iter().all(constant))
+        && surfaces
+            .iter()
+            .all(|s| s.gradient.iter().all(constant) && s.reset_jacobian.iter().all(constant))
+}
+
+/// The model at one lane's parameters as a piecewise-linear system: each
+/// region's y' = A·y + c + p·cos ωt + q·sin ωt read off its expressions (A
+/// from the derivatives, c, p, q from F(0, t) at ωt = 0, π/2, π), then
+/// checked at sample points, so a forcing that is not harmonic (cos²) or a
+/// clock in a coefficient is refused (`None`). The walls come first, as
+/// events, then the general surfaces: the crossings' order of the CPU path.
+pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> {
+    if !code.is_piecewise_linear {
+        return None;
+    }
+    let n = code.states();
+    let omega = code.equations.lane_values(params).frequency;
+    let period = code.period(params);
+    // The time of forcing phase θ (any t when there is no forcing).
+    let at_phase = |theta: f64| if omega != 0.0 { theta / omega } else { 0.0 };
+    let zero = vec![0.0; n];
+    let mut fields = Vec::new();
+    for region in 0..code.regions.len() as u32 {
+        let equations: Vec<Expr> = code
+            .model
+            .equations
+            .iter()
+            .map(|e| e.in_region(region))
+            .collect();
+        let f = |y: &[f64], t: f64| -> DVector<f64> {
+            DVector::from_iterator(n, equations.iter().map(|e| e.eval(y, params, t)))
+        };
+        let a = DMatrix::from_fn(n, n, |i, k| {
+            code.regions[region as usize].jacobian[i * n + k].eval(&zero, params, 0.0)
+        });
+        let (f0, f90, f180) = (
+            f(&zero, at_phase(0.0)),
+            f(&zero, at_phase(std::f64::consts::FRAC_PI_2)),
+            f(&zero, at_phase(std::f64::consts::PI)),
+        );
+        let constant = (&f0 + &f180) * 0.5;
+        let cos = (&f0 - &f180) * 0.5;
+        let sin = &f90 - &constant;
+        let field = LinearField::new(a, constant, cos, sin);
+        // The form must reproduce the field elsewhere.
+        for k in 1..4 {
+            let y: Vec<f64> = (0..n).map(|i| 0.37 * (k * (i + 1)) as f64 - 0.5).collect();
+            let t = period * (0.13 * k as f64);
+            let expected = f(&y, t);
+            let form = field.eval(omega, t, &DVector::from_column_slice(&y));
+            let scale = expected.amax().max(1.0);
+            if (expected - form).amax() > 1e-9 * scale {
+                return None;
+            }
+        }
+        fields.push(field);
+    }
+    let mut surfaces = Vec::new();
+    for w in walls_at(code, params) {
+        let mut normal = DVector::zeros(n);
+        normal[w.coordinate] = w.side;
+        let mut reset = DMatrix::identity(n, n);
+        reset[(w.velocity, w.velocity)] = -w.restitution;
+        surfaces.push(LinearSurface::event(
+            normal,
+            w.side * w.position,
+            reset,
+            DVector::zeros(n),
+        ));
+    }
+    for s in &code.surfaces {
+        let normal =
+            DVector::from_iterator(n, s.gradient.iter().map(|e| e.eval(&zero, params, 0.0)));
+        let offset = -s.g.eval(&zero, params, 0.0);
+        surfaces.push(match s.kind {
+            Surface::Switch { .. } => LinearSurface::switch(normal, offset),
+            Surface::Event => LinearSurface::event(
+                normal,
+                offset,
+                DMatrix::from_fn(n, n, |i, k| {
+                    s.reset_jacobian[i * n + k].eval(&zero, params, 0.0)
+                }),
+                DVector::from_iterator(n, s.reset.iter().map(|e| e.eval(&zero, params, 0.0))),
+            ),
+        });
+    }
+    PiecewiseLinear::new(omega, fields, surfaces).ok()
 }
 
 /// An event that is not a stop, as a general surface: any g(y) and any
@@ -621,7 +728,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
         default_sweep: leak(&model.names.parameters.first().cloned().unwrap_or_default()),
         default_initial_state: Box::leak(vec![initial; code.states()].into_boxed_slice()),
         is_flow: true,
-        has_exact: false,
+        has_exact: code.is_piecewise_linear,
         check,
         check_state,
         expected_sum,
@@ -765,6 +872,9 @@ pub struct ModelFlow<const D: usize> {
     frequency: f64,
     period: f64,
     walls: Vec<Wall>,
+    /// The lane as a piecewise-linear system, where the model is one: the
+    /// exact backend's propagator, built when that backend first asks.
+    exact: std::sync::OnceLock<Option<PiecewiseLinear>>,
 }
 
 impl<const D: usize> Flow<D> for ModelFlow<D> {
@@ -1000,6 +1110,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             frequency: lane.frequency,
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
+            exact: std::sync::OnceLock::new(),
         }
     }
 
@@ -1009,6 +1120,55 @@ impl<const D: usize> System<D> for ModelFlow<D> {
 
     fn iterate(&self, x: &[f64; D], flow: &FlowSettings, stats: &mut IterationStats) -> [f64; D] {
         time_map(self, x, self.period, flow, stats)
+    }
+
+    /// The piecewise-linear propagator's span: exact flow matrices between
+    /// crossings located by a certified search, saltation matrices at them.
+    fn iterate_exact(
+        &self,
+        x: &[f64; D],
+        part: Part,
+        stats: &mut IterationStats,
+    ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
+        let exact = self
+            .exact
+            .get_or_init(|| piecewise_linear(self.code, &self.params))
+            .as_ref()?;
+        let (t0, t1) = part.span(self.period);
+        let y = DVector::from_column_slice(x);
+        let it = exact.iterate_span(&y, exact.region(&y), t0, t1);
+        let walls = self.walls.len();
+        let mut wall_log_det = 0.0;
+        for (j, &c) in it.crossings.iter().enumerate() {
+            stats.crossings[j] += c;
+            if j < walls {
+                stats.impacts += c;
+                if c > 0 {
+                    wall_log_det += 2.0 * f64::from(c) * self.walls[j].restitution.ln();
+                }
+            }
+        }
+        // The walls' e² per impact is in the expected sum already; the
+        // general surfaces' det S goes with the orbit.
+        let general = it.log_det_saltation - wall_log_det;
+        if general.is_finite() {
+            stats.log_flux += general;
+        } else {
+            stats.rank_loss = stats.rank_loss.max(1);
+        }
+        stats.slowest_impact = stats.slowest_impact.min(it.min_crossing_rate);
+        match it.status {
+            PiecewiseStatus::Ok => {}
+            PiecewiseStatus::Sliding => stats.sliding = true,
+            PiecewiseStatus::Grazing => {
+                stats.grazing = true;
+                stats.grazing_error = f64::INFINITY;
+            }
+            PiecewiseStatus::Chattering | PiecewiseStatus::Sticking => stats.chattering = true,
+            PiecewiseStatus::Diverged => {}
+        }
+        let state: [f64; D] = std::array::from_fn(|i| it.state[i]);
+        Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())))
     }
 
     fn iterate_lanes(systems: &[Self], xs: &mut [[f64; D]], flow: &FlowSettings) {
