@@ -343,12 +343,16 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
     let expected = [
         ("duffing.toml", true),
         ("forced-pendulum.toml", true),
+        // A switch the motion slides on: CPU only so far.
+        ("friction-belt.toml", false),
         // Two stops; the kernels know one wall.
         ("impact-pair.toml", false),
         // Poincaré sections: the kernels run period maps.
         ("lorenz.toml", false),
         ("rossler.toml", false),
         ("seed-oscillator.toml", true),
+        // A switch: CPU only so far.
+        ("soft-stop.toml", false),
         // A stop on the third of four states.
         ("two-mass-chain.toml", false),
         ("van-der-pol.toml", true),

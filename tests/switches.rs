@@ -174,9 +174,10 @@ fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
     assert!(cpu_sum <= 1e-8, "RK4 sum rule: {cpu_sum:e}");
 }
 
-/// A mass on a belt with Coulomb friction, written with a switch on the
-/// slip velocity: where the spring force is below the friction limit, both
-/// fields point into v = 0 (sticking, Filippov sliding).
+/// A mass on a spring with Coulomb friction against a fixed floor, written
+/// with a switch on the velocity: where the spring force is below the
+/// friction limit, both fields point into v = 0 (sticking, Filippov
+/// sliding).
 const FRICTION: &str = r#"
 [model]
 name = "friction"
@@ -196,19 +197,144 @@ period = "2*pi/eta"
 "#;
 
 #[test]
-fn sliding_is_flagged_on_both_paths_never_silently_wrong() {
-    // Started at rest inside the sticking band |x| < μ: it sticks at once.
-    for backend in ["cpu", "exact"] {
-        let scene = format!(
+fn sliding_collapses_a_direction_and_the_exact_backend_flags_it() {
+    // Started at rest inside the sticking band |x| < μ - f: it sticks at
+    // once and for good (the forcing never overcomes friction).
+    let scene = |backend: &str| {
+        format!(
             "{FRICTION}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[integration]\n\
              steps_per_period = 200\ntransient = 5\niterations = 5\ninitial_state = [0.1, 0.0]\n\
-             [run]\nbackend = \"{backend}\"\n"
+             [output]\nbifurcation_points = 5\n[run]\nbackend = \"{backend}\"\n"
+        )
+    };
+    let cpu = run(&model_scene(&scene("cpu"), "", &[]));
+    let lane = &cpu.lanes[0];
+    assert_eq!(lane.status, LaneStatus::Collapsed { exponents: 1 });
+    assert_eq!(lane.exponents[1], f64::NEG_INFINITY);
+    // The mass never moves: its position is kept, its velocity forgotten,
+    // so the map is (x, v) → (x, 0) and the surviving exponent is 0.
+    assert!(lane.exponents[0].abs() <= 1e-9, "{:?}", lane.exponents);
+    assert!(
+        lane.bifurcation
+            .chunks(2)
+            .all(|p| (p[0] - 0.1).abs() <= 1e-12 && p[1].abs() <= 1e-12),
+        "{:?}",
+        lane.bifurcation
+    );
+    // The volume law does not apply to a sliding orbit: no expected sum.
+    assert!(cpu.expected_sums[0].is_nan());
+    // The exact propagator does not slide yet: it says so.
+    let exact = run(&model_scene(&scene("exact"), "", &[]));
+    assert!(
+        matches!(exact.lanes[0].status, LaneStatus::Sliding { .. }),
+        "{}",
+        exact.lanes[0].status
+    );
+}
+
+/// The friction oscillator with sign(v - vb) smoothed to tanh((v - vb)/ε),
+/// with its variational equation Φ' = J·Φ, integrated by classical RK4
+/// with steps that resolve the smoothed layer's fast time scale ε/μ (h =
+/// ε/(20μ), so hλ ≤ 0.05 and RK4's error there is ~1e-7 relative); QR
+/// accumulated once per period. Returns (λ1, λ2).
+fn smoothed_friction(
+    (zeta, mu, vb, f, eta): (f64, f64, f64, f64, f64),
+    epsilon: f64,
+    transient: usize,
+    iterations: usize,
+) -> (f64, f64) {
+    use nalgebra::{Matrix2, Vector2};
+    let period = std::f64::consts::TAU / eta;
+    let steps = (period * 20.0 * mu / epsilon).ceil() as usize;
+    let h = period / steps as f64;
+    // z = (y, Φ): the state and the fundamental matrix.
+    let field = |t: f64, y: &Vector2<f64>, phi: &Matrix2<f64>| {
+        let slip = ((y[1] - vb) / epsilon).tanh();
+        let jacobian = Matrix2::new(
+            0.0,
+            1.0,
+            -1.0,
+            -2.0 * zeta - mu / epsilon * (1.0 - slip * slip),
         );
-        let report = run(&model_scene(&scene, "", &[]));
+        (
+            Vector2::new(
+                y[1],
+                -2.0 * zeta * y[1] - y[0] - mu * slip + f * (eta * t).cos(),
+            ),
+            jacobian * phi,
+        )
+    };
+    let (mut y, mut q) = (Vector2::zeros(), Matrix2::identity());
+    let mut logs = [0.0; 2];
+    for n in 0..transient + iterations {
+        let mut phi = Matrix2::identity();
+        for k in 0..steps {
+            let t = k as f64 * h;
+            let (k1, l1) = field(t, &y, &phi);
+            let (k2, l2) = field(t + 0.5 * h, &(y + k1 * (0.5 * h)), &(phi + l1 * (0.5 * h)));
+            let (k3, l3) = field(t + 0.5 * h, &(y + k2 * (0.5 * h)), &(phi + l2 * (0.5 * h)));
+            let (k4, l4) = field(t + h, &(y + k3 * h), &(phi + l3 * h));
+            y += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
+            phi += (l1 + l2 * 2.0 + l3 * 2.0 + l4) * (h / 6.0);
+        }
+        if n >= transient {
+            let qr = (phi * q).qr();
+            let r = qr.r();
+            q = qr.q();
+            for (i, l) in logs.iter_mut().enumerate() {
+                *l += r[(i, i)].abs().ln();
+            }
+        }
+    }
+    let total = iterations as f64 * period;
+    (logs[0] / total, logs[1] / total)
+}
+
+#[test]
+fn stick_slip_s_largest_exponent_is_the_smoothed_system_s_limit() {
+    // Filippov's rule (mus = mu): the smoothed system tanh((v - vb)/ε)
+    // tends to it as ε → 0. Its largest exponent converges about linearly
+    // in ε here (the rungs' differences halve), so the smoothing error of
+    // the finest rung is about the last difference, and the Richardson
+    // extrapolate 2λ(ε/2) - λ(ε) removes most of it.
+    let (zeta, mu, vb, f) = (0.05, 0.5, 0.2, 1.0);
+    for eta in [0.3, 0.4] {
+        let body = format!(
+            "[sweep]\nparameter = \"eta\"\nvalues = [{eta}]\n[integration]\nsteps_per_period = 1800\n\
+             transient = 200\niterations = 300\n[run]\nbackend = \"cpu\"\n"
+        );
+        let report = run(&model_scene(
+            &file("friction-belt.toml"),
+            &body,
+            &["model.parameters.mus=0.5"],
+        ));
+        let lane = &report.lanes[0];
+        // Sticking collapses the velocity: one exponent is -∞, exactly.
+        assert_eq!(
+            lane.status,
+            LaneStatus::Collapsed { exponents: 1 },
+            "η = {eta}"
+        );
+        assert_eq!(lane.exponents[1], f64::NEG_INFINITY);
+        let model = lane.exponents[0];
+        let ladder: Vec<f64> = [2e-3, 1e-3, 5e-4]
+            .iter()
+            .map(|&eps| smoothed_friction((zeta, mu, vb, f, eta), eps, 60, 60).0)
+            .collect();
+        let (first, last) = (ladder[1] - ladder[0], ladder[2] - ladder[1]);
         assert!(
-            matches!(report.lanes[0].status, LaneStatus::Sliding { .. }),
-            "{backend}: {}",
-            report.lanes[0].status
+            last.abs() < 0.7 * first.abs(),
+            "η = {eta}: the ladder {ladder:?} converges"
+        );
+        let smoothing_error = last.abs();
+        assert!(
+            (model - ladder[2]).abs() <= 2.0 * smoothing_error,
+            "η = {eta}: model {model} against the finest rung {ladder:?}"
+        );
+        let extrapolate = 2.0 * ladder[2] - ladder[1];
+        assert!(
+            (model - extrapolate).abs() <= 1e-4,
+            "η = {eta}: model {model} against the extrapolate {extrapolate} of {ladder:?}"
         );
     }
 }

@@ -266,6 +266,24 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     // Sub-steps from (phase0, y0), `done` into the step.
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
+        if let Some(j) = surface::sliding(*region) {
+            // On a switch: the rest of the step slides, unless it leaves.
+            match slide(base, region, j, omega, &phase0, &y0, h - done) {
+                (None, y_end) => return y_end,
+                (Some(s), y_exit) => {
+                    done += s;
+                    phase0 = rotate(&phase0, &cos_sin(omega * s));
+                    y0 = y_exit;
+                    y1 = SubStep {
+                        flow: &flow_in(base, *region),
+                        omega,
+                    }
+                    .step(&phase0, &y0, h - done)
+                    .0;
+                    continue;
+                }
+            }
+        }
         let flow = &InRegion {
             flow: base,
             region: *region,
@@ -328,6 +346,10 @@ pub fn resolve<const D: usize, F: Flow<D>>(
                 Some(after) => {
                     phase0 = phase_c;
                     y0 = after;
+                    if surface::sliding(*region).is_some() {
+                        // The loop's top slides the rest of the step.
+                        continue;
+                    }
                     let flow = &InRegion {
                         flow: base,
                         region: *region,
@@ -490,10 +512,30 @@ fn cross<const D: usize, F: Flow<D>>(
             Some(after)
         }
         Surface::Switch { bit } => {
+            let (plus, minus) = surface::stick_margins(base, *region, j, bit, phase, y);
+            if plus > 0.0 && minus > 0.0 {
+                // Both fields point into the surface (or the stick limit
+                // holds the motion): it slides, and forgets how far from
+                // the surface it came; the volume law no longer applies.
+                *region = surface::sliding_on(*region, j);
+                stats.rank_loss = stats.rank_loss.max(1);
+                stats.log_flux = f64::NAN;
+                return Some(*y);
+            }
+            // Not held: the motion goes to the side whose margin ran out.
+            // Where that is the side it is on, it only touched the surface
+            // (a tangential exit from sliding met again in rounding): no
+            // crossing.
+            let to_plus = plus <= minus;
+            if to_plus == ((*region >> bit) & 1 == 1) {
+                stats.crossings[walls + j] -= 1;
+                return Some(*y);
+            }
             *region ^= 1 << bit;
             let leaving = base.surface_values(*region, phase, y).rate[j];
             if leaving * before.rate[j] <= 0.0 {
-                // Both fields point into the surface: Filippov sliding.
+                // The new field points back, yet the stick limit lets go
+                // (a limit below Filippov's): the motion cannot be resolved.
                 stats.sliding = true;
                 return None;
             }
@@ -502,6 +544,66 @@ fn cross<const D: usize, F: Flow<D>>(
             Some(*y)
         }
     }
+}
+
+/// Slides on switch j (a trajectory in `region`, on the surface at y, phase
+/// `phase`) for up to `h`: returns `(None, end)` if it is still sliding
+/// at the end, or `(Some(s), exit)` where it leaves after s, its region
+/// then the side it leaves to. The exit (a stick margin reaching 0) is
+/// bisected on RK4 re-stepped along the sliding field.
+fn slide<const D: usize, F: Flow<D>>(
+    base: &F,
+    region: &mut u32,
+    j: usize,
+    omega: f64,
+    phase: &Phase,
+    y: &[f64; D],
+    h: f64,
+) -> (Option<f64>, [f64; D]) {
+    let Surface::Switch { bit } = base.surfaces()[j] else {
+        unreachable!("only switches slide")
+    };
+    let sides = surface::sides(*region);
+    let sliding = surface::Sliding {
+        flow: base,
+        sides,
+        surface: j,
+        bit,
+    };
+    let sub = SubStep {
+        flow: &sliding,
+        omega,
+    };
+    let at = |s: f64| -> ([f64; D], (f64, f64)) {
+        let y_s = sub.step(phase, y, s).0;
+        let phase_s = rotate(phase, &cos_sin(omega * s));
+        (
+            y_s,
+            surface::stick_margins(base, sides, j, bit, &phase_s, &y_s),
+        )
+    };
+    let (end, (plus, minus)) = at(h);
+    if plus > 0.0 && minus > 0.0 {
+        return (None, end);
+    }
+    let (mut lo, mut hi) = (0.0, h);
+    let (mut exit, mut margins) = (end, (plus, minus));
+    while hi - lo > f64::EPSILON * h {
+        let mid = 0.5 * (lo + hi);
+        let (y_mid, m) = at(mid);
+        if m.0 > 0.0 && m.1 > 0.0 {
+            lo = mid;
+        } else {
+            (hi, exit, margins) = (mid, y_mid, m);
+        }
+    }
+    // It leaves to the side whose margin ran out.
+    *region = if margins.0 <= margins.1 {
+        sides | 1 << bit
+    } else {
+        sides & !(1 << bit)
+    };
+    (Some(hi), exit)
 }
 
 /// Locates the crossing of a general surface inside the step [0, h] from
@@ -533,11 +635,15 @@ fn locate<const D: usize, F: Flow<D>>(
         ));
     }
     let hermite = Hermite::new(start.0, start.1, end.0, end.1, h);
+    let scale = y0.iter().fold(1.0, |m: f64, v| m.max(v.abs()));
     let (hi, guess) = if end.0 > 0.0 {
         (h, hermite.first_root(0.0, 1.0))
     } else if start.1 > 0.0 && end.1 < 0.0 {
+        // An excursion no deeper than the location's own tolerance is a
+        // touch in rounding (a motion leaving a sliding surface
+        // tangentially), not a crossing.
         let peak = hermite.peak()?;
-        if distance(&sub.step(phase0, y0, peak * h).0) <= 0.0 {
+        if distance(&sub.step(phase0, y0, peak * h).0) <= 4.0 * f64::EPSILON * scale {
             return None;
         }
         (peak * h, hermite.first_root(0.0, peak))
@@ -548,7 +654,7 @@ fn locate<const D: usize, F: Flow<D>>(
         |s| sub.step(phase0, y0, s).0,
         distance,
         rate,
-        y0.iter().fold(1.0, |m: f64, v| m.max(v.abs())),
+        scale,
         hi,
         guess * h,
     ))

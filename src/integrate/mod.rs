@@ -61,6 +61,13 @@ pub trait Flow<const D: usize>: Sync {
         unreachable!("a flow with surfaces evaluates them")
     }
 
+    /// The stick limit of switch j at y (see [`surface`]'s sliding): the
+    /// largest mean rate |m| the motion stays on the surface under;
+    /// `None` for Filippov's own (the half jump of the rates).
+    fn stick_limit(&self, _j: usize, _y: &[f64; D]) -> Option<f64> {
+        None
+    }
+
     /// Event j's reset of y (on its surface) and the reset's Jacobian DR.
     fn reset(&self, _j: usize, _y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
         unreachable!("a flow with events resets")
@@ -502,7 +509,8 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
         let mut y1 = if surfaces.is_empty() {
             flows.step(&stages, &y, &h)
         } else {
-            flows.step_in(&regions, &stages, &y, &h)
+            let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
+            flows.step_in(&sides, &stages, &y, &h)
         };
         let next: [Phase; W] = std::array::from_fn(|k| stages[k][2]);
         let mut meets = [false; W];
@@ -522,9 +530,10 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
         let mut at_end = [SurfaceValues::default(); W];
         if !surfaces.is_empty() {
             for k in 0..n {
-                at_end[k] = flows
-                    .of(k)
-                    .surface_values(regions[k], &next[k], &column(&y1, k));
+                // A sliding trajectory takes the slow path at every step.
+                meets[k] |= surface::sliding(regions[k]).is_some();
+                let sides = surface::sides(regions[k]);
+                at_end[k] = flows.of(k).surface_values(sides, &next[k], &column(&y1, k));
                 for (j, &kind) in surfaces.iter().enumerate() {
                     meets[k] |= surface::may_cross(
                         kind,
@@ -573,7 +582,7 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
                     y1[i][k] = after[i];
                 }
                 if !surfaces.is_empty() {
-                    at_end[k] = flow.surface_values(regions[k], &next[k], &after);
+                    at_end[k] = flow.surface_values(surface::sides(regions[k]), &next[k], &after);
                 }
             }
         }

@@ -21,9 +21,21 @@
 //! ```
 //!
 //! F⁻ the field before the crossing, F⁺ after it (after the reset R, in the
-//! new region). A switch whose new field points back into the surface
-//! (∇g·F⁺ of the other sign) starts a Filippov sliding motion, which is
-//! not integrated yet: the iteration is flagged (`IterationStats::sliding`).
+//! new region).
+//!
+//! **Sliding.** Where the fields on both sides point into a switch (the
+//! rates a = ∇g·F on the negative side and b on the positive side with
+//! a > 0 > b), the motion slides on it with Filippov's convex combination
+//! F_s = F_a + α(F_b - F_a), α = a/(a - b), which keeps ∇g·F_s = 0: a mass
+//! stuck to a belt under dry friction. With the mean rate m = (a + b)/2
+//! (the rate without the discontinuity) and the half jump (a - b)/2, the
+//! motion slides while |m| < L and leaves towards the side m points to when
+//! |m| reaches L. Filippov's L is the half jump itself; a switch's stick
+//! limit gives a larger L (static friction above kinetic), and then a
+//! trajectory arriving with |m| < L sticks as well. A sliding phase
+//! forgets the distance to the surface: the map loses a rank
+//! (`IterationStats::rank_loss`), and the volume law does not apply to it
+//! (its record becomes NaN).
 
 use nalgebra::DMatrix;
 
@@ -42,6 +54,87 @@ pub enum Surface {
     /// Switch number `bit` of the field: no reset, the trajectory's region
     /// flips that bit.
     Switch { bit: u32 },
+}
+
+/// Region bits from this one up mark a trajectory sliding on a switch:
+/// bit `SLIDING + j` for surface j; the bits below are the sides.
+pub const SLIDING: u32 = 16;
+
+/// The side bits of a region (what a flow's fields are indexed by).
+#[inline(always)]
+pub fn sides(region: u32) -> u32 {
+    region & ((1 << SLIDING) - 1)
+}
+
+/// The surface a trajectory in `region` slides on, if any.
+#[inline(always)]
+pub fn sliding(region: u32) -> Option<usize> {
+    let s = region >> SLIDING;
+    (s != 0).then(|| s.trailing_zeros() as usize)
+}
+
+/// The region of a trajectory sliding on surface j from `region`'s sides.
+pub fn sliding_on(region: u32, j: usize) -> u32 {
+    sides(region) | 1 << (SLIDING + j as u32)
+}
+
+/// The fields on either side of switch `bit` (its bit cleared, and set)
+/// at y, for a trajectory whose other sides are `sides`.
+fn either_side<const D: usize, F: Flow<D>>(
+    flow: &F,
+    sides: u32,
+    bit: u32,
+    phase: &Phase,
+    y: &[f64; D],
+) -> ([f64; D], [f64; D]) {
+    (
+        flow.rhs_in(sides & !(1 << bit), phase, y),
+        flow.rhs_in(sides | 1 << bit, phase, y),
+    )
+}
+
+/// How far a sliding motion on switch j (bit `bit`) at y is from leaving
+/// it: (L - m, L + m), the first ≤ 0 where it leaves to the positive side,
+/// the second to the negative side (see the module's docs).
+pub fn stick_margins<const D: usize, F: Flow<D>>(
+    flow: &F,
+    sides: u32,
+    j: usize,
+    bit: u32,
+    phase: &Phase,
+    y: &[f64; D],
+) -> (f64, f64) {
+    let (lo, hi) = either_side(flow, sides, bit, phase, y);
+    let n = flow.surface_gradient(j, y);
+    let a: f64 = (0..D).map(|i| n[i] * lo[i]).sum();
+    let b: f64 = (0..D).map(|i| n[i] * hi[i]).sum();
+    let m = 0.5 * (a + b);
+    let limit = flow.stick_limit(j, y).unwrap_or(0.5 * (a - b));
+    (limit - m, limit + m)
+}
+
+/// A flow sliding on switch j: Filippov's field F_a + α(F_b - F_a) with
+/// α = a/(a - b), whose rate along ∇g is 0.
+pub struct Sliding<'a, F> {
+    pub flow: &'a F,
+    pub sides: u32,
+    pub surface: usize,
+    pub bit: u32,
+}
+
+impl<const D: usize, F: Flow<D>> Flow<D> for Sliding<'_, F> {
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        let (lo, hi) = either_side(self.flow, self.sides, self.bit, phase, y);
+        let n = self.flow.surface_gradient(self.surface, y);
+        let a: f64 = (0..D).map(|i| n[i] * lo[i]).sum();
+        let b: f64 = (0..D).map(|i| n[i] * hi[i]).sum();
+        let alpha = a / (a - b);
+        std::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i]))
+    }
+
+    fn forcing_frequency(&self) -> f64 {
+        self.flow.forcing_frequency()
+    }
 }
 
 /// g of every surface at one state, and its rate ∇g·F along a region's

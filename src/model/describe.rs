@@ -111,6 +111,13 @@ pub fn describe(code: &Code) -> String {
             stop.name
         );
     }
+    if !code.surfaces.is_empty() {
+        let _ = writeln!(
+            w,
+            "  + ln|det S| per crossing of the other events and switches, along the reference \
+             (S their saltation matrix); NaN once the motion slides on a switch"
+        );
+    }
     if let Some(section) = &code.section {
         let _ = writeln!(
             w,
@@ -134,6 +141,53 @@ pub fn describe(code: &Code) -> String {
                 names.states[stop.velocity],
             );
         }
+    }
+    for s in &code.surfaces {
+        match s.kind {
+            crate::integrate::Surface::Event => {
+                let resets: Vec<String> = s
+                    .reset
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, e)| **e != Expr::Var(crate::model::expr::Var::State(*i)))
+                    .map(|(i, e)| format!("{} -> {}", names.states[i], show(e)))
+                    .collect();
+                let _ = writeln!(
+                    w,
+                    "\nevent '{}' (a general surface): fires where {} crosses 0 from below; reset {}",
+                    s.name,
+                    show(&s.g),
+                    resets.join(", ")
+                );
+            }
+            crate::integrate::Surface::Switch { bit } => {
+                let _ = writeln!(
+                    w,
+                    "\nswitch '{}': the field changes where {} crosses 0 (step = 1 above); \
+                     region bit {bit}; {}",
+                    s.name,
+                    show(&s.g),
+                    match &s.stick_limit {
+                        Some(limit) => format!(
+                            "slides while the mean rate of the two sides is below {} in size",
+                            show(limit)
+                        ),
+                        None => "slides where both fields point into it (Filippov)".to_owned(),
+                    }
+                );
+            }
+        }
+    }
+    if code.is_piecewise_linear {
+        let _ = writeln!(
+            w,
+            "\npiecewise linear: backend = \"exact\" propagates it in closed form{}",
+            if code.model.switches.is_empty() {
+                ""
+            } else {
+                " (not through sliding yet: such rows say `sliding`)"
+            }
+        );
     }
     let n = names.states.len();
     let _ = writeln!(

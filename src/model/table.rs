@@ -57,6 +57,10 @@ pub struct Event {
 pub struct Switch {
     pub name: String,
     pub surface: Expr,
+    /// The stick limit (`stick_limit`): the motion stays on the surface
+    /// while the mean of the two sides' rates is below it in size (static
+    /// friction); `None` for Filippov's rule.
+    pub stick_limit: Option<Expr>,
 }
 
 /// Switches a model may have: each doubles the fields compiled (one per
@@ -237,7 +241,12 @@ impl Model {
             for (n, item) in items.iter().enumerate() {
                 let key = format!("{switches_key}[{n}]");
                 let switch = table(item, &key)?;
-                known_keys(switch, &key, "a switch", &["name", "surface"])?;
+                known_keys(
+                    switch,
+                    &key,
+                    "a switch",
+                    &["name", "surface", "stick_limit"],
+                )?;
                 let name_key = format!("{key}.name");
                 let name = string(
                     switch.get("name").ok_or_else(|| {
@@ -271,7 +280,23 @@ impl Model {
                         _ => None,
                     },
                 )?;
-                switches.push(Switch { name, surface });
+                let stick_limit = match switch.get("stick_limit") {
+                    None => None,
+                    Some(text) => Some(expression(
+                        text,
+                        &format!("{key}.stick_limit"),
+                        &names,
+                        |v| match v {
+                            Var::Time => Some("a stick limit is a function of the state"),
+                            _ => None,
+                        },
+                    )?),
+                };
+                switches.push(Switch {
+                    name,
+                    surface,
+                    stick_limit,
+                });
             }
             if switches.len() > MAX_SWITCHES {
                 return Err(invalid(

@@ -83,6 +83,8 @@ pub struct GeneralSurface {
     /// switch.
     pub reset: Vec<Expr>,
     pub reset_jacobian: Vec<Expr>,
+    /// A switch's stick limit (see `integrate::surface`), if it has one.
+    pub stick_limit: Option<Expr>,
 }
 
 /// One region's field, compiled.
@@ -226,6 +228,7 @@ impl Code {
                     .collect(),
                 reset: Vec::new(),
                 reset_jacobian: Vec::new(),
+                stick_limit: switch.stick_limit.clone(),
             });
         }
         if surfaces.len() > MAX_SURFACES {
@@ -548,6 +551,7 @@ fn general_event(model: &Model, event: &crate::model::Event, key: &str) -> Resul
             .collect(),
         reset,
         reset_jacobian,
+        stick_limit: None,
     })
 }
 
@@ -919,6 +923,13 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     fn surface_gradient(&self, j: usize, y: &[f64; D]) -> [f64; D] {
         let gradient = &self.code.surfaces[j].gradient;
         std::array::from_fn(|i| gradient[i].eval(y, &self.params, 0.0))
+    }
+
+    fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
+        self.code.surfaces[j]
+            .stick_limit
+            .as_ref()
+            .map(|l| l.eval(y, &self.params, 0.0))
     }
 
     fn reset(&self, j: usize, y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
