@@ -268,7 +268,7 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     for _ in 0..MAX_IMPACTS_PER_STEP {
         if let Some(j) = surface::sliding(*region) {
             // On a switch: the rest of the step slides, unless it leaves.
-            match slide(base, region, j, omega, &phase0, &y0, h - done) {
+            match slide(base, region, j, omega, &phase0, &y0, h - done, stats) {
                 (None, y_end) => return y_end,
                 (Some(s), y_exit) => {
                     done += s;
@@ -551,6 +551,7 @@ fn cross<const D: usize, F: Flow<D>>(
 /// at the end, or `(Some(s), exit)` where it leaves after s, its region
 /// then the side it leaves to. The exit (a stick margin reaching 0) is
 /// bisected on RK4 re-stepped along the sliding field.
+#[allow(clippy::too_many_arguments)]
 fn slide<const D: usize, F: Flow<D>>(
     base: &F,
     region: &mut u32,
@@ -559,6 +560,7 @@ fn slide<const D: usize, F: Flow<D>>(
     phase: &Phase,
     y: &[f64; D],
     h: f64,
+    stats: &mut IterationStats,
 ) -> (Option<f64>, [f64; D]) {
     let Surface::Switch { bit } = base.surfaces()[j] else {
         unreachable!("only switches slide")
@@ -583,6 +585,24 @@ fn slide<const D: usize, F: Flow<D>>(
         )
     };
     let (end, (plus, minus)) = at(h);
+    // Another surface met while sliding (a second block sticking, a wall)
+    // would need a motion on two surfaces at once, which is not
+    // integrated: the iteration says so rather than step through it.
+    let end_phase = rotate(phase, &cos_sin(omega * h));
+    let (before, after) = (
+        base.surface_values(sides, phase, y),
+        base.surface_values(sides, &end_phase, &end),
+    );
+    let others = base.surfaces().iter().enumerate().filter(|&(k, _)| k != j);
+    for (k, &kind) in others {
+        let o = kind.orientation(sides);
+        if o * before.g[k] <= 0.0 && o * after.g[k] > 0.0 {
+            stats.sliding = true;
+        }
+    }
+    if base.walls().iter().any(|w| w.gap(&end) > 0.0) {
+        stats.sliding = true;
+    }
     if plus > 0.0 && minus > 0.0 {
         return (None, end);
     }

@@ -248,9 +248,9 @@ pub enum LaneStatus {
     Chattering {
         iterations: usize,
     },
-    /// The motion met a switch whose fields on both sides point into it
-    /// (Filippov sliding), in this many iterations: sliding is not
-    /// integrated yet, so the exponents are not to be trusted.
+    /// A sliding motion that is not integrated yet (on two switches at
+    /// once, against a wall, or in the exact propagator), in this many
+    /// iterations: the exponents are not to be trusted.
     Sliding {
         iterations: usize,
     },

@@ -223,9 +223,9 @@ pub struct IterationStats {
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
-    /// A switch was met where the fields on both sides point into it: the
-    /// motion slides on the surface (Filippov), which is not integrated
-    /// yet, so the iteration is not trustworthy.
+    /// A sliding motion that is not integrated (on two surfaces at once, a
+    /// wall met while sliding, a stick limit below Filippov's, or sliding
+    /// in the exact propagator): the iteration is not trustworthy.
     pub sliding: bool,
     /// Dimensions the iteration collapsed: 1 after an impact with e = 0 (the
     /// velocity is forgotten), D after sticking (the state on release depends
