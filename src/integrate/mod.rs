@@ -56,6 +56,19 @@ pub trait Flow<const D: usize>: Sync {
         unreachable!("a flow with surfaces evaluates them")
     }
 
+    /// [`surface_values`](Self::surface_values) at W states of
+    /// trajectories of this flow, all in `region` (one evaluation for the
+    /// batch where the flow can; each in turn by default).
+    #[inline(always)]
+    fn surface_values_batch<const W: usize>(
+        &self,
+        region: u32,
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+    ) -> [SurfaceValues; W] {
+        std::array::from_fn(|k| self.surface_values(region, &phases[k], &column(y, k)))
+    }
+
     /// ∇g of surface j at y.
     fn surface_gradient(&self, _j: usize, _y: &[f64; D]) -> [f64; D] {
         unreachable!("a flow with surfaces evaluates them")
@@ -373,6 +386,20 @@ trait Flows<const D: usize> {
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D];
+    /// The surfaces' values and rates of every trajectory, each in its
+    /// region (sides only).
+    #[inline(always)]
+    fn surface_values<const W: usize>(
+        &self,
+        regions: &[u32; W],
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+    ) -> [SurfaceValues; W] {
+        std::array::from_fn(|k| {
+            self.of(k)
+                .surface_values(regions[k], &phases[k], &column(y, k))
+        })
+    }
 }
 
 /// One flow for every trajectory: a lane's reference and its copies.
@@ -410,6 +437,19 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
             self.0.step_shared_in(regions[0], &stages[0], y, h[0])
         } else {
             F::step_each_in(&[self.0; W], regions, stages, y, h)
+        }
+    }
+    #[inline(always)]
+    fn surface_values<const W: usize>(
+        &self,
+        regions: &[u32; W],
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+    ) -> [SurfaceValues; W] {
+        if regions.iter().all(|&r| r == regions[0]) {
+            self.0.surface_values_batch(regions[0], phases, y)
+        } else {
+            std::array::from_fn(|k| self.0.surface_values(regions[k], &phases[k], &column(y, k)))
         }
     }
 }
@@ -529,11 +569,12 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
         }
         let mut at_end = [SurfaceValues::default(); W];
         if !surfaces.is_empty() {
+            // Every slot's sides (unused slots repeat the last trajectory's).
+            let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
+            at_end = flows.surface_values(&sides, &next, &y1);
             for k in 0..n {
                 // A sliding trajectory takes the slow path at every step.
                 meets[k] |= surface::sliding(regions[k]).is_some();
-                let sides = surface::sides(regions[k]);
-                at_end[k] = flows.of(k).surface_values(sides, &next[k], &column(&y1, k));
                 for (j, &kind) in surfaces.iter().enumerate() {
                     meets[k] |= surface::may_cross(
                         kind,

@@ -920,6 +920,28 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         }
     }
 
+    #[inline(always)]
+    fn surface_values_batch<const W: usize>(
+        &self,
+        region: u32,
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+    ) -> [SurfaceValues; W] {
+        let constants = &self.surface_constants[region as usize];
+        let out: [[f64; W]; 2 * MAX_SURFACES] =
+            self.code.regions[region as usize]
+                .surfaces
+                .eval(|j| [constants[j]; W], phases, y);
+        let mut values = [SurfaceValues::default(); W];
+        for (k, v) in values.iter_mut().enumerate() {
+            for j in 0..MAX_SURFACES {
+                v.g[j] = out[j][k];
+                v.rate[j] = out[MAX_SURFACES + j][k];
+            }
+        }
+        values
+    }
+
     fn surface_gradient(&self, j: usize, y: &[f64; D]) -> [f64; D] {
         let gradient = &self.code.surfaces[j].gradient;
         std::array::from_fn(|i| gradient[i].eval(y, &self.params, 0.0))
