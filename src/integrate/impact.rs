@@ -493,7 +493,7 @@ fn cross<const D: usize, F: Flow<D>>(
     stats.crossings[walls + j] += 1;
     match kind {
         Surface::Event => {
-            let (after, dr) = base.reset(j, y);
+            let (after, dr, reset_rate) = base.reset(j, phase, y);
             let now = base.surface_values(*region, phase, &after);
             if !(now.g[j] <= 0.0 && now.rate[j] < 0.0) {
                 // The reset does not send the motion back where it lives.
@@ -502,7 +502,9 @@ fn cross<const D: usize, F: Flow<D>>(
             }
             stats.log_flux += surface::event_log_det(
                 &dr,
-                &base.surface_gradient(j, y),
+                &reset_rate,
+                &base.surface_gradient(j, phase, y),
+                before.rate[j],
                 &base.rhs_in(*region, phase, y),
                 &base.rhs_in(*region, phase, &after),
             );

@@ -15,6 +15,9 @@ pub mod surface;
 pub use impact::{ImpactLocation, Wall};
 pub use surface::{InRegion, Surface, SurfaceValues};
 
+/// An event's reset at one state: the state after, DR, and ∂R/∂t.
+pub type Reset<const D: usize> = ([f64; D], [[f64; D]; D], [f64; D]);
+
 /// Crossings counted apart per iteration: the walls', then the general
 /// surfaces' (the output's event columns).
 pub const MAX_EVENTS: usize = impact::MAX_WALLS + surface::MAX_SURFACES;
@@ -69,8 +72,9 @@ pub trait Flow<const D: usize>: Sync {
         std::array::from_fn(|k| self.surface_values(region, &phases[k], &column(y, k)))
     }
 
-    /// ∇g of surface j at y.
-    fn surface_gradient(&self, _j: usize, _y: &[f64; D]) -> [f64; D] {
+    /// ∇g of surface j at y, at forcing phase `phase` (a surface may move
+    /// with the forcing).
+    fn surface_gradient(&self, _j: usize, _phase: &Phase, _y: &[f64; D]) -> [f64; D] {
         unreachable!("a flow with surfaces evaluates them")
     }
 
@@ -81,8 +85,10 @@ pub trait Flow<const D: usize>: Sync {
         None
     }
 
-    /// Event j's reset of y (on its surface) and the reset's Jacobian DR.
-    fn reset(&self, _j: usize, _y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
+    /// Event j's reset of y (on its surface) at forcing phase `phase`: the
+    /// state after, the reset's Jacobian DR, and its rate ∂R/∂t (0 for a
+    /// reset that does not read the time).
+    fn reset(&self, _j: usize, _phase: &Phase, _y: &[f64; D]) -> Reset<D> {
         unreachable!("a flow with events resets")
     }
 

@@ -16,7 +16,7 @@
 //! matrix, which the sum rule needs (added to `IterationStats::log_flux`):
 //!
 //! ```text
-//! event:  S = DR + (F⁺ - DR·F⁻) ∇gᵀ / (∇g·F⁻),
+//! event:  S = DR + (F⁺ - DR·F⁻ - ∂R/∂t) ∇gᵀ / (∇g·F⁻ + ∂g/∂t),
 //! switch: S = I + (F⁺ - F⁻) ∇gᵀ / (∇g·F⁻),   det S = (∇g·F⁺) / (∇g·F⁻),
 //! ```
 //!
@@ -105,7 +105,7 @@ pub fn stick_margins<const D: usize, F: Flow<D>>(
     y: &[f64; D],
 ) -> (f64, f64) {
     let (lo, hi) = either_side(flow, sides, bit, phase, y);
-    let n = flow.surface_gradient(j, y);
+    let n = flow.surface_gradient(j, phase, y);
     let a: f64 = (0..D).map(|i| n[i] * lo[i]).sum();
     let b: f64 = (0..D).map(|i| n[i] * hi[i]).sum();
     let m = 0.5 * (a + b);
@@ -125,7 +125,7 @@ pub struct Sliding<'a, F> {
 impl<const D: usize, F: Flow<D>> Flow<D> for Sliding<'_, F> {
     fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         let (lo, hi) = either_side(self.flow, self.sides, self.bit, phase, y);
-        let n = self.flow.surface_gradient(self.surface, y);
+        let n = self.flow.surface_gradient(self.surface, phase, y);
         let a: f64 = (0..D).map(|i| n[i] * lo[i]).sum();
         let b: f64 = (0..D).map(|i| n[i] * hi[i]).sum();
         let alpha = a / (a - b);
@@ -206,20 +206,21 @@ pub fn may_cross(kind: Surface, region: u32, before: (f64, f64), after: (f64, f6
     o * after.0 > 0.0 || (o * before.1 > 0.0 && o * after.1 < 0.0)
 }
 
-/// ln |det S| of an event's crossing at y (on the surface), its state
-/// after the reset `after` with Jacobian `dr`, fields `before_field` (F⁻)
-/// and `after_field` (F⁺), gradient `gradient` (∇g). -∞ when the reset
-/// collapses a direction (det DR = 0).
+/// ln |det S| of an event's crossing: the reset's Jacobian `dr` and rate
+/// `reset_rate` (∂R/∂t), the fields `before_field` (F⁻) and `after_field`
+/// (F⁺), the surface's gradient ∇g and its rate along F⁻, `rate` = ∇g·F⁻ +
+/// ∂g/∂t. -∞ when the reset collapses a direction (det DR = 0).
 pub fn event_log_det<const D: usize>(
     dr: &[[f64; D]; D],
+    reset_rate: &[f64; D],
     gradient: &[f64; D],
+    rate: f64,
     before_field: &[f64; D],
     after_field: &[f64; D],
 ) -> f64 {
-    let rate: f64 = (0..D).map(|i| gradient[i] * before_field[i]).sum();
     let s = DMatrix::from_fn(D, D, |i, k| {
         let dr_f: f64 = (0..D).map(|m| dr[i][m] * before_field[m]).sum();
-        dr[i][k] + (after_field[i] - dr_f) * gradient[k] / rate
+        dr[i][k] + (after_field[i] - dr_f - reset_rate[i]) * gradient[k] / rate
     });
     s.determinant().abs().ln()
 }

@@ -62,6 +62,9 @@ pub struct Code {
     /// The field of every region of the switches (one without switches),
     /// indexed by the region's bits.
     pub regions: Vec<Field>,
+    /// ω of the model's forcing clock: the equations' `cos(w*t)`, or else
+    /// a moving surface's (a wall vibrating at w).
+    pub clock: Option<Expr>,
     /// Whether the model is piecewise linear (every region's field linear
     /// with constant coefficients plus harmonic forcing, its surfaces and
     /// resets linear): then it has an exact backend
@@ -83,6 +86,8 @@ pub struct GeneralSurface {
     /// switch.
     pub reset: Vec<Expr>,
     pub reset_jacobian: Vec<Expr>,
+    /// ∂R/∂t of an event's reset, one per state (zeros unless it reads `t`).
+    pub reset_rate: Vec<Expr>,
     /// A switch's stick limit (see `integrate::surface`), if it has one.
     pub stick_limit: Option<Expr>,
 }
@@ -209,7 +214,12 @@ impl Code {
             let event_key = format!("{key}.events[{j}]");
             match stop(&model, event, &event_key) {
                 Some(stop) => walls.push(stop),
-                None => surfaces.push(general_event(&model, event, &event_key)?),
+                None => surfaces.push(general_event(
+                    &model,
+                    event,
+                    &event_key,
+                    equations.frequency.clone(),
+                )?),
             }
         }
         if walls.len() > MAX_WALLS {
@@ -228,6 +238,7 @@ impl Code {
                     .collect(),
                 reset: Vec::new(),
                 reset_jacobian: Vec::new(),
+                reset_rate: Vec::new(),
                 stick_limit: switch.stick_limit.clone(),
             });
         }
@@ -314,7 +325,12 @@ impl Code {
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
         let is_piecewise_linear = section_free_linear(&model, &regions, &surfaces);
+        let clock = equations
+            .frequency
+            .clone()
+            .or_else(|| regions.iter().find_map(|f| f.surfaces.frequency.clone()));
         Ok(Code {
+            clock,
             is_piecewise_linear,
             model,
             equations,
@@ -336,6 +352,13 @@ impl Code {
             (None, true) => self.divergence_along.as_ref(),
             _ => None,
         }
+    }
+
+    /// ω of the forcing clock at `params` (0 without one).
+    pub fn frequency(&self, params: &[f64]) -> f64 {
+        self.clock
+            .as_ref()
+            .map_or(0.0, |w| w.eval(&[], params, 0.0))
     }
 
     /// The flow's states.
@@ -424,9 +447,12 @@ fn section_free_linear(model: &Model, regions: &[Field], surfaces: &[GeneralSurf
     matches!(model.map, Map::Period(_))
         && model.angles.is_empty()
         && regions.iter().all(|f| f.jacobian.iter().all(constant))
-        && surfaces
-            .iter()
-            .all(|s| s.gradient.iter().all(constant) && s.reset_jacobian.iter().all(constant))
+        && surfaces.iter().all(|s| {
+            s.gradient.iter().all(constant)
+                && s.reset_jacobian.iter().all(constant)
+                && !s.g.uses(Var::Time)
+                && !s.reset.iter().any(|r| r.uses(Var::Time))
+        })
 }
 
 /// The model at one lane's parameters as a piecewise-linear system: each
@@ -440,7 +466,7 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
         return None;
     }
     let n = code.states();
-    let omega = code.equations.lane_values(params).frequency;
+    let omega = code.frequency(params);
     let period = code.period(params);
     // The time of forcing phase θ (any t when there is no forcing).
     let at_phase = |theta: f64| if omega != 0.0 { theta / omega } else { 0.0 };
@@ -515,22 +541,28 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
 
 /// An event that is not a stop, as a general surface: any g(y) and any
 /// reset of the states (time not yet).
-fn general_event(model: &Model, event: &crate::model::Event, key: &str) -> Result<GeneralSurface> {
+fn general_event(
+    model: &Model,
+    event: &crate::model::Event,
+    key: &str,
+    clock: Option<Expr>,
+) -> Result<GeneralSurface> {
     let n = model.names.states.len();
-    if event.surface.uses(Var::Time) {
-        return Err(Error::invalid(
-            format!("{key}.surface"),
-            "an event surface that reads the time is not supported yet",
-        ));
+    // Time may enter as the forcing clock alone, with the equations' ω (a
+    // wall vibrating with the forcing), so that it restarts each period.
+    let surface_key = format!("{key}.surface");
+    Tape::compile([&event.surface], n, clock.clone())
+        .map_err(|(_, why)| Error::invalid(&surface_key, why.to_string()))?;
+    for (state, value) in &event.reset {
+        Tape::compile([value], n, clock.clone()).map_err(|(_, why)| {
+            Error::invalid(
+                format!("{key}.reset.{}", model.names.states[*state]),
+                why.to_string(),
+            )
+        })?;
     }
     let mut reset: Vec<Expr> = (0..n).map(|i| Expr::Var(Var::State(i))).collect();
     for (state, value) in &event.reset {
-        if value.uses(Var::Time) {
-            return Err(Error::invalid(
-                format!("{key}.reset.{}", model.names.states[*state]),
-                "a reset that reads the time is not supported yet",
-            ));
-        }
         reset[*state] = value.clone();
     }
     if event.reset.is_empty() {
@@ -542,6 +574,7 @@ fn general_event(model: &Model, event: &crate::model::Event, key: &str) -> Resul
     let reset_jacobian = (0..n * n)
         .map(|ik| reset[ik / n].derivative(Var::State(ik % n)))
         .collect();
+    let reset_rate = reset.iter().map(|r| r.derivative(Var::Time)).collect();
     Ok(GeneralSurface {
         name: event.name.clone(),
         kind: Surface::Event,
@@ -551,6 +584,7 @@ fn general_event(model: &Model, event: &crate::model::Event, key: &str) -> Resul
             .collect(),
         reset,
         reset_jacobian,
+        reset_rate,
         stick_limit: None,
     })
 }
@@ -737,7 +771,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
         check_state,
         expected_sum,
         period: |p| code_of(p).period(&p.values),
-        forcing_frequency: |p| code_of(p).equations.lane_values(&p.values).frequency,
+        forcing_frequency: |p| code_of(p).frequency(&p.values),
         run_lane,
         run_lanes,
         gpu_refuses,
@@ -942,9 +976,10 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         values
     }
 
-    fn surface_gradient(&self, j: usize, y: &[f64; D]) -> [f64; D] {
+    fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         let gradient = &self.code.surfaces[j].gradient;
-        std::array::from_fn(|i| gradient[i].eval(y, &self.params, 0.0))
+        let t = self.time_at(phase);
+        std::array::from_fn(|i| gradient[i].eval(y, &self.params, t))
     }
 
     fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
@@ -954,13 +989,15 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             .map(|l| l.eval(y, &self.params, 0.0))
     }
 
-    fn reset(&self, j: usize, y: &[f64; D]) -> ([f64; D], [[f64; D]; D]) {
+    fn reset(&self, j: usize, phase: &Phase, y: &[f64; D]) -> crate::integrate::Reset<D> {
         let s = &self.code.surfaces[j];
+        let t = self.time_at(phase);
         (
-            std::array::from_fn(|i| s.reset[i].eval(y, &self.params, 0.0)),
+            std::array::from_fn(|i| s.reset[i].eval(y, &self.params, t)),
             std::array::from_fn(|i| {
-                std::array::from_fn(|k| s.reset_jacobian[i * D + k].eval(y, &self.params, 0.0))
+                std::array::from_fn(|k| s.reset_jacobian[i * D + k].eval(y, &self.params, t))
             }),
+            std::array::from_fn(|i| s.reset_rate[i].eval(y, &self.params, t)),
         )
     }
 
@@ -1049,6 +1086,16 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
 const EACH_CONSTANTS: usize = 32;
 
 impl<const D: usize> ModelFlow<D> {
+    /// The local time of forcing phase (cos ωt, sin ωt) within the period:
+    /// where an expression evaluated as a tree (a reset, a gradient) reads
+    /// `t`, it reads the same cos ωt and sin ωt as the tapes' clock.
+    fn time_at(&self, phase: &Phase) -> f64 {
+        if self.frequency == 0.0 {
+            return 0.0;
+        }
+        phase[1].atan2(phase[0]).rem_euclid(std::f64::consts::TAU) / self.frequency
+    }
+
     /// The native code of a region's equations, if there is one for
     /// batches of W.
     #[inline(always)]
@@ -1126,7 +1173,6 @@ impl<const D: usize> ModelFlow<D> {
 impl<const D: usize> System<D> for ModelFlow<D> {
     fn new(p: &Params) -> Self {
         let code = code_of(p);
-        let lane = code.equations.lane_values(&p.values);
         ModelFlow {
             code,
             params: p.values.clone(),
@@ -1140,7 +1186,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
                 .iter()
                 .map(|f| f.surfaces.lane_values(&p.values).constants)
                 .collect(),
-            frequency: lane.frequency,
+            frequency: code.frequency(&p.values),
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
             exact: std::sync::OnceLock::new(),
