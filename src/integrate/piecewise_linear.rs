@@ -777,84 +777,85 @@ impl PiecewiseLinear {
             }
             // The next mode, the state there, the saltation matrix, its
             // ln|det|, and the surface just left tangentially (if any).
-            let (next_mode, y_plus, saltation, log_det, leaving) = match (segment.mode, watched.what)
-            {
-                (Mode::Region(r), Watch::Surface(j)) => match &self.surfaces[j].kind {
-                    SurfaceKind::Switch { sliding } => {
-                        let bit = self.bits[j].expect("a switch has a region bit");
-                        let next_region = r ^ (1 << bit);
-                        let (plus, minus) = self.stick_margins(j, r, p.t, &p.y);
-                        if plus > 0.0 && minus > 0.0 && *sliding != SlidingRule::Stop {
-                            // Held on the surface: it slides, where that can
-                            // be propagated.
-                            let Some(dynamics) = self.sliding_dynamics(j, r) else {
-                                break (p, PiecewiseStatus::Sliding);
-                            };
-                            let mode = Mode::Sliding {
-                                switch: j,
-                                sides: r,
-                            };
-                            let y_on = self.onto(j, &p.y);
-                            let f_s = self.field_of(&dynamics, p.t, &y_on);
-                            let s = DMatrix::identity(n, n)
-                                + (&f_s - &p.field) * gradient.transpose() / rate;
-                            crossings[j] += 1;
-                            rank_loss = 1;
-                            (mode, y_on, s, f64::NAN, None)
-                        } else {
-                            let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
-                            let onward = gradient.dot(&f_plus);
-                            let carried = watched.sign * onward;
-                            if carried.is_nan() || carried <= 0.0 {
-                                // The new field does not carry the state on
-                                // across: both point into the surface
-                                // (Filippov sliding, not propagated here), or
-                                // a stick limit below Filippov's lets go.
-                                break (p, PiecewiseStatus::Sliding);
+            let (next_mode, y_plus, saltation, log_det, leaving) =
+                match (segment.mode, watched.what) {
+                    (Mode::Region(r), Watch::Surface(j)) => match &self.surfaces[j].kind {
+                        SurfaceKind::Switch { sliding } => {
+                            let bit = self.bits[j].expect("a switch has a region bit");
+                            let next_region = r ^ (1 << bit);
+                            let (plus, minus) = self.stick_margins(j, r, p.t, &p.y);
+                            if plus > 0.0 && minus > 0.0 && *sliding != SlidingRule::Stop {
+                                // Held on the surface: it slides, where that can
+                                // be propagated.
+                                let Some(dynamics) = self.sliding_dynamics(j, r) else {
+                                    break (p, PiecewiseStatus::Sliding);
+                                };
+                                let mode = Mode::Sliding {
+                                    switch: j,
+                                    sides: r,
+                                };
+                                let y_on = self.onto(j, &p.y);
+                                let f_s = self.field_of(&dynamics, p.t, &y_on);
+                                let s = DMatrix::identity(n, n)
+                                    + (&f_s - &p.field) * gradient.transpose() / rate;
+                                crossings[j] += 1;
+                                rank_loss = 1;
+                                (mode, y_on, s, f64::NAN, None)
+                            } else {
+                                let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
+                                let onward = gradient.dot(&f_plus);
+                                let carried = watched.sign * onward;
+                                if carried.is_nan() || carried <= 0.0 {
+                                    // The new field does not carry the state on
+                                    // across: both point into the surface
+                                    // (Filippov sliding, not propagated here), or
+                                    // a stick limit below Filippov's lets go.
+                                    break (p, PiecewiseStatus::Sliding);
+                                }
+                                let s = DMatrix::identity(n, n)
+                                    + (&f_plus - &p.field) * gradient.transpose() / rate;
+                                crossings[j] += 1;
+                                // det(I + u nᵀ/(n·F⁻)) = 1 + n·u/(n·F⁻), written
+                                // exactly.
+                                let log_det = (onward / rate).abs().ln();
+                                (Mode::Region(next_region), p.y.clone(), s, log_det, None)
                             }
-                            let s = DMatrix::identity(n, n)
-                                + (&f_plus - &p.field) * gradient.transpose() / rate;
+                        }
+                        SurfaceKind::Event { reset, shift } => {
+                            let y_plus = reset * &p.y + shift;
+                            let next_region = self.region_after_reset(r, &p.y, &y_plus);
+                            let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_plus);
+                            let s =
+                                reset + (&f_plus - reset * &p.field) * gradient.transpose() / rate;
+                            let det = s.clone().determinant();
+                            if det == 0.0 {
+                                rank_loss = 1;
+                            }
                             crossings[j] += 1;
-                            // det(I + u nᵀ/(n·F⁻)) = 1 + n·u/(n·F⁻), written
-                            // exactly.
-                            let log_det = (onward / rate).abs().ln();
-                            (Mode::Region(next_region), p.y.clone(), s, log_det, None)
+                            (Mode::Region(next_region), y_plus, s, det.abs().ln(), None)
                         }
+                    },
+                    (Mode::Sliding { .. }, Watch::Surface(_)) => {
+                        // Another surface met while sliding (a wall, a second
+                        // switch): motion on two surfaces at once is not
+                        // propagated.
+                        break (p, PiecewiseStatus::Sliding);
                     }
-                    SurfaceKind::Event { reset, shift } => {
-                        let y_plus = reset * &p.y + shift;
-                        let next_region = self.region_after_reset(r, &p.y, &y_plus);
-                        let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_plus);
-                        let s = reset + (&f_plus - reset * &p.field) * gradient.transpose() / rate;
-                        let det = s.clone().determinant();
-                        if det == 0.0 {
-                            rank_loss = 1;
-                        }
-                        crossings[j] += 1;
-                        (Mode::Region(next_region), y_plus, s, det.abs().ln(), None)
+                    (Mode::Sliding { switch, sides }, Watch::Margin { plus }) => {
+                        let bit = 1 << self.bits[switch].expect("a switch has a region bit");
+                        let next_region = if plus { sides | bit } else { sides & !bit };
+                        let y_off = self.onto(switch, &p.y);
+                        let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_off);
+                        // The exit on the margin q = k·z: its time moves by
+                        // −k_y·δy/(dq/dt).
+                        let s = DMatrix::identity(n, n)
+                            + (&f_plus - &p.field) * gradient.transpose() / rate;
+                        (Mode::Region(next_region), y_off, s, f64::NAN, Some(switch))
                     }
-                },
-                (Mode::Sliding { .. }, Watch::Surface(_)) => {
-                    // Another surface met while sliding (a wall, a second
-                    // switch): motion on two surfaces at once is not
-                    // propagated.
-                    break (p, PiecewiseStatus::Sliding);
-                }
-                (Mode::Sliding { switch, sides }, Watch::Margin { plus }) => {
-                    let bit = 1 << self.bits[switch].expect("a switch has a region bit");
-                    let next_region = if plus { sides | bit } else { sides & !bit };
-                    let y_off = self.onto(switch, &p.y);
-                    let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_off);
-                    // The exit on the margin q = k·z: its time moves by
-                    // −k_y·δy/(dq/dt).
-                    let s = DMatrix::identity(n, n)
-                        + (&f_plus - &p.field) * gradient.transpose() / rate;
-                    (Mode::Region(next_region), y_off, s, f64::NAN, Some(switch))
-                }
-                (Mode::Region(_), Watch::Margin { .. }) => {
-                    unreachable!("margins are watched while sliding only")
-                }
-            };
+                    (Mode::Region(_), Watch::Margin { .. }) => {
+                        unreachable!("margins are watched while sliding only")
+                    }
+                };
             let dt = p.t - segment.t0;
             jacobian = saltation * self.flow(&segment.dynamics, dt) * jacobian;
             trace_integral += segment.dynamics.trace * dt;
@@ -1020,7 +1021,13 @@ impl PiecewiseLinear {
             .iter()
             .enumerate()
             .filter(|&(k, _)| k != j)
-            .map(|(k, s)| (Watch::Surface(k), s.augmented(), side_sign(self.bits[k], sides)))
+            .map(|(k, s)| {
+                (
+                    Watch::Surface(k),
+                    s.augmented(),
+                    side_sign(self.bits[k], sides),
+                )
+            })
             .collect();
         // A margin reaching 0 from above: g = −q rises through 0.
         watch.push((Watch::Margin { plus: true }, plus, -1.0));
@@ -1710,6 +1717,331 @@ mod tests {
         assert!((log_det - it.log_det_saltation).abs() < 1e-12, "tr A = 0");
         let fd = finite_difference_error(&system, &y, 0, 0.5);
         assert!(fd <= 1e-6, "{fd:e}");
+    }
+
+    /// The belt oscillator x'' = -2ζx' - x - μ sign(x' - vb) + f cos ηt:
+    /// region 0 (slip v - vb < 0) has +μ, region 1 has -μ; the switch
+    /// v = vb slides (Filippov's rule, or held while |m| < `limit`).
+    fn belt(
+        (zeta, mu, vb, f, eta): (f64, f64, f64, f64, f64),
+        limit: Option<f64>,
+    ) -> PiecewiseLinear {
+        let field = |c: f64| oscillator_field(zeta, 1.0, c, f);
+        let slip = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), vb, limit);
+        PiecewiseLinear::new(eta, vec![field(mu), field(-mu)], vec![slip]).unwrap()
+    }
+
+    /// One period of the belt oscillator written out as Filippov's system:
+    /// off the belt, RK4 steps of T/n in the field of the side, a step that
+    /// ends across v = vb redone to the crossing (bisected on the RK4
+    /// sub-step); there, with the rates a = -2ζvb - x + μ + f cos ηt and
+    /// b = a - 2μ, m = a - μ, L = `limit` or μ: it sticks while L ∓ m > 0,
+    /// moving exactly as x' = vb, v = vb, and leaves where a margin reaches
+    /// 0 (bisected on that closed form) to the side L - m ≤ 0 says.
+    /// Returns the end and the arrivals at v = vb.
+    fn filippov_belt(
+        (zeta, mu, vb, f, eta): (f64, f64, f64, f64, f64),
+        limit: Option<f64>,
+        y0: [f64; 2],
+        n: usize,
+    ) -> ([f64; 2], u32) {
+        let limit = limit.unwrap_or(mu);
+        let margins = |t: f64, x: f64| {
+            let m = -2.0 * zeta * vb - x + f * (eta * t).cos();
+            (limit - m, limit + m)
+        };
+        let held = |(plus, minus): (f64, f64)| plus > 0.0 && minus > 0.0;
+        let rhs = |t: f64, y: [f64; 2], hi: bool| {
+            let friction = if hi { -mu } else { mu };
+            [
+                y[1],
+                -2.0 * zeta * y[1] - y[0] + friction + f * (eta * t).cos(),
+            ]
+        };
+        let rk4 = |t: f64, y: [f64; 2], h: f64, hi: bool| {
+            let add = |y: [f64; 2], k: [f64; 2], s: f64| [y[0] + s * k[0], y[1] + s * k[1]];
+            let k1 = rhs(t, y, hi);
+            let k2 = rhs(t + 0.5 * h, add(y, k1, 0.5 * h), hi);
+            let k3 = rhs(t + 0.5 * h, add(y, k2, 0.5 * h), hi);
+            let k4 = rhs(t + h, add(y, k3, h), hi);
+            std::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+        };
+        let period = TAU / eta;
+        let h = period / n as f64;
+        let (mut t, mut y, mut arrivals) = (0.0, y0, 0);
+        let mut sliding = (y[1] - vb).abs() <= 1e-12 && held(margins(0.0, y[0]));
+        let mut hi = y[1] > vb;
+        while t < period {
+            let step = h.min(period - t);
+            if sliding {
+                let x = |s: f64| y[0] + vb * s;
+                if held(margins(t + step, x(step))) {
+                    (t, y) = (t + step, [x(step), vb]);
+                    continue;
+                }
+                let (mut lo, mut up) = (0.0, step);
+                for _ in 0..200 {
+                    let mid = 0.5 * (lo + up);
+                    if mid <= lo || mid >= up {
+                        break;
+                    }
+                    if held(margins(t + mid, x(mid))) {
+                        lo = mid;
+                    } else {
+                        up = mid;
+                    }
+                }
+                let (plus, minus) = margins(t + up, x(up));
+                (t, y, hi, sliding) = (t + up, [x(up), vb], plus <= minus, false);
+                continue;
+            }
+            let next = rk4(t, y, step, hi);
+            if (next[1] > vb) == hi {
+                (t, y) = (t + step, next);
+                continue;
+            }
+            let (mut lo, mut up) = (0.0, step);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + up);
+                if mid <= lo || mid >= up {
+                    break;
+                }
+                if (rk4(t, y, mid, hi)[1] > vb) == hi {
+                    lo = mid;
+                } else {
+                    up = mid;
+                }
+            }
+            let contact = rk4(t, y, up, hi);
+            (t, y) = (t + up, [contact[0], vb]);
+            arrivals += 1;
+            if held(margins(t, y[0])) {
+                sliding = true;
+            } else {
+                hi = !hi;
+            }
+        }
+        (y, arrivals)
+    }
+
+    #[test]
+    fn stick_slip_matches_a_filippov_reference() {
+        let (zeta, mu, vb, f) = (0.05, 0.5, 0.2, 1.0);
+        let mut worst = 0.0_f64;
+        for limit in [None, Some(0.6)] {
+            for eta in [0.3, 0.4, 0.6] {
+                let system = belt((zeta, mu, vb, f, eta), limit);
+                let period = TAU / eta;
+                let mut y = vector(&[0.0, 0.0]);
+                let mut region = system.region(&y);
+                let (mut arrivals, mut slid) = (0, 0);
+                for _ in 0..20 {
+                    let it = system.iterate(&y, region, period);
+                    assert_eq!(it.status, PiecewiseStatus::Ok, "η={eta} {limit:?}");
+                    let (reference, rk4_arrivals) =
+                        filippov_belt((zeta, mu, vb, f, eta), limit, [y[0], y[1]], 20_000);
+                    assert_eq!(
+                        it.crossings,
+                        vec![rk4_arrivals],
+                        "η={eta} {limit:?} from {y}"
+                    );
+                    let error = (it.state[0] - reference[0])
+                        .abs()
+                        .max((it.state[1] - reference[1]).abs());
+                    worst = worst.max(error);
+                    // A sliding phase in the period (or carried into it)
+                    // collapses the velocity.
+                    if it.rank_loss == 1 {
+                        assert!(it.log_det_saltation.is_nan());
+                        let scale = it.jacobian.abs().max().powi(2);
+                        assert!(it.jacobian.determinant().abs() <= 1e-15 * scale);
+                        slid += 1;
+                    }
+                    if it.sliding.is_some() {
+                        assert_eq!(it.state[1], vb);
+                    }
+                    arrivals += it.crossings[0];
+                    (y, region) = (it.state, it.region);
+                }
+                assert!(
+                    arrivals >= 20 && slid >= 10,
+                    "η={eta}: {arrivals} arrivals, {slid} slid"
+                );
+            }
+        }
+        eprintln!("stick-slip vs Filippov RK4: state {worst:.2e}");
+        assert!(worst <= 1e-9, "{worst:e}");
+    }
+
+    #[test]
+    fn stick_slip_jacobian_matches_finite_differences() {
+        // Periods that enter and leave sliding from a start off the belt:
+        // S_in, exp(P A s) and S_out against central differences.
+        let (zeta, mu, vb, f) = (0.05, 0.5, 0.2, 1.0);
+        let (mut checked, mut worst) = (0, 0.0_f64);
+        for limit in [None, Some(0.6)] {
+            for eta in [0.3, 0.4, 0.6] {
+                let system = belt((zeta, mu, vb, f, eta), limit);
+                let period = TAU / eta;
+                let mut y = vector(&[0.0, 0.0]);
+                let mut region = system.region(&y);
+                for _ in 0..30 {
+                    let it = system.iterate(&y, region, period);
+                    let off = (y[1] - vb).abs() > 1e-3;
+                    if off && it.rank_loss == 1 && it.sliding.is_none() {
+                        let fd = finite_difference_error(&system, &y, region, period);
+                        assert!(fd <= 1e-6, "η={eta} {limit:?} from {y}: {fd:e}");
+                        (checked, worst) = (checked + 1, worst.max(fd));
+                    }
+                    (y, region) = (it.state, it.region);
+                }
+            }
+        }
+        eprintln!("stick-slip Jacobian vs FD: {worst:.2e} over {checked} periods");
+        assert!(checked >= 5, "{checked} periods checked");
+    }
+
+    /// λ1 of the belt oscillator from the exact Jacobians, per unit time:
+    /// QR once a period over `iterations` periods after `transient`, Q
+    /// restarting from I (the CPU path's protocol). Also the state reached.
+    fn belt_exponent(
+        eta: f64,
+        transient: usize,
+        iterations: usize,
+    ) -> (f64, f64, DVector<f64>, usize) {
+        let system = belt((0.05, 0.5, 0.2, 1.0, eta), None);
+        let period = TAU / eta;
+        let mut y = vector(&[0.0, 0.0]);
+        let mut region = system.region(&y);
+        let mut q = DMatrix::identity(2, 2);
+        let mut logs = [0.0; 2];
+        for k in 0..transient + iterations {
+            let it = system.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok, "η={eta}, period {k}");
+            if k >= transient {
+                let qr = (&it.jacobian * &q).qr();
+                let r = qr.r();
+                q = qr.q();
+                for (i, l) in logs.iter_mut().enumerate() {
+                    *l += r[(i, i)].abs().ln();
+                }
+            }
+            (y, region) = (it.state, it.region);
+        }
+        let total = iterations as f64 * period;
+        (logs[0] / total, logs[1] / total, y, region)
+    }
+
+    #[test]
+    fn stick_slip_exponents() {
+        // The CPU path's λ1 (lyapsweep's FD method, Filippov's rule, 200 +
+        // 300 periods), converged in its step and δ to 1e-8.
+        for (eta, cpu) in [(0.3, -0.0983497), (0.4, -0.0562861), (0.6, -0.2395735)] {
+            let (l1, l2, y, region) = belt_exponent(eta, 200, 300);
+            // Sticking collapses the velocity once a period: λ2 = -∞.
+            assert_eq!(l2, f64::NEG_INFINITY);
+            assert!(
+                (l1 - cpu).abs() <= 1e-6,
+                "η={eta}: exact {l1} against the CPU's {cpu}"
+            );
+            // The orbit has settled on a periodic one (p periods), whose
+            // Jacobian over p periods has rank 1: its one nonzero
+            // eigenvalue, the trace, gives λ1 for an infinite window. A
+            // window of W periods from Q = I differs from it by
+            // ln(|Π J e1| / |tr Π J|) / (W T) at most, the start vector's
+            // share, which does not vanish for W = 300.
+            let system = belt((0.05, 0.5, 0.2, 1.0, eta), None);
+            let period = TAU / eta;
+            let (mut z, mut r, mut product, mut p) =
+                (y.clone(), region, DMatrix::identity(2, 2), 0);
+            loop {
+                let it = system.iterate(&z, r, period);
+                product = &it.jacobian * product;
+                (z, r, p) = (it.state, it.region, p + 1);
+                if (&z - &y).norm() <= 1e-12 || p == 8 {
+                    break;
+                }
+            }
+            assert!((&z - &y).norm() <= 1e-12, "η={eta}: no period up to 8");
+            assert!(product.rank(1e-12 * product.abs().max()) == 1);
+            let limit = product.trace().abs().ln() / (p as f64 * period);
+            let start = (product.column(0).norm() / product.trace().abs()).ln();
+            eprintln!(
+                "η={eta}: exact λ1 = {l1:.9} (200 + 300 periods, Q from I; CPU {cpu}), \
+                 {limit:.9} on the period-{p} orbit (start vector's share {:.2e})",
+                start / (300.0 * period)
+            );
+            assert!((l1 - limit - start / (300.0 * period)).abs() <= 1e-9);
+        }
+    }
+
+    #[test]
+    fn sticking_for_good_keeps_the_position_and_forgets_the_velocity() {
+        // vb = 0 and |x| < μ - f: the spring and the forcing never overcome
+        // friction (|-x + f cos ηt| < μ), so the mass never moves.
+        let (zeta, mu, f, eta) = (0.05, 0.5, 0.2, 0.8);
+        let system = belt((zeta, mu, 0.0, f, eta), None);
+        let period = TAU / eta;
+        for region in [0, 1] {
+            let y = vector(&[0.1, 0.0]);
+            let it = system.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok);
+            assert_eq!((it.crossings[0], it.sliding, it.rank_loss), (0, Some(0), 1));
+            assert!(
+                (it.state[0] - 0.1).abs() <= 1e-14 && it.state[1] == 0.0,
+                "{}",
+                it.state
+            );
+            // (x, v) ↦ (x, 0): rank 1.
+            let expected = matrix([[1.0, 0.0], [0.0, 0.0]]);
+            assert!(
+                (&it.jacobian - expected).abs().max() <= 1e-14,
+                "{}",
+                it.jacobian
+            );
+            assert_eq!(it.jacobian.rank(1e-12), 1);
+        }
+        // Arriving from a slip: one crossing, then stuck where it arrived.
+        let it = system.iterate(&vector(&[0.1, -0.05]), 0, period);
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert_eq!((it.crossings[0], it.sliding, it.rank_loss), (1, Some(0), 1));
+        assert_eq!(it.state[1], 0.0);
+        let again = system.iterate(&it.state, it.region, period);
+        assert!((&again.state - &it.state).norm() <= 1e-14);
+        assert_eq!(again.jacobian.rank(1e-12), 1);
+    }
+
+    #[test]
+    fn sliding_that_cannot_be_propagated_is_reported() {
+        // A jump with a y-dependent part (friction proportional to x):
+        // F_hi - F_lo is not constant, so the sliding field is not linear.
+        let a = matrix([[0.0, 1.0], [-1.0, 0.0]]);
+        let lo = LinearField::autonomous(a.clone(), vector(&[0.0, 0.5]));
+        let hi = LinearField::autonomous(matrix([[0.0, 1.0], [-1.5, 0.0]]), vector(&[0.0, -0.5]));
+        let v = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), 0.0, None);
+        let system = PiecewiseLinear::new(1.0, vec![lo, hi], vec![v]).unwrap();
+        let it = system.iterate(&vector(&[0.2, -0.1]), 0, TAU);
+        assert_eq!((it.status, it.crossings[0]), (PiecewiseStatus::Sliding, 0));
+        // Sliding into a wall: two surfaces at once.
+        let field = |c: f64| oscillator_field(0.05, 1.0, c, 0.2);
+        let slip = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), 0.3, None);
+        let wall = LinearSurface::event(
+            vector(&[1.0, 0.0]),
+            0.2,
+            matrix([[1.0, 0.0], [0.0, -0.5]]),
+            DVector::zeros(2),
+        );
+        let system =
+            PiecewiseLinear::new(0.8, vec![field(0.5), field(-0.5)], vec![slip, wall]).unwrap();
+        let it = system.iterate(&vector(&[0.0, 0.3]), 0, TAU / 0.8);
+        assert_eq!(it.status, PiecewiseStatus::Sliding);
+        assert_eq!(it.sliding, Some(0));
+        assert!(
+            (it.state[0] - 0.2).abs() < 1e-12 && it.time < 1.0,
+            "{} at {}",
+            it.state,
+            it.time
+        );
     }
 
     /// The time and height of the highest point of the seed's free flight
