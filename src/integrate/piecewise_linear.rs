@@ -31,12 +31,13 @@
 //! point of a segment is computed from the segment's start, so rounding does
 //! not accumulate along the search.
 //!
-//! **Crossings.** Each surface is watched through g = σ h with σ = ±1 chosen
-//! so that a crossing is g reaching 0 from below. A scan certified by a bound
-//! L ≥ |h'''| over each step (see [`PiecewiseLinear::iterate`]) cannot step
-//! over a near-grazing approach, and each root is refined by safeguarded
-//! Newton, h' = n·F, to machine precision. The earliest crossing over all
-//! surfaces is taken.
+//! **Crossings.** The scan watches linear functions of z, g = σ k·z, with
+//! σ = ±1 chosen so that a crossing is g reaching 0 from below: each
+//! surface (k = [n; −d; 0; 0]) and, while sliding, the two stick margins
+//! (below). A scan certified by a bound L ≥ |g'''| over each step (see
+//! [`PiecewiseLinear::iterate`]) cannot step over a near-grazing approach,
+//! and each root is refined by safeguarded Newton, g' = σ k·B z, to machine
+//! precision. The earliest crossing over all of them is taken.
 //!
 //! **Tangent map.** The product of flow matrices and saltation matrices
 //! (Müller, "Calculation of Lyapunov exponents for dynamic systems with
@@ -48,12 +49,47 @@
 //! switch: S = I + (F⁺ − F⁻) nᵀ / (n·F⁻),     F⁺ the new region's field at y⁻,  det S = n·F⁺ / n·F⁻.
 //! ```
 //!
-//! Filippov sliding (at a switch, the new field points back into the
-//! surface) and sticking (after an event, at rest on the surface, pressed
-//! into it) are not propagated: the iteration stops and says so.
+//! **Sliding.** On a switch built with [`LinearSurface::sliding_switch`],
+//! with the rates a = n·F_lo and b = n·F_hi of the fields on its two sides
+//! (bit cleared, bit set), the mean rate m = (a + b)/2 and the limit L (the
+//! switch's stick limit, else Filippov's half jump (a − b)/2), the motion
+//! slides on the surface while both margins L − m and L + m are positive,
+//! and leaves towards + when L − m reaches 0, towards − when L + m does:
+//! the CPU integrator's rule (`surface::stick_margins`). It is propagated
+//! exactly where the jump F_hi − F_lo = Δ is a constant vector (A, p, q
+//! equal on both sides, only c differs: dry friction μ sign(slip)). Then
+//! Filippov's field F_lo + α Δ, α = a/(a − b) = −a/(n·Δ), is
+//!
+//! ```text
+//! F_s = P F_lo = P F_hi,   P = I − Δ nᵀ/(n·Δ)   (the projection along Δ onto n·y = const),
+//! ```
+//!
+//! linear in z again, B_s = [[P A, P c, P p, P q], ...], and the margins
+//! L ∓ m are linear functions of z (m = n·M_lo z + (n·Δ)/2 with M_lo the
+//! top rows of B_lo; L a constant times the coordinate 1), which the same
+//! scan watches. The tangent map through a sliding phase is
+//!
+//! ```text
+//! S_out · exp(P A s) · S_in,   S_in  = I + (F_s − F⁻) nᵀ/(n·F⁻)          (det 0: n·F_s = 0),
+//!                              S_out = I + (F⁺ − F_s) k_yᵀ/(dq/dt),
+//! ```
+//!
+//! S_in the saltation onto the sliding field, S_out that of the exit on the
+//! margin q = k·z that reaches 0 (k_y its gradient in y, dq/dt = k·B_s z
+//! its full rate, forcing included: the exit time's sensitivity, di Bernardo
+//! et al., *Piecewise-smooth Dynamical Systems*, 2008, §7.2). A sliding
+//! phase forgets the distance to the surface: the map loses a rank
+//! ([`PiecewiseIteration::rank_loss`]). Sliding is reported and not
+//! propagated ([`PiecewiseStatus::Sliding`]) on a plain
+//! [`LinearSurface::switch`], where the jump is not constant, where the jump
+//! is not attracting (n·Δ ≥ 0), and where the sliding motion meets another
+//! surface (motion on two surfaces at once). Sticking after an event (at
+//! rest on the surface, pressed into it) is not propagated either: the
+//! iteration stops and says so.
 
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::SQRT_2;
+use std::sync::Arc;
 
 /// Crossings allowed in one period, over all surfaces, before the iteration
 /// is abandoned with [`PiecewiseStatus::Chattering`].
@@ -87,6 +123,12 @@ const CHATTER_TIME_FRACTION: f64 = 1e-11;
 /// So is a bounce whose height g'²/(2g'') is below this many ulps of the
 /// surface's scale |d| + |n||y|.
 const CHATTER_HEIGHT_ULPS: f64 = 64.0;
+
+/// The two sides of a sliding switch count as one field plus a constant
+/// jump when A, p and q agree to this many ulps of their size (the model
+/// side builds them by evaluating expressions, which may round the two
+/// sides differently).
+const JUMP_ULPS: f64 = 64.0;
 
 /// Iterations of the root refinement (it converges in a handful).
 const MAX_REFINE: usize = 200;
@@ -160,12 +202,33 @@ impl LinearField {
     }
 }
 
+/// What a switch does where both fields point into it (or its stick limit
+/// holds the motion on it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SlidingRule {
+    /// Not propagated: the iteration stops with
+    /// [`PiecewiseStatus::Sliding`] at the arrival. The default of
+    /// [`LinearSurface::switch`], so that a caller who has not said which
+    /// limit holds (a model with static friction above kinetic) is not
+    /// given Filippov's silently.
+    Stop,
+    /// Slides while both margins L ∓ m are positive, L = Filippov's
+    /// (a − b)/2, or `stick_limit` where given (module docs).
+    Slide {
+        /// L, a constant (static friction); None for Filippov's.
+        stick_limit: Option<f64>,
+    },
+}
+
 /// What happens where a surface's h crosses zero.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SurfaceKind {
     /// The field switches across the surface; no reset. Region bit j is 1
     /// where h_j > 0 (j counting the switches only, in order).
-    Switch,
+    Switch {
+        /// Sliding on it: propagated, or reported.
+        sliding: SlidingRule,
+    },
     /// An event: fires when h crosses 0 from below (the motion is confined
     /// to h ≤ 0) and maps y ↦ reset·y + shift (a stop: v ↦ −e v).
     Event {
@@ -174,6 +237,12 @@ pub enum SurfaceKind {
         /// s.
         shift: DVector<f64>,
     },
+}
+
+impl SurfaceKind {
+    fn is_switch(&self) -> bool {
+        matches!(self, SurfaceKind::Switch { .. })
+    }
 }
 
 /// A surface h(y) = normal·y − offset (linear in the state, not in time).
@@ -188,12 +257,27 @@ pub struct LinearSurface {
 }
 
 impl LinearSurface {
-    /// A switching surface n·y = d.
+    /// A switching surface n·y = d on which sliding is reported, not
+    /// propagated ([`SlidingRule::Stop`]).
     pub fn switch(normal: DVector<f64>, offset: f64) -> Self {
         LinearSurface {
             normal,
             offset,
-            kind: SurfaceKind::Switch,
+            kind: SurfaceKind::Switch {
+                sliding: SlidingRule::Stop,
+            },
+        }
+    }
+
+    /// A switching surface n·y = d on which the motion slides (Filippov's
+    /// rule with `stick_limit` None, else held while |m| < stick_limit).
+    pub fn sliding_switch(normal: DVector<f64>, offset: f64, stick_limit: Option<f64>) -> Self {
+        LinearSurface {
+            normal,
+            offset,
+            kind: SurfaceKind::Switch {
+                sliding: SlidingRule::Slide { stick_limit },
+            },
         }
     }
 
@@ -215,6 +299,15 @@ impl LinearSurface {
     /// h(y) = n·y − d.
     pub fn value(&self, y: &DVector<f64>) -> f64 {
         self.normal.dot(y) - self.offset
+    }
+
+    /// h as a function of z: [n; −d; 0; 0].
+    fn augmented(&self) -> DVector<f64> {
+        let n = self.normal.len();
+        let mut k = DVector::zeros(n + FORCING);
+        k.rows_mut(0, n).copy_from(&self.normal);
+        k[n] = -self.offset;
+        k
     }
 }
 
@@ -238,7 +331,7 @@ pub enum PiecewiseError {
         dimension: usize,
         got: String,
     },
-    /// A coefficient, ω or an offset is NaN or infinite.
+    /// A coefficient, ω, an offset or a stick limit is NaN or infinite.
     #[error("{what} is not finite")]
     NotFinite { what: String },
 }
@@ -246,7 +339,8 @@ pub enum PiecewiseError {
 /// How an iteration ended.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PiecewiseStatus {
-    /// The span was completed; state and Jacobian are those at its end.
+    /// The span was completed; state and Jacobian are those at its end
+    /// (sliding phases included).
     Ok,
     /// Crossings accumulated (more than [`MAX_CROSSINGS_PER_PERIOD`], or a
     /// bounce off an event surface below the time or position resolution,
@@ -259,9 +353,10 @@ pub enum PiecewiseStatus {
     /// rate was not positive at all (a tangency lost in rounding, where no
     /// saltation matrix exists): then it stopped at the crossing.
     Grazing,
-    /// At a switch, the new field points back into the surface as well
-    /// (Filippov sliding): not propagated; stopped at the crossing, before
-    /// the switch.
+    /// Sliding that is not propagated: at a switch whose rule is
+    /// [`SlidingRule::Stop`], whose jump is not a constant attracting vector
+    /// (stopped at the arrival, before the switch), or a sliding motion
+    /// meeting another surface (stopped there, still sliding).
     Sliding,
     /// After an event the state is on the surface with zero rate n·F⁺ = 0
     /// (a reset to rest, e = 0), pressed into it by the field: it would stick.
@@ -276,19 +371,31 @@ pub enum PiecewiseStatus {
 pub struct PiecewiseIteration {
     /// y at the end of the span (at [`Self::time`] when stopped early).
     pub state: DVector<f64>,
-    /// The region of the final state.
+    /// The region of the final state (while sliding, the side it arrived
+    /// from).
     pub region: usize,
+    /// The switch the final state slides on, if any.
+    pub sliding: Option<usize>,
     /// The exact tangent map ∂state/∂y(t0) = Φ_k S_k ··· S_1 Φ_0, Φ the flow
-    /// matrices exp(A_r Δt) of the segments, S the saltation matrices.
+    /// matrices exp(A_r Δt) (exp(P A Δt) while sliding) of the segments, S
+    /// the saltation matrices.
     pub jacobian: DMatrix<f64>,
-    /// Crossings of each surface (switches in either direction, events).
+    /// Crossings of each surface (switches in either direction, arrivals
+    /// on a switch that start a sliding phase, events); a departure from
+    /// sliding is not counted, as on the CPU path.
     pub crossings: Vec<u32>,
     /// How the iteration ended.
     pub status: PiecewiseStatus,
-    /// Σ ln|det S| over the crossings (−∞ after a singular reset, e = 0).
+    /// Σ ln|det S| over the crossings: −∞ after a singular reset (e = 0);
+    /// NaN once the motion has slid, where the volume law does not apply
+    /// (the CPU path's `log_flux` likewise).
     pub log_det_saltation: f64,
-    /// Σ tr(A_r) Δt over the segments: with [`Self::log_det_saltation`],
-    /// ln|det J| by Liouville's formula, the sum of the exponents.
+    /// Directions the tangent map collapsed: 1 after a sliding phase or a
+    /// singular reset, else 0 (as the CPU path's `rank_loss`).
+    pub rank_loss: u32,
+    /// Σ tr(A) Δt over the segments (tr(P A) while sliding): with
+    /// [`Self::log_det_saltation`], ln|det J| by Liouville's formula, the
+    /// sum of the exponents.
     pub trace_integral: f64,
     /// Smallest approach rate |n·F⁻| of the crossings (∞ without any).
     pub min_crossing_rate: f64,
@@ -296,20 +403,55 @@ pub struct PiecewiseIteration {
     pub time: f64,
 }
 
-/// Bounds of one region used by the certified scan.
+/// What a watched function of z is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Watch {
+    /// Surface j's h.
+    Surface(usize),
+    /// A stick margin of the sliding switch: L − m (reaching 0, the motion
+    /// leaves to the positive side, `plus`) or L + m (to the negative).
+    Margin { plus: bool },
+}
+
+/// A linear function of z that the scan watches: g = σ k·z.
 #[derive(Clone, Debug)]
-struct RegionBounds {
+struct Watched {
+    what: Watch,
+    /// k, of length N + 3.
+    k: DVector<f64>,
+    /// σ: g rises through 0 at a crossing.
+    sign: f64,
+    /// An event surface (confining: bounces and sticking apply).
+    event: bool,
+    /// (|r_y|, √2 |r_w|) with [r_y; r_w] = (Bᵀ)³ k, so that
+    /// |g'''| = |r_y·y + r_w·w| ≤ |r_y||y| + √2 |r_w|.
+    jerk: (f64, f64),
+}
+
+/// The linear flow of one mode (a region, or sliding on a switch) with the
+/// functions its scan watches and their bounds.
+#[derive(Clone, Debug)]
+struct Dynamics {
     /// B, the augmented generator.
     b: DMatrix<f64>,
-    /// tr A.
+    /// tr of B's state block.
     trace: f64,
-    /// max(μ₂(A), 0), μ₂ the logarithmic 2-norm λ_max((A + Aᵀ)/2).
+    /// max(μ₂(A), 0), μ₂ the logarithmic 2-norm λ_max((A + Aᵀ)/2), A the
+    /// state block of B.
     growth: f64,
     /// √2 |[c p q]|_F ≥ |c + p cos + q sin|.
     drive: f64,
-    /// Per surface, (|r_y|, √2 |r_w|) with [r_y; r_w] = (Bᵀ)³ [n; −d; 0; 0],
-    /// so that |h'''| = |r_y·y + r_w·w| ≤ |r_y||y| + √2 |r_w|.
-    jerk: Vec<(f64, f64)>,
+    watch: Vec<Watched>,
+}
+
+/// What a segment integrates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    /// A region's field.
+    Region(usize),
+    /// Sliding on switch `switch`, the other switches' sides those of
+    /// `sides` (whose own bit is the side the motion arrived from).
+    Sliding { switch: usize, sides: usize },
 }
 
 /// A piecewise-linear, harmonically forced system with its surfaces.
@@ -320,7 +462,7 @@ pub struct PiecewiseLinear {
     surfaces: Vec<LinearSurface>,
     /// The region bit of each surface (None for events).
     bits: Vec<Option<u32>>,
-    regions: Vec<RegionBounds>,
+    regions: Vec<Arc<Dynamics>>,
 }
 
 /// The scan's settings for one span.
@@ -332,25 +474,24 @@ struct Span {
     chatter_time: f64,
 }
 
-/// A segment: the flow of one region from (t0, y0).
+/// A segment: the flow of one mode from (t0, y0).
 #[derive(Clone, Debug)]
 struct Segment {
     t0: f64,
-    region: usize,
+    mode: Mode,
+    dynamics: Arc<Dynamics>,
     /// z(t0) = [y0; 1; cos ωt0; sin ωt0].
     z0: DVector<f64>,
-    /// σ_j: g_j = σ_j h_j rises through 0 at a crossing.
-    sign: Vec<f64>,
 }
 
-/// A point of a segment, with what the scan needs of every surface.
+/// A point of a segment, with what the scan needs of every watched function.
 #[derive(Clone, Debug)]
 struct Point {
     t: f64,
     y: DVector<f64>,
-    /// F(t, y) of the segment's region.
+    /// F(t, y) of the segment's mode.
     field: DVector<f64>,
-    /// g_j, g_j', g_j''.
+    /// g_i, g_i', g_i''.
     g: Vec<f64>,
     g1: Vec<f64>,
     g2: Vec<f64>,
@@ -359,6 +500,7 @@ struct Point {
 /// What ended a scan of a segment.
 enum Next {
     End(Point),
+    /// The watched function of this index reached 0.
     Crossing(usize, Point),
     Chattering(Point),
     Sticking(Point),
@@ -378,10 +520,7 @@ impl PiecewiseLinear {
         if !omega.is_finite() {
             return Err(PiecewiseError::NotFinite { what: "ω".into() });
         }
-        let switches = surfaces
-            .iter()
-            .filter(|s| s.kind == SurfaceKind::Switch)
-            .count();
+        let switches = surfaces.iter().filter(|s| s.kind.is_switch()).count();
         const MAX_SWITCHES: usize = 16;
         if switches > MAX_SWITCHES {
             return Err(PiecewiseError::TooManySwitches {
@@ -427,16 +566,25 @@ impl PiecewiseLinear {
         for (j, surface) in surfaces.iter().enumerate() {
             vector(format!("surface {j}: normal"), &surface.normal)?;
             finite(format!("surface {j}: offset"), [surface.offset].iter())?;
-            if let SurfaceKind::Event { reset, shift } = &surface.kind {
-                square(format!("surface {j}: reset"), reset)?;
-                vector(format!("surface {j}: shift"), shift)?;
+            match &surface.kind {
+                SurfaceKind::Event { reset, shift } => {
+                    square(format!("surface {j}: reset"), reset)?;
+                    vector(format!("surface {j}: shift"), shift)?;
+                }
+                SurfaceKind::Switch {
+                    sliding:
+                        SlidingRule::Slide {
+                            stick_limit: Some(limit),
+                        },
+                } => finite(format!("surface {j}: stick limit"), [*limit].iter())?,
+                SurfaceKind::Switch { .. } => {}
             }
         }
         let mut next_bit = 0;
-        let bits = surfaces
+        let bits: Vec<Option<u32>> = surfaces
             .iter()
             .map(|s| match s.kind {
-                SurfaceKind::Switch => {
+                SurfaceKind::Switch { .. } => {
                     next_bit += 1;
                     Some(next_bit - 1)
                 }
@@ -445,7 +593,19 @@ impl PiecewiseLinear {
             .collect();
         let regions = fields
             .iter()
-            .map(|field| region_bounds(field, omega, &surfaces))
+            .enumerate()
+            .map(|(r, field)| {
+                let watch = surfaces
+                    .iter()
+                    .enumerate()
+                    .map(|(j, s)| (Watch::Surface(j), s.augmented(), side_sign(bits[j], r)))
+                    .collect();
+                let event = |w: Watch| match w {
+                    Watch::Surface(j) => bits[j].is_none(),
+                    Watch::Margin { .. } => false,
+                };
+                Arc::new(dynamics(field.augmented(omega), watch, event))
+            })
             .collect();
         Ok(PiecewiseLinear {
             omega,
@@ -491,13 +651,16 @@ impl PiecewiseLinear {
     /// Preconditions: y is on the allowed side of every event surface
     /// (h ≤ 0; a start on one moving into it, n·F > 0, fires at t = 0), and
     /// `region` agrees with the switches' signs except on a surface itself,
-    /// where it says which field the motion starts in. An event exactly at
-    /// the end is applied: the state returned is the post-reset one.
+    /// where it says which field the motion starts in. A start on a
+    /// sliding switch (|h| within rounding) where its margins hold slides
+    /// from t = 0, entered from `region`'s side (S_in applied, no crossing
+    /// counted). An event exactly at the end is applied: the state returned
+    /// is the post-reset one.
     ///
-    /// The scan over a step [a, a+h] certifies each surface with the cubic
-    /// majorant g(a+s) ≤ g(a) + g'(a)s + g''(a)s²/2 + Ls³/6, L ≥ |h'''| on
-    /// the step (as the closed form does with |X'''|). Writing
-    /// h''' = r_y·y + r_w·w ([r_y; r_w] = (Bᵀ)³[n; −d; 0; 0]) and bounding
+    /// The scan over a step [a, a+h] certifies each watched function with
+    /// the cubic majorant g(a+s) ≤ g(a) + g'(a)s + g''(a)s²/2 + Ls³/6,
+    /// L ≥ |g'''| on the step (as the closed form does with |X'''|).
+    /// Writing g''' = r_y·y + r_w·w ([r_y; r_w] = (Bᵀ)³ σk) and bounding
     /// |y| along the step through the logarithmic norm μ = μ₂(A),
     /// d|y|/dt ≤ μ|y| + |C w|, |w| = √2:
     ///
@@ -505,8 +668,8 @@ impl PiecewiseLinear {
     /// |y(a+s)| ≤ e^{μ⁺s} (|y(a)| + √2 |C|_F s),   L = |r_y| max|y| + √2 |r_w|.
     /// ```
     ///
-    /// A step is taken only when every surface's majorant stays below 0;
-    /// otherwise it is halved until each surface in doubt is certified to
+    /// A step is taken only when every function's majorant stays below 0;
+    /// otherwise it is halved until each function in doubt is certified to
     /// rise through 0 once (a bracket, refined by safeguarded Newton), or
     /// until h reaches 1e-12 of the span, where the ends decide.
     pub fn iterate(&self, y: &DVector<f64>, region: usize, period: f64) -> PiecewiseIteration {
@@ -544,95 +707,353 @@ impl PiecewiseLinear {
             h_min: H_MIN_FRACTION * length,
             chatter_time: CHATTER_TIME_FRACTION * length,
         };
-        let mut segment = self.segment(t0, y, region);
-        let mut start = self.point(&segment, t0, y.clone());
         let mut jacobian = DMatrix::identity(n, n);
         let mut crossings = vec![0_u32; self.surfaces.len()];
         let mut total = 0_u32;
         let mut log_det_saltation = 0.0;
+        let mut rank_loss = 0;
         let mut trace_integral = 0.0;
         let mut min_crossing_rate = f64::INFINITY;
         let mut grazing = false;
         let mut budget = MAX_SCAN_STEPS;
 
+        let (mut segment, mut start) = match self.sliding_start(t0, y, region) {
+            Ok(Some((segment, saltation))) => {
+                jacobian = saltation;
+                (log_det_saltation, rank_loss) = (f64::NAN, 1);
+                let start = self.point(&segment, t0, segment.z0.rows(0, n).into_owned());
+                (segment, start)
+            }
+            Ok(None) => {
+                let segment = self.segment(t0, y, Mode::Region(region));
+                let start = self.point(&segment, t0, y.clone());
+                (segment, start)
+            }
+            Err(()) => {
+                let segment = self.segment(t0, y, Mode::Region(region));
+                let start = self.point(&segment, t0, y.clone());
+                return PiecewiseIteration {
+                    state: y.clone(),
+                    region,
+                    sliding: None,
+                    jacobian,
+                    crossings,
+                    status: PiecewiseStatus::Sliding,
+                    log_det_saltation,
+                    rank_loss,
+                    trace_integral,
+                    min_crossing_rate,
+                    time: start.t,
+                };
+            }
+        };
+
         let (end, status) = loop {
-            let (j, p) = match self.next_crossing(&segment, start, &span, &mut budget) {
+            let (w, p) = match self.next_crossing(&segment, start, &span, &mut budget) {
                 Next::End(p) => break (p, PiecewiseStatus::Ok),
                 Next::Chattering(p) => break (p, PiecewiseStatus::Chattering),
                 Next::Sticking(p) => break (p, PiecewiseStatus::Sticking),
                 Next::Diverged(p) => break (p, PiecewiseStatus::Diverged),
-                Next::Crossing(j, p) => (j, p),
+                Next::Crossing(w, p) => (w, p),
             };
             if total == MAX_CROSSINGS_PER_PERIOD {
                 break (p, PiecewiseStatus::Chattering);
             }
-            let surface = &self.surfaces[j];
-            let normal = &surface.normal;
-            // n·F⁻, whose sign is the crossing's direction; g' = σ n·F⁻ is
-            // the approach rate, positive unless the root is a tangency that
-            // rounding turned over.
-            let rate = normal.dot(&p.field);
-            let approach = p.g1[j];
+            let watched = &segment.dynamics.watch[w];
+            let gradient = watched.k.rows(0, n).into_owned();
+            // k·B z, whose sign is the crossing's direction (n·F⁻ for a
+            // surface); g' = σ k·B z is the approach rate, positive unless
+            // the root is a tangency that rounding turned over.
+            let approach = p.g1[w];
+            let rate = watched.sign * approach;
             if approach.is_nan() || approach <= 0.0 {
                 break (p, PiecewiseStatus::Grazing);
             }
-            min_crossing_rate = min_crossing_rate.min(approach);
-            if approach < GRAZING_RATE * normal.norm() * p.field.norm() {
+            if let Watch::Surface(_) = watched.what {
+                min_crossing_rate = min_crossing_rate.min(approach);
+            }
+            if approach < GRAZING_RATE * gradient.norm() * p.field.norm() {
                 grazing = true;
             }
-            let (next_region, y_plus, saltation, log_det) = match &surface.kind {
-                SurfaceKind::Switch => {
-                    let bit = self.bits[j].expect("a switch has a region bit");
-                    let next_region = segment.region ^ (1 << bit);
-                    let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
-                    let onward = normal.dot(&f_plus);
-                    let carried = segment.sign[j] * onward;
-                    if carried.is_nan() || carried <= 0.0 {
-                        // The new field does not carry the state on across:
-                        // both point into the surface (Filippov sliding).
+            // The next mode, the state there, the saltation matrix, its
+            // ln|det|, and the surface just left tangentially (if any).
+            let (next_mode, y_plus, saltation, log_det, leaving) =
+                match (segment.mode, watched.what) {
+                    (Mode::Region(r), Watch::Surface(j)) => match &self.surfaces[j].kind {
+                        SurfaceKind::Switch { sliding } => {
+                            let bit = self.bits[j].expect("a switch has a region bit");
+                            let next_region = r ^ (1 << bit);
+                            let (plus, minus) = self.stick_margins(j, r, p.t, &p.y);
+                            if plus > 0.0 && minus > 0.0 && *sliding != SlidingRule::Stop {
+                                // Held on the surface: it slides, where that can
+                                // be propagated.
+                                let Some(dynamics) = self.sliding_dynamics(j, r) else {
+                                    break (p, PiecewiseStatus::Sliding);
+                                };
+                                let mode = Mode::Sliding {
+                                    switch: j,
+                                    sides: r,
+                                };
+                                let y_on = self.onto(j, &p.y);
+                                let f_s = self.field_of(&dynamics, p.t, &y_on);
+                                let s = DMatrix::identity(n, n)
+                                    + (&f_s - &p.field) * gradient.transpose() / rate;
+                                crossings[j] += 1;
+                                rank_loss = 1;
+                                (mode, y_on, s, f64::NAN, None)
+                            } else {
+                                let f_plus = self.fields[next_region].eval(self.omega, p.t, &p.y);
+                                let onward = gradient.dot(&f_plus);
+                                let carried = watched.sign * onward;
+                                if carried.is_nan() || carried <= 0.0 {
+                                    // The new field does not carry the state on
+                                    // across: both point into the surface
+                                    // (Filippov sliding, not propagated here), or
+                                    // a stick limit below Filippov's lets go.
+                                    break (p, PiecewiseStatus::Sliding);
+                                }
+                                let s = DMatrix::identity(n, n)
+                                    + (&f_plus - &p.field) * gradient.transpose() / rate;
+                                crossings[j] += 1;
+                                // det(I + u nᵀ/(n·F⁻)) = 1 + n·u/(n·F⁻), written
+                                // exactly.
+                                let log_det = (onward / rate).abs().ln();
+                                (Mode::Region(next_region), p.y.clone(), s, log_det, None)
+                            }
+                        }
+                        SurfaceKind::Event { reset, shift } => {
+                            let y_plus = reset * &p.y + shift;
+                            let next_region = self.region_after_reset(r, &p.y, &y_plus);
+                            let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_plus);
+                            let s =
+                                reset + (&f_plus - reset * &p.field) * gradient.transpose() / rate;
+                            let det = s.clone().determinant();
+                            if det == 0.0 {
+                                rank_loss = 1;
+                            }
+                            crossings[j] += 1;
+                            (Mode::Region(next_region), y_plus, s, det.abs().ln(), None)
+                        }
+                    },
+                    (Mode::Sliding { .. }, Watch::Surface(_)) => {
+                        // Another surface met while sliding (a wall, a second
+                        // switch): motion on two surfaces at once is not
+                        // propagated.
                         break (p, PiecewiseStatus::Sliding);
                     }
-                    let s =
-                        DMatrix::identity(n, n) + (&f_plus - &p.field) * normal.transpose() / rate;
-                    // det(I + u nᵀ/(n·F⁻)) = 1 + n·u/(n·F⁻), written exactly.
-                    (next_region, p.y.clone(), s, (onward / rate).abs().ln())
-                }
-                SurfaceKind::Event { reset, shift } => {
-                    let y_plus = reset * &p.y + shift;
-                    let next_region = self.region_after_reset(segment.region, &p.y, &y_plus);
-                    let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_plus);
-                    let s = reset + (&f_plus - reset * &p.field) * normal.transpose() / rate;
-                    let det = s.clone().determinant();
-                    (next_region, y_plus, s, det.abs().ln())
-                }
-            };
+                    (Mode::Sliding { switch, sides }, Watch::Margin { plus }) => {
+                        let bit = 1 << self.bits[switch].expect("a switch has a region bit");
+                        let next_region = if plus { sides | bit } else { sides & !bit };
+                        let y_off = self.onto(switch, &p.y);
+                        let f_plus = self.fields[next_region].eval(self.omega, p.t, &y_off);
+                        // The exit on the margin q = k·z: its time moves by
+                        // −k_y·δy/(dq/dt).
+                        let s = DMatrix::identity(n, n)
+                            + (&f_plus - &p.field) * gradient.transpose() / rate;
+                        (Mode::Region(next_region), y_off, s, f64::NAN, Some(switch))
+                    }
+                    (Mode::Region(_), Watch::Margin { .. }) => {
+                        unreachable!("margins are watched while sliding only")
+                    }
+                };
             let dt = p.t - segment.t0;
-            jacobian = saltation * self.flow(segment.region, dt) * jacobian;
-            trace_integral += self.regions[segment.region].trace * dt;
+            jacobian = saltation * self.flow(&segment.dynamics, dt) * jacobian;
+            trace_integral += segment.dynamics.trace * dt;
             log_det_saltation += log_det;
-            crossings[j] += 1;
             total += 1;
-            segment = self.segment(p.t, &y_plus, next_region);
+            segment = self.segment(p.t, &y_plus, next_mode);
             start = self.point(&segment, p.t, y_plus);
+            if let Some(j) = leaving {
+                // Leaving a sliding surface tangentially (Filippov's exit,
+                // where the new side's rate n·F⁺ starts at 0): rounding
+                // must not read that rate as a return to the surface.
+                start.g1[j] = start.g1[j].min(0.0);
+            }
         };
         let dt = end.t - segment.t0;
-        jacobian = self.flow(segment.region, dt) * jacobian;
-        trace_integral += self.regions[segment.region].trace * dt;
+        jacobian = self.flow(&segment.dynamics, dt) * jacobian;
+        trace_integral += segment.dynamics.trace * dt;
         let status = match status {
             PiecewiseStatus::Ok if grazing => PiecewiseStatus::Grazing,
             s => s,
         };
+        let (region, sliding, state) = match segment.mode {
+            Mode::Region(r) => (r, None, end.y),
+            Mode::Sliding { switch, sides } => (sides, Some(switch), self.onto(switch, &end.y)),
+        };
         PiecewiseIteration {
-            state: end.y,
-            region: segment.region,
+            state,
+            region,
+            sliding,
             jacobian,
             crossings,
             status,
             log_det_saltation,
+            rank_loss,
             trace_integral,
             min_crossing_rate,
             time: end.t,
         }
+    }
+
+    /// A start on a sliding switch: the sliding segment and the saltation
+    /// S_in onto it from `region`'s field; None where the start does not
+    /// slide; Err where it would slide on a switch (or several) where that
+    /// is not propagated.
+    #[allow(clippy::type_complexity)]
+    fn sliding_start(
+        &self,
+        t0: f64,
+        y: &DVector<f64>,
+        region: usize,
+    ) -> Result<Option<(Segment, DMatrix<f64>)>, ()> {
+        let mut held = self.surfaces.iter().enumerate().filter(|(j, s)| {
+            matches!(
+                s.kind,
+                SurfaceKind::Switch {
+                    sliding: SlidingRule::Slide { .. }
+                }
+            ) && s.value(y).abs() <= self.resolution(&s.augmented(), y)
+                && {
+                    let (plus, minus) = self.stick_margins(*j, region, t0, y);
+                    plus > 0.0 && minus > 0.0
+                }
+        });
+        let Some((j, surface)) = held.next() else {
+            return Ok(None);
+        };
+        if held.next().is_some() {
+            return Err(());
+        }
+        let dynamics = self.sliding_dynamics(j, region).ok_or(())?;
+        let n = self.dimension();
+        let y_on = self.onto(j, y);
+        let f_s = self.field_of(&dynamics, t0, &y_on);
+        // From the given side's field, or the other's where that one runs
+        // along the surface (a stick limit holding a motion whose field
+        // has no rate).
+        let bit = 1 << self.bits[j].expect("a switch has a region bit");
+        let mut f_in = self.fields[region].eval(self.omega, t0, &y_on);
+        if surface.normal.dot(&f_in) == 0.0 {
+            f_in = self.fields[region ^ bit].eval(self.omega, t0, &y_on);
+        }
+        let rate = surface.normal.dot(&f_in);
+        let s = DMatrix::identity(n, n) + (f_s - f_in) * surface.normal.transpose() / rate;
+        let mode = Mode::Sliding {
+            switch: j,
+            sides: region,
+        };
+        let segment = Segment {
+            t0,
+            mode,
+            dynamics: Arc::new(dynamics),
+            z0: augment(&y_on, self.omega, t0),
+        };
+        Ok(Some((segment, s)))
+    }
+
+    /// The stick margins (L − m, L + m) of switch j at (t, y), the other
+    /// switches' sides those of `sides` (module docs). A switch that does
+    /// not slide ([`SlidingRule::Stop`]) has Filippov's, −b and a.
+    fn stick_margins(&self, j: usize, sides: usize, t: f64, y: &DVector<f64>) -> (f64, f64) {
+        let bit = 1 << self.bits[j].expect("a switch has a region bit");
+        let normal = &self.surfaces[j].normal;
+        let a = normal.dot(&self.fields[sides & !bit].eval(self.omega, t, y));
+        let b = normal.dot(&self.fields[sides | bit].eval(self.omega, t, y));
+        let m = 0.5 * (a + b);
+        let limit = match self.surfaces[j].kind {
+            SurfaceKind::Switch {
+                sliding:
+                    SlidingRule::Slide {
+                        stick_limit: Some(limit),
+                    },
+            } => limit,
+            _ => 0.5 * (a - b),
+        };
+        (limit - m, limit + m)
+    }
+
+    /// The flow while sliding on switch j, the other sides those of
+    /// `sides` (module docs): None where it is not propagated (the rule is
+    /// [`SlidingRule::Stop`], the jump is not a constant vector, or does
+    /// not attract, n·Δ ≥ 0).
+    fn sliding_dynamics(&self, j: usize, sides: usize) -> Option<Dynamics> {
+        let SurfaceKind::Switch {
+            sliding: SlidingRule::Slide { stick_limit },
+        } = self.surfaces[j].kind
+        else {
+            return None;
+        };
+        let n = self.dimension();
+        let bit = 1 << self.bits[j].expect("a switch has a region bit");
+        let (lo, hi) = (&self.fields[sides & !bit], &self.fields[sides | bit]);
+        let same = |x: &DMatrix<f64>, y: &DMatrix<f64>| {
+            let scale = x.amax().max(y.amax());
+            (x - y).amax() <= JUMP_ULPS * f64::EPSILON * scale
+        };
+        let column = |v: &DVector<f64>| DMatrix::from_column_slice(n, 1, v.as_slice());
+        if !(same(&lo.a, &hi.a)
+            && same(&column(&lo.cos), &column(&hi.cos))
+            && same(&column(&lo.sin), &column(&hi.sin)))
+        {
+            return None;
+        }
+        let normal = &self.surfaces[j].normal;
+        let jump = &hi.constant - &lo.constant;
+        let normal_jump = normal.dot(&jump);
+        if normal_jump.is_nan() || normal_jump >= 0.0 {
+            return None;
+        }
+        // B_s = [P M_lo; forcing rows], P = I − Δ nᵀ/(n·Δ).
+        let projection = DMatrix::identity(n, n) - &jump * normal.transpose() / normal_jump;
+        let mut b = self.regions[sides & !bit].b.clone();
+        let top = &projection * b.rows(0, n);
+        b.rows_mut(0, n).copy_from(&top);
+        // a(z) = k_a·z, k_a = M_loᵀ n; m = k_a·z + (n·Δ)/2.
+        let k_a = self.regions[sides & !bit].b.rows(0, n).transpose() * normal;
+        let limit = stick_limit.unwrap_or(-0.5 * normal_jump);
+        let mut plus = -&k_a; // L − m
+        plus[n] += limit - 0.5 * normal_jump;
+        let mut minus = k_a; // L + m
+        minus[n] += limit + 0.5 * normal_jump;
+        let mut watch: Vec<(Watch, DVector<f64>, f64)> = self
+            .surfaces
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| k != j)
+            .map(|(k, s)| {
+                (
+                    Watch::Surface(k),
+                    s.augmented(),
+                    side_sign(self.bits[k], sides),
+                )
+            })
+            .collect();
+        // A margin reaching 0 from above: g = −q rises through 0.
+        watch.push((Watch::Margin { plus: true }, plus, -1.0));
+        watch.push((Watch::Margin { plus: false }, minus, -1.0));
+        let event = |w: Watch| match w {
+            Watch::Surface(k) => self.bits[k].is_none(),
+            Watch::Margin { .. } => false,
+        };
+        Some(dynamics(b, watch, event))
+    }
+
+    /// y moved along n onto switch j's surface (a sliding state kept on it
+    /// against rounding).
+    fn onto(&self, j: usize, y: &DVector<f64>) -> DVector<f64> {
+        let s = &self.surfaces[j];
+        let h = s.value(y);
+        if h == 0.0 {
+            return y.clone();
+        }
+        y - &s.normal * (h / s.normal.norm_squared())
+    }
+
+    /// The field of `dynamics` at (t, y): the state rows of B z.
+    fn field_of(&self, dynamics: &Dynamics, t: f64, y: &DVector<f64>) -> DVector<f64> {
+        let n = self.dimension();
+        dynamics.b.rows(0, n) * augment(y, self.omega, t)
     }
 
     /// The region after a reset from y⁻ to y⁺: a switch whose h changed sign
@@ -658,56 +1079,52 @@ impl PiecewiseLinear {
         region
     }
 
-    /// exp(A_r s), the top-left block of exp(B_r s).
-    fn flow(&self, region: usize, s: f64) -> DMatrix<f64> {
+    /// The top-left block of exp(B s): exp(A s), or exp(P A s) sliding.
+    fn flow(&self, dynamics: &Dynamics, s: f64) -> DMatrix<f64> {
         let n = self.dimension();
-        let e = (&self.regions[region].b * s).exp();
+        let e = (&dynamics.b * s).exp();
         e.view((0, 0), (n, n)).into_owned()
     }
 
-    fn segment(&self, t0: f64, y0: &DVector<f64>, region: usize) -> Segment {
-        let n = self.dimension();
-        let (sin, cos) = (self.omega * t0).sin_cos();
-        let mut z0 = DVector::zeros(n + FORCING);
-        z0.rows_mut(0, n).copy_from(y0);
-        z0[n] = 1.0;
-        z0[n + 1] = cos;
-        z0[n + 2] = sin;
-        let sign = self
-            .bits
-            .iter()
-            .map(|bit| match bit {
-                Some(b) if region & (1 << b) != 0 => -1.0,
-                _ => 1.0,
-            })
-            .collect();
+    fn segment(&self, t0: f64, y0: &DVector<f64>, mode: Mode) -> Segment {
+        let dynamics = match mode {
+            Mode::Region(r) => self.regions[r].clone(),
+            Mode::Sliding { switch, sides } => Arc::new(
+                self.sliding_dynamics(switch, sides)
+                    .expect("a sliding mode is entered only where it is propagated"),
+            ),
+        };
         Segment {
             t0,
-            region,
-            z0,
-            sign,
+            mode,
+            dynamics,
+            z0: augment(y0, self.omega, t0),
         }
     }
 
     /// The point of `segment` at t with state y (kept exactly as given).
     fn point(&self, segment: &Segment, t: f64, y: DVector<f64>) -> Point {
-        let field = &self.fields[segment.region];
-        let (sin, cos) = (self.omega * t).sin_cos();
-        let f = field.at_phase(cos, sin, &y);
-        // y'' = A y' − ω p sin ωt + ω q cos ωt.
-        let acc = &field.a * &f - &field.cos * (self.omega * sin) + &field.sin * (self.omega * cos);
-        let mut g = Vec::with_capacity(self.surfaces.len());
-        let mut g1 = Vec::with_capacity(self.surfaces.len());
-        let mut g2 = Vec::with_capacity(self.surfaces.len());
-        for (s, sign) in self.surfaces.iter().zip(&segment.sign) {
-            g.push(sign * s.value(&y));
-            g1.push(sign * s.normal.dot(&f));
-            g2.push(sign * s.normal.dot(&acc));
+        let n = self.dimension();
+        let d = &segment.dynamics;
+        let z = augment(&y, self.omega, t);
+        // z' = B z and z'' = B² z: the field, and the forcing's rotation.
+        let bz = &d.b * &z;
+        let b2z = &d.b * &bz;
+        let count = d.watch.len();
+        let (mut g, mut g1, mut g2) = (
+            Vec::with_capacity(count),
+            Vec::with_capacity(count),
+            Vec::with_capacity(count),
+        );
+        for w in &d.watch {
+            g.push(w.sign * w.k.dot(&z));
+            g1.push(w.sign * w.k.dot(&bz));
+            g2.push(w.sign * w.k.dot(&b2z));
         }
         Point {
             t,
             y,
-            field: f,
+            field: bz.rows(0, n).into_owned(),
             g,
             g1,
             g2,
@@ -717,33 +1134,34 @@ impl PiecewiseLinear {
     /// The point of `segment` at t, always from the segment's start.
     fn eval(&self, segment: &Segment, t: f64) -> Point {
         let n = self.dimension();
-        let e = (&self.regions[segment.region].b * (t - segment.t0)).exp();
+        let e = (&segment.dynamics.b * (t - segment.t0)).exp();
         let y = e.rows(0, n) * &segment.z0;
         self.point(segment, t, y)
     }
 
-    /// L ≥ |h_j'''| on [t, t + step] along the segment of `region` through y
-    /// (see [`iterate`](Self::iterate)).
-    fn jerk_bound(&self, region: usize, j: usize, y_norm: f64, step: f64) -> f64 {
-        let bounds = &self.regions[region];
-        let (ry, rw) = bounds.jerk[j];
+    /// L ≥ |g_i'''| on [t, t + step] along a segment of `dynamics` through
+    /// y (see [`iterate`](Self::iterate)).
+    fn jerk_bound(&self, dynamics: &Dynamics, i: usize, y_norm: f64, step: f64) -> f64 {
+        let (ry, rw) = dynamics.watch[i].jerk;
         if ry == 0.0 {
-            // h''' does not see y (A³ᵀn = 0): no bound on |y| needed, and
-            // none to overflow into ∞·0.
+            // g''' does not see y ((Aᵀ)³ k_y = 0): no bound on |y| needed,
+            // and none to overflow into ∞·0.
             return rw;
         }
-        let reach = (bounds.growth * step).exp() * (y_norm + bounds.drive * step);
+        let reach = (dynamics.growth * step).exp() * (y_norm + dynamics.drive * step);
         ry * reach + rw
     }
 
-    /// The scale below which an event surface's bounce is rounding.
-    fn resolution(&self, j: usize, y: &DVector<f64>) -> f64 {
-        let s = &self.surfaces[j];
-        CHATTER_HEIGHT_ULPS * f64::EPSILON * (s.offset.abs() + s.normal.norm() * y.norm())
+    /// The scale below which k·z at y is rounding: |d| + |n||y| for a
+    /// surface.
+    fn resolution(&self, k: &DVector<f64>, y: &DVector<f64>) -> f64 {
+        let n = self.dimension();
+        let constant: f64 = k.rows(n, FORCING).iter().map(|x| x.abs()).sum();
+        CHATTER_HEIGHT_ULPS * f64::EPSILON * (constant + k.rows(0, n).norm() * y.norm())
     }
 
     /// Scans `segment` from `start` for the first crossing in (start.t, end]
-    /// over all surfaces (see [`iterate`](Self::iterate)).
+    /// over all watched functions (see [`iterate`](Self::iterate)).
     fn next_crossing(
         &self,
         segment: &Segment,
@@ -751,11 +1169,13 @@ impl PiecewiseLinear {
         span: &Span,
         budget: &mut u32,
     ) -> Next {
-        let surfaces = self.surfaces.len();
+        let dynamics = &segment.dynamics;
+        let watch = &dynamics.watch;
+        let count = watch.len();
         let mut a = start;
         let mut h = span.h_max;
-        for j in 0..surfaces {
-            if a.g1[j] < 0.0 && a.g2[j] > 0.0 && a.g[j] >= -self.resolution(j, &a.y) {
+        for j in 0..count {
+            if a.g1[j] < 0.0 && a.g2[j] > 0.0 && a.g[j] >= -self.resolution(&watch[j].k, &a.y) {
                 // Leaving a surface against a field pushing back: the bounce
                 // lasts about 2|g'|/g'', so start with half of that rather
                 // than halving down from h_max.
@@ -766,16 +1186,19 @@ impl PiecewiseLinear {
             if !a.y.iter().all(|x| x.is_finite()) {
                 return Next::Diverged(a);
             }
-            for j in 0..surfaces {
-                let event = self.bits[j].is_none();
-                if event && a.g[j] >= -self.resolution(j, &a.y) && a.g1[j] <= 0.0 && a.g2[j] > 0.0 {
+            for j in 0..count {
+                if watch[j].event
+                    && a.g[j] >= -self.resolution(&watch[j].k, &a.y)
+                    && a.g1[j] <= 0.0
+                    && a.g2[j] > 0.0
+                {
                     // On an event surface (to rounding), pressed into it.
                     if a.g1[j] == 0.0 {
                         return Next::Sticking(a);
                     }
                     // A bounce below the time or position resolution: the
                     // tail of an accumulating sequence of events.
-                    let resolution = self.resolution(j, &a.y);
+                    let resolution = self.resolution(&watch[j].k, &a.y);
                     if -2.0 * a.g1[j] < span.chatter_time * a.g2[j]
                         || a.g1[j] * a.g1[j] < 2.0 * a.g2[j] * resolution
                     {
@@ -804,8 +1227,8 @@ impl PiecewiseLinear {
             let y_norm = a.y.norm();
             let mut in_doubt = Vec::new();
             let mut bracketed = true;
-            for j in 0..surfaces {
-                let jerk = self.jerk_bound(segment.region, j, y_norm, step);
+            for j in 0..count {
+                let jerk = self.jerk_bound(dynamics, j, y_norm, step);
                 if certified_below(a.g[j], a.g1[j], a.g2[j], jerk, step) {
                     continue;
                 }
@@ -821,9 +1244,9 @@ impl PiecewiseLinear {
             }
             let fine = step <= span.h_min;
             if bracketed || fine {
-                // Each surface in doubt either rises through 0 once in the
-                // step (bracketed), or, at the finest step, is decided from
-                // the ends, including a maximum inside the step that
+                // Each function in doubt either rises through 0 once in
+                // the step (bracketed), or, at the finest step, is decided
+                // from the ends, including a maximum inside the step that
                 // reaches 0.
                 let mut first: Option<(usize, Point)> = None;
                 for &j in &in_doubt {
@@ -924,35 +1347,62 @@ fn finite<'a>(what: String, values: impl Iterator<Item = &'a f64>) -> Result<(),
     }
 }
 
-/// The scan's bounds of one region (see [`RegionBounds`]).
-fn region_bounds(field: &LinearField, omega: f64, surfaces: &[LinearSurface]) -> RegionBounds {
-    let n = field.dimension();
-    let b = field.augmented(omega);
-    let symmetric = (&field.a + field.a.transpose()) * 0.5;
+/// σ of switch `bit` for a motion in `region`: g = σh rises through 0 at a
+/// crossing (events, bit None, are approached from below).
+fn side_sign(bit: Option<u32>, region: usize) -> f64 {
+    match bit {
+        Some(b) if region & (1 << b) != 0 => -1.0,
+        _ => 1.0,
+    }
+}
+
+/// z = [y; 1; cos ωt; sin ωt].
+fn augment(y: &DVector<f64>, omega: f64, t: f64) -> DVector<f64> {
+    let n = y.len();
+    let (sin, cos) = (omega * t).sin_cos();
+    let mut z = DVector::zeros(n + FORCING);
+    z.rows_mut(0, n).copy_from(y);
+    z[n] = 1.0;
+    z[n + 1] = cos;
+    z[n + 2] = sin;
+    z
+}
+
+/// The flow of generator `b` with the scan's bounds for the functions
+/// `watch` (what, k, σ) (see [`Dynamics`]).
+fn dynamics(
+    b: DMatrix<f64>,
+    watch: Vec<(Watch, DVector<f64>, f64)>,
+    event: impl Fn(Watch) -> bool,
+) -> Dynamics {
+    let n = b.nrows() - FORCING;
+    let a = b.view((0, 0), (n, n)).into_owned();
+    let symmetric = (&a + a.transpose()) * 0.5;
     // The eigenvalues are exact to about ε|A|; the margin keeps the bound an
     // upper one.
-    let margin = 64.0 * f64::EPSILON * field.a.norm();
+    let margin = 64.0 * f64::EPSILON * a.norm();
     let growth = (symmetric.symmetric_eigenvalues().max() + margin).max(0.0);
-    let drive = SQRT_2
-        * (field.constant.norm_squared() + field.cos.norm_squared() + field.sin.norm_squared())
-            .sqrt();
+    let drive = SQRT_2 * b.view((0, n), (n, FORCING)).norm();
     let bt = b.transpose();
-    let jerk = surfaces
-        .iter()
-        .map(|s| {
-            let mut m = DVector::zeros(n + FORCING);
-            m.rows_mut(0, n).copy_from(&s.normal);
-            m[n] = -s.offset;
-            let r = &bt * (&bt * (&bt * m));
-            (r.rows(0, n).norm(), SQRT_2 * r.rows(n, FORCING).norm())
+    let watch = watch
+        .into_iter()
+        .map(|(what, k, sign)| {
+            let r = &bt * (&bt * (&bt * &k));
+            Watched {
+                what,
+                event: event(what),
+                jerk: (r.rows(0, n).norm(), SQRT_2 * r.rows(n, FORCING).norm()),
+                k,
+                sign,
+            }
         })
         .collect();
-    RegionBounds {
+    Dynamics {
+        trace: a.trace(),
         b,
-        trace: field.a.trace(),
         growth,
         drive,
-        jerk,
+        watch,
     }
 }
 
@@ -1267,6 +1717,331 @@ mod tests {
         assert!((log_det - it.log_det_saltation).abs() < 1e-12, "tr A = 0");
         let fd = finite_difference_error(&system, &y, 0, 0.5);
         assert!(fd <= 1e-6, "{fd:e}");
+    }
+
+    /// The belt oscillator x'' = -2ζx' - x - μ sign(x' - vb) + f cos ηt:
+    /// region 0 (slip v - vb < 0) has +μ, region 1 has -μ; the switch
+    /// v = vb slides (Filippov's rule, or held while |m| < `limit`).
+    fn belt(
+        (zeta, mu, vb, f, eta): (f64, f64, f64, f64, f64),
+        limit: Option<f64>,
+    ) -> PiecewiseLinear {
+        let field = |c: f64| oscillator_field(zeta, 1.0, c, f);
+        let slip = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), vb, limit);
+        PiecewiseLinear::new(eta, vec![field(mu), field(-mu)], vec![slip]).unwrap()
+    }
+
+    /// One period of the belt oscillator written out as Filippov's system:
+    /// off the belt, RK4 steps of T/n in the field of the side, a step that
+    /// ends across v = vb redone to the crossing (bisected on the RK4
+    /// sub-step); there, with the rates a = -2ζvb - x + μ + f cos ηt and
+    /// b = a - 2μ, m = a - μ, L = `limit` or μ: it sticks while L ∓ m > 0,
+    /// moving exactly as x' = vb, v = vb, and leaves where a margin reaches
+    /// 0 (bisected on that closed form) to the side L - m ≤ 0 says.
+    /// Returns the end and the arrivals at v = vb.
+    fn filippov_belt(
+        (zeta, mu, vb, f, eta): (f64, f64, f64, f64, f64),
+        limit: Option<f64>,
+        y0: [f64; 2],
+        n: usize,
+    ) -> ([f64; 2], u32) {
+        let limit = limit.unwrap_or(mu);
+        let margins = |t: f64, x: f64| {
+            let m = -2.0 * zeta * vb - x + f * (eta * t).cos();
+            (limit - m, limit + m)
+        };
+        let held = |(plus, minus): (f64, f64)| plus > 0.0 && minus > 0.0;
+        let rhs = |t: f64, y: [f64; 2], hi: bool| {
+            let friction = if hi { -mu } else { mu };
+            [
+                y[1],
+                -2.0 * zeta * y[1] - y[0] + friction + f * (eta * t).cos(),
+            ]
+        };
+        let rk4 = |t: f64, y: [f64; 2], h: f64, hi: bool| {
+            let add = |y: [f64; 2], k: [f64; 2], s: f64| [y[0] + s * k[0], y[1] + s * k[1]];
+            let k1 = rhs(t, y, hi);
+            let k2 = rhs(t + 0.5 * h, add(y, k1, 0.5 * h), hi);
+            let k3 = rhs(t + 0.5 * h, add(y, k2, 0.5 * h), hi);
+            let k4 = rhs(t + h, add(y, k3, h), hi);
+            std::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+        };
+        let period = TAU / eta;
+        let h = period / n as f64;
+        let (mut t, mut y, mut arrivals) = (0.0, y0, 0);
+        let mut sliding = (y[1] - vb).abs() <= 1e-12 && held(margins(0.0, y[0]));
+        let mut hi = y[1] > vb;
+        while t < period {
+            let step = h.min(period - t);
+            if sliding {
+                let x = |s: f64| y[0] + vb * s;
+                if held(margins(t + step, x(step))) {
+                    (t, y) = (t + step, [x(step), vb]);
+                    continue;
+                }
+                let (mut lo, mut up) = (0.0, step);
+                for _ in 0..200 {
+                    let mid = 0.5 * (lo + up);
+                    if mid <= lo || mid >= up {
+                        break;
+                    }
+                    if held(margins(t + mid, x(mid))) {
+                        lo = mid;
+                    } else {
+                        up = mid;
+                    }
+                }
+                let (plus, minus) = margins(t + up, x(up));
+                (t, y, hi, sliding) = (t + up, [x(up), vb], plus <= minus, false);
+                continue;
+            }
+            let next = rk4(t, y, step, hi);
+            if (next[1] > vb) == hi {
+                (t, y) = (t + step, next);
+                continue;
+            }
+            let (mut lo, mut up) = (0.0, step);
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + up);
+                if mid <= lo || mid >= up {
+                    break;
+                }
+                if (rk4(t, y, mid, hi)[1] > vb) == hi {
+                    lo = mid;
+                } else {
+                    up = mid;
+                }
+            }
+            let contact = rk4(t, y, up, hi);
+            (t, y) = (t + up, [contact[0], vb]);
+            arrivals += 1;
+            if held(margins(t, y[0])) {
+                sliding = true;
+            } else {
+                hi = !hi;
+            }
+        }
+        (y, arrivals)
+    }
+
+    #[test]
+    fn stick_slip_matches_a_filippov_reference() {
+        let (zeta, mu, vb, f) = (0.05, 0.5, 0.2, 1.0);
+        let mut worst = 0.0_f64;
+        for limit in [None, Some(0.6)] {
+            for eta in [0.3, 0.4, 0.6] {
+                let system = belt((zeta, mu, vb, f, eta), limit);
+                let period = TAU / eta;
+                let mut y = vector(&[0.0, 0.0]);
+                let mut region = system.region(&y);
+                let (mut arrivals, mut slid) = (0, 0);
+                for _ in 0..20 {
+                    let it = system.iterate(&y, region, period);
+                    assert_eq!(it.status, PiecewiseStatus::Ok, "η={eta} {limit:?}");
+                    let (reference, rk4_arrivals) =
+                        filippov_belt((zeta, mu, vb, f, eta), limit, [y[0], y[1]], 20_000);
+                    assert_eq!(
+                        it.crossings,
+                        vec![rk4_arrivals],
+                        "η={eta} {limit:?} from {y}"
+                    );
+                    let error = (it.state[0] - reference[0])
+                        .abs()
+                        .max((it.state[1] - reference[1]).abs());
+                    worst = worst.max(error);
+                    // A sliding phase in the period (or carried into it)
+                    // collapses the velocity.
+                    if it.rank_loss == 1 {
+                        assert!(it.log_det_saltation.is_nan());
+                        let scale = it.jacobian.abs().max().powi(2);
+                        assert!(it.jacobian.determinant().abs() <= 1e-15 * scale);
+                        slid += 1;
+                    }
+                    if it.sliding.is_some() {
+                        assert_eq!(it.state[1], vb);
+                    }
+                    arrivals += it.crossings[0];
+                    (y, region) = (it.state, it.region);
+                }
+                assert!(
+                    arrivals >= 20 && slid >= 10,
+                    "η={eta}: {arrivals} arrivals, {slid} slid"
+                );
+            }
+        }
+        eprintln!("stick-slip vs Filippov RK4: state {worst:.2e}");
+        assert!(worst <= 1e-9, "{worst:e}");
+    }
+
+    #[test]
+    fn stick_slip_jacobian_matches_finite_differences() {
+        // Periods that enter and leave sliding from a start off the belt:
+        // S_in, exp(P A s) and S_out against central differences.
+        let (zeta, mu, vb, f) = (0.05, 0.5, 0.2, 1.0);
+        let (mut checked, mut worst) = (0, 0.0_f64);
+        for limit in [None, Some(0.6)] {
+            for eta in [0.3, 0.4, 0.6] {
+                let system = belt((zeta, mu, vb, f, eta), limit);
+                let period = TAU / eta;
+                let mut y = vector(&[0.0, 0.0]);
+                let mut region = system.region(&y);
+                for _ in 0..30 {
+                    let it = system.iterate(&y, region, period);
+                    let off = (y[1] - vb).abs() > 1e-3;
+                    if off && it.rank_loss == 1 && it.sliding.is_none() {
+                        let fd = finite_difference_error(&system, &y, region, period);
+                        assert!(fd <= 1e-6, "η={eta} {limit:?} from {y}: {fd:e}");
+                        (checked, worst) = (checked + 1, worst.max(fd));
+                    }
+                    (y, region) = (it.state, it.region);
+                }
+            }
+        }
+        eprintln!("stick-slip Jacobian vs FD: {worst:.2e} over {checked} periods");
+        assert!(checked >= 5, "{checked} periods checked");
+    }
+
+    /// λ1 of the belt oscillator from the exact Jacobians, per unit time:
+    /// QR once a period over `iterations` periods after `transient`, Q
+    /// restarting from I (the CPU path's protocol). Also the state reached.
+    fn belt_exponent(
+        eta: f64,
+        transient: usize,
+        iterations: usize,
+    ) -> (f64, f64, DVector<f64>, usize) {
+        let system = belt((0.05, 0.5, 0.2, 1.0, eta), None);
+        let period = TAU / eta;
+        let mut y = vector(&[0.0, 0.0]);
+        let mut region = system.region(&y);
+        let mut q = DMatrix::identity(2, 2);
+        let mut logs = [0.0; 2];
+        for k in 0..transient + iterations {
+            let it = system.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok, "η={eta}, period {k}");
+            if k >= transient {
+                let qr = (&it.jacobian * &q).qr();
+                let r = qr.r();
+                q = qr.q();
+                for (i, l) in logs.iter_mut().enumerate() {
+                    *l += r[(i, i)].abs().ln();
+                }
+            }
+            (y, region) = (it.state, it.region);
+        }
+        let total = iterations as f64 * period;
+        (logs[0] / total, logs[1] / total, y, region)
+    }
+
+    #[test]
+    fn stick_slip_exponents() {
+        // The CPU path's λ1 (lyapsweep's FD method, Filippov's rule, 200 +
+        // 300 periods), converged in its step and δ to 1e-8.
+        for (eta, cpu) in [(0.3, -0.0983497), (0.4, -0.0562861), (0.6, -0.2395735)] {
+            let (l1, l2, y, region) = belt_exponent(eta, 200, 300);
+            // Sticking collapses the velocity once a period: λ2 = -∞.
+            assert_eq!(l2, f64::NEG_INFINITY);
+            assert!(
+                (l1 - cpu).abs() <= 1e-6,
+                "η={eta}: exact {l1} against the CPU's {cpu}"
+            );
+            // The orbit has settled on a periodic one (p periods), whose
+            // Jacobian over p periods has rank 1: its one nonzero
+            // eigenvalue, the trace, gives λ1 for an infinite window. A
+            // window of W periods from Q = I differs from it by
+            // ln(|Π J e1| / |tr Π J|) / (W T) at most, the start vector's
+            // share, which does not vanish for W = 300.
+            let system = belt((0.05, 0.5, 0.2, 1.0, eta), None);
+            let period = TAU / eta;
+            let (mut z, mut r, mut product, mut p) =
+                (y.clone(), region, DMatrix::identity(2, 2), 0);
+            loop {
+                let it = system.iterate(&z, r, period);
+                product = &it.jacobian * product;
+                (z, r, p) = (it.state, it.region, p + 1);
+                if (&z - &y).norm() <= 1e-12 || p == 8 {
+                    break;
+                }
+            }
+            assert!((&z - &y).norm() <= 1e-12, "η={eta}: no period up to 8");
+            assert!(product.rank(1e-12 * product.abs().max()) == 1);
+            let limit = product.trace().abs().ln() / (p as f64 * period);
+            let start = (product.column(0).norm() / product.trace().abs()).ln();
+            eprintln!(
+                "η={eta}: exact λ1 = {l1:.9} (200 + 300 periods, Q from I; CPU {cpu}), \
+                 {limit:.9} on the period-{p} orbit (start vector's share {:.2e})",
+                start / (300.0 * period)
+            );
+            assert!((l1 - limit - start / (300.0 * period)).abs() <= 1e-9);
+        }
+    }
+
+    #[test]
+    fn sticking_for_good_keeps_the_position_and_forgets_the_velocity() {
+        // vb = 0 and |x| < μ - f: the spring and the forcing never overcome
+        // friction (|-x + f cos ηt| < μ), so the mass never moves.
+        let (zeta, mu, f, eta) = (0.05, 0.5, 0.2, 0.8);
+        let system = belt((zeta, mu, 0.0, f, eta), None);
+        let period = TAU / eta;
+        for region in [0, 1] {
+            let y = vector(&[0.1, 0.0]);
+            let it = system.iterate(&y, region, period);
+            assert_eq!(it.status, PiecewiseStatus::Ok);
+            assert_eq!((it.crossings[0], it.sliding, it.rank_loss), (0, Some(0), 1));
+            assert!(
+                (it.state[0] - 0.1).abs() <= 1e-14 && it.state[1] == 0.0,
+                "{}",
+                it.state
+            );
+            // (x, v) ↦ (x, 0): rank 1.
+            let expected = matrix([[1.0, 0.0], [0.0, 0.0]]);
+            assert!(
+                (&it.jacobian - expected).abs().max() <= 1e-14,
+                "{}",
+                it.jacobian
+            );
+            assert_eq!(it.jacobian.rank(1e-12), 1);
+        }
+        // Arriving from a slip: one crossing, then stuck where it arrived.
+        let it = system.iterate(&vector(&[0.1, -0.05]), 0, period);
+        assert_eq!(it.status, PiecewiseStatus::Ok);
+        assert_eq!((it.crossings[0], it.sliding, it.rank_loss), (1, Some(0), 1));
+        assert_eq!(it.state[1], 0.0);
+        let again = system.iterate(&it.state, it.region, period);
+        assert!((&again.state - &it.state).norm() <= 1e-14);
+        assert_eq!(again.jacobian.rank(1e-12), 1);
+    }
+
+    #[test]
+    fn sliding_that_cannot_be_propagated_is_reported() {
+        // A jump with a y-dependent part (friction proportional to x):
+        // F_hi - F_lo is not constant, so the sliding field is not linear.
+        let a = matrix([[0.0, 1.0], [-1.0, 0.0]]);
+        let lo = LinearField::autonomous(a.clone(), vector(&[0.0, 0.5]));
+        let hi = LinearField::autonomous(matrix([[0.0, 1.0], [-1.5, 0.0]]), vector(&[0.0, -0.5]));
+        let v = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), 0.0, None);
+        let system = PiecewiseLinear::new(1.0, vec![lo, hi], vec![v]).unwrap();
+        let it = system.iterate(&vector(&[0.2, -0.1]), 0, TAU);
+        assert_eq!((it.status, it.crossings[0]), (PiecewiseStatus::Sliding, 0));
+        // Sliding into a wall: two surfaces at once.
+        let field = |c: f64| oscillator_field(0.05, 1.0, c, 0.2);
+        let slip = LinearSurface::sliding_switch(vector(&[0.0, 1.0]), 0.3, None);
+        let wall = LinearSurface::event(
+            vector(&[1.0, 0.0]),
+            0.2,
+            matrix([[1.0, 0.0], [0.0, -0.5]]),
+            DVector::zeros(2),
+        );
+        let system =
+            PiecewiseLinear::new(0.8, vec![field(0.5), field(-0.5)], vec![slip, wall]).unwrap();
+        let it = system.iterate(&vector(&[0.0, 0.3]), 0, TAU / 0.8);
+        assert_eq!(it.status, PiecewiseStatus::Sliding);
+        assert_eq!(it.sliding, Some(0));
+        assert!(
+            (it.state[0] - 0.2).abs() < 1e-12 && it.time < 1.0,
+            "{} at {}",
+            it.state,
+            it.time
+        );
     }
 
     /// The time and height of the highest point of the seed's free flight
