@@ -383,13 +383,13 @@ fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
         ),
         (
             "surface = \"x - gap\"",
-            "surface = \"x - gap*cos(eta*t)\"",
-            "model.events[0].surface: an event surface that reads the time is not supported yet",
+            "surface = \"x - gap*cos(2*t)\"",
+            "model.events[0].surface: a second forcing frequency",
         ),
         (
             "reset = { v = \"-e*v\" }\n[[",
             "reset = { v = \"-e*v*cos(t)\" }\n[[",
-            "model.events[0].reset.v: a reset that reads the time is not supported yet",
+            "model.events[0].reset.v: a second forcing frequency",
         ),
         (
             "x = \"v\"\n",

@@ -356,6 +356,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         // A stop on the third of four states.
         ("two-mass-chain.toml", false),
         ("van-der-pol.toml", true),
+        // An event that moves with the clock: CPU only so far.
+        ("vibrating-table.toml", false),
     ];
     let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     assert_eq!(runs, expected);

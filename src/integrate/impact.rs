@@ -315,8 +315,13 @@ pub fn resolve<const D: usize, F: Flow<D>>(
             let after = base.surface_values(*region, &end, &y1);
             for (j, &kind) in surfaces.iter().enumerate() {
                 let o = kind.orientation(*region);
-                let distance = |y: &[f64; D]| o * base.surface_values(*region, &phase0, y).g[j];
-                let rate = |y: &[f64; D]| o * base.surface_values(*region, &phase0, y).rate[j];
+                // At s into the rest of the step: a surface may move with
+                // the forcing.
+                let at = |s: f64, y: &[f64; D]| {
+                    base.surface_values(*region, &rotate(&phase0, &cos_sin(omega * s)), y)
+                };
+                let distance = |s: f64, y: &[f64; D]| o * at(s, y).g[j];
+                let rate = |s: f64, y: &[f64; D]| o * at(s, y).rate[j];
                 earliest(
                     walls.len() + j,
                     locate(
@@ -495,7 +500,11 @@ fn cross<const D: usize, F: Flow<D>>(
         Surface::Event => {
             let (after, dr, reset_rate) = base.reset(j, phase, y);
             let now = base.surface_values(*region, phase, &after);
-            if !(now.g[j] <= 0.0 && now.rate[j] < 0.0) {
+            // Back where the motion lives (to the location's tolerance:
+            // a reset that does not move g leaves it at the root's
+            // rounding) and leaving the surface.
+            let scale = y.iter().fold(1.0, |m: f64, v| m.max(v.abs()));
+            if !(now.g[j] <= 4.0 * f64::EPSILON * scale && now.rate[j] < 0.0) {
                 // The reset does not send the motion back where it lives.
                 stats.chattering = true;
                 return None;
@@ -643,8 +652,8 @@ fn locate<const D: usize, F: Flow<D>>(
     y1: &[f64; D],
     start: (f64, f64),
     end: (f64, f64),
-    distance: impl Fn(&[f64; D]) -> f64,
-    rate: impl Fn(&[f64; D]) -> f64,
+    distance: impl Fn(f64, &[f64; D]) -> f64,
+    rate: impl Fn(f64, &[f64; D]) -> f64,
 ) -> Option<(f64, [f64; D])> {
     if location == ImpactLocation::Linear {
         if end.0 <= 0.0 {
@@ -665,7 +674,7 @@ fn locate<const D: usize, F: Flow<D>>(
         // touch in rounding (a motion leaving a sliding surface
         // tangentially), not a crossing.
         let peak = hermite.peak()?;
-        if distance(&sub.step(phase0, y0, peak * h).0) <= 4.0 * f64::EPSILON * scale {
+        if distance(peak * h, &sub.step(phase0, y0, peak * h).0) <= 4.0 * f64::EPSILON * scale {
             return None;
         }
         (peak * h, hermite.first_root(0.0, peak))
@@ -760,8 +769,8 @@ fn locate_newton<const D: usize, F: Flow<D>>(
     };
     Some(newton_in_bracket(
         |s| sub.step(phase0, y0, s).0,
-        |y| wall.gap(y),
-        |y| wall.speed(y),
+        |_, y| wall.gap(y),
+        |_, y| wall.speed(y),
         wall.position,
         hi,
         guess * h,
@@ -781,8 +790,8 @@ const PEAK_ITERATIONS: usize = 64;
 /// Poincaré section's location.
 pub(crate) fn newton_in_bracket<const D: usize>(
     at: impl Fn(f64) -> [f64; D],
-    distance: impl Fn(&[f64; D]) -> f64,
-    rate: impl Fn(&[f64; D]) -> f64,
+    distance: impl Fn(f64, &[f64; D]) -> f64,
+    rate: impl Fn(f64, &[f64; D]) -> f64,
     scale: f64,
     mut hi: f64,
     mut s: f64,
@@ -791,7 +800,7 @@ pub(crate) fn newton_in_bracket<const D: usize>(
     let mut lo = 0.0;
     let mut y = at(s);
     for _ in 0..32 {
-        let g = distance(&y);
+        let g = distance(s, &y);
         if g.abs() <= tolerance {
             break;
         }
@@ -800,7 +809,7 @@ pub(crate) fn newton_in_bracket<const D: usize>(
         } else {
             lo = s;
         }
-        let newton = s - g / rate(&y);
+        let newton = s - g / rate(s, &y);
         s = if newton > lo && newton < hi && newton.is_finite() {
             newton
         } else {

@@ -1174,8 +1174,8 @@ impl PiecewiseLinear {
         let count = watch.len();
         let mut a = start;
         let mut h = span.h_max;
-        for j in 0..count {
-            if a.g1[j] < 0.0 && a.g2[j] > 0.0 && a.g[j] >= -self.resolution(&watch[j].k, &a.y) {
+        for (j, w) in watch.iter().enumerate() {
+            if a.g1[j] < 0.0 && a.g2[j] > 0.0 && a.g[j] >= -self.resolution(&w.k, &a.y) {
                 // Leaving a surface against a field pushing back: the bounce
                 // lasts about 2|g'|/g'', so start with half of that rather
                 // than halving down from h_max.
@@ -1186,9 +1186,9 @@ impl PiecewiseLinear {
             if !a.y.iter().all(|x| x.is_finite()) {
                 return Next::Diverged(a);
             }
-            for j in 0..count {
-                if watch[j].event
-                    && a.g[j] >= -self.resolution(&watch[j].k, &a.y)
+            for (j, w) in watch.iter().enumerate() {
+                if w.event
+                    && a.g[j] >= -self.resolution(&w.k, &a.y)
                     && a.g1[j] <= 0.0
                     && a.g2[j] > 0.0
                 {

@@ -153,8 +153,8 @@ fn locate<const N: usize, F: Flow<N>>(
     );
     let (s, mut y) = newton_in_bracket(
         at,
-        |y| section.distance(y),
-        |y| section.rate(flow, y),
+        |_, y| section.distance(y),
+        |_, y| section.rate(flow, y),
         section.at,
         h,
         hermite.first_root(0.0, 1.0) * h,

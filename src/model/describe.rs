@@ -185,7 +185,7 @@ pub fn describe(code: &Code) -> String {
             if code.model.switches.is_empty() {
                 ""
             } else {
-                " (not through sliding yet: such rows say `sliding`)"
+                " (sliding too, where the jump is constant and the stick limit a number)"
             }
         );
     }

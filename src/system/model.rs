@@ -468,8 +468,6 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
     let n = code.states();
     let omega = code.frequency(params);
     let period = code.period(params);
-    // The time of forcing phase θ (any t when there is no forcing).
-    let at_phase = |theta: f64| if omega != 0.0 { theta / omega } else { 0.0 };
     let zero = vec![0.0; n];
     let mut fields = Vec::new();
     for region in 0..code.regions.len() as u32 {
@@ -485,14 +483,20 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
         let a = DMatrix::from_fn(n, n, |i, k| {
             code.regions[region as usize].jacobian[i * n + k].eval(&zero, params, 0.0)
         });
-        let (f0, f90, f180) = (
-            f(&zero, at_phase(0.0)),
-            f(&zero, at_phase(std::f64::consts::FRAC_PI_2)),
-            f(&zero, at_phase(std::f64::consts::PI)),
-        );
-        let constant = (&f0 + &f180) * 0.5;
-        let cos = (&f0 - &f180) * 0.5;
-        let sin = &f90 - &constant;
+        // c, p and q read with the clock set to (cos, sin) = (0, 0), (1, 0)
+        // and (0, 1): exact zeros where the field has no such term, so
+        // that the jump across a switch is the same constant where it is.
+        let at_clock = |cos: f64, sin: f64| -> DVector<f64> {
+            DVector::from_iterator(
+                n,
+                equations
+                    .iter()
+                    .map(|e| with_clock(e, cos, sin).eval(&zero, params, 0.0)),
+            )
+        };
+        let constant = at_clock(0.0, 0.0);
+        let cos = at_clock(1.0, 0.0) - &constant;
+        let sin = at_clock(0.0, 1.0) - &constant;
         let field = LinearField::new(a, constant, cos, sin);
         // The form must reproduce the field elsewhere.
         for k in 1..4 {
@@ -525,7 +529,16 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
             DVector::from_iterator(n, s.gradient.iter().map(|e| e.eval(&zero, params, 0.0)));
         let offset = -s.g.eval(&zero, params, 0.0);
         surfaces.push(match s.kind {
-            Surface::Switch { .. } => LinearSurface::switch(normal, offset),
+            // A constant stick limit (or Filippov's) slides in closed form;
+            // one that reads the state is left to the RK4 path (`sliding`).
+            Surface::Switch { .. } => match &s.stick_limit {
+                Some(limit) if reads_state_or_time(limit) => LinearSurface::switch(normal, offset),
+                limit => LinearSurface::sliding_switch(
+                    normal,
+                    offset,
+                    limit.as_ref().map(|l| l.eval(&zero, params, 0.0)),
+                ),
+            },
             Surface::Event => LinearSurface::event(
                 normal,
                 offset,
@@ -537,6 +550,26 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
         });
     }
     PiecewiseLinear::new(omega, fields, surfaces).ok()
+}
+
+/// `e` with the clock's cos(w t) and sin(w t) replaced by the numbers
+/// `cos` and `sin` (see [`piecewise_linear`]).
+fn with_clock(e: &Expr, cos: f64, sin: f64) -> Expr {
+    use crate::model::expr::Func;
+    match e {
+        Expr::Call(Func::Cos, args) if args[0].uses(Var::Time) => Expr::Num(cos),
+        Expr::Call(Func::Sin, args) if args[0].uses(Var::Time) => Expr::Num(sin),
+        Expr::Num(_) | Expr::Var(_) => e.clone(),
+        Expr::Neg(a) => Expr::Neg(Box::new(with_clock(a, cos, sin))),
+        Expr::Bin(op, a, b) => Expr::Bin(
+            *op,
+            Box::new(with_clock(a, cos, sin)),
+            Box::new(with_clock(b, cos, sin)),
+        ),
+        Expr::Call(f, args) => {
+            Expr::Call(*f, args.iter().map(|a| with_clock(a, cos, sin)).collect())
+        }
+    }
 }
 
 /// An event that is not a stop, as a general surface: any g(y) and any
@@ -626,6 +659,8 @@ fn field(
                         Box::new(equations[i].clone()),
                     )
                 })
+                // ∂g/∂t: a surface that moves with the forcing.
+                .chain([s.g.derivative(Var::Time)])
                 .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
                 .expect("a model has a state")
         })
