@@ -298,14 +298,17 @@ fn every_committed_scene_is_valid() {
             "duffing",
             "eta-f-map",
             "forced-pendulum",
+            "friction-belt",
             "henon",
             "impact-pair",
             "lorenz",
             "lorenz-section",
             "rossler-section",
             "seed-fig3",
+            "soft-stop",
             "two-mass-chain",
-            "van-der-pol"
+            "van-der-pol",
+            "vibrating-table"
         ]
     );
 }

@@ -423,3 +423,35 @@ fn a_vibrating_table_s_impacts_keep_e_squared_per_impact() {
             .collect::<Vec<_>>()
     );
 }
+
+#[test]
+fn model_check_describes_switches_events_and_the_exact_backend() {
+    let check = |name: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+            .args(["model", "check", &model_path(name)])
+            .output()
+            .expect("the binary runs");
+        assert!(out.status.success(), "{name}");
+        String::from_utf8(out.stdout).expect("utf-8")
+    };
+    let friction = check("friction-belt.toml");
+    for expected in [
+        "mu * (2 * step(slip) - 1)",
+        "switch 'slip': the field changes where v - vb crosses 0",
+        "slides while the mean rate of the two sides is below mus in size",
+        "ln|det S| per crossing of the other events and switches",
+        "piecewise linear: backend = \"exact\"",
+        "the switch 'slip' is not a stop",
+    ] {
+        assert!(friction.contains(expected), "{expected:?} in:\n{friction}");
+    }
+    let table = check("vibrating-table.toml");
+    for expected in [
+        "event 'table' (a general surface): fires where a * cos(w * t) - a - 1 - x crosses 0",
+        "reset v -> -e * v - (1 + e) * a * w * sin(w * t)",
+    ] {
+        assert!(table.contains(expected), "{expected:?} in:\n{table}");
+    }
+    // A moving surface is not piecewise linear in the state alone.
+    assert!(!table.contains("piecewise linear"));
+}

@@ -1,11 +1,14 @@
-//! Wall impacts inside an RK4 step.
+//! Crossings inside an RK4 step: wall impacts, and the general surfaces of
+//! `integrate::surface` (events, switches, sliding), in one loop.
 //!
 //! A rigid wall (a stop) at X = X_w acts on one coordinate of a flow (a
 //! position X) whose rate is another coordinate (its velocity V = X'),
-//! from one side. A step that reaches a wall is split: integrate to the
-//! impact time t_c, apply the reset V → -e·V with X = X_w exactly, then
-//! integrate the rest of the step, and look again, so several impacts in
-//! one step, on one wall or several, work and no step ends behind a wall.
+//! from one side. A step that reaches a wall or crosses a surface is split:
+//! integrate to the crossing, apply it (the reset V → -e·V with X = X_w
+//! exactly, an event's reset, a switch's new region, or the start of a
+//! sliding phase), then integrate the rest of the step, and look again, so
+//! several crossings in one step, on one surface or several, work and no
+//! step ends behind a wall or integrates across a switch.
 
 use serde::Deserialize;
 

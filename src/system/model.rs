@@ -1,15 +1,18 @@
 //! A system given as data: a scene's `[model]` table (see `crate::model`),
-//! compiled once per run into the tape the CPU integrator evaluates, with
-//! its events as walls, and described to the rest of the tool like a
+//! compiled once per run into the tapes the CPU integrator evaluates (one
+//! field per region of its switches), with its events and switches as the
+//! integrator's surfaces, and described to the rest of the tool like a
 //! built-in system.
 //!
-//! Events so far are stops: a surface `x - c` or `c - x` on one state x
-//! (c of parameters alone) whose equation is another state v (x' = v), with
-//! a reset of v alone that is linear in v (`v = "-e*v"`). That covers
-//! impacts of masses on rigid stops, one-sided or two-sided, in any number
-//! of degrees of freedom; each crossing multiplies phase-space volume by e²
-//! (the saltation determinant, e² for a stop whatever the flow), which the
-//! sum rule adds. Other surfaces are refused with their key.
+//! An event that is a stop (a surface `x - c` or `c - x` on one state x, c
+//! of parameters alone, whose equation is another state v, x' = v, with a
+//! reset of v alone that is linear in v, `v = "-e*v"`) runs as a wall: the
+//! vectorised detection and the sticking of `integrate::impact`; each
+//! impact multiplies phase-space volume by e², which the sum rule adds.
+//! Any other event, and every switch, is a general surface
+//! (`integrate::surface`), whose ln|det S| the integrator records crossing
+//! by crossing. A model that is piecewise linear also gets the exact
+//! backend ([`piecewise_linear`]).
 
 use nalgebra::{DMatrix, DVector, SMatrix};
 
@@ -1337,8 +1340,8 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     /// A flow whose Jacobian depends on the state (or time) has its time
     /// scales where its orbit goes, not at the origin (van der Pol's
     /// origin is unstable; it contracts on its relaxation cycle): the
-    /// largest over the origin and a pilot of [`PILOT_PERIODS`] periods
-    /// from the initial state, sampled [`PILOT_SAMPLES`] times a period. A
+    /// largest over the origin and a pilot of `PILOT_PERIODS` periods
+    /// from the initial state, sampled `PILOT_SAMPLES` times a period. A
     /// constant Jacobian (a flow linear between impacts) is read at the
     /// origin alone, as [`stiffness`](System::stiffness) does.
     fn time_scales(&self, initial: &[f64], flow: &FlowSettings) -> (f64, f64) {
