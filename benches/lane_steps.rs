@@ -18,7 +18,8 @@
 //! 6. impacts: the same sweep with a wall the orbits reach and one they never
 //!    reach (kernels without impact code), on every path;
 //! 7. models: the seed's oscillator built in against the same system written
-//!    as a model, on the CPU path.
+//!    as a model, and with its wall written as a general event, on the CPU
+//!    path (and the GPU where it runs them).
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
@@ -406,6 +407,11 @@ fn models_on(backend: &str, repeats: usize) {
         "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"f64\"\nvalidate = 0\n"
     );
     let model = format!("{}/models/seed-oscillator.toml", env!("CARGO_MANIFEST_DIR"));
+    // The same wall written `2*(x - wall)`: not a stop's shape, so a general
+    // event (the surface tape at every step; CPU only).
+    let general = std::fs::read_to_string(&model)
+        .expect("the seed model")
+        .replace("surface = \"x - wall\"", "surface = \"2*(x - wall)\"");
     let scenes = [
         (
             "built-in impact-oscillator",
@@ -414,6 +420,10 @@ fn models_on(backend: &str, repeats: usize) {
         (
             "model seed-oscillator",
             format!("model = {model:?}\n{rest}"),
+        ),
+        (
+            "model, wall as a general event",
+            format!("{general}\n{rest}"),
         ),
     ];
     let mut builtin = None;

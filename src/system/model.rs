@@ -1155,13 +1155,15 @@ impl<const D: usize> ModelFlow<D> {
         h: &[f64; W],
     ) -> [[f64; W]; D] {
         let r = region as usize;
-        let l = flows[0].constants[r].len();
+        // Each slot's constants of this region, looked up once per step.
+        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[r].as_slice());
+        let l = slots[0].len();
         if let Some(native) = flows[0].native::<W>(region).filter(|_| l <= EACH_CONSTANTS) {
             // The slots' constants and stage phases side by side.
             let mut lane = [[0.0; W]; EACH_CONSTANTS];
             for (j, row) in lane[..l].iter_mut().enumerate() {
                 for k in 0..W {
-                    row[k] = flows[k].constants[r][j];
+                    row[k] = slots[k][j];
                 }
             }
             let mut clock = [[0.0; W]; 6];
@@ -1176,9 +1178,7 @@ impl<const D: usize> ModelFlow<D> {
         }
         let tape = &flows[0].code.regions[r].equations;
         let mut registers = Registers::new();
-        tape.prepare(&mut registers, |j| {
-            std::array::from_fn(|k| flows[k].constants[r][j])
-        });
+        tape.prepare(&mut registers, |j| std::array::from_fn(|k| slots[k][j]));
         rk4::step_batch(
             #[inline(always)]
             |s, y| tape.run(&mut registers, &std::array::from_fn(|k| stages[k][s]), y),
