@@ -30,6 +30,9 @@
 use nalgebra::{Matrix2, Vector2};
 use std::f64::consts::TAU;
 
+// The certified scan's two tests, shared with the general propagator.
+use super::piecewise_linear::{certified_below, certified_increasing};
+
 /// Impacts allowed in one forcing period before the iteration is abandoned
 /// with [`ExactStatus::Chattering`].
 pub const MAX_IMPACTS_PER_PERIOD: u32 = 10_000;
@@ -727,43 +730,6 @@ impl Model {
             hi
         }
     }
-}
-
-/// Whether q(s) = g₀ + g₁s + g₂s²/2 + Ls³/6 < 0 for all s ∈ (0, h].
-///
-/// A point on (or, by rounding, just beyond) the wall counts as g₀ = 0; it is
-/// then certified to leave when g₁ ≤ 0 and q(s)/s = g₁ + g₂s/2 + Ls²/6, a
-/// convex quadratic that starts at g₁ ≤ 0, is negative at h.
-fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
-    if g0 >= 0.0 {
-        return g1 <= 0.0 && g1 + h * (0.5 * g2 + h * jerk / 6.0) < 0.0;
-    }
-    let q = |s: f64| g0 + s * (g1 + s * (0.5 * g2 + s * jerk / 6.0));
-    if q(h) >= 0.0 {
-        return false;
-    }
-    // An interior maximum is the smaller root of q'(s) = g₁ + g₂s + Ls²/2,
-    // which is positive only if g₁ > 0 and g₂ ≤ 0; written as
-    // 2g₁/(√disc - g₂) to avoid cancellation.
-    if g1 > 0.0 && g2 <= 0.0 {
-        let disc = g2 * g2 - 2.0 * jerk * g1;
-        if disc >= 0.0 {
-            let denominator = disc.sqrt() - g2;
-            if denominator > 0.0 {
-                let s = 2.0 * g1 / denominator;
-                if s < h && q(s) >= 0.0 {
-                    return false;
-                }
-            }
-        }
-    }
-    true
-}
-
-/// Whether g' > 0 on [0, h], from g'(s) ≥ g₁ + g₂s - Ls²/2 (concave, so
-/// checking both ends suffices).
-fn certified_increasing(g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
-    g1 > 0.0 && g1 + h * (g2 - 0.5 * h * jerk) > 0.0
 }
 
 #[cfg(test)]

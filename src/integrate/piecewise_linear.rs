@@ -1407,12 +1407,13 @@ fn dynamics(
 }
 
 /// Whether q(s) = g₀ + g₁s + g₂s²/2 + Ls³/6 < 0 for all s ∈ (0, h]: the
-/// closed form's test, with a non-finite q counting as not certified.
+/// scan's test here and in `closed_form`, a non-finite q counting as not
+/// certified.
 ///
 /// A point on (or, by rounding, just beyond) the surface counts as g₀ = 0;
 /// it is then certified to leave when g₁ ≤ 0 and q(s)/s = g₁ + g₂s/2 +
 /// Ls²/6, a convex quadratic that starts at g₁ ≤ 0, is negative at h.
-fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
+pub(super) fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
     if g0 >= 0.0 {
         return g1 <= 0.0 && g1 + h * (0.5 * g2 + h * jerk / 6.0) < 0.0;
     }
@@ -1442,7 +1443,7 @@ fn certified_below(g0: f64, g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
 
 /// Whether g' > 0 on [0, h], from g'(s) ≥ g₁ + g₂s − Ls²/2 (concave, so
 /// checking both ends suffices).
-fn certified_increasing(g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
+pub(super) fn certified_increasing(g1: f64, g2: f64, jerk: f64, h: f64) -> bool {
     g1 > 0.0 && g1 + h * (g2 - 0.5 * h * jerk) > 0.0
 }
 
