@@ -398,7 +398,7 @@ fn models_on(backend: &str, repeats: usize) {
     let (values, steps, transient, iterations) = (4096, 200, 20, 20);
     let lane_steps = (values * steps * (transient + 5 * iterations)) as f64;
     println!(
-        "\nModels on the {backend} path ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}, f64; {} CPU threads; medians of {repeats} runs after a warm-up)\n",
+        "\nModels on the {backend} path ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}, f64; {} CPU threads; medians of {repeats} interleaved rounds after a warm-up; the ratio is the median of the rounds' ratios)\n",
         rayon::current_num_threads()
     );
     println!("| system | run s | device s | lane-steps/s | vs built-in |");
@@ -426,21 +426,73 @@ fn models_on(backend: &str, repeats: usize) {
             format!("{general}\n{rest}"),
         ),
     ];
-    let mut builtin = None;
-    for (name, text) in scenes {
-        let scene = scene::parse(&text, "bench", "bench", &[]).expect("scene");
-        let Some((seconds, device)) = time_runs(&scene, &Default::default(), repeats) else {
+    let scenes: Vec<(&str, lyapsweep::Scene)> = scenes
+        .iter()
+        .map(|(name, text)| {
+            (
+                *name,
+                scene::parse(text, "bench", "bench", &[]).expect("scene"),
+            )
+        })
+        .collect();
+    // The systems' runs interleaved, and each ratio taken within a round:
+    // the machine's load drifts (shared cores), and a ratio of medians
+    // taken minutes apart would carry the drift.
+    let timed = time_interleaved(&scenes.iter().map(|(_, s)| s).collect::<Vec<_>>(), repeats);
+    for ((name, _), timing) in scenes.iter().zip(timed) {
+        let Some(t) = timing else {
             println!("| {name} | – | – | – | – |");
             continue;
         };
-        let reference = *builtin.get_or_insert(seconds);
         println!(
-            "| {name} | {seconds:.3} | {} | {:.3e} | {:.2}× |",
-            device.map_or("–".into(), |d| format!("{d:.3}")),
-            lane_steps / seconds,
-            reference / seconds
+            "| {name} | {:.3} | {} | {:.3e} | {:.2}× |",
+            t.seconds,
+            t.device.map_or("–".into(), |d| format!("{d:.3}")),
+            lane_steps / t.seconds,
+            t.speed_vs_first
         );
     }
+}
+
+/// The medians of interleaved runs of scenes (see [`time_interleaved`]).
+struct Interleaved {
+    seconds: f64,
+    device: Option<f64>,
+    /// The median over rounds of the first scene's time over this one's.
+    speed_vs_first: f64,
+}
+
+/// Runs each scene once to warm up, then `repeats` rounds of one run of
+/// each in turn; `None` for a scene that cannot run here (the first must).
+fn time_interleaved(scenes: &[&lyapsweep::Scene], repeats: usize) -> Vec<Option<Interleaved>> {
+    let options = lyapsweep::RunOptions::default();
+    let runs: Vec<bool> = scenes
+        .iter()
+        .map(|scene| lyapsweep::run_with(scene, &options).is_ok())
+        .collect();
+    let mut walls = vec![Vec::new(); scenes.len()];
+    let mut devices = vec![Vec::new(); scenes.len()];
+    let mut ratios = vec![Vec::new(); scenes.len()];
+    for _ in 0..repeats {
+        let mut first = None;
+        for (i, scene) in scenes.iter().enumerate().filter(|&(i, _)| runs[i]) {
+            let report = lyapsweep::run_with(scene, &options).expect("runs");
+            let seconds = report.elapsed.as_secs_f64();
+            let reference = *first.get_or_insert(seconds);
+            walls[i].push(seconds);
+            devices[i].extend(device_seconds(&report));
+            ratios[i].push(reference / seconds);
+        }
+    }
+    (0..scenes.len())
+        .map(|i| {
+            runs[i].then(|| Interleaved {
+                seconds: median(std::mem::take(&mut walls[i])),
+                device: (!devices[i].is_empty()).then(|| median(std::mem::take(&mut devices[i]))),
+                speed_vs_first: median(std::mem::take(&mut ratios[i])),
+            })
+        })
+        .collect()
 }
 
 /// Section 6: the sweep of the speed issue (4096 values of η in [0.5, 1.5],

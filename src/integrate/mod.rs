@@ -376,11 +376,14 @@ trait Flows<const D: usize> {
     fn of(&self, k: usize) -> &Self::F;
     /// The map period of trajectory k (`period` when all share one).
     fn period(&self, k: usize, period: f64) -> f64;
-    /// One RK4 step of every trajectory of the batch, each from its
-    /// stage phases (when shared, the first's) with its step size.
+    /// One RK4 step of every trajectory of the batch with its step size,
+    /// from the stage phases `shared` when [`SHARED`](Self::SHARED), else
+    /// each from its own in `each` (left unset when shared: building W
+    /// copies of one phase every step cost the shared loop a tenth).
     fn step<const W: usize>(
         &self,
-        stages: &[[Phase; 3]; W],
+        shared: &[Phase; 3],
+        each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D];
@@ -388,7 +391,8 @@ trait Flows<const D: usize> {
     fn step_in<const W: usize>(
         &self,
         regions: &[u32; W],
-        stages: &[[Phase; 3]; W],
+        shared: &[Phase; 3],
+        each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D];
@@ -425,24 +429,26 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
     #[inline(always)]
     fn step<const W: usize>(
         &self,
-        stages: &[[Phase; 3]; W],
+        shared: &[Phase; 3],
+        _each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        self.0.step_shared(&stages[0], y, h[0])
+        self.0.step_shared(shared, y, h[0])
     }
     #[inline(always)]
     fn step_in<const W: usize>(
         &self,
         regions: &[u32; W],
-        stages: &[[Phase; 3]; W],
+        shared: &[Phase; 3],
+        _each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
         if regions.iter().all(|&r| r == regions[0]) {
-            self.0.step_shared_in(regions[0], &stages[0], y, h[0])
+            self.0.step_shared_in(regions[0], shared, y, h[0])
         } else {
-            F::step_each_in(&[self.0; W], regions, stages, y, h)
+            F::step_each_in(&[self.0; W], regions, &[*shared; W], y, h)
         }
     }
     #[inline(always)]
@@ -480,21 +486,23 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
     #[inline(always)]
     fn step<const W: usize>(
         &self,
-        stages: &[[Phase; 3]; W],
+        _shared: &[Phase; 3],
+        each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        F::step_each(&std::array::from_fn(|k| self.of(k)), stages, y, h)
+        F::step_each(&std::array::from_fn(|k| self.of(k)), each, y, h)
     }
     #[inline(always)]
     fn step_in<const W: usize>(
         &self,
         regions: &[u32; W],
-        stages: &[[Phase; 3]; W],
+        _shared: &[Phase; 3],
+        each: &[[Phase; 3]; W],
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        F::step_each_in(&std::array::from_fn(|k| self.of(k)), regions, stages, y, h)
+        F::step_each_in(&std::array::from_fn(|k| self.of(k)), regions, each, y, h)
     }
 }
 
@@ -557,6 +565,19 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     } else {
         &[]
     };
+    // The forcing phase when the slots share it, in a register: an array
+    // of W copies, written a scalar at a time and read back as pairs,
+    // stalled every step on failed store forwards. `phases` is then
+    // unused until the end.
+    let mut phase = phases[0];
+    let phase_of = |phases: &[Phase; W], phase: &Phase, k: usize| {
+        if S::SHARED {
+            *phase
+        } else {
+            phases[k]
+        }
+    };
+    let unset = [[ZERO_PHASE; 3]; W];
     let mut regions = [0u32; W];
     // (Kept outside the step loop and touched only where there are
     // surfaces: zeroing and copying them every step cost the flows without
@@ -566,67 +587,80 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     if SURFACES {
         for k in 0..n {
             let (flow, yk) = (flows.of(k), column(&y, k));
-            regions[k] = surface::region_of(flow, &phases[k], &yk);
-            at_start[k] = flow.surface_values(regions[k], &phases[k], &yk);
+            let phase = phase_of(&phases, &phase, k);
+            regions[k] = surface::region_of(flow, &phase, &yk);
+            at_start[k] = flow.surface_values(regions[k], &phase, &yk);
         }
     }
     for _ in part.steps(steps) {
         // The batch's step (see `Flow::step_shared`), then detection.
-        let shared = rk4::stage_phases(&phases[0], &half[0]);
-        let stages: [[Phase; 3]; W] = std::array::from_fn(|k| {
-            if S::SHARED {
-                shared
-            } else {
-                rk4::stage_phases(&phases[k], &half[k])
-            }
-        });
+        let shared = rk4::stage_phases(&phase, &half[0]);
+        let each: [[Phase; 3]; W] = if S::SHARED {
+            unset
+        } else {
+            std::array::from_fn(|k| rk4::stage_phases(&phases[k], &half[k]))
+        };
         let mut y1 = if !SURFACES {
-            flows.step(&stages, &y, &h)
+            flows.step(&shared, &each, &y, &h)
         } else {
             let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
-            flows.step_in(&sides, &stages, &y, &h)
+            flows.step_in(&sides, &shared, &each, &y, &h)
         };
-        let next: [Phase; W] = std::array::from_fn(|k| stages[k][2]);
-        let mut meets = [false; W];
+        let next_phase = shared[2];
+        let next: [Phase; W] = if S::SHARED {
+            phases
+        } else {
+            std::array::from_fn(|k| each[k][2])
+        };
+        // Bit k: slot k meets a wall or surface in this step. (A mask: the
+        // loop over an array of bools that found whether any was set read
+        // back, one at a time, the bytes the vector compares had just
+        // stored, and cost a tenth of the loop.)
+        let mut meets = 0u32;
         if count > 0 {
             // Detection only: at rest on a wall before the step, or
             // reaching it (or turning back inside the step) after it.
+            let mut hits = [false; W];
             for (j, wall) in walls[0].iter().enumerate() {
                 let (c, v) = (wall.coordinate, wall.velocity);
                 let (position, side) = (&position[j], &side[j]);
                 for k in 0..W {
-                    meets[k] |= (y[c][k] == position[k] && y[v][k] == 0.0)
+                    hits[k] |= ((y[c][k] == position[k]) & (y[v][k] == 0.0))
                         | (side[k] * (y1[c][k] - position[k]) > 0.0)
                         | ((side[k] * y[v][k] > 0.0) & (side[k] * y1[v][k] < 0.0));
                 }
+            }
+            for (k, &hit) in hits.iter().enumerate() {
+                meets |= (hit as u32) << k;
             }
         }
         if SURFACES {
             // Every slot's sides (unused slots repeat the last trajectory's).
             let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
+            let next: [Phase; W] = std::array::from_fn(|k| phase_of(&next, &next_phase, k));
             at_end = flows.surface_values(&sides, &next, &y1);
             for k in 0..n {
                 // A sliding trajectory takes the slow path at every step.
-                meets[k] |= surface::sliding(regions[k]).is_some();
+                let mut hit = surface::sliding(regions[k]).is_some();
                 for (j, &kind) in surfaces.iter().enumerate() {
-                    meets[k] |= surface::may_cross(
+                    hit |= surface::may_cross(
                         kind,
                         regions[k],
                         (at_start[k].g[j], at_start[k].rate[j]),
                         (at_end[k].g[j], at_end[k].rate[j]),
                     );
                 }
+                meets |= (hit as u32) << k;
             }
         }
-        let mut any = false;
-        for &m in &meets[..n] {
-            any |= m;
-        }
-        if any {
-            for k in (0..n).filter(|&k| meets[k]) {
+        // Unused slots repeat a trajectory and are never resolved.
+        meets &= (1u32 << n) - 1;
+        if meets != 0 {
+            for k in (0..n).filter(|&k| meets & (1 << k) != 0) {
                 let w = walls[k];
                 let flow = flows.of(k);
                 let before = column(&y, k);
+                let start = phase_of(&phases, &phase, k);
                 let after = if let Some(j) = impact::resting_on(w, &before) {
                     impact::stuck_step(
                         flow,
@@ -634,7 +668,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                         j,
                         location,
                         omega[k],
-                        &phases[k],
+                        &start,
                         &before,
                         h[k],
                         &mut stats[k],
@@ -645,7 +679,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                         &mut regions[k],
                         location,
                         omega[k],
-                        &phases[k],
+                        &start,
                         &before,
                         h[k],
                         column(&y1, k),
@@ -656,12 +690,14 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                     y1[i][k] = after[i];
                 }
                 if SURFACES {
-                    at_end[k] = flow.surface_values(surface::sides(regions[k]), &next[k], &after);
+                    let end = phase_of(&next, &next_phase, k);
+                    at_end[k] = flow.surface_values(surface::sides(regions[k]), &end, &after);
                 }
             }
         }
         y = y1;
         phases = next;
+        phase = next_phase;
         if SURFACES {
             at_start = at_end;
         }
@@ -669,5 +705,5 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     for (k, out) in ys.iter_mut().enumerate() {
         *out = std::array::from_fn(|i| y[i][k]);
     }
-    phases
+    std::array::from_fn(|k| phase_of(&phases, &phase, k))
 }

@@ -146,7 +146,7 @@ impl Native {
                 && (kind == Kind::Rhs || h.len() >= per_slot)
         );
         let f = self.functions[kind as usize][w][layout as usize];
-        let mut out = [[0.0; W]; D];
+        let mut out = Aligned([[0.0; W]; D]);
         // SAFETY: the function reads D·W states, the clock of its stages,
         // L constants and a step size per slot of `layout` (checked above),
         // and writes D·W values; it was compiled for W, `kind` and `layout`.
@@ -156,11 +156,65 @@ impl Native {
                 clock.as_ptr(),
                 lane.as_ptr(),
                 h.as_ptr(),
-                out.as_mut_ptr().cast(),
+                out.0.as_mut_ptr().cast(),
             )
         };
-        out
+        read_as_written(&out)
     }
+}
+
+/// The native functions' results, aligned for [`read_as_written`].
+#[repr(C, align(32))]
+struct Aligned<T>(T);
+
+/// The results the native code has just stored, read back at the width it
+/// stored them: 128 bits (`F64X2`). Read as the 256-bit vectors the AVX2
+/// step loop works in, each load waits for its two narrower stores to
+/// reach the cache (a failed store forward, measured as a fifth of the
+/// step loop's time); 128-bit loads forward from the stores at once, and
+/// are joined in registers.
+#[inline(always)]
+fn read_as_written<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
+    #[cfg(target_arch = "x86_64")]
+    if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX; W is a multiple of 4.
+        return unsafe { joined(out) };
+    }
+    out.0
+}
+
+/// [`read_as_written`] with AVX: each 256-bit vector loaded as its two
+/// halves, joined in a register. In assembly, because LLVM turns a join of
+/// two loads into one wide load, and the store of a joined vector into
+/// two narrow stores (which the next wide load would wait for in turn).
+///
+/// # Safety
+/// The CPU has AVX, and W is a multiple of 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn joined<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
+    use std::arch::x86_64::__m256d;
+    let mut read = Aligned([[0.0; W]; D]);
+    for i in 0..D {
+        for k in (0..W).step_by(4) {
+            let v: __m256d;
+            // SAFETY: out.0[i][k..k + 4] are four f64, read; and
+            // read.0[i][k..k + 4] four f64 at a 32-byte aligned address
+            // (the array is 32-aligned, W and k multiples of 4).
+            unsafe {
+                std::arch::asm!(
+                    "vmovupd {v:x}, xmmword ptr [{p}]",
+                    "vinsertf128 {v}, {v}, xmmword ptr [{p} + 16], 1",
+                    p = in(reg) out.0[i][k..].as_ptr(),
+                    v = out(ymm_reg) v,
+                    options(pure, readonly, nostack, preserves_flags),
+                );
+                read.0[i][k..].as_mut_ptr().cast::<__m256d>().write(v);
+            }
+        }
+    }
+    read.0
 }
 
 /// [`Func::apply`] behind the C calling convention, one per function, for
