@@ -21,6 +21,7 @@ pub mod integrate;
 pub mod method;
 pub mod model;
 pub mod output;
+pub mod perturbation;
 pub mod scene;
 pub mod system;
 

@@ -26,7 +26,7 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                     settings,
                 })
                 .collect();
-            let results = (scene.system.run_lanes)(&lanes);
+            let results = (crate::method::runner(scene.system).run_lanes)(&lanes);
             progress.advance((lanes.len() * (settings.transient + settings.iterations)) as u64);
             results
         })

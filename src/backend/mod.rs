@@ -319,7 +319,7 @@ fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
                 ),
             ));
         }
-        let lane = (scene.system.plan)(&params, settings);
+        let lane = (crate::method::runner(scene.system).plan)(&params, settings);
         if !lane.affordable() {
             // Not run: its row says too-many-steps (see `run_batch`).
             continue;
@@ -452,7 +452,8 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
             // own plan is beyond reach is not to be trusted (the CPU path
             // does not run it at all).
             for (k, lane) in run.lanes.iter_mut().enumerate() {
-                let own = (scene.system.plan)(&scene.lane_params(k), settings);
+                let own =
+                    (crate::method::runner(scene.system).plan)(&scene.lane_params(k), settings);
                 if !own.affordable() {
                     *lane = crate::method::lane::not_run(
                         settings,
@@ -643,7 +644,7 @@ fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Op
             params: scene.lane_params(k),
             settings: &settings,
         };
-        let cpu = (scene.system.run_lane)(&lane);
+        let cpu = (crate::method::runner(scene.system).run_lane)(&lane);
         let finished = |l: &LaneResult| l.exponents.iter().all(|e| e.is_finite());
         if !finished(&cpu) || !finished(&lanes[k]) {
             continue;

@@ -14,8 +14,8 @@ use serde::Deserialize;
 
 use super::clock::{cos_sin, rotate, Phase};
 use super::surface::{self, InRegion, Surface};
+use super::IterationStats;
 use super::{rk4, Flow};
-use crate::system::IterationStats;
 
 /// A rigid wall at `position` on coordinate `coordinate`, whose rate is
 /// coordinate `velocity`, with coefficient of restitution `restitution`.

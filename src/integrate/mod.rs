@@ -7,12 +7,14 @@
 pub mod clock;
 pub mod closed_form;
 pub mod impact;
+pub mod iteration;
 pub mod piecewise_linear;
 pub mod rk4;
 pub mod section;
 pub mod surface;
 
 pub use impact::{ImpactLocation, Wall};
+pub use iteration::{FlowSettings, IterationStats, Part};
 pub use surface::{InRegion, Surface, SurfaceValues};
 
 /// An event's reset at one state: the state after, DR, and ∂R/∂t.
@@ -22,7 +24,6 @@ pub type Reset<const D: usize> = ([f64; D], [[f64; D]; D], [f64; D]);
 /// surfaces' (the output's event columns).
 pub const MAX_EVENTS: usize = impact::MAX_WALLS + surface::MAX_SURFACES;
 
-use crate::system::{FlowSettings, IterationStats, Part};
 use clock::{cos_sin, Phase, ZERO_PHASE};
 
 /// A flow y' = F(t, y) in D dimensions, possibly forced, possibly with a wall.

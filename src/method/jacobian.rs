@@ -8,6 +8,7 @@
 use nalgebra::SMatrix;
 
 use crate::integrate::clock::Phase;
+pub use crate::perturbation::Difference;
 use crate::system::{FlowSettings, IterationStats, Part, System};
 
 /// Trajectories an estimate integrates at most: the reference and 2D copies
@@ -116,42 +117,4 @@ pub fn estimate<const D: usize, S: System<D>>(
     }
     stats.slowest_impact = stats.slowest_impact.min(st[0].slowest_impact);
     (image, jacobian)
-}
-
-/// How the Jacobian's columns are differenced.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Difference {
-    /// The paper's scheme: D copies at x + δe_i; error O(δ).
-    #[default]
-    Forward,
-    /// 2D copies at x ± δe_i; error O(δ²), so δ can be larger against
-    /// rounding, which is what f32 needs.
-    Central,
-}
-
-impl Difference {
-    pub fn name(self) -> &'static str {
-        match self {
-            Difference::Forward => "forward",
-            Difference::Central => "central",
-        }
-    }
-
-    /// The order of the scheme's error in δ: a copy that leaves the linear
-    /// regime by a fraction r errs by r (forward) or r² (central).
-    pub fn order(self) -> i32 {
-        match self {
-            Difference::Forward => 1,
-            Difference::Central => 2,
-        }
-    }
-
-    /// Perturbed copies per lane.
-    pub fn copies(self, dimension: usize) -> usize {
-        match self {
-            Difference::Forward => dimension,
-            Difference::Central => 2 * dimension,
-        }
-    }
 }

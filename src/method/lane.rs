@@ -12,6 +12,7 @@ use nalgebra::{Const, DimMin, SMatrix};
 use super::jacobian;
 use super::qr::QrAccumulator;
 use crate::integrate::clock::{Phase, ZERO_PHASE};
+pub use crate::perturbation::perturbation_at;
 use crate::system::{FlowSettings, IterationStats, Params, Part, System};
 
 /// Where each iteration's Jacobian comes from.
@@ -51,13 +52,6 @@ pub struct MethodSettings {
     /// The unit roundoff of the arithmetic the images are computed in
     /// (f64::EPSILON, or f32::EPSILON on the GPU's f32 path).
     pub rounding_unit: f64,
-}
-
-/// The perturbation actually used at x: δ·max(1, ‖x‖∞). A relative δ keeps
-/// the balance of truncation and rounding error the same for a state of
-/// size 30 (Lorenz) as for one of size 1; f32 needs that.
-pub fn perturbation_at(delta: f64, x: &[f64]) -> f64 {
-    delta * x.iter().fold(1.0_f64, |m, v| m.max(v.abs()))
 }
 
 /// The noise in a finite-difference column: the rounding of an image of
@@ -173,7 +167,7 @@ pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSett
 /// The Jacobian of one part of an iteration (the whole iteration, or a
 /// sub-map) from the reference's state x at the part's start, by
 /// [`estimate_resolving_grazing`], row-major, with what happened
-/// (`SystemInfo::reestimate`).
+/// (`dispatch::Runner::reestimate`).
 pub fn reestimate_of<const D: usize, S: System<D>>(
     params: &Params,
     settings: &MethodSettings,
@@ -219,7 +213,7 @@ where
     !suspect.is_nan() && suspect > GRAZING_ERROR
 }
 
-/// [`plan_lane`] from parameter values (`SystemInfo::plan`).
+/// [`plan_lane`] from parameter values (`dispatch::Runner::plan`).
 pub fn plan_of<const D: usize, S: System<D>>(
     params: &Params,
     settings: &MethodSettings,
@@ -793,7 +787,14 @@ where
             y
         }
         Tangent::FiniteDifference if settings.lyapunov => {
-            if let Some(next) = system.tangent_factors(x, flow, settings, stats, jacobians) {
+            if let Some(next) = system.tangent_factors(
+                x,
+                flow,
+                settings.perturbation,
+                settings.difference,
+                stats,
+                jacobians,
+            ) {
                 return next;
             }
             let (mut y, mut phase) = (*x, ZERO_PHASE);

@@ -5,9 +5,11 @@
 //! over one period with an optional wall), the period T of that iteration,
 //! the sum of exponents the divergence theorem predicts, and, when a closed
 //! form exists, the exact tangent map. A built-in system is its file here
-//! (and, for the GPU backend, its WGSL twin in `shaders/`) and one line in
-//! [`SYSTEMS`]; a user's system is a model ([`model`], [`section`]),
-//! described at run time from a scene's `[model]` table.
+//! (and, for the GPU backend, its WGSL twin in `shaders/`), one line in
+//! [`SYSTEMS`] and one in `method::dispatch` (which instance of the lane
+//! code runs it: systems know nothing of the method); a user's system is
+//! a model ([`model`], [`section`]), described at run time from a scene's
+//! `[model]` table.
 
 pub mod henon;
 pub mod impact_oscillator;
@@ -19,8 +21,7 @@ use nalgebra::SMatrix;
 
 use crate::integrate::clock::Phase;
 
-use crate::integrate::ImpactLocation;
-use crate::method::Lane;
+pub use crate::integrate::{FlowSettings, IterationStats, Part};
 
 /// Every system the tool knows, by its scene `kind`.
 pub static SYSTEMS: &[&SystemInfo] = &[&impact_oscillator::INFO, &henon::INFO, &lorenz::INFO];
@@ -64,21 +65,9 @@ pub struct SystemInfo {
     pub period: fn(&Params) -> f64,
     /// ω of the forcing (cos ωt enters the right-hand side); 0 if autonomous.
     pub forcing_frequency: fn(&Params) -> f64,
-    /// Runs one lane on the dimension-specific code path.
-    pub run_lane: fn(&Lane) -> crate::method::LaneResult,
-    /// [`crate::method::lane::run_lanes`]: neighbouring lanes, their
-    /// transients stepped together.
-    pub run_lanes: fn(&[Lane]) -> Vec<crate::method::LaneResult>,
     /// Why the GPU kernels cannot run a lane with these parameters, if
     /// they cannot (what the CPU path models and the kernels do not yet).
     pub gpu_refuses: fn(&Params) -> Option<String>,
-    /// One part's Jacobian (the whole iteration's, or a sub-map's) from x,
-    /// re-estimated on the CPU with the grazing ladder
-    /// (`method::lane::reestimate_of`): what the GPU host does with the
-    /// parts its kernels flag as grazing. Row-major.
-    pub reestimate: Reestimate,
-    /// How a lane would be cut (`method::lane::plan_lane`), without running it.
-    pub plan: fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
     /// struct (fields in the order of `parameters`) and `rhs` for a flow
     /// (with `wall_position`/`wall_restitution` when it has a wall) or
@@ -164,141 +153,6 @@ impl Params {
     }
 }
 
-/// How one flow iteration is integrated (the part of `[integration]` a system sees).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FlowSettings {
-    pub steps_per_period: usize,
-    pub impact_location: ImpactLocation,
-}
-
-/// See [`SystemInfo::reestimate`].
-pub type Reestimate =
-    fn(&Params, &crate::method::MethodSettings, Part, &[f64]) -> (Vec<f64>, IterationStats);
-
-/// Part `index` of `count` equal parts of one map iteration: a sub-map.
-/// Over a long period a strongly contracting direction shrinks below what a
-/// finite difference (or even a product of exact tangent maps) resolves, so
-/// the method estimates the map as the composition of its parts, re-seeding
-/// the perturbations and accumulating QR at each (see `method::lane`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Part {
-    pub index: usize,
-    pub count: usize,
-}
-
-impl Part {
-    pub const WHOLE: Part = Part { index: 0, count: 1 };
-
-    /// This part's share of `total` RK4 steps.
-    pub fn steps(&self, total: usize) -> std::ops::Range<usize> {
-        total * self.index / self.count..total * (self.index + 1) / self.count
-    }
-
-    /// This part's time span within a period (the last one ends at `period` exactly).
-    pub fn span(&self, period: f64) -> (f64, f64) {
-        let at = |k: usize| {
-            if k == self.count {
-                period
-            } else {
-                period * k as f64 / self.count as f64
-            }
-        };
-        (at(self.index), at(self.index + 1))
-    }
-
-    /// The parts of one iteration, in order.
-    pub fn all(count: usize) -> impl Iterator<Item = Part> {
-        (0..count).map(move |index| Part { index, count })
-    }
-}
-
-/// What happened during one map iteration of one trajectory.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IterationStats {
-    /// Wall impacts during the iteration.
-    pub impacts: u32,
-    /// The crossings of each wall of the flow, in its order, then of each
-    /// general surface (events and switches).
-    pub crossings: [u32; crate::integrate::MAX_EVENTS],
-    /// An integration step needed more impacts than the bound allows, or the
-    /// mass was pressed into the wall: the iteration is not trustworthy.
-    pub chattering: bool,
-    /// A sliding motion that is not integrated (on two surfaces at once, a
-    /// wall met while sliding, a stick limit below Filippov's, or sliding
-    /// in the exact propagator): the iteration is not trustworthy.
-    pub sliding: bool,
-    /// Dimensions the iteration collapsed: 1 after an impact with e = 0 (the
-    /// velocity is forgotten), D after sticking (the state on release depends
-    /// on the forcing alone). The map's Jacobian then has rank D - rank_loss
-    /// and the last rank_loss exponents are -∞.
-    pub rank_loss: u32,
-    /// The slowest approach speed of the iteration's impacts (infinite
-    /// without impacts): a slow impact is near grazing.
-    pub slowest_impact: f64,
-    /// Of a Jacobian estimate: how far the perturbed copies left the linear
-    /// regime, as the largest relative difference between a copy's slowest
-    /// impact speed and the reference's (infinite when a column's copies
-    /// met the wall a different number of times on both sides); 0 without
-    /// impacts. A finite difference is off by about this fraction (forward)
-    /// or its square (central).
-    pub nonlinearity: f64,
-    /// Of a Jacobian estimate: re-estimated over a ladder of smaller δ
-    /// because `nonlinearity` was too large for the Jacobian's conditioning
-    /// (a grazing iteration).
-    pub grazing: bool,
-    /// Of a grazing iteration: the error left in ln R_ii of the chosen
-    /// estimate, measured as the change between neighbouring rungs of the
-    /// ladder (0 for other iterations).
-    pub grazing_error: f64,
-    /// The time the iteration took, where it is not the system's period
-    /// (a Poincaré section's return time); 0 otherwise.
-    pub time: f64,
-    /// ln |F_k(start) / F_k(end)| of a section map on state k, plus
-    /// ∫ div F dt along the reference where div F depends on the state,
-    /// plus ln |det S| of every crossing of a general surface: the
-    /// iteration's ln |det| beyond what the system's expected sum has
-    /// (the determinant is exp(∫ div F dt)·F_k(start)/F_k(end)·Π det S);
-    /// 0 otherwise.
-    pub log_flux: f64,
-}
-
-impl IterationStats {
-    /// Adds a part's statistics to its iteration's.
-    pub fn merge(&mut self, part: &IterationStats) {
-        self.impacts += part.impacts;
-        for (c, p) in self.crossings.iter_mut().zip(part.crossings) {
-            *c += p;
-        }
-        self.chattering |= part.chattering;
-        self.rank_loss = self.rank_loss.max(part.rank_loss);
-        self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
-        self.nonlinearity = self.nonlinearity.max(part.nonlinearity);
-        self.grazing |= part.grazing;
-        self.grazing_error += part.grazing_error;
-        self.time += part.time;
-        self.log_flux += part.log_flux;
-        self.sliding |= part.sliding;
-    }
-}
-
-impl Default for IterationStats {
-    fn default() -> Self {
-        IterationStats {
-            impacts: 0,
-            crossings: [0; crate::integrate::MAX_EVENTS],
-            sliding: false,
-            chattering: false,
-            rank_loss: 0,
-            slowest_impact: f64::INFINITY,
-            nonlinearity: 0.0,
-            grazing: false,
-            grazing_error: 0.0,
-            time: 0.0,
-            log_flux: 0.0,
-        }
-    }
-}
-
 /// A system of map dimension `D`.
 pub trait System<const D: usize>: Sized + Send + Sync {
     /// Builds the system from checked parameter values.
@@ -377,7 +231,8 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         &self,
         _x: &[f64; D],
         _flow: &FlowSettings,
-        _settings: &crate::method::MethodSettings,
+        _delta: f64,
+        _difference: crate::perturbation::Difference,
         _stats: &mut IterationStats,
         _factors: &mut Vec<SMatrix<f64, D, D>>,
     ) -> Option<[f64; D]> {

@@ -16,7 +16,6 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix};
 
-use super::section::SectionFlow;
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
 use crate::error::{Error, Result};
 use crate::integrate::clock::Phase;
@@ -724,10 +723,6 @@ fn replace_state(e: &Expr, i: usize) -> Expr {
     }
 }
 
-type RunLane = fn(&crate::method::Lane) -> crate::method::LaneResult;
-type RunLanes = fn(&[crate::method::Lane]) -> Vec<crate::method::LaneResult>;
-type Plan = fn(&Params, &crate::method::MethodSettings) -> crate::method::lane::LanePlan;
-
 fn leak(s: &str) -> &'static str {
     Box::leak(s.to_owned().into_boxed_str())
 }
@@ -764,37 +759,6 @@ pub fn info(code: Code) -> &'static SystemInfo {
         .map(|w| leak(&w.name))
         .chain(code.surfaces.iter().map(|s| leak(&s.name)))
         .collect();
-    macro_rules! by_dimension {
-        ($($d:literal)*) => {
-            match code.dimension() {
-                $($d => (
-                    crate::method::run_lane::<$d, ModelFlow<$d>> as RunLane,
-                    crate::method::lane::run_lanes::<$d, ModelFlow<$d>> as RunLanes,
-                    crate::method::lane::plan_of::<$d, ModelFlow<$d>> as Plan,
-                    crate::method::lane::reestimate_of::<$d, ModelFlow<$d>> as super::Reestimate,
-                ),)*
-                n => unreachable!("{n} states passed the check"),
-            }
-        };
-    }
-    macro_rules! by_section_dimension {
-        ($($d:literal $n:literal)*) => {
-            match code.dimension() {
-                $($d => (
-                    crate::method::run_lane::<$d, SectionFlow<$d, $n>> as RunLane,
-                    crate::method::lane::run_lanes::<$d, SectionFlow<$d, $n>> as RunLanes,
-                    crate::method::lane::plan_of::<$d, SectionFlow<$d, $n>> as Plan,
-                    crate::method::lane::reestimate_of::<$d, SectionFlow<$d, $n>> as super::Reestimate,
-                ),)*
-                n => unreachable!("{n} map dimensions passed the check"),
-            }
-        };
-    }
-    let (run_lane, run_lanes, plan, reestimate) = if code.section.is_some() {
-        by_section_dimension!(1 2 2 3 3 4 4 5 5 6)
-    } else {
-        by_dimension!(1 2 3 4 5 6)
-    };
     // A Poincaré map starts from a point of the flow (all states).
     let initial = if code.section.is_some() { 1.0 } else { 0.0 };
     Box::leak(Box::new(SystemInfo {
@@ -810,11 +774,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
         expected_sum,
         period: |p| code_of(p).period(&p.values),
         forcing_frequency: |p| code_of(p).frequency(&p.values),
-        run_lane,
-        run_lanes,
         gpu_refuses,
-        reestimate,
-        plan,
         wgsl: crate::model::wgsl::system_file(code),
         wall_reachable: if code.walls.is_empty() && code.surfaces.is_empty() {
             None

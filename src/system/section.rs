@@ -18,10 +18,8 @@ use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
 use crate::integrate::section::{advance, next_crossings, Section};
 use crate::integrate::Flow;
-use crate::method::jacobian::Difference;
-use crate::method::lane::perturbation_at;
-use crate::method::MethodSettings;
 use crate::model::tape::Tape;
+use crate::perturbation::{perturbation_at, Difference};
 
 /// The contraction one part of a return may have, e^PART_CONTRACTION: far
 /// above the finite difference's rounding noise (see `tangent_factors`).
@@ -141,7 +139,8 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
         &self,
         x: &[f64; D],
         flow: &FlowSettings,
-        settings: &MethodSettings,
+        relative_delta: f64,
+        difference: Difference,
         stats: &mut IterationStats,
         factors: &mut Vec<SMatrix<f64, D, D>>,
     ) -> Option<[f64; D]> {
@@ -162,11 +161,11 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
             frame[(if i < k { i } else { i + 1 }, i)] = 1.0;
         }
         let mut y = start;
-        let copies = settings.difference.copies(D);
+        let copies = difference.copies(D);
         for _ in 0..parts {
             let span = tau / parts as f64;
             let steps = (span / h).ceil().max(1.0) as usize;
-            let delta = perturbation_at(settings.perturbation, &y);
+            let delta = perturbation_at(relative_delta, &y);
             let mut ys = vec![y; 1 + copies];
             for c in 0..copies {
                 let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
@@ -197,7 +196,7 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
             let mut columns = DMatrix::<f64>::zeros(N, D);
             for i in 0..D {
                 for r in 0..N {
-                    columns[(r, i)] = match settings.difference {
+                    columns[(r, i)] = match difference {
                         Difference::Forward => (ys[1 + i][r] - ys[0][r]) / delta,
                         Difference::Central => (ys[1 + i][r] - ys[1 + D + i][r]) / (2.0 * delta),
                     };

@@ -1005,11 +1005,9 @@ where
                                         index: p,
                                         count: parts,
                                     };
-                                    let (cpu, cpu_stats) = (g.system.reestimate)(
-                                        &g.params[lane],
-                                        &g.settings,
-                                        index,
-                                        x,
+                                    let (cpu, cpu_stats) = (crate::method::runner(g.system)
+                                        .reestimate)(
+                                        &g.params[lane], &g.settings, index, x
                                     );
                                     jacobian = SMatrix::from_row_slice(&cpu);
                                     part.grazing = true;
