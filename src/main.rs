@@ -133,7 +133,7 @@ fn main() -> ExitCode {
 fn check_model(file: &std::path::Path) -> Result<(), Error> {
     let table = lyapsweep::model::read_table(file)?;
     let model = lyapsweep::model::Model::parse(&table, "model")?;
-    let code = lyapsweep::system::model::Code::compile(model, "model")?;
+    let code = lyapsweep::model::code::Code::compile(model, "model")?;
     print!("{}", lyapsweep::model::describe::describe(&code));
     Ok(())
 }

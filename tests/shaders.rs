@@ -44,8 +44,9 @@ period = "2*pi"
 "#;
 
 fn no_parameters() -> &'static SystemInfo {
+    use lyapsweep::model::code::Code;
     use lyapsweep::model::Model;
-    use lyapsweep::system::model::{info, Code};
+    use lyapsweep::system::model::info;
     let table: toml::Value = toml::from_str(NO_PARAMETERS).unwrap();
     let model = Model::parse(&table, "model").unwrap();
     info(Code::compile(model, "model").unwrap())

@@ -5,9 +5,9 @@
 
 use std::fmt::Write;
 
+use super::code::Code;
 use super::expr::{Expr, Op, Var, Written};
 use super::wgsl;
-use crate::system::model::Code;
 
 /// The report of a model that compiled.
 pub fn describe(code: &Code) -> String {

@@ -9,6 +9,7 @@
 //! `model check`'s report ([`describe`]). `system::model` and
 //! `system::section` make a compiled model a system like the built-ins.
 
+pub mod code;
 pub mod describe;
 pub mod expr;
 pub mod jit;

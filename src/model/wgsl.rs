@@ -38,8 +38,8 @@
 
 use std::fmt::{self, Write};
 
+use super::code::Code;
 use super::expr::{Expr, Func, Op, Var, Written};
-use crate::system::model::Code;
 
 /// The wrappers a generated file may call, defined per precision in
 /// `shaders/shared/model_functions.wgsl`: a system file that calls none of

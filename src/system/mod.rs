@@ -79,7 +79,7 @@ pub struct SystemInfo {
     /// kernels compiled without impact code.
     pub wall_reachable: Option<fn(&Params, &[f64]) -> bool>,
     /// The compiled model of a system given as data (`None` for a built-in).
-    pub model: Option<&'static model::Code>,
+    pub model: Option<&'static crate::model::code::Code>,
     /// The scene table its parameters are keys of ("system", or
     /// "model.parameters"), for messages.
     pub table: &'static str,

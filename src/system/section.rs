@@ -13,11 +13,12 @@
 
 use nalgebra::{DMatrix, SMatrix};
 
-use super::model::{Code, ModelFlow};
+use super::model::ModelFlow;
 use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
 use crate::integrate::section::{advance, next_crossings, Section};
 use crate::integrate::Flow;
+use crate::model::code::Code;
 use crate::model::tape::Tape;
 use crate::perturbation::{perturbation_at, Difference};
 
