@@ -238,15 +238,18 @@ fn the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu() {
 
 #[test]
 fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
-    // Two stops (the impact pair) and a stop on a third state of four (the
-    // two-mass chain): the GPU's impact code knows one wall on the first
-    // state. No adapter is needed: the refusal comes first.
-    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n\
-                [integration]\ntransient = 2\niterations = 2\n";
-    for (name, why) in [
-        ("impact-pair.toml", "2 stops"),
-        ("two-mass-chain.toml", "acts on x2"),
+    // An event that moves with the clock (the vibrating table) and a switch
+    // (the soft stop): the GPU's impact code knows stops alone. No adapter
+    // is needed: the refusal comes first.
+    for (name, parameter, why) in [
+        ("vibrating-table.toml", "e", "the event 'table' is not a stop"),
+        ("soft-stop.toml", "eta", "the switch 'contact' is not a stop"),
     ] {
+        let body = format!(
+            "[sweep]\nparameter = \"{parameter}\"\nvalues = [0.8]\n\
+             [integration]\ntransient = 2\niterations = 2\n"
+        );
+        let body = body.as_str();
         let scene = model_scene(name, body, &["run.backend=\"gpu\""]);
         assert!(scene.system.wgsl.is_none(), "{name}");
         let err = lyapsweep::run(&scene).unwrap_err();
@@ -254,13 +257,13 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
         assert!(matches!(err, Error::Backend { .. }), "{name}: {text}");
         assert!(err.is_input_error(), "exit 2");
         assert!(
-            text.contains("one stop on the first state") && text.contains(why),
+            text.contains("the GPU kernels handle stops alone") && text.contains(why),
             "{name}: {text}"
         );
         let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
         assert_eq!(auto.backend, Backend::Cpu);
         let choice = auto.choice.unwrap();
-        assert!(choice.contains("one stop on the first state"), "{choice}");
+        assert!(choice.contains("the GPU kernels handle stops alone"), "{choice}");
     }
 }
 
