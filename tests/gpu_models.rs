@@ -242,8 +242,16 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
     // (the soft stop): the GPU's impact code knows stops alone. No adapter
     // is needed: the refusal comes first.
     for (name, parameter, why) in [
-        ("vibrating-table.toml", "e", "the event 'table' is not a stop"),
-        ("soft-stop.toml", "eta", "the switch 'contact' is not a stop"),
+        (
+            "vibrating-table.toml",
+            "e",
+            "the event 'table' is not a stop",
+        ),
+        (
+            "soft-stop.toml",
+            "eta",
+            "the switch 'contact' is not a stop",
+        ),
     ] {
         let body = format!(
             "[sweep]\nparameter = \"{parameter}\"\nvalues = [0.8]\n\
@@ -263,7 +271,10 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
         let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
         assert_eq!(auto.backend, Backend::Cpu);
         let choice = auto.choice.unwrap();
-        assert!(choice.contains("the GPU kernels handle stops alone"), "{choice}");
+        assert!(
+            choice.contains("the GPU kernels handle stops alone"),
+            "{choice}"
+        );
     }
 }
 
@@ -370,8 +381,14 @@ fn stops_agree(name: &str, body: &str, overrides: &[&str], tolerance: f64) -> f6
             }
         }
         let d = exponent_difference(
-            &c.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
-            &g.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
+            &c.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+            &g.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
         );
         eprintln!(
             "{lane}: {:?} {:?}, impacts per stop {:?}: CPU - GPU {d:e}",
@@ -417,7 +434,12 @@ fn the_impact_pair_on_the_gpu_agrees_with_the_cpu_in_f64() {
     for e in ["model.parameters.e=0.5", "model.parameters.e=0.0"] {
         let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.4, 1.0, 1.9, 2.0]\n\
                     [integration]\ntransient = 200\niterations = 200\n[run]\nvalidate = 0\n";
-        let d = stops_agree("impact-pair.toml", body, &["model.parameters.f=2.0", e], 1e-9);
+        let d = stops_agree(
+            "impact-pair.toml",
+            body,
+            &["model.parameters.f=2.0", e],
+            1e-9,
+        );
         eprintln!("impact pair, {e}: largest CPU - GPU {d:e}");
     }
 }
@@ -435,7 +457,12 @@ fn the_two_mass_chain_on_the_gpu_agrees_with_the_cpu_in_f64() {
     // lavapipe: 0, bit for bit the CPU's.
     let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.6, 0.8, 1.0, 1.3, 1.8, 2.5]\n\
                 [integration]\ntransient = 200\niterations = 200\n[run]\nvalidate = 0\n";
-    let d = stops_agree("two-mass-chain.toml", body, &["model.parameters.f=2.0"], 1e-9);
+    let d = stops_agree(
+        "two-mass-chain.toml",
+        body,
+        &["model.parameters.f=2.0"],
+        1e-9,
+    );
     eprintln!("two-mass chain, e = 0.8: largest CPU - GPU {d:e}");
     // e = 0: the second mass stops dead at each impact (one exponent
     // collapses) and at η ≤ 0.8 or 1.7 rests on the stop while the first

@@ -241,7 +241,13 @@ fn stops(w: &mut String, code: &Code) {
     }
     let vector = |kind: &str, each: &dyn Fn(usize) -> String, zero: &str| {
         let parts: Vec<String> = (0..crate::integrate::impact::MAX_WALLS)
-            .map(|j| if j < walls.len() { each(j) } else { zero.into() })
+            .map(|j| {
+                if j < walls.len() {
+                    each(j)
+                } else {
+                    zero.into()
+                }
+            })
             .collect();
         format!("vec4<{kind}>({})", parts.join(", "))
     };

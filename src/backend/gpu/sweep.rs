@@ -1018,7 +1018,9 @@ where
                         };
                         let mut part = IterationStats {
                             impacts,
-                            crossings: std::array::from_fn(|j| per_stop.get(j).copied().unwrap_or(0)),
+                            crossings: std::array::from_fn(|j| {
+                                per_stop.get(j).copied().unwrap_or(0)
+                            }),
                             chattering: flags & FLAG_CHATTERING != 0,
                             // Sticking collapses the mass's position and
                             // velocity (all of a 2-state system).
