@@ -195,8 +195,9 @@ fn departure(r: u32, t: u32) -> f32 {
 // System::admits).
 fn behind_wall(p: Params, y: State) -> u32 {
 #ifdef WALL
+    let walls = stops_of(p);
     for (var j = 0u; j < WALLS; j = j + 1u) {
-        if (gap(stop(p, j), y) > real(0.0)) {
+        if (gap(stop(walls, j), y) > real(0.0)) {
             return FLAG_BEHIND_WALL;
         }
     }

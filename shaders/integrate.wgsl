@@ -49,7 +49,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let end = min(c.x + control.chunk_steps, part_end);
 #ifdef WALL
     var slowest = traj[base + TRAJ_SLOWEST];
-    var crossed = crossings[t];
+    let walls = stops_of(p);
     var k = c.x;
     // The hot loop only steps and detects: a step whose plain image reaches
     // a stop or turns back inside it, or a mass at rest on a stop, ends
@@ -62,7 +62,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var comp1 = comp;
         var pending = false;
         for (; k < end; k = k + 1u) {
-            if (resting_on(p, y) < WALLS) {
+            if (resting_on(walls, y) < WALLS) {
                 pending = true;
                 break;
             }
@@ -76,7 +76,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             y1 = y + inc.y;
 #endif
-            if (reaches_a_stop(p, y, y1)) {
+            if (reaches_a_stop(walls, y, y1)) {
                 pending = true;
                 break;
             }
@@ -92,11 +92,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // At rest on a stop, from the step's start or from an impact inside
         // it: stuck_step takes (the rest of) the step, called here only
         // (see resolve_impacts).
-        var stuck = resting_on(p, y);
+        var stuck = resting_on(walls, y);
         var rest_at = real(0.0);
         var rest_phase = phase;
         if (stuck == WALLS) {
-            let w = resolve_impacts(p, omega, phase, y, h, y1);
+            let w = resolve_impacts(p, walls, omega, phase, y, h, y1);
             // Whatever the stops did (an impact, a rest, a departure from
             // rest), the step ends where resolve_impacts says; the
             // compensation belongs to the plain step it replaced.
@@ -108,7 +108,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 comp = comp1;
             }
             c.y = c.y + w.impacts;
-            crossed = crossed + w.crossings;
+            // Straight to the buffer: a vector kept live across the step
+            // loop would cost every step (registers), for a rare event.
+            crossings[t] = crossings[t] + w.crossings;
             slowest = min(slowest, w.slowest);
             if (w.chattering) {
                 c.z = c.z | FLAG_CHATTERING;
@@ -119,7 +121,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             rest_phase = w.rest_phase;
         }
         if (stuck < WALLS) {
-            let w = stuck_step(p, stuck, omega, rest_phase, y, h - rest_at);
+            let w = stuck_step(p, walls, stuck, omega, rest_phase, y, h - rest_at);
             y = w.y;
             comp = State();
             c.z = c.z | rank_flags(w.rank_loss);
@@ -150,7 +152,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     traj[base + 2u * DIM + 1u] = phase.y;
 #ifdef WALL
     traj[base + TRAJ_SLOWEST] = slowest;
-    crossings[t] = crossed;
 #endif
 #endif
     if (!is_finite(y)) {

@@ -23,8 +23,20 @@ struct Stop {
     side: real,
 }
 
-fn stop(p: Params, j: u32) -> Stop {
-    return Stop(wall_position(p)[j], wall_restitution(p)[j], WALL_COORDINATE[j], WALL_VELOCITY[j], WALL_SIDE[j]);
+// Every stop's position and restitution at a lane's parameters (twin of
+// walls_at in src/system/model.rs), computed once per invocation: the step
+// loop does not recompute a position that is an expression of parameters.
+struct Stops {
+    position: vec4<real>,
+    restitution: vec4<real>,
+}
+
+fn stops_of(p: Params) -> Stops {
+    return Stops(wall_position(p), wall_restitution(p));
+}
+
+fn stop(walls: Stops, j: u32) -> Stop {
+    return Stop(walls.position[j], walls.restitution[j], WALL_COORDINATE[j], WALL_VELOCITY[j], WALL_SIDE[j]);
 }
 
 // How far y lies beyond the stop (> 0: behind it).
@@ -60,33 +72,33 @@ fn at_rest(w: Stop, y: State) -> bool {
 // than as a loop: WALLS is a constant, so the branches of absent stops fold
 // away, and a loop inside the step loop would cost every step on lavapipe
 // (docs/BENCHMARKS.md, "Impacts off the hot path").
-fn reaches_a_stop(p: Params, y: State, y1: State) -> bool {
-    var hit = reaches(stop(p, 0u), y, y1);
+fn reaches_a_stop(walls: Stops, y: State, y1: State) -> bool {
+    var hit = reaches(stop(walls, 0u), y, y1);
     if (WALLS > 1u) {
-        hit = hit || reaches(stop(p, 1u), y, y1);
+        hit = hit || reaches(stop(walls, 1u), y, y1);
     }
     if (WALLS > 2u) {
-        hit = hit || reaches(stop(p, 2u), y, y1);
+        hit = hit || reaches(stop(walls, 2u), y, y1);
     }
     if (WALLS > 3u) {
-        hit = hit || reaches(stop(p, 3u), y, y1);
+        hit = hit || reaches(stop(walls, 3u), y, y1);
     }
     return hit;
 }
 
 // The first stop y rests on, or WALLS (twin of resting_on).
-fn resting_on(p: Params, y: State) -> u32 {
+fn resting_on(walls: Stops, y: State) -> u32 {
     var on = WALLS;
-    if (WALLS > 3u && at_rest(stop(p, 3u), y)) {
+    if (WALLS > 3u && at_rest(stop(walls, 3u), y)) {
         on = 3u;
     }
-    if (WALLS > 2u && at_rest(stop(p, 2u), y)) {
+    if (WALLS > 2u && at_rest(stop(walls, 2u), y)) {
         on = 2u;
     }
-    if (WALLS > 1u && at_rest(stop(p, 1u), y)) {
+    if (WALLS > 1u && at_rest(stop(walls, 1u), y)) {
         on = 1u;
     }
-    if (at_rest(stop(p, 0u), y)) {
+    if (at_rest(stop(walls, 0u), y)) {
         on = 0u;
     }
     return on;
@@ -152,12 +164,12 @@ fn held_for(p: Params, w: Stop, omega: real, phase: vec2<real>, rest: State, s: 
 // stuck_step in src/integrate/impact.rs, except that the rest of the step
 // after a release (or a free departure) is one plain RK4 step held off the
 // stops (WGSL has no recursion; the force pulls away right after a release).
-fn stuck_step(p: Params, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {
-    let w = stop(p, j);
+fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {
+    let w = stop(walls, j);
     let rest = on_stop(w, y, real(0.0));
     if (pressing(p, w, phase, rest) <= real(0.0)) {
         let free = sub_step(p, omega, phase, rest, h);
-        return WallStep(clamp_to_stops(p, free.y), 0u, vec4<u32>(), false, 0u, NO_IMPACT, WALLS, h, phase);
+        return WallStep(clamp_to_stops(walls, free.y), 0u, vec4<u32>(), false, 0u, NO_IMPACT, WALLS, h, phase);
     }
     var out = held_for(p, w, omega, phase, rest, h);
     if (pressing(p, w, rotate(phase, cos_sin(omega * h)), out) <= real(0.0)) {
@@ -177,7 +189,7 @@ fn stuck_step(p: Params, j: u32, omega: real, phase: vec2<real>, y: State, h: re
         }
         let release = rotate(phase, cos_sin(omega * hi));
         let held = held_for(p, w, omega, phase, rest, hi);
-        out = clamp_to_stops(p, sub_step(p, omega, release, held, h - hi).y);
+        out = clamp_to_stops(walls, sub_step(p, omega, release, held, h - hi).y);
     }
     return WallStep(out, 0u, vec4<u32>(), false, min(2u, DIM), NO_IMPACT, WALLS, h, phase);
 }
@@ -194,10 +206,10 @@ fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Ste
 }
 
 // y moved back onto every stop it lies behind, moving towards it at most.
-fn clamp_to_stops(p: Params, y: State) -> State {
+fn clamp_to_stops(walls: Stops, y: State) -> State {
     var out = y;
     for (var j = 0u; j < WALLS; j = j + 1u) {
-        let w = stop(p, j);
+        let w = stop(walls, j);
         if (gap(w, out) > real(0.0)) {
             out = on_stop(w, out, min(speed(w, out), real(0.0)));
         }
@@ -211,7 +223,7 @@ fn clamp_to_stops(p: Params, y: State) -> State {
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
 // invocation is small: see loop_budget_exhausted).
-fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
+fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
     var done = real(0.0);
     var phase0 = phase;
     var y0 = y;
@@ -233,9 +245,9 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
         var hit = Hit(false, real(0.0), y0);
         for (var j = 0u; j < WALLS; j = j + 1u) {
 #ifdef IMPACT_LINEAR
-            let found = locate_linear(stop(p, j), y0, rest, y1);
+            let found = locate_linear(stop(walls, j), y0, rest, y1);
 #else
-            let found = locate_newton(p, omega, stop(p, j), phase0, y0, rest, y1);
+            let found = locate_newton(p, omega, stop(walls, j), phase0, y0, rest, y1);
 #endif
             if (found.found && (first == WALLS || found.s < hit.s)) {
                 first = j;
@@ -246,7 +258,7 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
             ending = 0u;
             break;
         }
-        let w = stop(p, first);
+        let w = stop(walls, first);
         let phase_c = rotate(phase0, cos_sin(omega * hit.s));
         let v = speed(w, hit.y);
         done = done + hit.s;
@@ -279,7 +291,7 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
     if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
         for (var j = 0u; j < WALLS; j = j + 1u) {
-            let w = stop(p, j);
+            let w = stop(walls, j);
             if (y0[w.coordinate] == w.position && pressing(p, w, phase0, y0) > real(0.0)) {
                 stuck = j;
                 ending = 1u;
@@ -293,7 +305,7 @@ fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real,
     if (ending == 0u) {
         return WallStep(y1, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
     }
-    return WallStep(clamp_to_stops(p, y1), impacts, crossings, true, rank_loss, slowest, WALLS, h, phase0);
+    return WallStep(clamp_to_stops(walls, y1), impacts, crossings, true, rank_loss, slowest, WALLS, h, phase0);
 }
 
 #ifdef IMPACT_LINEAR
