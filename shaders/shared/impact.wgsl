@@ -205,16 +205,93 @@ fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Ste
     return rk4_step(p, phase, cos_sin(real(0.5) * omega * s), y, s);
 }
 
-// y moved back onto every stop it lies behind, moving towards it at most.
+// The per-stop code below is written out per stop rather than as loops
+// over them, as in the step loop's tests: a loop of one pass (the seed's
+// single stop) still cost lavapipe 10% of the whole kernel's time.
+
+// y moved back onto a stop it lies behind, moving towards it at most.
+fn clamp_to(w: Stop, y: State) -> State {
+    if (gap(w, y) > real(0.0)) {
+        return on_stop(w, y, min(speed(w, y), real(0.0)));
+    }
+    return y;
+}
+
+// y moved back onto every stop it lies behind, in their order.
 fn clamp_to_stops(walls: Stops, y: State) -> State {
-    var out = y;
-    for (var j = 0u; j < WALLS; j = j + 1u) {
-        let w = stop(walls, j);
-        if (gap(w, out) > real(0.0)) {
-            out = on_stop(w, out, min(speed(w, out), real(0.0)));
-        }
+    var out = clamp_to(stop(walls, 0u), y);
+    if (WALLS > 1u) {
+        out = clamp_to(stop(walls, 1u), out);
+    }
+    if (WALLS > 2u) {
+        out = clamp_to(stop(walls, 2u), out);
+    }
+    if (WALLS > 3u) {
+        out = clamp_to(stop(walls, 3u), out);
     }
     return out;
+}
+
+// The first stop y lies on with a force pressing it there, or WALLS.
+fn pressed_on(p: Params, walls: Stops, phase: vec2<real>, y: State) -> u32 {
+    var on = WALLS;
+    if (WALLS > 3u && pressed(p, stop(walls, 3u), phase, y)) {
+        on = 3u;
+    }
+    if (WALLS > 2u && pressed(p, stop(walls, 2u), phase, y)) {
+        on = 2u;
+    }
+    if (WALLS > 1u && pressed(p, stop(walls, 1u), phase, y)) {
+        on = 1u;
+    }
+    if (pressed(p, stop(walls, 0u), phase, y)) {
+        on = 0u;
+    }
+    return on;
+}
+
+fn pressed(p: Params, w: Stop, phase: vec2<real>, y: State) -> bool {
+    return y[w.coordinate] == w.position && pressing(p, w, phase, y) > real(0.0);
+}
+
+// A stop's impact in the rest of a step, if any.
+fn locate(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+#ifdef IMPACT_LINEAR
+    return locate_linear(w, y0, h, y1);
+#else
+    return locate_newton(p, omega, w, phase0, y0, h, y1);
+#endif
+}
+
+// The first stop met, and where.
+struct Met {
+    hit: Hit,
+    stop: u32,
+}
+
+// `met`, or stop j's hit if found earlier (on a tie the lower index, as on
+// the CPU).
+fn earlier(met: Met, found: Hit, j: u32) -> Met {
+    if (found.found && (met.stop == WALLS || found.s < met.hit.s)) {
+        return Met(found, j);
+    }
+    return met;
+}
+
+// The first stop met in the step [0, h] from (phase0, y0) to y1 (WALLS:
+// none).
+fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
+    var met = earlier(Met(Hit(false, real(0.0), y0), WALLS), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
+    if (WALLS > 1u) {
+        met = earlier(met, locate(p, omega, stop(walls, 1u), phase0, y0, h, y1), 1u);
+    }
+    if (WALLS > 2u) {
+        met = earlier(met, locate(p, omega, stop(walls, 2u), phase0, y0, h, y1), 2u);
+    }
+    if (WALLS > 3u) {
+        met = earlier(met, locate(p, omega, stop(walls, 3u), phase0, y0, h, y1), 3u);
+    }
+    return met;
 }
 
 // Applies every impact inside the step [0, h] from (phase, y), whose plain
@@ -239,21 +316,9 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
         let rest = h - done;
-        // The first stop met in the rest of the step (on a tie the lower
-        // index, as on the CPU).
-        var first = WALLS;
-        var hit = Hit(false, real(0.0), y0);
-        for (var j = 0u; j < WALLS; j = j + 1u) {
-#ifdef IMPACT_LINEAR
-            let found = locate_linear(stop(walls, j), y0, rest, y1);
-#else
-            let found = locate_newton(p, omega, stop(walls, j), phase0, y0, rest, y1);
-#endif
-            if (found.found && (first == WALLS || found.s < hit.s)) {
-                first = j;
-                hit = found;
-            }
-        }
+        let met = first_met(p, walls, omega, phase0, y0, rest, y1);
+        let first = met.stop;
+        let hit = met.hit;
         if (first == WALLS) {
             ending = 0u;
             break;
@@ -290,13 +355,9 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
     }
     if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
-        for (var j = 0u; j < WALLS; j = j + 1u) {
-            let w = stop(walls, j);
-            if (y0[w.coordinate] == w.position && pressing(p, w, phase0, y0) > real(0.0)) {
-                stuck = j;
-                ending = 1u;
-                break;
-            }
+        stuck = pressed_on(p, walls, phase0, y0);
+        if (stuck < WALLS) {
+            ending = 1u;
         }
     }
     if (ending == 1u) {
