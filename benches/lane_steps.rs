@@ -19,7 +19,9 @@
 //!    reach (kernels without impact code), on every path;
 //! 7. models: the seed's oscillator built in against the same system written
 //!    as a model, and with its wall written as a general event, on the CPU
-//!    path (and the GPU where it runs them).
+//!    path (and the GPU where it runs them); then the models with several
+//!    stops or a stop on another state (the impact pair, the two-mass
+//!    chain) on the same sweep.
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
@@ -396,7 +398,10 @@ fn models(repeats: usize) {
 
 fn models_on(backend: &str, repeats: usize) {
     let (values, steps, transient, iterations) = (4096, 200, 20, 20);
-    let lane_steps = (values * steps * (transient + 5 * iterations)) as f64;
+    // The reference in the transient, then it and 2D copies (central
+    // differences) while averaging.
+    let lane_steps =
+        |dimension: usize| (values * steps * (transient + (1 + 2 * dimension) * iterations)) as f64;
     println!(
         "\nModels on the {backend} path ({values} values, {steps} steps/period, transient {transient}, iterations {iterations}, f64; {} CPU threads; medians of {repeats} interleaved rounds after a warm-up; the ratio is the median of the rounds' ratios)\n",
         rayon::current_num_threads()
@@ -425,6 +430,22 @@ fn models_on(backend: &str, repeats: usize) {
             "model, wall as a general event",
             format!("{general}\n{rest}"),
         ),
+        // Not the same system: their own lane-steps per second, their time
+        // against the built-in's for scale.
+        (
+            "model impact-pair (two stops on x)",
+            format!(
+                "model = {:?}\n{rest}",
+                format!("{}/models/impact-pair.toml", env!("CARGO_MANIFEST_DIR"))
+            ),
+        ),
+        (
+            "model two-mass-chain (4 states, a stop on x2)",
+            format!(
+                "model = {:?}\n{rest}",
+                format!("{}/models/two-mass-chain.toml", env!("CARGO_MANIFEST_DIR"))
+            ),
+        ),
     ];
     let scenes: Vec<(&str, lyapsweep::Scene)> = scenes
         .iter()
@@ -439,7 +460,7 @@ fn models_on(backend: &str, repeats: usize) {
     // the machine's load drifts (shared cores), and a ratio of medians
     // taken minutes apart would carry the drift.
     let timed = time_interleaved(&scenes.iter().map(|(_, s)| s).collect::<Vec<_>>(), repeats);
-    for ((name, _), timing) in scenes.iter().zip(timed) {
+    for ((name, scene), timing) in scenes.iter().zip(timed) {
         let Some(t) = timing else {
             println!("| {name} | – | – | – | – |");
             continue;
@@ -448,7 +469,7 @@ fn models_on(backend: &str, repeats: usize) {
             "| {name} | {:.3} | {} | {:.3e} | {:.2}× |",
             t.seconds,
             t.device.map_or("–".into(), |d| format!("{d:.3}")),
-            lane_steps / t.seconds,
+            lane_steps(scene.system.dimension()) / t.seconds,
             t.speed_vs_first
         );
     }

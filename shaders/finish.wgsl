@@ -50,11 +50,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let step_plus = deltas[lane * 2u * DIM + i];
             let step_minus = deltas[lane * 2u * DIM + DIM + i];
             flags = flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED));
-            // A copy that met the wall a different number of times than the
+            // A copy that met a stop a different number of times than the
             // reference crossed a grazing boundary: its difference is O(1)
             // wrong. Difference on the other side, where the map is smooth.
-            let same_plus = counts[plus].y == cr.y && (counts[plus].z & FLAG_BEHIND_WALL) == 0u;
-            let same_minus = counts[minus].y == cr.y && (counts[minus].z & FLAG_BEHIND_WALL) == 0u;
+            let same_plus = same_impacts(r, plus) && (counts[plus].z & FLAG_BEHIND_WALL) == 0u;
+            let same_minus = same_impacts(r, minus) && (counts[minus].z & FLAG_BEHIND_WALL) == 0u;
             var step = step_plus + step_minus;
             if (!same_plus && same_minus) {
                 plus = r;
@@ -94,7 +94,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var k = 0u; k < DIM; k = k + 1u) {
             scale = max(scale, abs(y[k]));
         }
-        summary[slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
+        summary[SUMMARY_STRIDE * slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
+#ifdef WALL
+        summary[SUMMARY_STRIDE * slot + 1u] = crossings[r];
+#endif
         if (last) {
             cr.w = cr.w + 1u;
         }
@@ -116,6 +119,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     cr.y = 0u;
     cr.z = flags & FLAG_STICKY;
     counts[r] = cr;
+#ifdef WALL
+    crossings[r] = vec4<u32>();
+#endif
 #ifdef LYAPUNOV
     // δ relative to the state's size, as on the CPU: δ·max(1, ‖y‖∞).
     var size = real(1.0);
@@ -134,34 +140,49 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #endif
         restart((r + 1u + i) * TRAJ_STRIDE, yi, phase, comp);
         counts[r + 1u + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(p, yi), 0u);
+#ifdef WALL
+        crossings[r + 1u + i] = vec4<u32>();
+#endif
 #ifdef CENTRAL
         var ym = y;
         ym[i] = y[i] - delta;
         deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];
         restart((r + 1u + DIM + i) * TRAJ_STRIDE, ym, phase, comp);
         counts[r + 1u + DIM + i] = vec4<u32>(cr.x, 0u, cr.z | behind_wall(p, ym), 0u);
+#ifdef WALL
+        crossings[r + 1u + DIM + i] = vec4<u32>();
+#endif
 #endif
     }
 #endif
 }
 
+// Whether trajectory t met each stop as often as the reference r (twin of
+// `same` in method::jacobian).
+fn same_impacts(r: u32, t: u32) -> bool {
 #ifdef WALL
-// A copy's departure from the reference r at the wall: the relative
+    return all(crossings[t] == crossings[r]);
+#else
+    return counts[t].y == counts[r].y;
+#endif
+}
+
+#ifdef WALL
+// A copy's departure from the reference r at the stops: the relative
 // difference of their slowest impact speeds, or a large value when they met
-// the wall a different number of times (0 for the reference itself, or
+// a stop a different number of times (0 for the reference itself, or
 // without impacts).
 fn departure(r: u32, t: u32) -> f32 {
-    let impacts = counts[r].y;
     if (t == r) {
         return 0.0f;
     }
     if ((counts[t].z & FLAG_BEHIND_WALL) != 0u) {
         return 1e30f;
     }
-    if (impacts == 0u) {
+    if (counts[r].y == 0u) {
         return 0.0f;
     }
-    if (counts[t].y != impacts) {
+    if (!same_impacts(r, t)) {
         return 1e30f;
     }
     let vr = traj[r * TRAJ_STRIDE + TRAJ_SLOWEST];
@@ -170,11 +191,15 @@ fn departure(r: u32, t: u32) -> f32 {
 }
 #endif
 
-// FLAG_BEHIND_WALL for a copy seeded at y, else 0 (twin of System::admits).
+// FLAG_BEHIND_WALL for a copy seeded at y behind a stop, else 0 (twin of
+// System::admits).
 fn behind_wall(p: Params, y: State) -> u32 {
 #ifdef WALL
-    if (y.x > wall_position(p)) {
-        return FLAG_BEHIND_WALL;
+    let walls = stops_of(p);
+    for (var j = 0u; j < WALLS; j = j + 1u) {
+        if (gap(stop(walls, j), y) > real(0.0)) {
+            return FLAG_BEHIND_WALL;
+        }
     }
 #endif
     return 0u;

@@ -49,10 +49,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let end = min(c.x + control.chunk_steps, part_end);
 #ifdef WALL
     var slowest = traj[base + TRAJ_SLOWEST];
-    let xw = wall_position(p);
+    let walls = stops_of(p);
     var k = c.x;
     // The hot loop only steps and detects: a step whose plain image reaches
-    // the wall or turns back inside it, or a mass at rest on the wall, ends
+    // a stop or turns back inside it, or a mass at rest on a stop, ends
     // it, and the resolution path below takes that one step and goes back.
     // With the resolution inlined into every step, lavapipe ran the kernel
     // 21 times slower than the kernel without a wall, even when no impact
@@ -62,7 +62,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var comp1 = comp;
         var pending = false;
         for (; k < end; k = k + 1u) {
-            if (at_rest_on(xw, y)) {
+            if (resting_on(walls, y) < WALLS) {
                 pending = true;
                 break;
             }
@@ -76,7 +76,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             y1 = y + inc.y;
 #endif
-            if (y1.x > xw || (y.y > real(0.0) && y1.y < real(0.0))) {
+            if (reaches_a_stop(walls, y, y1)) {
                 pending = true;
                 break;
             }
@@ -87,17 +87,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (!pending) {
             break;
         }
-        // Step k meets the wall (or starts at rest on it).
+        // Step k meets a stop (or starts at rest on one).
         let next_phase = rotate(rotate(phase, half), half);
-        // At rest on the wall, from the step's start or from an impact
-        // inside it: stuck_step takes (the rest of) the step, called here
-        // only (see resolve_impacts).
-        var sticks = at_rest_on(xw, y);
+        // At rest on a stop, from the step's start or from an impact inside
+        // it: stuck_step takes (the rest of) the step, called here only
+        // (see resolve_impacts).
+        var stuck = resting_on(walls, y);
         var rest_at = real(0.0);
         var rest_phase = phase;
-        if (!sticks) {
-            let w = resolve_impacts(p, omega, phase, y, h, y1);
-            // Whatever the wall did (an impact, a rest, a departure from
+        if (stuck == WALLS) {
+            let w = resolve_impacts(p, walls, omega, phase, y, h, y1);
+            // Whatever the stops did (an impact, a rest, a departure from
             // rest), the step ends where resolve_impacts says; the
             // compensation belongs to the plain step it replaced.
             if (any(w.y != y1)) {
@@ -108,17 +108,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 comp = comp1;
             }
             c.y = c.y + w.impacts;
+            // Straight to the buffer: a vector kept live across the step
+            // loop would cost every step (registers), for a rare event.
+            crossings[t] = crossings[t] + w.crossings;
             slowest = min(slowest, w.slowest);
             if (w.chattering) {
                 c.z = c.z | FLAG_CHATTERING;
             }
             c.z = c.z | rank_flags(w.rank_loss);
-            sticks = w.sticks;
+            stuck = w.stuck;
             rest_at = w.rest_at;
             rest_phase = w.rest_phase;
         }
-        if (sticks) {
-            let w = stuck_step(p, omega, rest_phase, h - rest_at);
+        if (stuck < WALLS) {
+            let w = stuck_step(p, walls, stuck, omega, rest_phase, y, h - rest_at);
             y = w.y;
             comp = State();
             c.z = c.z | rank_flags(w.rank_loss);

@@ -587,7 +587,8 @@ fn model_check_prints_the_equations_the_sum_rule_the_events_and_the_kernel() {
         "div F = (-2) * zeta (a function of the parameters)",
         "+ 2·ln(e) per impact on 'right stop'",
         "'left stop': x >= -gap, velocity v, reset v -> -(e)·v",
-        "GPU: not run on the GPU kernels: 2 stops",
+        "GPU: runs on the kernels; the generated system file:",
+        "const WALLS: u32 = 2u;",
     ] {
         assert!(text.contains(line), "{line:?} not in:\n{text}");
     }
@@ -599,7 +600,7 @@ fn model_check_prints_the_equations_the_sum_rule_the_events_and_the_kernel() {
         "{text}"
     );
     assert!(
-        text.contains("fn wall_position(p: Params) -> real"),
+        text.contains("fn wall_position(p: Params) -> vec4<real>"),
         "{text}"
     );
     let lorenz = model_check(std::path::Path::new(&model_path("lorenz.toml")));

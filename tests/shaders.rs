@@ -346,8 +346,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("forced-pendulum.toml", true),
         // A switch the motion slides on: CPU only so far.
         ("friction-belt.toml", false),
-        // Two stops; the kernels know one wall.
-        ("impact-pair.toml", false),
+        // Two stops on x, from below and from above.
+        ("impact-pair.toml", true),
         // Poincaré sections: the kernels run period maps.
         ("lorenz.toml", false),
         ("rossler.toml", false),
@@ -355,7 +355,7 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         // A switch: CPU only so far.
         ("soft-stop.toml", false),
         // A stop on the third of four states.
-        ("two-mass-chain.toml", false),
+        ("two-mass-chain.toml", true),
         ("van-der-pol.toml", true),
         // An event that moves with the clock: CPU only so far.
         ("vibrating-table.toml", false),

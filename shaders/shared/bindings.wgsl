@@ -49,10 +49,11 @@ override WORKGROUP_SIZE: u32 = 64u;
 // counts[t]: (step within the period, impacts this iteration, flags, iteration).
 const FLAG_CHATTERING: u32 = 1u;
 const FLAG_NONFINITE: u32 = 2u;
-// The iteration collapsed one dimension (an impact with e = 0), or all of
-// them (sticking): see IterationStats::rank_loss.
+// The iteration collapsed one dimension (an impact with e = 0), or two
+// (sticking: the mass's position and velocity; all of them with two
+// states): see IterationStats::rank_loss.
 const FLAG_RANK_ONE: u32 = 4u;
-const FLAG_RANK_ALL: u32 = 8u;
+const FLAG_RANK_TWO: u32 = 8u;
 // The adapter cut this dispatch's loops short (see loop_budget_exhausted):
 // the host redoes the batch with shorter dispatches.
 const FLAG_TRUNCATED: u32 = 16u;
@@ -63,8 +64,8 @@ const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED;
 const FLAG_BEHIND_WALL: u32 = 32u;
 
 fn rank_flags(rank_loss: u32) -> u32 {
-    if (rank_loss >= DIM) {
-        return FLAG_RANK_ALL;
+    if (rank_loss >= 2u) {
+        return FLAG_RANK_TWO;
     }
     return select(0u, FLAG_RANK_ONE, rank_loss > 0u);
 }
@@ -74,8 +75,17 @@ fn rank_flags(rank_loss: u32) -> u32 {
 @group(0) @binding(2) var<storage, read_write> traj: array<real>;
 @group(0) @binding(3) var<storage, read_write> counts: array<vec4<u32>>;
 // Per ring slot and lane, a slot per part of an iteration: (impacts, flags,
-// bits of the f32 max |y|, bits of the f32 nonlinearity).
+// bits of the f32 max |y|, bits of the f32 nonlinearity), then with stops
+// the impacts on each (SUMMARY_STRIDE vectors per slot).
 @group(0) @binding(4) var<storage, read_write> summary: array<vec4<u32>>;
+#ifdef WALL
+const SUMMARY_STRIDE: u32 = 2u;
+// Per trajectory: its impacts on each stop in the current part of an
+// iteration (components past WALLS stay 0); counts[t].y is their sum.
+@group(0) @binding(8) var<storage, read_write> crossings: array<vec4<u32>>;
+#else
+const SUMMARY_STRIDE: u32 = 1u;
+#endif
 #ifdef LYAPUNOV
 // Per lane: the perturbation actually taken per copy, (x_i + δ) - x_i
 // (then x_i - (x_i - δ) for central differences).

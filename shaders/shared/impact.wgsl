@@ -1,70 +1,197 @@
-// Wall impacts inside an RK4 step, twin of src/integrate/impact.rs: split
-// the step at the impact, reset V -> -e·V with X = X_w exactly, integrate the
-// rest, look again. The system file provides wall_position and
-// wall_restitution; coordinate 0 is the position, 1 its velocity.
+// Stops inside an RK4 step, twin of src/integrate/impact.rs: split the step
+// at the impact, reset V -> -e·V with X = X_w exactly, integrate the rest,
+// look again (several impacts per step, on one stop or several, in the
+// order they happen).
+//
+// Stop j of WALLS (1 to 4) acts on coordinate WALL_COORDINATE[j] (its
+// position X), whose rate is coordinate WALL_VELOCITY[j] (V = X'), from
+// side WALL_SIDE[j]: +1 confines X <= X_w (a stop approached from below),
+// -1 X >= X_w. The system file gives those constants and, per stop as the
+// components of a vec4, wall_position(p) and wall_restitution(p) (the
+// components past WALLS are never read).
 
 const MAX_IMPACTS_PER_STEP: u32 = 64u;
 // See ACCUMULATION_FRACTION in src/integrate/impact.rs.
 const ACCUMULATION_FRACTION: f32 = 1e-3;
 
+// Twin of integrate::impact::Wall.
+struct Stop {
+    position: real,
+    restitution: real,
+    coordinate: u32,
+    velocity: u32,
+    side: real,
+}
+
+// Every stop's position and restitution at a lane's parameters (twin of
+// walls_at in src/system/model.rs), computed once per invocation: the step
+// loop does not recompute a position that is an expression of parameters.
+struct Stops {
+    position: vec4<real>,
+    restitution: vec4<real>,
+}
+
+fn stops_of(p: Params) -> Stops {
+    return Stops(wall_position(p), wall_restitution(p));
+}
+
+fn stop(walls: Stops, j: u32) -> Stop {
+    return Stop(walls.position[j], walls.restitution[j], WALL_COORDINATE[j], WALL_VELOCITY[j], WALL_SIDE[j]);
+}
+
+// How far y lies beyond the stop (> 0: behind it).
+fn gap(w: Stop, y: State) -> real {
+    return w.side * (y[w.coordinate] - w.position);
+}
+
+// The speed towards the stop (> 0: approaching).
+fn speed(w: Stop, y: State) -> real {
+    return w.side * y[w.velocity];
+}
+
+// y moved onto the stop with approach speed v.
+fn on_stop(w: Stop, y: State, v: real) -> State {
+    var out = y;
+    out[w.coordinate] = w.position;
+    out[w.velocity] = w.side * v;
+    return out;
+}
+
+// Whether a step from y to y1 may meet the stop: it ends behind it, or the
+// velocity turns inside it (an excursion between the ends).
+fn reaches(w: Stop, y: State, y1: State) -> bool {
+    return gap(w, y1) > real(0.0) || (speed(w, y) > real(0.0) && speed(w, y1) < real(0.0));
+}
+
+// At rest on the stop: the sticking state, X = X_w and V = 0.
+fn at_rest(w: Stop, y: State) -> bool {
+    return y[w.coordinate] == w.position && y[w.velocity] == real(0.0);
+}
+
+// The step loop's two tests, over every stop. Written out per stop rather
+// than as a loop: WALLS is a constant, so the branches of absent stops fold
+// away, and a loop inside the step loop would cost every step on lavapipe
+// (docs/BENCHMARKS.md, "Impacts off the hot path").
+fn reaches_a_stop(walls: Stops, y: State, y1: State) -> bool {
+    var hit = reaches(stop(walls, 0u), y, y1);
+    if (WALLS > 1u) {
+        hit = hit || reaches(stop(walls, 1u), y, y1);
+    }
+    if (WALLS > 2u) {
+        hit = hit || reaches(stop(walls, 2u), y, y1);
+    }
+    if (WALLS > 3u) {
+        hit = hit || reaches(stop(walls, 3u), y, y1);
+    }
+    return hit;
+}
+
+// The first stop y rests on, or WALLS (twin of resting_on).
+fn resting_on(walls: Stops, y: State) -> u32 {
+    var on = WALLS;
+    if (WALLS > 3u && at_rest(stop(walls, 3u), y)) {
+        on = 3u;
+    }
+    if (WALLS > 2u && at_rest(stop(walls, 2u), y)) {
+        on = 2u;
+    }
+    if (WALLS > 1u && at_rest(stop(walls, 1u), y)) {
+        on = 1u;
+    }
+    if (at_rest(stop(walls, 0u), y)) {
+        on = 0u;
+    }
+    return on;
+}
+
 struct WallStep {
     y: State,
     impacts: u32,
+    // Of these, the impacts on each stop.
+    crossings: vec4<u32>,
     chattering: bool,
-    // Dimensions collapsed: 1 after an impact with e = 0, 2 after sticking.
+    // Dimensions collapsed: 1 after an impact with e = 0, 2 (all of them
+    // with two states) after sticking.
     rank_loss: u32,
     // The slowest approach speed of the step's impacts (NO_IMPACT if none).
     slowest: real,
-    // From resolve_impacts: the mass came to rest on the wall `rest_at`
-    // into the step, at `rest_phase`, and stuck_step takes the rest of the
-    // step from there (`y` is then meaningless).
-    sticks: bool,
+    // From resolve_impacts: the mass came to rest on stop `stuck` (WALLS:
+    // it did not) `rest_at` into the step, at `rest_phase`, in the state
+    // `y` (its stop's reset not applied), and stuck_step takes the rest of
+    // the step from there.
+    stuck: u32,
     rest_at: real,
     rest_phase: vec2<real>,
 }
 
-// At rest on the wall: the sticking state, X = X_w and V = 0.
-fn at_rest_on(xw: real, y: State) -> bool {
-    return y.x == xw && y.y == real(0.0);
+// The acceleration towards the stop at rest on it (y moved onto it at
+// speed 0) at `phase`: > 0 presses the mass into the stop.
+fn pressing(p: Params, w: Stop, phase: vec2<real>, y: State) -> real {
+    return w.side * rhs(p, phase, on_stop(w, y, real(0.0)))[w.velocity];
 }
 
-// The acceleration at rest on the wall at `phase`: > 0 presses the mass into
-// the wall.
-fn pressing(p: Params, xw: real, phase: vec2<real>) -> real {
-    var rest = State();
-    rest.x = xw;
-    return rhs(p, phase, rest).y;
+// The flow with a mass held at rest on the stop (Held in
+// src/integrate/impact.rs): its position and velocity do not move.
+fn held_rhs(p: Params, w: Stop, phase: vec2<real>, y: State) -> State {
+    var f = rhs(p, phase, y);
+    f[w.coordinate] = real(0.0);
+    f[w.velocity] = real(0.0);
+    return f;
 }
 
-// A step of size h from rest on the wall: the mass stays while the force
-// presses it there and leaves when the force reverses (bisection for the
-// release). Twin of stuck_step in src/integrate/impact.rs, except that after
-// a release the rest of the step is one plain RK4 step held off the wall
-// (WGSL has no recursion; the force pulls away right after a release).
-fn stuck_step(p: Params, omega: real, phase: vec2<real>, h: real) -> WallStep {
-    let xw = wall_position(p);
-    var rest = State();
-    rest.x = xw;
-    if (pressing(p, xw, phase) <= real(0.0)) {
-        let free = sub_step(p, omega, phase, rest, h);
-        return WallStep(clamp_to_wall(xw, free.y), 0u, false, 0u, NO_IMPACT, false, h, phase);
+// The state held on the stop for s from `rest` at `phase`: `rest` itself
+// with two states, else one RK4 step of the held flow for the others
+// (rk4_step's arithmetic, as the CPU's rk4::step of Held).
+fn held_for(p: Params, w: Stop, omega: real, phase: vec2<real>, rest: State, s: real) -> State {
+    if (DIM == 2u) {
+        return rest;
     }
-    var out = rest;
-    if (pressing(p, xw, rotate(phase, cos_sin(omega * h))) <= real(0.0)) {
+    let half = cos_sin(real(0.5) * omega * s);
+    let mid = rotate(phase, half);
+    let end = rotate(mid, half);
+    let h2 = real(0.5) * s;
+    let k1 = held_rhs(p, w, phase, rest);
+    let k2 = held_rhs(p, w, mid, rest + h2 * k1);
+    let k3 = held_rhs(p, w, mid, rest + h2 * k2);
+    let k4 = held_rhs(p, w, end, rest + s * k3);
+    let sixth = s / real(6.0);
+    return rest + sixth * (k1 + real(2.0) * (k2 + k3) + k4);
+}
+
+// A step of size h from rest on stop j (y moved onto it): the mass stays
+// while the force presses it there (the other coordinates move on) and
+// leaves when the force reverses (bisection for the release). Twin of
+// stuck_step in src/integrate/impact.rs, except that the rest of the step
+// after a release (or a free departure) is one plain RK4 step held off the
+// stops (WGSL has no recursion; the force pulls away right after a release).
+fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {
+    let w = stop(walls, j);
+    let rest = on_stop(w, y, real(0.0));
+    if (pressing(p, w, phase, rest) <= real(0.0)) {
+        let free = sub_step(p, omega, phase, rest, h);
+        return WallStep(clamp_to_stops(walls, free.y), 0u, vec4<u32>(), false, 0u, NO_IMPACT, WALLS, h, phase);
+    }
+    var out = held_for(p, w, omega, phase, rest, h);
+    if (pressing(p, w, rotate(phase, cos_sin(omega * h)), out) <= real(0.0)) {
         var lo = real(0.0);
         var hi = h;
         for (var k = 0u; k < 64u; k = k + 1u) {
             let mid = real(0.5) * (lo + hi);
-            if (pressing(p, xw, rotate(phase, cos_sin(omega * mid))) > real(0.0)) {
+            let at = rotate(phase, cos_sin(omega * mid));
+            if (pressing(p, w, at, held_for(p, w, omega, phase, rest, mid)) > real(0.0)) {
                 lo = mid;
             } else {
                 hi = mid;
             }
+            if (hi - lo <= EPSILON * h) {
+                break;
+            }
         }
         let release = rotate(phase, cos_sin(omega * hi));
-        out = clamp_to_wall(xw, sub_step(p, omega, release, rest, h - hi).y);
+        let held = held_for(p, w, omega, phase, rest, hi);
+        out = clamp_to_stops(walls, sub_step(p, omega, release, held, h - hi).y);
     }
-    return WallStep(out, 0u, false, DIM, NO_IMPACT, false, h, phase);
+    return WallStep(out, 0u, vec4<u32>(), false, min(2u, DIM), NO_IMPACT, WALLS, h, phase);
 }
 
 struct Hit {
@@ -78,113 +205,198 @@ fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Ste
     return rk4_step(p, phase, cos_sin(real(0.5) * omega * s), y, s);
 }
 
-fn clamp_to_wall(xw: real, y: State) -> State {
-    var out = y;
-    if (out.x > xw) {
-        out.x = xw;
-        out.y = min(out.y, real(0.0));
+// The per-stop code below is written out per stop rather than as loops
+// over them, as in the step loop's tests: a loop of one pass (the seed's
+// single stop) still cost lavapipe 10% of the whole kernel's time.
+
+// y moved back onto a stop it lies behind, moving towards it at most.
+fn clamp_to(w: Stop, y: State) -> State {
+    if (gap(w, y) > real(0.0)) {
+        return on_stop(w, y, min(speed(w, y), real(0.0)));
+    }
+    return y;
+}
+
+// y moved back onto every stop it lies behind, in their order.
+fn clamp_to_stops(walls: Stops, y: State) -> State {
+    var out = clamp_to(stop(walls, 0u), y);
+    if (WALLS > 1u) {
+        out = clamp_to(stop(walls, 1u), out);
+    }
+    if (WALLS > 2u) {
+        out = clamp_to(stop(walls, 2u), out);
+    }
+    if (WALLS > 3u) {
+        out = clamp_to(stop(walls, 3u), out);
     }
     return out;
 }
 
+// The first stop y lies on with a force pressing it there, or WALLS.
+fn pressed_on(p: Params, walls: Stops, phase: vec2<real>, y: State) -> u32 {
+    var on = WALLS;
+    if (WALLS > 3u && pressed(p, stop(walls, 3u), phase, y)) {
+        on = 3u;
+    }
+    if (WALLS > 2u && pressed(p, stop(walls, 2u), phase, y)) {
+        on = 2u;
+    }
+    if (WALLS > 1u && pressed(p, stop(walls, 1u), phase, y)) {
+        on = 1u;
+    }
+    if (pressed(p, stop(walls, 0u), phase, y)) {
+        on = 0u;
+    }
+    return on;
+}
+
+fn pressed(p: Params, w: Stop, phase: vec2<real>, y: State) -> bool {
+    return y[w.coordinate] == w.position && pressing(p, w, phase, y) > real(0.0);
+}
+
+// A stop's impact in the rest of a step, if any.
+fn locate(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+#ifdef IMPACT_LINEAR
+    return locate_linear(w, y0, h, y1);
+#else
+    return locate_newton(p, omega, w, phase0, y0, h, y1);
+#endif
+}
+
+// The first stop met, and where.
+struct Met {
+    hit: Hit,
+    stop: u32,
+}
+
+// `met`, or stop j's hit if found earlier (on a tie the lower index, as on
+// the CPU).
+fn earlier(met: Met, found: Hit, j: u32) -> Met {
+    if (found.found && (met.stop == WALLS || found.s < met.hit.s)) {
+        return Met(found, j);
+    }
+    return met;
+}
+
+// The first stop met in the step [0, h] from (phase0, y0) to y1 (WALLS:
+// none).
+fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
+    var met = earlier(Met(Hit(false, real(0.0), y0), WALLS), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
+    if (WALLS > 1u) {
+        met = earlier(met, locate(p, omega, stop(walls, 1u), phase0, y0, h, y1), 1u);
+    }
+    if (WALLS > 2u) {
+        met = earlier(met, locate(p, omega, stop(walls, 2u), phase0, y0, h, y1), 2u);
+    }
+    if (WALLS > 3u) {
+        met = earlier(met, locate(p, omega, stop(walls, 3u), phase0, y0, h, y1), 3u);
+    }
+    return met;
+}
+
 // Applies every impact inside the step [0, h] from (phase, y), whose plain
-// RK4 image y1 reached the wall or turned back inside the step; a mass that
-// comes to rest is handed back with `sticks`, and the integrate kernel's
+// RK4 image y1 reached a stop or turned back inside the step; a mass that
+// comes to rest is handed back with `stuck`, and the integrate kernel's
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
 // invocation is small: see loop_budget_exhausted).
-fn resolve_impacts(p: Params, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
-    let xw = wall_position(p);
-    let e = wall_restitution(p);
+fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
     var done = real(0.0);
     var phase0 = phase;
     var y0 = y;
     var y1 = y1_plain;
     var impacts = 0u;
+    var crossings = vec4<u32>();
     var slowest = NO_IMPACT;
-    // How the loop ended: 0 no further impact in the step, 1 at rest on the
-    // wall (stuck_step takes the rest of the step from phase0), 2 out of
-    // impacts.
+    // How the loop ended: 0 no further impact in the step, 1 at rest on
+    // stop `stuck` (stuck_step takes the rest of the step from phase0), 2
+    // out of impacts.
     var ending = 2u;
+    var stuck = WALLS;
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
         let rest = h - done;
-#ifdef IMPACT_LINEAR
-        let hit = locate_linear(xw, y0, rest, y1);
-#else
-        let hit = locate_newton(p, omega, xw, phase0, y0, rest, y1);
-#endif
-        if (!hit.found) {
+        let met = first_met(p, walls, omega, phase0, y0, rest, y1);
+        let first = met.stop;
+        let hit = met.hit;
+        if (first == WALLS) {
             ending = 0u;
             break;
         }
+        let w = stop(walls, first);
         let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-        var yc = hit.y;
-        if (yc.y <= real(0.0)) {
-            // Arriving at rest, pressed into the wall: it sticks.
-            done = done + hit.s;
-            phase0 = phase_c;
+        let v = speed(w, hit.y);
+        done = done + hit.s;
+        phase0 = phase_c;
+        if (v <= real(0.0)) {
+            // Arriving at rest, pressed into the stop: it sticks.
+            y0 = hit.y;
+            stuck = first;
             ending = 1u;
             break;
         }
         impacts = impacts + 1u;
-        slowest = min(slowest, yc.y);
-        let rebound = e * yc.y;
-        let push = pressing(p, xw, phase_c);
-        done = done + hit.s;
-        phase0 = phase_c;
+        crossings[first] = crossings[first] + 1u;
+        slowest = min(slowest, v);
+        let e = w.restitution;
+        let rebound = e * v;
+        let push = pressing(p, w, phase_c, hit.y);
         // e = 0 stops the mass dead; bounces that would accumulate within a
         // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
         if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
             rank_loss = 1u;
+            y0 = hit.y;
+            stuck = first;
             ending = 1u;
             break;
         }
-        yc.x = xw;
-        yc.y = -rebound;
-        y0 = yc;
+        y0 = on_stop(w, hit.y, -rebound);
         y1 = sub_step(p, omega, phase0, y0, h - done).y;
     }
-    if (ending == 2u && y0.x == xw && pressing(p, xw, phase0) > real(0.0)) {
+    if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
-        ending = 1u;
+        stuck = pressed_on(p, walls, phase0, y0);
+        if (stuck < WALLS) {
+            ending = 1u;
+        }
     }
     if (ending == 1u) {
-        return WallStep(y0, impacts, false, rank_loss, slowest, true, done, phase0);
+        return WallStep(y0, impacts, crossings, false, rank_loss, slowest, stuck, done, phase0);
     }
     if (ending == 0u) {
-        return WallStep(y1, impacts, false, rank_loss, slowest, false, h, phase0);
+        return WallStep(y1, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
     }
-    return WallStep(clamp_to_wall(xw, y1), impacts, true, rank_loss, slowest, false, h, phase0);
+    return WallStep(clamp_to_stops(walls, y1), impacts, crossings, true, rank_loss, slowest, WALLS, h, phase0);
 }
 
 #ifdef IMPACT_LINEAR
 // The paper's location: linear interpolation between the step's ends.
-fn locate_linear(xw: real, y0: State, h: real, y1: State) -> Hit {
-    if (y1.x <= xw) {
+fn locate_linear(w: Stop, y0: State, h: real, y1: State) -> Hit {
+    if (gap(w, y1) <= real(0.0)) {
         return Hit(false, real(0.0), y0);
     }
-    let theta = clamp((xw - y0.x) / (y1.x - y0.x), real(0.0), real(1.0));
+    let c = w.coordinate;
+    let theta = clamp((w.position - y0[c]) / (y1[c] - y0[c]), real(0.0), real(1.0));
     return Hit(true, theta * h, y0 + theta * (y1 - y0));
 }
 
 #else
 // Re-steps RK4 to the impact (Newton from the Hermite root), so the impact
-// lies on the RK4 solution itself; also finds an excursion past the wall
+// lies on the RK4 solution itself; also finds an excursion past the stop
 // between the step's ends.
-fn locate_newton(p: Params, omega: real, xw: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
-    let herm = hermite_new(y0.x - xw, y0.y, y1.x - xw, y1.y, h);
+fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+    let herm = hermite_new(gap(w, y0), speed(w, y0), gap(w, y1), speed(w, y1), h);
     var hi: real;
     var guess: real;
-    if (y1.x > xw) {
+    if (gap(w, y1) > real(0.0)) {
         hi = h;
         guess = hermite_first_root(herm, real(0.0), real(1.0));
-    } else if (y0.y > real(0.0) && y1.y < real(0.0)) {
+    } else if (speed(w, y0) > real(0.0) && speed(w, y1) < real(0.0)) {
         let peak = hermite_peak(herm);
         if (peak < real(0.0)) {
             return Hit(false, real(0.0), y0);
         }
-        if (sub_step(p, omega, phase0, y0, peak * h).y.x <= xw) {
+        if (gap(w, sub_step(p, omega, phase0, y0, peak * h).y) <= real(0.0)) {
             return Hit(false, real(0.0), y0);
         }
         hi = peak * h;
@@ -192,13 +404,13 @@ fn locate_newton(p: Params, omega: real, xw: real, phase0: vec2<real>, y0: State
     } else {
         return Hit(false, real(0.0), y0);
     }
-    // Safeguarded Newton on g(s) = X(RK4(y0, s)) - X_w, g'(s) ≈ V(s), in [0, hi].
-    let tolerance = real(4.0) * EPSILON * max(abs(xw), real(1.0));
+    // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in [0, hi].
+    let tolerance = real(4.0) * EPSILON * max(abs(w.position), real(1.0));
     var lo = real(0.0);
     var s = guess * h;
     var y = sub_step(p, omega, phase0, y0, s).y;
     for (var k = 0u; k < 32u; k = k + 1u) {
-        let g = y.x - xw;
+        let g = gap(w, y);
         if (abs(g) <= tolerance) {
             break;
         }
@@ -207,7 +419,7 @@ fn locate_newton(p: Params, omega: real, xw: real, phase0: vec2<real>, y0: State
         } else {
             lo = s;
         }
-        let newton = s - g / y.y;
+        let newton = s - g / speed(w, y);
         if (newton > lo && newton < hi) {
             s = newton;
         } else {
@@ -220,7 +432,6 @@ fn locate_newton(p: Params, omega: real, xw: real, phase0: vec2<real>, y0: State
     }
     return Hit(true, s, y);
 }
-
 // The cubic Hermite interpolant of g = X - X_w over the step, θ in [0, 1]:
 // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³.
 fn hermite_new(g0: real, v0: real, g1: real, v1: real, h: real) -> vec4<real> {

@@ -14,10 +14,17 @@ fn rhs(p: Params, phase: vec2<real>, y: State) -> State {
     return State(y.y, -real(2.0) * p.zeta * y.y - y.x + p.f * phase.x);
 }
 
-fn wall_position(p: Params) -> real {
-    return p.wall;
+// The one stop, as shared/impact.wgsl reads stops (component 0 of each):
+// X (coordinate 0) stopped from below, V (coordinate 1) its velocity.
+const WALLS: u32 = 1u;
+const WALL_COORDINATE = vec4<u32>(0u, 0u, 0u, 0u);
+const WALL_VELOCITY = vec4<u32>(1u, 0u, 0u, 0u);
+const WALL_SIDE = vec4<real>(real(1.0), real(0.0), real(0.0), real(0.0));
+
+fn wall_position(p: Params) -> vec4<real> {
+    return vec4<real>(p.wall, real(0.0), real(0.0), real(0.0));
 }
 
-fn wall_restitution(p: Params) -> real {
-    return p.restitution;
+fn wall_restitution(p: Params) -> vec4<real> {
+    return vec4<real>(p.restitution, real(0.0), real(0.0), real(0.0));
 }

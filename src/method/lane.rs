@@ -256,7 +256,8 @@ pub enum LaneStatus {
     Unresolved {
         bound: f64,
     },
-    /// Impacts with e = 0 (rank 1 lost) or sticking (all lost) collapse
+    /// Impacts with e = 0 (rank 1 lost) or sticking (2 lost: the resting
+    /// mass's position and velocity, all of a 2-state system) collapse
     /// phase space: the last `exponents` exponents are -∞, exactly.
     Collapsed {
         exponents: usize,

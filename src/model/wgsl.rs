@@ -4,9 +4,14 @@
 //!
 //! The file has the built-ins' shape: `struct Params` (every parameter, in
 //! the model's order), `fn rhs(p, phase, y) -> State` (one expression per
-//! state) and, for a model with a wall, `wall_position(p)` and
-//! `wall_restitution(p)`. It is emitted from the same trees the CPU tape is
-//! compiled from (`model::tape`), so that the equations exist once:
+//! state) and, for a model with stops, what `shaders/shared/impact.wgsl`
+//! reads of them: `WALLS`, each stop's coordinate, velocity and side
+//! (`WALL_COORDINATE`, `WALL_VELOCITY`, `WALL_SIDE`, constants, so that the
+//! kernels' per-stop code folds to the seed's `y.x > X_w` for a stop on
+//! the first state from below), and its position and restitution as the
+//! components of `wall_position(p)` and `wall_restitution(p)`. It is
+//! emitted from the same trees the CPU tape is compiled from
+//! (`model::tape`), so that the equations exist once:
 //!
 //! - every operation keeps the tree's association, fully parenthesised
 //!   (`((-2*zeta)*v - x) + f*phase.x`), so in f64 the GPU rounds where the
@@ -29,12 +34,13 @@
 //!   functions, not to the bit: a model that calls one matches the CPU to
 //!   rounding, not bit for bit.
 //!
-//! What the kernels run so far ([`check`]): a flow of 2 to 4 states (the
-//! kernels' `State` is a WGSL vector) with no events, or a model of two
-//! states whose one event is a stop on the first state, with the second its
-//! velocity, approached from below: the one wall `shaders/shared/impact.wgsl`
-//! knows (its sticking code also sets every other state to 0, right for two
-//! states only).
+//! What the kernels run so far ([`check`]): a period map of a flow of 2 to
+//! 4 states (the kernels' `State` is a WGSL vector) whose events, if any,
+//! are all stops: up to `MAX_WALLS` = 4, each on any state x with its
+//! velocity v (x' = v), approached from either side, reset v → -e·v
+//! (`system::model::Stop`), with the CPU's sticking (a mass held at rest
+//! on a stop while the others move on) and per-stop crossing counts. Other
+//! events, switches and Poincaré sections run on the CPU.
 
 use std::fmt::{self, Write};
 
@@ -64,7 +70,7 @@ pub fn calls_wrappers(system: &str) -> bool {
 pub enum Unsupported {
     /// The kernels' `State` is `vec2`..`vec4`.
     States(usize),
-    /// Events other than the one wall the impact code knows.
+    /// Events that are not stops, or switches: the impact code knows stops.
     Events(String),
     /// A number with no WGSL literal (∞ or NaN from folding).
     Number(f64),
@@ -84,8 +90,8 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Events(why) => write!(
                 f,
-                "{why}: the GPU kernels handle one stop on the first state so far \
-                 (surface `x - c` with x' = v the second state, in a model of two states)"
+                "{why}: the GPU kernels handle stops alone so far (surfaces `x - c` or \
+                 `c - x` on a state x whose rate is another state v, reset v -> -e*v)"
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
@@ -116,21 +122,9 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
             first.name
         )));
     }
-    match code.walls.as_slice() {
-        [] => {}
-        [stop] => {
-            let states = &code.model.names.states;
-            if n != 2 || stop.coordinate != 0 || stop.velocity != 1 || stop.side != 1.0 {
-                return Err(Unsupported::Events(format!(
-                    "the stop '{}' acts on {} from {} in a model of {n} states",
-                    stop.name,
-                    states[stop.coordinate],
-                    if stop.side > 0.0 { "below" } else { "above" },
-                )));
-            }
-        }
-        walls => return Err(Unsupported::Events(format!("{} stops", walls.len()))),
-    }
+    // Any stop (Code::compile allows MAX_WALLS, the components of the
+    // kernels' vec4 per-stop values).
+    debug_assert!(code.walls.len() <= crate::integrate::impact::MAX_WALLS);
     let mut trees: Vec<&Expr> = code.model.equations.iter().collect();
     for stop in &code.walls {
         trees.push(&stop.position);
@@ -198,21 +192,8 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         );
     }
     let _ = writeln!(w, "    );\n}}");
-    if let [stop] = code.walls.as_slice() {
-        let _ = writeln!(
-            w,
-            "\n// The stop '{}'.\nfn wall_position(p: Params) -> real {{\n    return {};\n}}\n\n\
-             fn wall_restitution(p: Params) -> real {{\n    return {};\n}}",
-            stop.name,
-            Emit {
-                expr: &stop.position,
-                code
-            },
-            Emit {
-                expr: &stop.restitution,
-                code
-            },
-        );
+    if !code.walls.is_empty() {
+        stops(w, code);
     }
     if !model.angles.is_empty() {
         // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
@@ -234,6 +215,81 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         let _ = writeln!(w, "    return w;\n}}");
     }
     Ok(out)
+}
+
+/// The stops of `code` as `shaders/shared/impact.wgsl` reads them: per
+/// stop j, component j of the constants and of the two functions (the
+/// components past `WALLS` are never read, and are 0).
+fn stops(w: &mut String, code: &Code) {
+    let names = &code.model.names;
+    let walls = &code.walls;
+    let _ = writeln!(w, "\n// The stops, in the model's order:");
+    for (j, stop) in walls.iter().enumerate() {
+        let _ = writeln!(
+            w,
+            "//   {j}: '{}', {} {} {}, {}' = {}",
+            stop.name,
+            names.states[stop.coordinate],
+            if stop.side > 0.0 { "<=" } else { ">=" },
+            Written {
+                expr: &stop.position,
+                names
+            },
+            names.states[stop.coordinate],
+            names.states[stop.velocity],
+        );
+    }
+    let vector = |kind: &str, each: &dyn Fn(usize) -> String, zero: &str| {
+        let parts: Vec<String> = (0..crate::integrate::impact::MAX_WALLS)
+            .map(|j| {
+                if j < walls.len() {
+                    each(j)
+                } else {
+                    zero.into()
+                }
+            })
+            .collect();
+        format!("vec4<{kind}>({})", parts.join(", "))
+    };
+    let _ = writeln!(w, "const WALLS: u32 = {}u;", walls.len());
+    let _ = writeln!(
+        w,
+        "const WALL_COORDINATE = {};",
+        vector("u32", &|j| format!("{}u", walls[j].coordinate), "0u")
+    );
+    let _ = writeln!(
+        w,
+        "const WALL_VELOCITY = {};",
+        vector("u32", &|j| format!("{}u", walls[j].velocity), "0u")
+    );
+    let _ = writeln!(
+        w,
+        "const WALL_SIDE = {};",
+        vector("real", &|j| literal(walls[j].side), "real(0.0)")
+    );
+    let _ = writeln!(
+        w,
+        "\nfn wall_position(p: Params) -> vec4<real> {{\n    return {};\n}}\n\n\
+         fn wall_restitution(p: Params) -> vec4<real> {{\n    return {};\n}}",
+        vector(
+            "real",
+            &|j| Emit {
+                expr: &walls[j].position,
+                code
+            }
+            .to_string(),
+            "real(0.0)"
+        ),
+        vector(
+            "real",
+            &|j| Emit {
+                expr: &walls[j].restitution,
+                code
+            }
+            .to_string(),
+            "real(0.0)"
+        ),
+    );
 }
 
 /// Whether a system file wraps angles (`wrap_angles`), for the `WRAP`

@@ -70,8 +70,10 @@ pub struct SystemInfo {
     pub gpu_refuses: fn(&Params) -> Option<String>,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
     /// struct (fields in the order of `parameters`) and `rhs` for a flow
-    /// (with `wall_position`/`wall_restitution` when it has a wall) or
-    /// `map_step` for a map. `None`: no GPU backend for this system.
+    /// (with its stops as `shaders/shared/impact.wgsl` reads them, `WALLS`
+    /// and per stop its coordinate, velocity, side, position and
+    /// restitution, when it has any) or `map_step` for a map. `None`: no
+    /// GPU backend for this system.
     pub wgsl: Option<&'static str>,
     /// Whether the trajectory from this start can reach the system's wall at
     /// these parameters (a conservative bound: `true` when unsure); `None`

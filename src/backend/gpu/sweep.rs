@@ -140,8 +140,11 @@ struct Layout {
     real: u64,
     lane_stride: usize,
     traj_stride: usize,
-    /// Ring bytes per lane and part of an iteration: summary, Jacobian, point.
+    /// Ring bytes per lane and part of an iteration: summary (with stops,
+    /// followed by the impacts on each), Jacobian, point.
     summary: u64,
+    /// `[u32; 4]`s of summary per slot: `SUMMARY_STRIDE` in the WGSL.
+    summary_stride: usize,
     jacobian: u64,
     point: u64,
     /// Parts (sub-maps) per iteration, each with its ring slot.
@@ -160,7 +163,8 @@ impl Layout {
             real,
             lane_stride: scene.system.parameters.len() + 5,
             traj_stride: 2 * dim + 3,
-            summary: 16,
+            summary: 16 * (1 + u64::from(variant.wall)),
+            summary_stride: 1 + usize::from(variant.wall),
             jacobian: if variant.lyapunov {
                 (dim * dim) as u64 * real
             } else {
@@ -283,6 +287,8 @@ struct Pipelines {
     finish: wgpu::ComputePipeline,
     lyapunov: bool,
     points: bool,
+    /// The per-stop impact counts (binding 8) of a variant with stops.
+    wall: bool,
     workgroup: u32,
 }
 
@@ -320,6 +326,9 @@ impl Pipelines {
         if variant.points {
             entries.push(storage(7, false));
         }
+        if variant.wall {
+            entries.push(storage(8, false));
+        }
         let device = &gpu.device;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sweep"),
@@ -353,6 +362,7 @@ impl Pipelines {
             layout,
             lyapunov: variant.lyapunov,
             points: variant.points,
+            wall: variant.wall,
             workgroup,
         }
     }
@@ -583,6 +593,14 @@ where
         );
         let traj_buffer = init("trajectories", &real_bytes(&traj_data, precision), storage);
         let counts = init("counts", bytemuck::cast_slice(&counts_data), storage);
+        // Per trajectory, its impacts on each stop: none yet.
+        let crossings = pipelines.wall.then(|| {
+            init(
+                "crossings",
+                bytemuck::cast_slice(&vec![[0u32; 4]; count * traj]),
+                storage,
+            )
+        });
         let slots = (ring * layout.parts * count) as u64;
         let summary = empty("summary", layout.summary * slots, storage);
         let deltas_buffer = pipelines
@@ -606,6 +624,7 @@ where
         let device_bytes = [&lanes_buffer, &traj_buffer, &counts, &summary]
             .into_iter()
             .chain(&deltas_buffer)
+            .chain(&crossings)
             .chain(&jac)
             .chain(&points)
             .chain(&staging)
@@ -649,6 +668,12 @@ where
                 entries.push(wgpu::BindGroupEntry {
                     binding: 7,
                     resource: p.as_entire_binding(),
+                });
+            }
+            if let Some(c) = &crossings {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: c.as_entire_binding(),
                 });
             }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -948,7 +973,12 @@ where
         };
         staging.unmap();
         timings.readback += start.elapsed();
-        if summary.iter().any(|s| s[1] & FLAG_TRUNCATED != 0) {
+        let stride = self.layout.summary_stride;
+        if summary
+            .iter()
+            .step_by(stride)
+            .any(|s| s[1] & FLAG_TRUNCATED != 0)
+        {
             return Ok(false);
         }
 
@@ -968,7 +998,7 @@ where
                     let slot = |part: usize| (j * parts + part) * count + lane;
                     // A failed reference reports in its iteration's last
                     // part; the earlier slots may hold an older iteration.
-                    if (0..parts).any(|p| summary[slot(p)][1] & FLAG_NONFINITE != 0) {
+                    if (0..parts).any(|p| summary[stride * slot(p)][1] & FLAG_NONFINITE != 0) {
                         acc.fail(transient + first_iteration + j);
                         break;
                     }
@@ -978,14 +1008,24 @@ where
                     jacobians.clear();
                     for p in 0..parts {
                         let s = slot(p);
-                        let [impacts, flags, scale_bits, nonlinearity_bits] = summary[s];
+                        let [impacts, flags, scale_bits, nonlinearity_bits] = summary[stride * s];
+                        // With stops, the impacts on each follow (their sum
+                        // is `impacts`); without, there are none.
+                        let per_stop = if stride > 1 {
+                            summary[stride * s + 1]
+                        } else {
+                            [0; 4]
+                        };
                         let mut part = IterationStats {
                             impacts,
-                            // The kernels know one wall so far.
-                            crossings: std::array::from_fn(|j| if j == 0 { impacts } else { 0 }),
+                            crossings: std::array::from_fn(|j| {
+                                per_stop.get(j).copied().unwrap_or(0)
+                            }),
                             chattering: flags & FLAG_CHATTERING != 0,
-                            rank_loss: if flags & FLAG_RANK_ALL != 0 {
-                                D as u32
+                            // Sticking collapses the mass's position and
+                            // velocity (all of a 2-state system).
+                            rank_loss: if flags & FLAG_RANK_TWO != 0 {
+                                2.min(D as u32)
                             } else {
                                 u32::from(flags & FLAG_RANK_ONE != 0)
                             },
@@ -1090,6 +1130,6 @@ fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<()> {
 const FLAG_CHATTERING: u32 = 1;
 const FLAG_NONFINITE: u32 = 2;
 const FLAG_RANK_ONE: u32 = 4;
-const FLAG_RANK_ALL: u32 = 8;
+const FLAG_RANK_TWO: u32 = 8;
 const FLAG_TRUNCATED: u32 = 16;
 const FLAG_BEHIND_WALL: u32 = 32;
