@@ -249,10 +249,11 @@ fn solve(
         if a[col][col] == 0.0 {
             return None;
         }
-        for row in col + 1..n {
-            let factor = a[row][col] / a[col][col];
-            for k in col..=MAX_SLIDING {
-                a[row][k] -= factor * a[col][k];
+        let pivot_row = a[col];
+        for row in a.iter_mut().take(n).skip(col + 1) {
+            let factor = row[col] / pivot_row[col];
+            for (x, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                *x -= factor * p;
             }
         }
     }
