@@ -455,3 +455,116 @@ pub fn event_log_det<const D: usize>(
     });
     s.determinant().abs().ln()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrate::clock::ZERO_PHASE;
+
+    /// Two blocks on a belt at speed `vb` (x1, v1, x2, v2), each with
+    /// friction ±mu on its own slip (switch j on v_j - vb, bit j), coupled
+    /// by a spring; `product` adds a term with both signs multiplied.
+    struct Blocks {
+        mu: f64,
+        vb: f64,
+        limit: Option<f64>,
+        product: bool,
+    }
+
+    const SWITCHES: [Surface; 2] = [Surface::Switch { bit: 0 }, Surface::Switch { bit: 1 }];
+
+    impl Flow<4> for Blocks {
+        fn rhs(&self, phase: &Phase, y: &[f64; 4]) -> [f64; 4] {
+            self.rhs_in(0, phase, y)
+        }
+
+        fn surfaces(&self) -> &[Surface] {
+            &SWITCHES
+        }
+
+        fn surface_gradient(&self, j: usize, _phase: &Phase, _y: &[f64; 4]) -> [f64; 4] {
+            std::array::from_fn(|i| if i == 2 * j + 1 { 1.0 } else { 0.0 })
+        }
+
+        fn stick_limit(&self, _j: usize, _y: &[f64; 4]) -> Option<f64> {
+            self.limit
+        }
+
+        fn rhs_in(&self, region: u32, _phase: &Phase, y: &[f64; 4]) -> [f64; 4] {
+            let sign = |bit: u32| if region >> bit & 1 == 1 { 1.0 } else { -1.0 };
+            let both = if self.product {
+                0.1 * sign(0) * sign(1)
+            } else {
+                0.0
+            };
+            [
+                y[1],
+                -2.0 * y[0] + y[2] - self.mu * sign(0) + 0.3 + both,
+                y[3],
+                -2.0 * y[2] + y[0] - self.mu * sign(1),
+            ]
+        }
+    }
+
+    #[test]
+    fn the_equivalent_control_keeps_every_sliding_surface_s_rate_at_zero() {
+        let flow = Blocks {
+            mu: 0.5,
+            vb: 0.2,
+            limit: Some(0.6),
+            product: false,
+        };
+        let y = [0.1, flow.vb, -0.15, flow.vb];
+        let both = sliding_on(sliding_on(0, 0), 1);
+        let e = equivalent(&flow, both, &ZERO_PHASE, &y, true).expect("solvable");
+        assert!(
+            e.field[1].abs() <= 1e-15 && e.field[3].abs() <= 1e-15,
+            "{:?}",
+            e.field
+        );
+        assert_eq!((e.field[0], e.field[2]), (flow.vb, flow.vb));
+        // Each block's margins: the force on it without its friction
+        // (the other's held at its control) against the stick limit.
+        let rest = [-2.0 * y[0] + y[2] + 0.3, -2.0 * y[2] + y[0]];
+        for j in 0..2 {
+            let (plus, minus) = e.margins[j];
+            assert!((plus - (0.6 - rest[j])).abs() <= 1e-15, "{j}: {plus}");
+            assert!((minus - (0.6 + rest[j])).abs() <= 1e-15, "{j}: {minus}");
+        }
+        assert!(separable(&flow, both, &ZERO_PHASE, &y));
+        let product = Blocks {
+            product: true,
+            ..flow
+        };
+        assert!(!separable(&product, both, &ZERO_PHASE, &y));
+    }
+
+    #[test]
+    fn one_sliding_switch_is_filippov_s_combination_to_the_bit() {
+        let flow = Blocks {
+            mu: 0.5,
+            vb: 0.2,
+            limit: None,
+            product: false,
+        };
+        let y = [0.1, flow.vb, -0.15, 0.7];
+        // Slipping block 2 on its positive side, block 1 sliding.
+        let region = sliding_on(1 << 1, 0);
+        let (lo, hi) = (
+            flow.rhs_in(1 << 1, &ZERO_PHASE, &y),
+            flow.rhs_in(1 << 1 | 1, &ZERO_PHASE, &y),
+        );
+        let (a, b) = (lo[1], hi[1]);
+        let alpha = a / (a - b);
+        let filippov: [f64; 4] = std::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i]));
+        let e = equivalent(&flow, region, &ZERO_PHASE, &y, true).expect("solvable");
+        assert_eq!(e.field, filippov);
+        let half_jump = 0.5 * (a - b);
+        let mean = 0.5 * (a + b);
+        assert_eq!(e.margins[0], (half_jump - mean, half_jump + mean));
+        assert_eq!(
+            joining_margins(&flow, 1 << 1, 0, 0, &ZERO_PHASE, &y),
+            Some(e.margins[0])
+        );
+    }
+}
