@@ -526,10 +526,10 @@ mod tests {
         // Each block's margins: the force on it without its friction
         // (the other's held at its control) against the stick limit.
         let rest = [-2.0 * y[0] + y[2] + 0.3, -2.0 * y[2] + y[0]];
-        for j in 0..2 {
+        for (j, rest) in rest.iter().enumerate() {
             let (plus, minus) = e.margins[j];
-            assert!((plus - (0.6 - rest[j])).abs() <= 1e-15, "{j}: {plus}");
-            assert!((minus - (0.6 + rest[j])).abs() <= 1e-15, "{j}: {minus}");
+            assert!((plus - (0.6 - rest)).abs() <= 1e-15, "{j}: {plus}");
+            assert!((minus - (0.6 + rest)).abs() <= 1e-15, "{j}: {minus}");
         }
         assert!(separable(&flow, both, &ZERO_PHASE, &y));
         let product = Blocks {
