@@ -611,7 +611,7 @@ fn field_step<const D: usize, F: Flow<D>>(
     s: f64,
 ) -> [f64; D] {
     if surface::is_sliding(region) {
-        let flow = &surface::Sliding { flow: base, region };
+        let flow = &surface::Sliding::new(base, region);
         SubStep { flow, omega }.step(phase, y, s).0
     } else {
         SubStep {
@@ -655,17 +655,14 @@ fn slide<const D: usize, F: Flow<D>>(
 ) -> Slid<D> {
     let (sides, set) = (surface::sides(*region), surface::sliding_set(*region));
     let surfaces = base.surfaces();
-    let sliding = surface::Sliding {
-        flow: base,
-        region: *region,
-    };
+    let sliding = surface::Sliding::new(base, *region);
     let sub = SubStep {
         flow: &sliding,
         omega,
     };
     let phase_at = |s: f64| rotate(phase, &cos_sin(omega * s));
     let margins = |phase_s: &Phase, y_s: &[f64; D]| {
-        surface::equivalent(base, *region, phase_s, y_s, true)
+        surface::equivalent_on(base, &sliding.set, phase_s, y_s, true)
             .map_or([(f64::NAN, f64::NAN); surface::MAX_SURFACES], |e| e.margins)
     };
     let at = |s: f64| -> ([f64; D], [(f64, f64); surface::MAX_SURFACES]) {
