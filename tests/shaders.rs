@@ -354,6 +354,9 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("seed-oscillator.toml", true),
         // A switch: CPU only so far.
         ("soft-stop.toml", false),
+        // Two switches the motion slides on, one at a time or at once:
+        // CPU only so far.
+        ("two-block-belt.toml", false),
         // A stop on the third of four states.
         ("two-mass-chain.toml", true),
         ("van-der-pol.toml", true),

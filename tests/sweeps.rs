@@ -306,6 +306,7 @@ fn every_committed_scene_is_valid() {
             "rossler-section",
             "seed-fig3",
             "soft-stop",
+            "two-block-belt",
             "two-mass-chain",
             "van-der-pol",
             "vibrating-table"

@@ -269,23 +269,39 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     // Sub-steps from (phase0, y0), `done` into the step.
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
-        if let Some(j) = surface::sliding(*region) {
-            // On a switch: the rest of the step slides, unless it leaves.
-            match slide(base, region, j, omega, &phase0, &y0, h - done, stats) {
-                (None, y_end) => return y_end,
-                (Some(s), y_exit) => {
-                    done += s;
-                    phase0 = rotate(&phase0, &cos_sin(omega * s));
-                    y0 = y_exit;
-                    y1 = SubStep {
-                        flow: &flow_in(base, *region),
-                        omega,
+        if surface::is_sliding(*region) {
+            // On one switch or several: the rest of the step slides, unless
+            // the motion leaves one of them or meets another.
+            let (s, y_at) =
+                match slide(base, region, location, omega, &phase0, &y0, h - done, stats) {
+                    Slid::Through(y_end) => return y_end,
+                    Slid::Leaves(s, y_exit) => (s, y_exit),
+                    Slid::Meets(k, s, yc) => {
+                        let phase_c = rotate(&phase0, &cos_sin(omega * s));
+                        match cross(base, region, k, &phase_c, &yc, stats) {
+                            Some(after) => (s, after),
+                            // Not resolved (flagged): the rest of the step in
+                            // the field now in force.
+                            None => {
+                                return field_step(
+                                    base,
+                                    *region,
+                                    omega,
+                                    &phase_c,
+                                    &yc,
+                                    h - done - s,
+                                )
+                            }
+                        }
                     }
-                    .step(&phase0, &y0, h - done)
-                    .0;
-                    continue;
-                }
+                };
+            done += s;
+            phase0 = rotate(&phase0, &cos_sin(omega * s));
+            y0 = y_at;
+            if !surface::is_sliding(*region) {
+                y1 = field_step(base, *region, omega, &phase0, &y0, h - done);
             }
+            continue;
         }
         let flow = &InRegion {
             flow: base,
@@ -354,7 +370,7 @@ pub fn resolve<const D: usize, F: Flow<D>>(
                 Some(after) => {
                     phase0 = phase_c;
                     y0 = after;
-                    if surface::sliding(*region).is_some() {
+                    if surface::is_sliding(*region) {
                         // The loop's top slides the rest of the step.
                         continue;
                     }
@@ -495,8 +511,13 @@ fn cross<const D: usize, F: Flow<D>>(
 ) -> Option<[f64; D]> {
     let walls = base.walls().len();
     let kind = base.surfaces()[j];
-    let before = base.surface_values(*region, phase, y);
-    let approach = kind.orientation(*region) * before.rate[j];
+    let before = base.surface_values(surface::sides(*region), phase, y);
+    let approach_rate = if surface::is_sliding(*region) {
+        surface::rate_along(base, *region, j, phase, y)
+    } else {
+        before.rate[j]
+    };
+    let approach = kind.orientation(*region) * approach_rate;
     stats.slowest_impact = stats.slowest_impact.min(approach);
     stats.crossings[walls + j] += 1;
     match kind {
@@ -526,13 +547,32 @@ fn cross<const D: usize, F: Flow<D>>(
             Some(after)
         }
         Surface::Switch { bit } => {
-            let (plus, minus) = surface::stick_margins(base, *region, j, bit, phase, y);
+            // Whether j holds the motion too, beside the switches it may
+            // already slide on.
+            let Some((plus, minus)) = surface::joining_margins(base, *region, j, bit, phase, y)
+            else {
+                stats.sliding = true;
+                return None;
+            };
             if plus > 0.0 && minus > 0.0 {
+                let joined = surface::sliding_on(*region, j);
+                let solvable = surface::equivalent(base, joined, phase, y, false).is_some();
+                if !solvable || !surface::separable(base, joined, phase, y) {
+                    // Sliding surfaces whose controls cannot be told
+                    // apart, or two signs multiplying in the field (the
+                    // equivalent control of a multi-affine field): not
+                    // integrated.
+                    stats.sliding = true;
+                    return None;
+                }
                 // Both fields point into the surface (or the stick limit
                 // holds the motion): it slides, and forgets how far from
-                // the surface it came; the volume law no longer applies.
-                *region = surface::sliding_on(*region, j);
-                stats.rank_loss = stats.rank_loss.max(1);
+                // the surface it came, one direction per switch it slides
+                // on at once; the volume law no longer applies.
+                *region = joined;
+                let at_once = surface::sliding_set(joined).count_ones();
+                stats.rank_loss = stats.rank_loss.max(at_once);
+                stats.sliding_phases += 1;
                 stats.log_flux = f64::NAN;
                 return Some(*y);
             }
@@ -546,98 +586,183 @@ fn cross<const D: usize, F: Flow<D>>(
                 return Some(*y);
             }
             *region ^= 1 << bit;
-            let leaving = base.surface_values(*region, phase, y).rate[j];
-            if leaving * before.rate[j] <= 0.0 {
+            let leaving = surface::rate_along(base, *region, j, phase, y);
+            if leaving * approach_rate <= 0.0 {
                 // The new field points back, yet the stick limit lets go
                 // (a limit below Filippov's): the motion cannot be resolved.
                 stats.sliding = true;
                 return None;
             }
             // det S = (∇g·F⁺)/(∇g·F⁻).
-            stats.log_flux += (leaving / before.rate[j]).ln();
+            stats.log_flux += (leaving / approach_rate).ln();
             Some(*y)
         }
     }
 }
 
-/// Slides on switch j (a trajectory in `region`, on the surface at y, phase
-/// `phase`) for up to `h`: returns `(None, end)` if it is still sliding
-/// at the end, or `(Some(s), exit)` where it leaves after s, its region
-/// then the side it leaves to. The exit (a stick margin reaching 0) is
-/// bisected on RK4 re-stepped along the sliding field.
+/// One RK4 step of s from (phase, y) in the field a trajectory in
+/// `region` follows: its region's, or the sliding field.
+fn field_step<const D: usize, F: Flow<D>>(
+    base: &F,
+    region: u32,
+    omega: f64,
+    phase: &Phase,
+    y: &[f64; D],
+    s: f64,
+) -> [f64; D] {
+    if surface::is_sliding(region) {
+        let flow = &surface::Sliding::new(base, region);
+        SubStep { flow, omega }.step(phase, y, s).0
+    } else {
+        SubStep {
+            flow: &flow_in(base, region),
+            omega,
+        }
+        .step(phase, y, s)
+        .0
+    }
+}
+
+/// How a sliding sub-step ended ([`slide`]).
+enum Slid<const D: usize> {
+    /// Still sliding at the end of the step, at this state.
+    Through([f64; D]),
+    /// Left a switch (its region updated) after this offset, at this state.
+    Leaves(f64, [f64; D]),
+    /// Met switch k, which it does not slide on, after this offset, at
+    /// this state (on k's surface), still sliding on the others.
+    Meets(usize, f64, [f64; D]),
+}
+
+/// Slides on the switches of `region`'s sliding set (a trajectory on
+/// their surfaces at y, phase `phase`) for up to `h`, along the
+/// equivalent control's field ([`surface::Equivalent`]). Another switch
+/// met on the way is located as any crossing is (on RK4 re-stepped along
+/// the sliding field) and handed back; an exit (a stick margin of a
+/// sliding switch reaching 0) before it is bisected on the same re-steps,
+/// and the region leaves that switch to the side whose margin ran out,
+/// the others still sliding.
 #[allow(clippy::too_many_arguments)]
 fn slide<const D: usize, F: Flow<D>>(
     base: &F,
     region: &mut u32,
-    j: usize,
+    location: ImpactLocation,
     omega: f64,
     phase: &Phase,
     y: &[f64; D],
     h: f64,
     stats: &mut IterationStats,
-) -> (Option<f64>, [f64; D]) {
-    let Surface::Switch { bit } = base.surfaces()[j] else {
-        unreachable!("only switches slide")
-    };
-    let sides = surface::sides(*region);
-    let sliding = surface::Sliding {
-        flow: base,
-        sides,
-        surface: j,
-        bit,
-    };
+) -> Slid<D> {
+    let (sides, set) = (surface::sides(*region), surface::sliding_set(*region));
+    let surfaces = base.surfaces();
+    let sliding = surface::Sliding::new(base, *region);
     let sub = SubStep {
         flow: &sliding,
         omega,
     };
-    let at = |s: f64| -> ([f64; D], (f64, f64)) {
-        let y_s = sub.step(phase, y, s).0;
-        let phase_s = rotate(phase, &cos_sin(omega * s));
-        (
-            y_s,
-            surface::stick_margins(base, sides, j, bit, &phase_s, &y_s),
-        )
+    let phase_at = |s: f64| rotate(phase, &cos_sin(omega * s));
+    let margins = |phase_s: &Phase, y_s: &[f64; D]| {
+        surface::equivalent_on(base, &sliding.set, phase_s, y_s, true)
+            .map_or([(f64::NAN, f64::NAN); surface::MAX_SURFACES], |e| e.margins)
     };
-    let (end, (plus, minus)) = at(h);
-    // Another surface met while sliding (a second block sticking, a wall)
-    // would need a motion on two surfaces at once, which is not
-    // integrated: the iteration says so rather than step through it.
-    let end_phase = rotate(phase, &cos_sin(omega * h));
+    let at = |s: f64| -> ([f64; D], [(f64, f64); surface::MAX_SURFACES]) {
+        let y_s = sub.step(phase, y, s).0;
+        (y_s, margins(&phase_at(s), &y_s))
+    };
+    // Every sliding switch still held.
+    let holds = |m: &[(f64, f64); surface::MAX_SURFACES]| {
+        (0..surfaces.len())
+            .filter(|&j| set >> j & 1 == 1)
+            .all(|j| m[j].0 > 0.0 && m[j].1 > 0.0)
+    };
+    let (end, end_margins) = at(h);
+    // An event or a wall met while sliding would need a motion along the
+    // surfaces and into them at once, which is not integrated: the
+    // iteration says so rather than step through it.
+    let end_phase = phase_at(h);
     let (before, after) = (
         base.surface_values(sides, phase, y),
         base.surface_values(sides, &end_phase, &end),
     );
-    let others = base.surfaces().iter().enumerate().filter(|&(k, _)| k != j);
+    // The first other switch met, located on the sliding field.
+    let mut first: Option<(usize, f64, [f64; D])> = None;
+    let others = surfaces
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| set >> k & 1 == 0);
     for (k, &kind) in others {
         let o = kind.orientation(sides);
-        if o * before.g[k] <= 0.0 && o * after.g[k] > 0.0 {
-            stats.sliding = true;
+        if kind == Surface::Event {
+            if o * before.g[k] <= 0.0 && o * after.g[k] > 0.0 {
+                stats.sliding = true;
+            }
+            continue;
+        }
+        let distance = |s: f64, y: &[f64; D]| o * base.surface_values(sides, &phase_at(s), y).g[k];
+        let rate =
+            |s: f64, y: &[f64; D]| o * surface::rate_along(base, *region, k, &phase_at(s), y);
+        let (start, stop) = (
+            (o * before.g[k], rate(0.0, y)),
+            (o * after.g[k], rate(h, &end)),
+        );
+        if !(stop.0 > 0.0 || (start.1 > 0.0 && stop.1 < 0.0)) {
+            continue;
+        }
+        let hit = locate(
+            &sub, location, phase, y, h, &end, start, stop, distance, rate,
+        );
+        if let Some((s, yc)) = hit {
+            if first.is_none_or(|(_, earliest, _)| s < earliest) {
+                first = Some((k, s, yc));
+            }
         }
     }
     if base.walls().iter().any(|w| w.gap(&end) > 0.0) {
         stats.sliding = true;
     }
-    if plus > 0.0 && minus > 0.0 {
-        return (None, end);
+    let (horizon, state, margins_there) = match first {
+        Some((_, s, yc)) => (s, yc, margins(&phase_at(s), &yc)),
+        None => (h, end, end_margins),
+    };
+    if holds(&margins_there) {
+        return match first {
+            Some((k, s, yc)) => Slid::Meets(k, s, yc),
+            None => Slid::Through(end),
+        };
     }
-    let (mut lo, mut hi) = (0.0, h);
-    let (mut exit, mut margins) = (end, (plus, minus));
+    let (mut lo, mut hi) = (0.0, horizon);
+    let (mut exit, mut m) = (state, margins_there);
     while hi - lo > f64::EPSILON * h {
         let mid = 0.5 * (lo + hi);
-        let (y_mid, m) = at(mid);
-        if m.0 > 0.0 && m.1 > 0.0 {
+        let (y_mid, m_mid) = at(mid);
+        if holds(&m_mid) {
             lo = mid;
         } else {
-            (hi, exit, margins) = (mid, y_mid, m);
+            (hi, exit, m) = (mid, y_mid, m_mid);
         }
     }
-    // It leaves to the side whose margin ran out.
-    *region = if margins.0 <= margins.1 {
-        sides | 1 << bit
-    } else {
-        sides & !(1 << bit)
-    };
-    (Some(hi), exit)
+    // It leaves the switch whose margin ran out (the most out, where two
+    // did within the bisection), to the side whose margin that is.
+    let (j, bit) = surfaces
+        .iter()
+        .enumerate()
+        .filter_map(|(j, s)| match s {
+            Surface::Switch { bit } if set >> j & 1 == 1 => Some((j, *bit)),
+            _ => None,
+        })
+        .min_by(|&(p, _), &(q, _)| {
+            let out = |j: usize| {
+                if m[j].0.is_nan() {
+                    f64::NEG_INFINITY
+                } else {
+                    m[j].0.min(m[j].1)
+                }
+            };
+            out(p).total_cmp(&out(q))
+        })
+        .expect("a sliding trajectory slides on a switch");
+    *region = surface::leaving(*region, j, bit, m[j].0 <= m[j].1);
+    Slid::Leaves(hi, exit)
 }
 
 /// Locates the crossing of a general surface inside the step [0, h] from

@@ -61,15 +61,24 @@ pub struct IterationStats {
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
-    /// A sliding motion that is not integrated (on two surfaces at once, a
-    /// wall met while sliding, a stick limit below Filippov's, or sliding
-    /// in the exact propagator): the iteration is not trustworthy.
+    /// A sliding motion that is not integrated (a wall or an event met
+    /// while sliding, switches whose signs multiply in the field, a stick
+    /// limit below Filippov's, or sliding on two switches at once in the
+    /// exact propagator): the iteration is not trustworthy.
     pub sliding: bool,
     /// Dimensions the iteration collapsed: 1 after an impact with e = 0 (the
     /// velocity is forgotten), D after sticking (the state on release depends
     /// on the forcing alone). The map's Jacobian then has rank D - rank_loss
     /// and the last rank_loss exponents are -∞.
     pub rank_loss: u32,
+    /// Sliding phases the iteration entered (one per switch a motion
+    /// began to slide on): each collapses one direction where it
+    /// happens, so together they bound the map's rank loss from above
+    /// (`rank_loss`, the most switches slid on at once, bounds it from
+    /// below; phases one after the other on two switches collapse two
+    /// directions where the switches' motions are independent, one where
+    /// the flow couples them). See `LaneAccumulator`.
+    pub sliding_phases: u32,
     /// The slowest approach speed of the iteration's impacts (infinite
     /// without impacts): a slow impact is near grazing.
     pub slowest_impact: f64,
@@ -109,6 +118,7 @@ impl IterationStats {
         }
         self.chattering |= part.chattering;
         self.rank_loss = self.rank_loss.max(part.rank_loss);
+        self.sliding_phases += part.sliding_phases;
         self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
         self.nonlinearity = self.nonlinearity.max(part.nonlinearity);
         self.grazing |= part.grazing;
@@ -127,6 +137,7 @@ impl Default for IterationStats {
             sliding: false,
             chattering: false,
             rank_loss: 0,
+            sliding_phases: 0,
             slowest_impact: f64::INFINITY,
             nonlinearity: 0.0,
             grazing: false,

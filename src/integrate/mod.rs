@@ -642,7 +642,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             at_end = flows.surface_values(&sides, &next, &y1);
             for k in 0..n {
                 // A sliding trajectory takes the slow path at every step.
-                let mut hit = surface::sliding(regions[k]).is_some();
+                let mut hit = surface::is_sliding(regions[k]);
                 for (j, &kind) in surfaces.iter().enumerate() {
                     hit |= surface::may_cross(
                         kind,

@@ -76,6 +76,7 @@ pub fn estimate<const D: usize, S: System<D>>(
         *c += r;
     }
     stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
+    stats.sliding_phases += st[0].sliding_phases;
     stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
     stats.sliding |= st[..1 + copies].iter().any(|s| s.sliding);
 

@@ -75,6 +75,13 @@ pub const MAX_STEP_RATE: f64 = 0.1;
 /// resolution. Such a lane says `too-many-steps`.
 pub const MAX_STEPS_PER_PERIOD: usize = 100_000_000;
 
+/// An exponent a sliding phase may have collapsed is taken as collapsed
+/// (-∞) where its mean ln R_ii per Jacobian is below ln of this many times
+/// the finite difference's rounding noise ([`difference_noise`]): a
+/// collapsed direction's R_ii is that rounding, and the sub-maps keep a
+/// direction that only contracts 1/PART_NOISE above it.
+const COLLAPSE_FLOOR: f64 = 10.0;
+
 /// Relative rounding noise allowed in a part's most contracted column.
 /// Its bias in an exponent is about PART_NOISE²/2 per part's time.
 const PART_NOISE: f64 = 1e-2;
@@ -242,8 +249,9 @@ pub enum LaneStatus {
     Chattering {
         iterations: usize,
     },
-    /// A sliding motion that is not integrated yet (on two switches at
-    /// once, against a wall, or in the exact propagator), in this many
+    /// A sliding motion that is not integrated yet (against a wall or an
+    /// event, on switches whose signs multiply in the field, or on two
+    /// switches at once in the exact propagator), in this many
     /// iterations: the exponents are not to be trusted.
     Sliding {
         iterations: usize,
@@ -517,9 +525,16 @@ pub struct LaneAccumulator<const D: usize> {
     grazing_error: f64,
     /// Jacobians taken (iterations × parts).
     parts_done: usize,
-    /// The most dimensions any iteration collapsed.
+    /// The most dimensions any iteration collapsed for certain (sliding on
+    /// that many switches at once, an impact with e = 0, sticking on a
+    /// stop).
     rank_loss: usize,
+    /// The most dimensions any iteration may have collapsed: its sliding
+    /// phases, one per switch entered (see `finish`).
+    rank_loss_bound: usize,
     noise_squares: f64,
+    /// Σ ln of the finite difference's rounding noise over the Jacobians taken.
+    log_noise: f64,
     bifurcation: Vec<f64>,
     jacobians: Option<Vec<f64>>,
     failed_at: Option<usize>,
@@ -560,7 +575,9 @@ where
             grazing_error: 0.0,
             parts_done: 0,
             rank_loss: 0,
+            rank_loss_bound: 0,
             noise_squares: 0.0,
+            log_noise: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
             jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
@@ -612,23 +629,36 @@ where
         // sticking) has a Jacobian of rank D - loss: its last `loss` R_ii are
         // zero in exact arithmetic and rounding here, and the exponents they
         // feed are -∞ (set in `finish`). When nothing is left (loss = D),
-        // the frame Q is kept as it is.
+        // the frame Q is kept as it is. Sliding phases on several switches
+        // one after the other may collapse up to one direction each
+        // (`bound`): those R_ii may be rounding too.
         let loss = (stats.rank_loss as usize).min(D);
+        let bound = (stats.sliding_phases as usize).max(loss).min(D);
         self.rank_loss = self.rank_loss.max(loss);
-        let kept = D - loss;
-        for j in jacobians.iter().filter(|_| kept > 0) {
-            let diag = self.qr.push(j);
+        self.rank_loss_bound = self.rank_loss_bound.max(bound);
+        let kept = D - bound;
+        let noise = self.noise.map(|(unit, delta, steps)| {
+            difference_noise(unit, scale, steps, delta * scale.max(1.0))
+        });
+        for j in jacobians.iter().filter(|_| loss < D) {
+            let diag = match noise {
+                Some(noise) if bound > 0 => {
+                    self.qr.push_collapsing(j, COLLAPSE_FLOOR * noise, bound)
+                }
+                _ => self.qr.push(j),
+            };
             if !diag[..kept].iter().all(|r| r.ln().is_finite()) {
                 // A singular Jacobian: a direction contracted below what δ and
                 // rounding can resolve in one iteration.
                 self.fail(self.transient + n);
                 return false;
             }
-            if let (Some((unit, delta, steps)), 0) = (self.noise, loss) {
-                let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
-                let delta = delta * scale.max(1.0);
-                self.noise_squares +=
-                    (difference_noise(unit, scale, steps, delta) / smallest).powi(2);
+            if let Some(noise) = noise {
+                self.log_noise += noise.ln();
+                if bound == 0 {
+                    let smallest = diag.iter().fold(f64::INFINITY, |m, &r| m.min(r));
+                    self.noise_squares += (noise / smallest).powi(2);
+                }
             }
         }
         self.parts_done += jacobians.len();
@@ -710,6 +740,19 @@ where
             }
             .to_vec();
             e.sort_by(|a, b| b.total_cmp(a));
+            // Directions beyond the certain ones that sliding phases may
+            // have collapsed: collapsed where the finite differences saw
+            // nothing in them above their own rounding, on average over
+            // the Jacobians (a direction that contracts for real is kept
+            // well above it by the sub-maps' plan, PART_NOISE).
+            if self.noise.is_some() && self.parts_done > 0 {
+                let floor = self.log_noise / taken + COLLAPSE_FLOOR.ln();
+                while self.rank_loss < self.rank_loss_bound
+                    && e[D - 1 - self.rank_loss] * part_time < floor
+                {
+                    self.rank_loss += 1;
+                }
+            }
             for x in &mut e[D - self.rank_loss..] {
                 *x = f64::NEG_INFINITY;
             }
