@@ -19,6 +19,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::expr::{Expr, Var, Written};
 use super::jit::Native;
+pub(crate) use super::tape::reads_state_or_time;
 use super::tape::Tape;
 use super::{Map, Model};
 use crate::error::{Error, Result};
@@ -124,16 +125,6 @@ pub struct Stop {
     pub restitution: Expr,
     /// The key of the reset, for messages about e.
     pub reset_key: String,
-}
-
-pub(crate) fn reads_state_or_time(e: &Expr) -> bool {
-    match e {
-        Expr::Num(_) => false,
-        Expr::Var(v) => !matches!(v, Var::Param(_)),
-        Expr::Neg(a) => reads_state_or_time(a),
-        Expr::Bin(_, a, b) => reads_state_or_time(a) || reads_state_or_time(b),
-        Expr::Call(_, args) => args.iter().any(reads_state_or_time),
-    }
 }
 
 /// The states an expression reads.

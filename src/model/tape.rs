@@ -512,7 +512,9 @@ fn time_outside_clock() -> CompileError {
     )
 }
 
-fn reads_state_or_time(e: &Expr) -> bool {
+/// Whether `e` reads a state or the time (anything but parameters and
+/// numbers).
+pub(crate) fn reads_state_or_time(e: &Expr) -> bool {
     match e {
         Expr::Num(_) => false,
         Expr::Var(v) => !matches!(v, Var::Param(_)),
