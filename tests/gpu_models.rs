@@ -33,6 +33,24 @@ fn exponent_difference(a: &[f64], b: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Every lane of an f32 GPU run is `ok`, settles (λ1 < 0) and has the f64
+/// CPU run's exponents within `tolerance`.
+fn f32_settles_like_f64(name: &str, f64_cpu: &Report, f32_gpu: &Report, tolerance: f64) {
+    assert_eq!(f32_gpu.precision, Precision::F32);
+    for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
+        assert_eq!(g.status, LaneStatus::Ok, "{name} lane {k}");
+        assert!(c.exponents[0] < 0.0, "{name} lane {k}: {:?}", c.exponents);
+        let d = exponent_difference(&c.exponents, &g.exponents);
+        eprintln!("{name} lane {k}: f32 vs f64 {d:e}");
+        assert!(
+            d < tolerance,
+            "{name} lane {k}: f64 {:?} vs f32 {:?}",
+            c.exponents,
+            g.exponents
+        );
+    }
+}
+
 #[test]
 fn the_seed_oscillator_as_a_model_is_the_built_in_on_the_gpu_to_the_bit() {
     if !gpu_or_skip(
@@ -185,19 +203,7 @@ fn models_run_in_f32_close_to_f64() {
             body,
             &["run.backend=\"gpu\"", "run.precision=\"f32\""],
         ));
-        assert_eq!(f32_gpu.precision, Precision::F32);
-        for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
-            assert_eq!(g.status, LaneStatus::Ok, "{name} lane {k}");
-            assert!(c.exponents[0] < 0.0, "{name} lane {k}: {:?}", c.exponents);
-            let d = exponent_difference(&c.exponents, &g.exponents);
-            eprintln!("{name} lane {k}: f32 vs f64 {d:e}");
-            assert!(
-                d < tolerance,
-                "{name} lane {k}: f64 {:?} vs f32 {:?}",
-                c.exponents,
-                g.exponents
-            );
-        }
+        f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
     }
 }
 
@@ -514,22 +520,12 @@ fn models_with_stops_run_in_f32_close_to_f64() {
                 "model.parameters.f=2.0",
             ],
         ));
-        assert_eq!(f32_gpu.precision, Precision::F32);
         for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
-            assert_eq!(g.status, LaneStatus::Ok, "{name} lane {k}");
-            assert!(c.exponents[0] < 0.0, "{name} lane {k}: {:?}", c.exponents);
             assert_eq!(
                 c.crossings_per_period, g.crossings_per_period,
                 "{name} lane {k}: the impacts on each stop"
             );
-            let d = exponent_difference(&c.exponents, &g.exponents);
-            eprintln!("{name} lane {k}: f32 vs f64 {d:e}");
-            assert!(
-                d < tolerance,
-                "{name} lane {k}: f64 {:?} vs f32 {:?}",
-                c.exponents,
-                g.exponents
-            );
         }
+        f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
     }
 }
