@@ -274,9 +274,12 @@ pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
             Backend::Exact => 1,
             _ => 1 + config.difference.copies(2),
         };
+        // The transient's aligning iterations carry the copies too.
+        let i = &scene.integration;
         let lane_steps = (report.lanes.len()
             * config.steps
-            * (plan.transient + plan.iterations * trajectories)) as f64;
+            * (i.transient - i.align + (i.align + i.iterations) * trajectories))
+            as f64;
         out.push(Measurement {
             config: *config,
             periodic_error,

@@ -124,15 +124,19 @@ pub fn batch_lanes(scene: &Scene) -> usize {
     (budget / lane_bytes(scene)).clamp(1, scene.run_lane_count().max(1))
 }
 
-/// The RK4 trajectory-steps of one lane: the reference and its `copies`
-/// over every iteration, at the requested steps (lanes may need more).
+/// The RK4 trajectory-steps of one lane: the reference over the transient,
+/// and with its `copies` over the aligning and averaged iterations, at the
+/// requested steps (lanes may need more).
 pub fn steps_per_lane(integration: &Integration, is_flow: bool, copies: usize) -> f64 {
     let steps = if is_flow {
         integration.steps_per_period as f64
     } else {
         1.0
     };
-    (integration.transient + integration.iterations) as f64 * steps * (1 + copies) as f64
+    let i = integration;
+    let plain = (i.transient - i.align) as f64;
+    let with_copies = (i.align + i.iterations) as f64 * (1 + copies) as f64;
+    (plain + with_copies) * steps
 }
 
 /// The RK4 lane-steps of the run (of its shard).

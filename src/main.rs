@@ -274,7 +274,10 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         )
     });
     println!("  lanes        {}{shard}", ranges.join(" × "));
-    let mut method = format!("transient {}, iterations {}", i.transient, i.iterations);
+    let mut method = format!(
+        "transient {} (the last {} aligning the QR frame), iterations {}",
+        i.transient, i.align, i.iterations
+    );
     if report.backend != Backend::Exact && scene.lyapunov {
         method += &format!(", δ = {:e}", scene.perturbation());
     }

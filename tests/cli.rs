@@ -93,6 +93,12 @@ fn impossible_values_name_their_key() {
         &[],
         "integration.iterations",
     );
+    // The aligning iterations are the transient's last ones.
+    refused(
+        &BASE.replace("iterations = 10", "iterations = 10\nalign = 100000"),
+        &[],
+        "integration.align",
+    );
     refused(
         &with("[sweep]\nfrom = 0.5\nto = 1.5\ncount = 0"),
         &[],

@@ -8,6 +8,7 @@
 mod common;
 
 use lyapsweep::method::LaneStatus;
+use lyapsweep::scene::DEFAULT_ALIGN_FRACTION;
 use lyapsweep::{scene, Report, Scene};
 use nalgebra::{DMatrix, SMatrix, SVector};
 
@@ -62,7 +63,8 @@ struct RefStop {
 /// O(s⁵)) for its fundamental matrix, crossings located by bisection on
 /// re-stepped RK4 to the last bits, the reset y_v → -e·y_v with Φ → S·Φ,
 /// S = DR + (F⁺ - DR·F⁻)·∇gᵀ/(∇g·F⁻), and QR accumulated once per period
-/// over `iterations` periods after `transient`. Returns the exponents
+/// over `iterations` periods after `transient`, the frame turned over the
+/// transient's last tenth first (the tool's protocol). Returns the exponents
 /// (sorted) and the crossings per period of each stop.
 fn reference_exponents<const N: usize>(
     a: SMatrix<f64, N, N>,
@@ -98,6 +100,8 @@ fn reference_exponents<const N: usize>(
     let mut logs = [0.0; N];
     let mut crossings = vec![0usize; stops.len()];
     let full_step = flow_matrix(h);
+    // The tool's protocol: the transient's last tenth turns the frame.
+    let align = transient / DEFAULT_ALIGN_FRACTION;
     for iteration in 0..transient + iterations {
         let averaging = iteration >= transient;
         let mut phi = SMatrix::<f64, N, N>::identity();
@@ -147,13 +151,16 @@ fn reference_exponents<const N: usize>(
             };
             y = y1;
         }
-        if averaging {
+        if iteration + align >= transient {
             let qr = DMatrix::from_column_slice(N, N, (phi * q).as_slice()).qr();
             let r = qr.r();
             q = SMatrix::from_column_slice(qr.q().as_slice());
             for (i, l) in logs.iter_mut().enumerate() {
                 *l += r[(i, i)].abs().ln();
             }
+        }
+        if iteration + 1 == transient {
+            logs = [0.0; N];
         }
     }
     let mut exponents: Vec<f64> = logs

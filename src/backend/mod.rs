@@ -248,8 +248,11 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         1
     };
     MethodSettings {
-        transient: i.transient,
-        iterations: i.iterations,
+        // The aligning iterations run with Jacobians, as the averaging
+        // ones do; the lane's accumulator takes them for the frame alone.
+        transient: i.transient - i.align,
+        iterations: i.align + i.iterations,
+        align: i.align,
         initial_state: i.initial_state.clone(),
         perturbation: scene.perturbation(),
         difference: scene.difference(),

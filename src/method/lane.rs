@@ -1,10 +1,18 @@
 //! One lane: the whole method for one parameter value.
 //!
-//! Discard `transient` iterations of the reference; then, with Q = I, run
-//! `iterations` iterations, each giving the next reference point and the
-//! map's Jacobian there (estimated from perturbed copies, or exact), and
-//! accumulate QR. A lane that goes non-finite stops and says so; it never
-//! touches another lane.
+//! Discard `transient` iterations of the reference, the last `align` of
+//! them with their Jacobians, which turn the QR frame from I towards the
+//! directions of growth without being counted; then run `iterations`
+//! iterations, each giving the next reference point and the map's Jacobian
+//! there (estimated from perturbed copies, or exact), and accumulate QR. A
+//! lane that goes non-finite stops and says so; it never touches another
+//! lane.
+//!
+//! [`MethodSettings`] is what the backends run: its `transient` is the
+//! iterations without Jacobians, and its `iterations` begin with the
+//! `align` ones, which [`LaneAccumulator`] takes for the frame alone. Every
+//! backend gets the alignment that way, by running the settings it is
+//! given.
 
 use crate::integrate::MAX_EVENTS;
 use nalgebra::{Const, DimMin, SMatrix};
@@ -27,8 +35,13 @@ pub enum Tangent {
 /// The settings shared by every lane of a sweep.
 #[derive(Clone, Debug)]
 pub struct MethodSettings {
+    /// Iterations of the reference alone, discarded.
     pub transient: usize,
+    /// Iterations with Jacobians: the first `align` of them turn the QR
+    /// frame only (the scene's transient's last ones), the others are
+    /// averaged.
     pub iterations: usize,
+    pub align: usize,
     pub initial_state: Vec<f64>,
     /// δ of the perturbed copies, relative to the state's size: the copies
     /// of x_n start at x_n ± δ·max(1, ‖x_n‖∞)·e_i (see [`perturbation_at`]).
@@ -508,8 +521,14 @@ pub struct LaneAccumulator<const D: usize> {
     period: f64,
     plan: LanePlan,
     transient: usize,
+    /// Iterations that turn the frame before the averaging, and how many
+    /// of them have been taken.
+    align: usize,
+    aligned: usize,
+    /// Iterations averaged (the settings' less the aligning ones).
     iterations: usize,
     lyapunov: bool,
+    /// The first averaged iteration whose point is kept.
     first_kept: usize,
     /// Rounding unit and δ of the run, for the resolution bound.
     noise: Option<(f64, f64, usize)>,
@@ -545,7 +564,8 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     pub fn new(settings: &MethodSettings, period: f64, plan: LanePlan) -> Self {
-        let kept = settings.bifurcation_points.min(settings.iterations);
+        let iterations = settings.iterations - settings.align;
+        let kept = settings.bifurcation_points.min(iterations);
         let steps_per_part = if settings.rounding_accumulates {
             plan.steps_per_period / plan.parts
         } else {
@@ -556,9 +576,11 @@ where
             period,
             plan,
             transient: settings.transient,
-            iterations: settings.iterations,
+            align: settings.align,
+            aligned: 0,
+            iterations,
             lyapunov: settings.lyapunov,
-            first_kept: settings.iterations - kept,
+            first_kept: iterations - kept,
             noise: (settings.tangent == Tangent::FiniteDifference).then_some((
                 settings.rounding_unit,
                 settings.perturbation,
@@ -584,7 +606,7 @@ where
         }
     }
 
-    /// Takes one averaging iteration: the reference's new point, the
+    /// Takes one iteration with Jacobians (aligning, then averaging): the reference's new point, the
     /// Jacobians of the map's parts in order (none when exponents are not
     /// wanted) and what happened on the way. Returns false once the lane
     /// has failed.
@@ -595,7 +617,7 @@ where
         stats: &IterationStats,
     ) -> bool {
         if !all_finite(next) {
-            self.fail(self.transient + self.done);
+            self.fail(self.taken());
             return false;
         }
         let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -617,10 +639,11 @@ where
         }
         let n = self.done;
         if jacobians.iter().any(|j| !j.iter().all(|v| v.is_finite())) {
-            self.fail(self.transient + n);
+            self.fail(self.taken());
             return false;
         }
-        if let Some(kept) = self.jacobians.as_mut() {
+        let aligning = self.aligned < self.align;
+        if let Some(kept) = self.jacobians.as_mut().filter(|_| !aligning) {
             for j in jacobians {
                 kept.extend(j.transpose().iter());
             }
@@ -634,8 +657,6 @@ where
         // (`bound`): those R_ii may be rounding too.
         let loss = (stats.rank_loss as usize).min(D);
         let bound = (stats.sliding_phases as usize).max(loss).min(D);
-        self.rank_loss = self.rank_loss.max(loss);
-        self.rank_loss_bound = self.rank_loss_bound.max(bound);
         let kept = D - bound;
         let noise = self.noise.map(|(unit, delta, steps)| {
             difference_noise(unit, scale, steps, delta * scale.max(1.0))
@@ -650,8 +671,11 @@ where
             if !diag[..kept].iter().all(|r| r.ln().is_finite()) {
                 // A singular Jacobian: a direction contracted below what δ and
                 // rounding can resolve in one iteration.
-                self.fail(self.transient + n);
+                self.fail(self.taken());
                 return false;
+            }
+            if aligning {
+                continue;
             }
             if let Some(noise) = noise {
                 self.log_noise += noise.ln();
@@ -661,6 +685,15 @@ where
                 }
             }
         }
+        if aligning {
+            self.aligned += 1;
+            if self.aligned == self.align {
+                self.qr.restart_sums();
+            }
+            return true;
+        }
+        self.rank_loss = self.rank_loss.max(loss);
+        self.rank_loss_bound = self.rank_loss_bound.max(bound);
         self.parts_done += jacobians.len();
         self.impacts += u64::from(stats.impacts);
         for (c, &s) in self.crossings.iter_mut().zip(&stats.crossings) {
@@ -677,6 +710,12 @@ where
         }
         self.done += 1;
         true
+    }
+
+    /// The iterations taken so far, counted from the start of the transient:
+    /// the index of the next one.
+    fn taken(&self) -> usize {
+        self.transient + self.aligned + self.done
     }
 
     /// Marks the lane failed at `iteration` (counted from the start of the transient).

@@ -113,6 +113,16 @@ where
         diag
     }
 
+    /// Forgets the sums, keeping the frame: the iterations pushed so far
+    /// only turned Q towards the directions of growth (the transient's
+    /// alignment), so that the averaging window starts from them rather
+    /// than from I, whose projection onto those directions would otherwise
+    /// stay in the sums as a bias of O(1/N).
+    pub fn restart_sums(&mut self) {
+        self.log_r = [0.0; D];
+        self.steps = 0;
+    }
+
     /// The current frame Q_n.
     pub fn frame(&self) -> &SMatrix<f64, D, D> {
         &self.q
