@@ -889,9 +889,8 @@ fn check_model_override(table: &toml::Table, assignment: &str) -> Result<()> {
 
 fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> {
     let kinds = || {
-        system::SYSTEMS
-            .iter()
-            .map(|s| format!("\"{}\"", s.kind))
+        system::kinds()
+            .map(|kind| format!("\"{kind}\""))
             .collect::<Vec<_>>()
             .join(", ")
     };

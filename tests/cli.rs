@@ -93,6 +93,15 @@ fn impossible_values_name_their_key() {
         &[],
         "integration.iterations",
     );
+    // The `lorenz` kind runs a model whose map period is its parameter
+    // `period`: the message names the scene's key.
+    refused(
+        &BASE
+            .replace("impact-oscillator", "lorenz")
+            .replace("eta = 0.8", "period = 0.0"),
+        &[],
+        "system.period",
+    );
     // The aligning iterations are the transient's last ones.
     refused(
         &BASE.replace("iterations = 10", "iterations = 10\nalign = 100000"),

@@ -348,6 +348,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("friction-belt.toml", false),
         // Two stops on x, from below and from above.
         ("impact-pair.toml", true),
+        // The `lorenz` kind's time-T map.
+        ("lorenz-flow.toml", true),
         // Poincaré sections: the kernels run period maps.
         ("lorenz.toml", false),
         ("rossler.toml", false),

@@ -15,7 +15,6 @@ use super::{Lane, LaneResult, MethodSettings};
 use crate::integrate::{IterationStats, Part};
 use crate::system::henon::Henon;
 use crate::system::impact_oscillator::ImpactOscillator;
-use crate::system::lorenz::Lorenz;
 use crate::system::model::ModelFlow;
 use crate::system::section::SectionFlow;
 use crate::system::{Params, System, SystemInfo};
@@ -80,7 +79,6 @@ pub fn runner(system: &SystemInfo) -> Runner {
     match system.kind {
         "impact-oscillator" => Runner::of::<2, ImpactOscillator>(),
         "henon" => Runner::of::<2, Henon>(),
-        "lorenz" => Runner::of::<3, Lorenz>(),
         kind => unreachable!("the built-in system '{kind}' has no runner"),
     }
 }

@@ -15,6 +15,7 @@ use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceValues, Wall,
 };
 use crate::model::code::{piecewise_linear, reads_state_or_time, walls_at, Code};
+use crate::model::expr::{Expr, Var};
 use crate::model::jit::{Kind, Layout, Native};
 use crate::model::tape::Registers;
 
@@ -26,6 +27,18 @@ fn leak(s: &str) -> &'static str {
 /// backends and the writers. Built once per scene and kept for the
 /// process (the description is static for the built-ins).
 pub fn info(code: Code) -> &'static SystemInfo {
+    let sweep = code.model.names.parameters.first().cloned();
+    info_as(
+        code,
+        "model.parameters",
+        sweep.as_deref().unwrap_or_default(),
+    )
+}
+
+/// [`info`] for a built-in kind given as a model (`system::MODEL_KINDS`):
+/// its parameters are the scene's `[system]` keys, and `default_sweep` is
+/// what a sweep naming no parameter sweeps.
+pub fn info_as(code: Code, table: &'static str, default_sweep: &str) -> &'static SystemInfo {
     let code: &'static Code = Box::leak(Box::new(code));
     let model = &code.model;
     let parameters: Vec<Parameter> = model
@@ -60,7 +73,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
         kind: leak(&model.name),
         parameters: Box::leak(parameters.into_boxed_slice()),
         state_names: Box::leak(state_names.into_boxed_slice()),
-        default_sweep: leak(&model.names.parameters.first().cloned().unwrap_or_default()),
+        default_sweep: leak(default_sweep),
         default_initial_state: Box::leak(vec![initial; code.states()].into_boxed_slice()),
         is_flow: true,
         has_exact: code.is_piecewise_linear,
@@ -77,7 +90,7 @@ pub fn info(code: Code) -> &'static SystemInfo {
             Some(|_, _| true)
         },
         model: Some(code),
-        table: "model.parameters",
+        table,
         events: Box::leak(events.into_boxed_slice()),
     }))
 }
@@ -91,10 +104,18 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
     super::check_finite(p)?;
     let t = code.period(&p.values);
     if !(t.is_finite() && t > 0.0) {
-        return Err((
-            "model.map.period",
-            format!("must be a finite number > 0, got {t}"),
-        ));
+        // A period that is one parameter is that parameter's fault (the
+        // `lorenz` kind's `system.period`).
+        return Err(match &code.model.map {
+            crate::model::Map::Period(Expr::Var(Var::Param(i))) => (
+                p.info.parameters[*i].name,
+                format!("the map's period must be a finite number > 0, got {t}"),
+            ),
+            _ => (
+                "model.map.period",
+                format!("must be a finite number > 0, got {t}"),
+            ),
+        });
     }
     if let Some(section) = &code.section {
         let at = section.at.eval(&[], &p.values, 0.0);
