@@ -110,20 +110,37 @@ const PIO2_2_64: f64 = 6.07710050630396597660e-11lf;
 const PIO2_3_64: f64 = 2.02226624879595063154e-21lf;
 const TWO_OVER_PI_64: f64 = 6.36619772367581382433e-01lf;
 
-// (cos x, sin x): x = k·π/2 + r with |r| ≤ π/4, the Taylor series of both
-// at r (to r^18 and r^19: error below 1e-17), rotated by k quarter turns.
+// fdlibm's kernels of sin and cos on |r| ≤ π/4 (k_sin.c, k_cos.c; Sun
+// Microsystems, freely usable): minimax polynomials of degree 13 and 14.
+const SIN1_64: f64 = -1.66666666666666324348e-01lf;
+const SIN2_64: f64 = 8.33333333332248946124e-03lf;
+const SIN3_64: f64 = -1.98412698298579493134e-04lf;
+const SIN4_64: f64 = 2.75573137070700676789e-06lf;
+const SIN5_64: f64 = -2.50507602534068634195e-08lf;
+const SIN6_64: f64 = 1.58969099521155010221e-10lf;
+const COS1_64: f64 = 4.16666666666666019037e-02lf;
+const COS2_64: f64 = -1.38888888888741095749e-03lf;
+const COS3_64: f64 = 2.48015872894767294178e-05lf;
+const COS4_64: f64 = -2.75573143513906633035e-07lf;
+const COS5_64: f64 = 2.08757232129817482790e-09lf;
+const COS6_64: f64 = -1.13596475577881948265e-11lf;
+
+// (cos x, sin x): x = k·π/2 + r with |r| ≤ π/4, fdlibm's kernels at r
+// (without its correction for |r| > 0.3 in cos, which costs a fraction of
+// an ulp), rotated by k quarter turns. The CPU's twin
+// (src/model/math64.rs) makes the same operations in the same order, so
+// that a model's sin θ, which the finite differences amplify by 1/δ, has
+// the same bits on both paths (on lavapipe, tests/math64.rs; a driver
+// that fused a multiply-add of the polynomials would differ by an ulp).
 // Accurate while |x| < 2^20·π/2 (ωt over about 10^5 periods).
 fn cos_sin64(x: f64) -> vec2<f64> {
     let k = round(x * TWO_OVER_PI_64);
     let r = ((x - k * PIO2_1_64) - k * PIO2_2_64) - k * PIO2_3_64;
-    let r2 = r * r;
-    var c = f64(1.0);
-    var s = f64(1.0);
-    for (var n = 9; n >= 1; n = n - 1) {
-        c = f64(1.0) - r2 * c / f64((2 * n - 1) * (2 * n));
-        s = f64(1.0) - r2 * s / f64((2 * n) * (2 * n + 1));
-    }
-    s = r * s;
+    let z = r * r;
+    let ps = SIN2_64 + z * (SIN3_64 + z * (SIN4_64 + z * (SIN5_64 + z * SIN6_64)));
+    let s = r + (z * r) * (SIN1_64 + z * ps);
+    let pc = z * (COS1_64 + z * (COS2_64 + z * (COS3_64 + z * (COS4_64 + z * (COS5_64 + z * COS6_64)))));
+    let c = f64(1.0) - (f64(0.5) * z - z * pc);
     let q = i32(k - f64(4.0) * floor(k * f64(0.25)));
     if (q == 0) {
         return vec2<f64>(c, s);

@@ -99,9 +99,10 @@ impl Func {
 
     pub(crate) fn apply(self, a: &[f64]) -> f64 {
         match self {
-            Func::Sin => a[0].sin(),
-            Func::Cos => a[0].cos(),
-            Func::Tan => a[0].tan(),
+            // The GPU's arithmetic, to the bit (`super::math64`).
+            Func::Sin => super::math64::sin(a[0]),
+            Func::Cos => super::math64::cos(a[0]),
+            Func::Tan => super::math64::tan(a[0]),
             Func::Exp => a[0].exp(),
             Func::Log => a[0].ln(),
             Func::Sqrt => a[0].sqrt(),

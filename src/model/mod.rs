@@ -5,7 +5,8 @@
 //! derivatives (for the sum rule) and text form; the `[model]` table
 //! checked and parsed into a [`Model`] ([`table`]); the CPU's compiled
 //! evaluator ([`tape`], and its native code, [`jit`]) and the GPU's
-//! generated system file ([`wgsl`]), both built from those trees; and
+//! generated system file ([`wgsl`]), both built from those trees, with
+//! sin, cos and tan computed by the same arithmetic on both ([`math64`]); and
 //! `model check`'s report ([`describe`]). `system::model` and
 //! `system::section` make a compiled model a system like the built-ins.
 
@@ -13,6 +14,7 @@ pub mod code;
 pub mod describe;
 pub mod expr;
 pub mod jit;
+pub mod math64;
 pub mod table;
 pub mod tape;
 pub mod wgsl;

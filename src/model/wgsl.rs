@@ -30,9 +30,10 @@
 //!   `shaders/shared/model_functions.wgsl`, which `backend::gpu::shader`
 //!   includes per precision: `shaders/shared/math64.wgsl` (arithmetic
 //!   alone) for f64, whose transcendental builtins Vulkan leaves undefined,
-//!   WGSL's builtins for f32. Those wrappers are within a few ulp of Rust's
-//!   functions, not to the bit: a model that calls one matches the CPU to
-//!   rounding, not bit for bit.
+//!   WGSL's builtins for f32. sin, cos and tan there are the CPU's own
+//!   arithmetic (`model::math64`: the same bits on lavapipe); exp, log,
+//!   tanh, atan2 and pow are within a few ulp of Rust's functions, not to
+//!   the bit, so a model that calls one matches the CPU to rounding.
 //!
 //! What the kernels run so far ([`check`]): a period map of a flow of 2 to
 //! 4 states (the kernels' `State` is a WGSL vector) whose events, if any,
