@@ -244,19 +244,14 @@ fn the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu() {
 
 #[test]
 fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
-    // An event that moves with the clock (the vibrating table) and a switch
-    // (the soft stop): the GPU's impact code knows stops alone. No adapter
-    // is needed: the refusal comes first.
+    // Switches with a stick limit (the belts), made to be slid on: the
+    // kernels do not slide. No adapter is needed: the refusal comes first.
     for (name, parameter, why) in [
+        ("friction-belt.toml", "eta", "the switch 'slip' has a stick limit"),
         (
-            "vibrating-table.toml",
-            "e",
-            "the event 'table' is not a stop",
-        ),
-        (
-            "soft-stop.toml",
+            "two-block-belt.toml",
             "eta",
-            "the switch 'contact' is not a stop",
+            "the switch 'slip1' has a stick limit",
         ),
     ] {
         let body = format!(
@@ -271,16 +266,13 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
         assert!(matches!(err, Error::Backend { .. }), "{name}: {text}");
         assert!(err.is_input_error(), "exit 2");
         assert!(
-            text.contains("the GPU kernels handle stops alone") && text.contains(why),
+            text.contains("the GPU kernels do not slide") && text.contains(why),
             "{name}: {text}"
         );
         let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
         assert_eq!(auto.backend, Backend::Cpu);
         let choice = auto.choice.unwrap();
-        assert!(
-            choice.contains("the GPU kernels handle stops alone"),
-            "{choice}"
-        );
+        assert!(choice.contains("the GPU kernels do not slide"), "{choice}");
     }
 }
 
@@ -527,5 +519,154 @@ fn models_with_stops_run_in_f32_close_to_f64() {
             );
         }
         f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
+    }
+}
+
+/// One model's sweep (a model file, or a model's text) on both paths in
+/// f64, lane by lane: both `ok`, the same impacts and crossings of every
+/// event column, the exponents within `tolerance`, and the sum rule: each
+/// lane's |λ_sum - expected| on the GPU within 1e-9 of the CPU's (the
+/// finite differences' floor, about 1e-9 at δ = 1e-6, is the same on both
+/// paths). Returns the largest exponent difference and the largest sum
+/// error of each path.
+fn surfaces_agree(scene: &dyn Fn(&str) -> Scene, label: &str, tolerance: f64) -> (f64, f64, f64) {
+    let (cpu, gpu) = (run(&scene("cpu")), run(&scene("gpu")));
+    assert_eq!(gpu.backend, Backend::Gpu);
+    let variant = &gpu.gpu.as_ref().unwrap().variant;
+    assert!(variant.contains("/f64/surfaces+newton"), "{variant}");
+    let (mut worst, mut cpu_sum, mut gpu_sum): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let lanes = cpu.lanes.iter().zip(&cpu.expected_sums);
+    for (k, ((c, ce), (g, ge))) in lanes.zip(gpu.lanes.iter().zip(&gpu.expected_sums)).enumerate() {
+        let lane = format!("{label} lane {k}");
+        assert_eq!(c.status, LaneStatus::Ok, "{lane}");
+        assert_eq!(g.status, LaneStatus::Ok, "{lane}");
+        assert_eq!(c.plan, g.plan, "{lane}: the same steps and parts");
+        assert_eq!(c.impacts_per_period, g.impacts_per_period, "{lane}");
+        assert_eq!(
+            c.crossings_per_period, g.crossings_per_period,
+            "{lane}: the crossings of each event and switch"
+        );
+        let d = exponent_difference(&c.exponents, &g.exponents);
+        let (c_err, g_err) = ((c.exponent_sum() - ce).abs(), (g.exponent_sum() - ge).abs());
+        eprintln!(
+            "{lane}: {:?}, crossings {:?}: CPU - GPU {d:e}; sum rule CPU {c_err:e}, GPU {g_err:e}",
+            c.exponents,
+            &c.crossings_per_period[..2]
+        );
+        assert!(d <= tolerance, "{lane}: CPU {:?} vs GPU {:?}", c.exponents, g.exponents);
+        assert!(g_err <= c_err + 1e-9, "{lane}: sum rule CPU {c_err:e}, GPU {g_err:e}");
+        worst = worst.max(d);
+        cpu_sum = cpu_sum.max(c_err);
+        gpu_sum = gpu_sum.max(g_err);
+    }
+    (worst, cpu_sum, gpu_sum)
+}
+
+#[test]
+fn the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The model's defaults (ks = 20, gap = 1, ζ = 0.05, f = 1): periodic
+    // orbits with 2 or 4 crossings of the contact a period, and one
+    // (η = 2.2) that never reaches it (tests/switches.rs checks them
+    // against the exact piecewise-linear backend).
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.4, 0.6, 0.8, 1.0, 1.2, 2.2]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        model_scene(
+            "soft-stop.toml",
+            body,
+            &[&format!("run.backend=\"{backend}\"")],
+        )
+    };
+    // Issue 15 asks for 1e-9. Measured on lavapipe: 0, every lane bit for
+    // bit the CPU's (the generated field reads the region's bit where the
+    // CPU's tape has it folded in, 0 or 1, which changes no rounding; the
+    // crossings are located by the same Newton on the same re-steps).
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "soft stop", 1e-9);
+    eprintln!("soft stop: largest CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    // The field is continuous across the contact (det S = 1, ln det S =
+    // 0 to rounding): both sums are -2ζ to the finite differences' floor
+    // (tests/switches.rs: 0.3 to 2.2e-9 on the CPU; measured 1.9e-9 on
+    // both paths here).
+    assert!(gpu_sum <= 1e-8, "{gpu_sum:e}");
+}
+
+#[test]
+fn a_general_event_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "a_general_event_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The kicked pair: two events whose reset v → -e·v ∓ kick is not a
+    // stop's, with a saltation determinant -e·v⁺/v⁻ that differs crossing
+    // by crossing: the sum rule holds only with each crossing's ln |det S|
+    // (tests/switches.rs checks the CPU against the exact backend).
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.5, 0.8, 1.2]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        common::scene(
+            &format!("{}\n{body}", common::KICKED_PAIR),
+            &[&format!("run.backend=\"{backend}\"")],
+        )
+    };
+    // Measured on lavapipe: 0, bit for bit, and the same sum error on both
+    // paths (5.8e-10): the kernels' ln |det S| per crossing (math64's log
+    // of an elimination's determinant) gave the CPU's Σ to the bit.
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "kicked pair", 1e-9);
+    eprintln!("kicked pair: largest CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    assert!(gpu_sum <= 1e-9, "{gpu_sum:e}");
+}
+
+#[test]
+fn an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu() {
+    if !gpu_or_skip(
+        "an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The vibrating table: its surface and the ball's reset read cos(w*t)
+    // and sin(w*t) (the forcing phase on the GPU), so each crossing's
+    // det S needs ∂g/∂t and ∂R/∂t, and comes to e² per impact. Chaotic
+    // lanes: the two paths' orbits decorrelate, so each is checked
+    // through its sum rule, crossing by crossing, and the sign of λ1.
+    let body = "[sweep]\nparameter = \"a\"\nvalues = [1.5, 2.5, 3.5, 4.0]\n[integration]\n\
+                steps_per_period = 900\ntransient = 100\niterations = 200\n[run]\nvalidate = 0\n";
+    let with = |backend: &str| {
+        run(&model_scene(
+            "vibrating-table.toml",
+            body,
+            &[&format!("run.backend=\"{backend}\"")],
+        ))
+    };
+    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    assert!(gpu.gpu.as_ref().unwrap().variant.contains("/f64/surfaces+"));
+    let e: f64 = 0.8;
+    for (k, ((c, g), expected)) in cpu
+        .lanes
+        .iter()
+        .zip(&gpu.lanes)
+        .zip(&gpu.expected_sums)
+        .enumerate()
+    {
+        assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+        let e_squared = 2.0 * e.ln() * g.crossings_per_period[0] / g.period;
+        let error = (g.exponent_sum() - expected).abs();
+        eprintln!(
+            "table lane {k}: GPU {:?} CPU {:?}, sum rule GPU {error:e}",
+            g.exponents, c.exponents
+        );
+        assert!((expected - e_squared).abs() <= 1e-12, "lane {k}: {expected} vs {e_squared}");
+        assert!(error <= 1e-8, "lane {k}: sum off by {error:e}");
+        assert_eq!(c.exponents[0] > 0.05, g.exponents[0] > 0.05, "lane {k}");
     }
 }

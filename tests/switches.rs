@@ -118,40 +118,12 @@ fn the_seed_model_s_exact_backend_is_the_built_in_closed_form() {
     }
 }
 
-/// The impact pair whose stops also kick the mass away: v → -e·v ∓ kick.
-/// Not a stop (the reset is not linear in v alone), so a general event;
-/// its saltation determinant, -e·v⁺/v⁻, differs crossing by crossing.
-const KICKED_PAIR: &str = r#"
-[model]
-name = "kicked-pair"
-states = ["x", "v"]
-[model.parameters]
-zeta = 0.05
-f = 1.0
-gap = 1.0
-e = 0.8
-kick = 0.1
-eta = 0.8
-[model.equations]
-x = "v"
-v = "-2*zeta*v - x + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-[[model.events]]
-name = "right stop"
-surface = "x - gap"
-reset = { v = "-e*v - kick" }
-[[model.events]]
-name = "left stop"
-surface = "-gap - x"
-reset = { v = "-e*v + kick" }
-"#;
 
 #[test]
 fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
     let etas = [0.5, 0.8, 1.2];
-    let exact = run(&model_scene(KICKED_PAIR, &sweep(&etas, 1800, "exact"), &[]));
-    let cpu = run(&model_scene(KICKED_PAIR, &sweep(&etas, 1800, "cpu"), &[]));
+    let exact = run(&model_scene(common::KICKED_PAIR, &sweep(&etas, 1800, "exact"), &[]));
+    let cpu = run(&model_scene(common::KICKED_PAIR, &sweep(&etas, 1800, "cpu"), &[]));
     for lane in &exact.lanes {
         assert!(
             lane.crossings_per_period[..2].iter().all(|&c| c >= 1.0),

@@ -78,6 +78,16 @@ pub enum Unsupported {
     Time,
     /// A Poincaré section: the kernels run time-T maps.
     Section,
+    /// A switch with a stick limit, made to be slid on: the kernels do
+    /// not slide.
+    Sliding(String),
+}
+
+fn kind_name(kind: crate::integrate::Surface) -> &'static str {
+    match kind {
+        crate::integrate::Surface::Event => "event",
+        crate::integrate::Surface::Switch { .. } => "switch",
+    }
 }
 
 impl fmt::Display for Unsupported {
@@ -90,8 +100,13 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Events(why) => write!(
                 f,
-                "{why}: the GPU kernels handle stops alone so far (surfaces `x - c` or \
-                 `c - x` on a state x whose rate is another state v, reset v -> -e*v)"
+                "{why}: the GPU kernels handle stops, or up to four events and switches \
+                 without stops"
+            ),
+            Unsupported::Sliding(name) => write!(
+                f,
+                "the switch '{name}' has a stick limit (a motion held on it): the GPU \
+                 kernels do not slide on switches so far"
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
@@ -112,15 +127,30 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     if !(2..=4).contains(&n) {
         return Err(Unsupported::States(n));
     }
-    if let Some(first) = code.surfaces.first() {
+    // Stops and general surfaces share the kernels' per-trajectory
+    // crossing counts (a vec4: up to four together); a model with both
+    // would also need sticking on a stop inside a step that crosses a
+    // surface, which the kernels do not do.
+    if !code.surfaces.is_empty() && !code.walls.is_empty() {
         return Err(Unsupported::Events(format!(
-            "the {} '{}' is not a stop",
-            match first.kind {
-                crate::integrate::Surface::Event => "event",
-                crate::integrate::Surface::Switch { .. } => "switch",
-            },
-            first.name
+            "the model has stops and the {} '{}' together",
+            kind_name(code.surfaces[0].kind),
+            code.surfaces[0].name
         )));
+    }
+    if code.surfaces.len() > crate::integrate::impact::MAX_WALLS {
+        return Err(Unsupported::Events(format!(
+            "{} events and switches: the kernels count up to {}",
+            code.surfaces.len(),
+            crate::integrate::impact::MAX_WALLS
+        )));
+    }
+    // A stick limit holds the motion on its switch (static friction): the
+    // kernels do not slide. (A switch without one may still be slid on
+    // where both fields point into it: the kernels flag such a lane,
+    // `FLAG_SLIDING`, and the backend recomputes it on the CPU.)
+    if let Some(s) = code.surfaces.iter().find(|s| s.stick_limit.is_some()) {
+        return Err(Unsupported::Sliding(s.name.clone()));
     }
     // Any stop (Code::compile allows MAX_WALLS, the components of the
     // kernels' vec4 per-stop values).
@@ -129,6 +159,15 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     for stop in &code.walls {
         trees.push(&stop.position);
         trees.push(&stop.restitution);
+    }
+    let rates: Vec<Expr> = code.surfaces.iter().map(|s| s.g.derivative(Var::Time)).collect();
+    for (s, rate) in code.surfaces.iter().zip(&rates) {
+        trees.push(&s.g);
+        trees.push(rate);
+        trees.extend(&s.gradient);
+        trees.extend(&s.reset);
+        trees.extend(&s.reset_jacobian);
+        trees.extend(&s.reset_rate);
     }
     for e in trees {
         emittable(e)?;
@@ -140,9 +179,9 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
 fn emittable(e: &Expr) -> Result<(), Unsupported> {
     match e {
         Expr::Num(v) if !v.is_finite() => Err(Unsupported::Number(*v)),
-        Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_)) => Ok(()),
+        // A switch's side is read from the trajectory's region (`side`).
+        Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_) | Var::Side(_)) => Ok(()),
         Expr::Var(Var::Time) => Err(Unsupported::Time),
-        Expr::Var(Var::Side(_)) => Err(Unsupported::Events("a switch".into())),
         // The clock: its argument is not emitted (the tape compiler has
         // checked that it is w*t with w of the parameters).
         Expr::Call(Func::Cos | Func::Sin, args) if args[0].uses(Var::Time) => Ok(()),
@@ -177,6 +216,12 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         // WGSL has no empty struct; load_params builds `Params()`.
         let _ = writeln!(w, "    unused: real,");
     }
+    if !code.surfaces.is_empty() {
+        // The field in force: the region of the switches the trajectory
+        // is in (bit b set on the positive side of switch b), set by the
+        // kernels, not a parameter of the lane.
+        let _ = writeln!(w, "    region: u32,");
+    }
     let _ = writeln!(w, "}}\n");
     let _ = writeln!(
         w,
@@ -192,8 +237,11 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         );
     }
     let _ = writeln!(w, "    );\n}}");
-    if !code.walls.is_empty() {
+    if !code.walls.is_empty() || !code.surfaces.is_empty() {
         stops(w, code);
+    }
+    if !code.surfaces.is_empty() {
+        surfaces(w, code);
     }
     if !model.angles.is_empty() {
         // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
@@ -292,6 +340,124 @@ fn stops(w: &mut String, code: &Code) {
     );
 }
 
+/// The general surfaces of `code` (events that are not stops, then the
+/// switches: the CPU's order, `Code::surfaces`) as the surface code of
+/// `shaders/shared/impact.wgsl` reads them: their count, each one's switch
+/// bit (or `EVENT`), g, its rate ∇g·F + ∂g/∂t along the field of the
+/// trajectory's region (the CPU's surface tape: the same sum, in the same
+/// order), ∇g, and an event's reset with its Jacobian and ∂R/∂t, all from
+/// the trees the CPU evaluates.
+fn surfaces(w: &mut String, code: &Code) {
+    let names = &code.model.names;
+    let n = names.states.len();
+    let surfaces = &code.surfaces;
+    let emit = |e: &Expr| Emit { expr: e, code }.to_string();
+    let state = |exprs: &[Expr]| -> String {
+        let parts: Vec<String> = exprs.iter().map(emit).collect();
+        format!("State({})", parts.join(", "))
+    };
+    let vector = |each: &dyn Fn(usize) -> String, pad: &str| -> String {
+        let parts: Vec<String> = (0..4)
+            .map(|j| if j < surfaces.len() { each(j) } else { pad.into() })
+            .collect();
+        parts.join(", ")
+    };
+    let _ = writeln!(w, "\n// The events and switches, in the CPU's order (after the stops):");
+    for (j, s) in surfaces.iter().enumerate() {
+        let kind = match s.kind {
+            crate::integrate::Surface::Event => "event".to_owned(),
+            crate::integrate::Surface::Switch { bit } => format!("switch (bit {bit})"),
+        };
+        let _ = writeln!(
+            w,
+            "//   {j}: {kind} '{}', g = {}",
+            s.name,
+            Written { expr: &s.g, names }
+        );
+    }
+    let bit = |j: usize| match surfaces[j].kind {
+        crate::integrate::Surface::Event => "EVENT".to_owned(),
+        crate::integrate::Surface::Switch { bit } => format!("{bit}u"),
+    };
+    let _ = writeln!(
+        w,
+        "const SURFACES: u32 = {}u;\n\
+         // A surface's switch bit, or EVENT for an event.\n\
+         const EVENT: u32 = 0xffffffffu;\n\
+         const SURFACE_BIT = vec4<u32>({});\n\n\
+         // The trajectory's side of switch `bit`: 1 on its positive side.\n\
+         fn side(p: Params, bit: u32) -> real {{\n    return real((p.region >> bit) & 1u);\n}}\n\n\
+         fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{\n    return vec4<real>({});\n}}\n\n\
+         struct SurfaceValues {{\n    g: vec4<real>,\n    rate: vec4<real>,\n}}\n",
+        surfaces.len(),
+        vector(&bit, "EVENT"),
+        vector(&|j| emit(&surfaces[j].g), "real(0.0)"),
+    );
+    const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
+    let rate = |j: usize| -> String {
+        let s = &surfaces[j];
+        let mut sum = String::new();
+        for i in 0..n {
+            let term = format!("({} * f.{})", emit(&s.gradient[i]), COMPONENTS[i]);
+            sum = if i == 0 { term } else { format!("({sum} + {term})") };
+        }
+        format!("({sum} + {})", emit(&s.g.derivative(Var::Time)))
+    };
+    let _ = writeln!(
+        w,
+        "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region.\n\
+         fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
+         let f = rhs(p, phase, y);\n    \
+         return SurfaceValues(surface_g(p, phase, y), vec4<real>({}));\n}}\n",
+        vector(&rate, "real(0.0)"),
+    );
+    let _ = writeln!(
+        w,
+        "fn surface_gradient(p: Params, phase: vec2<real>, y: State, j: u32) -> State {{\n    \
+         switch j {{"
+    );
+    for (j, s) in surfaces.iter().enumerate().skip(1) {
+        let _ = writeln!(w, "        case {j}u: {{ return {}; }}", state(&s.gradient));
+    }
+    let _ = writeln!(
+        w,
+        "        default: {{ return {}; }}\n    }}\n}}\n",
+        state(&surfaces[0].gradient)
+    );
+    let _ = writeln!(
+        w,
+        "// An event's reset: the state after it, its Jacobian DR (rows) and ∂R/∂t.\n\
+         struct Reset {{\n    y: State,\n    dr: array<State, DIM>,\n    rate: State,\n}}\n\n\
+         fn reset(p: Params, phase: vec2<real>, y: State, j: u32) -> Reset {{\n    switch j {{"
+    );
+    for (j, s) in surfaces.iter().enumerate() {
+        if s.kind != crate::integrate::Surface::Event {
+            continue;
+        }
+        let rows: Vec<String> = (0..n)
+            .map(|i| state(&s.reset_jacobian[i * n..(i + 1) * n]))
+            .collect();
+        let _ = writeln!(
+            w,
+            "        case {j}u: {{\n            return Reset({}, array<State, DIM>({}), {});\n        }}",
+            state(&s.reset),
+            rows.join(", "),
+            state(&s.reset_rate)
+        );
+    }
+    let _ = writeln!(
+        w,
+        "        default: {{}}\n    }}\n    // A switch: no reset.\n    \
+         return Reset(y, array<State, DIM>(), State());\n}}"
+    );
+}
+
+/// Whether a system file has general surfaces (`SURFACES`), for the
+/// kernels' surface code and the trajectories' region.
+pub fn has_surfaces(system: &str) -> bool {
+    system.contains("const SURFACES: u32")
+}
+
 /// Whether a system file wraps angles (`wrap_angles`), for the `WRAP`
 /// define of the finish kernel.
 pub fn wraps_angles(system: &str) -> bool {
@@ -354,7 +520,8 @@ fn emit(f: &mut fmt::Formatter<'_>, e: &Expr, code: &Code) -> fmt::Result {
         Expr::Var(Var::State(i)) => write!(f, "y.{}", COMPONENTS[*i]),
         Expr::Var(Var::Param(i)) => write!(f, "p.{}", field(&code.model.names, *i)),
         Expr::Var(Var::Time) => unreachable!("check refuses t outside the clock"),
-        Expr::Var(Var::Side(_)) => unreachable!("check refuses switches"),
+        // The trajectory's side of switch j: its region's bit j.
+        Expr::Var(Var::Side(j)) => write!(f, "side(p, {j}u)"),
         // The forcing clock, as the tape reads it (`Compiler::clock`).
         Expr::Call(Func::Cos, a) if a[0].uses(Var::Time) => write!(f, "phase.x"),
         Expr::Call(Func::Sin, a) if a[0].uses(Var::Time) => write!(f, "phase.y"),
