@@ -670,3 +670,42 @@ fn an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu() {
         assert_eq!(c.exponents[0] > 0.05, g.exponents[0] > 0.05, "lane {k}");
     }
 }
+
+#[test]
+fn switches_and_general_events_run_in_f32_close_to_f64() {
+    if !gpu_or_skip(
+        "switches_and_general_events_run_in_f32_close_to_f64",
+        Precision::F32,
+    ) {
+        return;
+    }
+    // The soft stop's and the kicked pair's periodic lanes against the
+    // CPU's f64, through the tool's own f32 tolerance (1e-3), with the same
+    // crossings of every event column.
+    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let body = |values: &str| {
+        format!(
+            "[sweep]\nparameter = \"eta\"\nvalues = {values}\n[integration]\n\
+             steps_per_period = 1800\ntransient = 300\niterations = 300\n[run]\nvalidate = 0\n"
+        )
+    };
+    let soft = body("[0.4, 0.6, 0.8, 1.0, 1.2, 2.2]");
+    let kicked = body("[0.5, 0.8, 1.2]");
+    let soft_stop = |overrides: &[&str]| model_scene("soft-stop.toml", &soft, overrides);
+    let kicked_pair = |overrides: &[&str]| {
+        common::scene(&format!("{}\n{kicked}", common::KICKED_PAIR), overrides)
+    };
+    let cases: [(&str, &dyn Fn(&[&str]) -> Scene); 2] =
+        [("soft stop", &soft_stop), ("kicked pair", &kicked_pair)];
+    for (name, scene) in cases {
+        let f64_cpu = run(&scene(&["run.backend=\"cpu\""]));
+        let f32_gpu = run(&scene(&["run.backend=\"gpu\"", "run.precision=\"f32\""]));
+        for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
+            assert_eq!(
+                c.crossings_per_period, g.crossings_per_period,
+                "{name} lane {k}: the crossings of each event and switch"
+            );
+        }
+        f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
+    }
+}
