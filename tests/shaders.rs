@@ -400,6 +400,23 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
             "{name}"
         );
     }
+    // Surface code (the region, the surfaces' values, ln |det S|) only for
+    // models with events or switches: the stop models' kernels are the
+    // ones they were (their speed measured in docs/BENCHMARKS.md).
+    for (name, surfaces) in [
+        ("seed-oscillator.toml", false),
+        ("impact-pair.toml", false),
+        ("two-mass-chain.toml", false),
+        ("soft-stop.toml", true),
+        ("vibrating-table.toml", true),
+    ] {
+        for kernel in Kernel::ALL {
+            let source = variant(system(name), Precision::F64).source(kernel);
+            for part in ["fn surface_values(", "TRAJ_REGION", "fluxes", "fn log64("] {
+                assert_eq!(source.contains(part), surfaces, "{name} {kernel:?}: {part}");
+            }
+        }
+    }
     // The seed as a model: the hand-written file's tree, fully bracketed,
     // its wall from the stop.
     let seed = system("seed-oscillator.toml").wgsl.unwrap();

@@ -330,9 +330,13 @@ fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
 // invocation is small: see loop_budget_exhausted).
+#ifdef SURFACES
 fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
-    // (A copy: with surfaces, its region follows the crossings.)
+    // A copy, whose region follows the crossings.
     var p = p_lane;
+#else
+fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
+#endif
     var done = real(0.0);
     var phase0 = phase;
     var y0 = y;
