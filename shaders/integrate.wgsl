@@ -70,6 +70,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // The surfaces' values at the step's start (carried from step to
     // step, as the CPU's at_start).
     var before = surface_values(p, phase, y);
+    if ((c.z & FLAG_SLIDING) != 0u) {
+        // A lane flagged sliding is the CPU's to recompute: its
+        // trajectories only count their steps from here on (stepping on
+        // from a state the kernels did not integrate costs, and can run
+        // past lavapipe's loop cap).
+        k = end;
+    }
 #endif
     // The hot loop only steps and detects: a step whose plain image reaches
     // a stop or turns back inside it, or a mass at rest on a stop, ends

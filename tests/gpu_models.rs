@@ -739,3 +739,56 @@ fn switches_and_general_events_run_in_f32_close_to_f64() {
         f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
     }
 }
+
+#[test]
+fn a_lane_sliding_on_a_switch_is_flagged_by_the_kernels_and_recomputed_on_the_cpu() {
+    if !gpu_or_skip(
+        "a_lane_sliding_on_a_switch_is_flagged_by_the_kernels_and_recomputed_on_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // Coulomb friction on a fixed floor (no stick limit, so the kernels
+    // run it): under a weak forcing the mass sticks (both fields point
+    // into v = 0, Filippov sliding), which the kernels flag rather than
+    // integrate; under a strong one its velocity crosses 0 transversally,
+    // which they integrate, with each crossing's det S = (∇g·F⁺)/(∇g·F⁻)
+    // ≠ 1 (the friction force jumps by 2μ).
+    let body = "[sweep]\nparameter = \"f\"\nvalues = [0.3, 0.6, 2.0, 3.0, 4.0]\n\
+                [integration]\nsteps_per_period = 600\ntransient = 100\niterations = 100\n\
+                [run]\nvalidate = 0\n";
+    let with = |backend: &str| {
+        run(&common::scene(
+            &format!("{}\n{body}", common::FRICTION),
+            &[&format!("run.backend=\"{backend}\"")],
+        ))
+    };
+    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    let recomputed = &gpu.gpu.as_ref().unwrap().recomputed;
+    eprintln!("recomputed on the CPU: {recomputed:?}");
+    // The sticking lanes (one exponent collapsed by the sliding), and
+    // those alone.
+    assert_eq!(recomputed, &[0, 1]);
+    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+        let d = exponent_difference(
+            &c.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
+            &g.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
+        );
+        eprintln!(
+            "friction lane {k}: {:?} {:?} CPU {:?} GPU {:?}: {d:e}",
+            c.status, g.status, c.exponents, g.exponents
+        );
+        assert_eq!(c.status, g.status, "lane {k}");
+        assert!(d <= 1e-9, "lane {k}: {d:e}");
+        if k >= 2 {
+            // Slipping lanes, the kernels' own: measured bit for bit, and
+            // the sum rule (div F = 0, so the sum is the crossings' ln
+            // det S alone, about ±ln(1 + 2μ/|a|) each) to δ's floor.
+            assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+            assert!(g.crossings_per_period[0] >= 2.0, "lane {k}");
+            let error = (g.exponent_sum() - gpu.expected_sums[k]).abs();
+            eprintln!("friction lane {k}: sum rule GPU {error:e}, expected {}", gpu.expected_sums[k]);
+            assert!(error <= 1e-8, "lane {k}: {error:e}");
+        }
+    }
+}

@@ -147,27 +147,6 @@ fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
     assert!(cpu_sum <= 1e-8, "RK4 sum rule: {cpu_sum:e}");
 }
 
-/// A mass on a spring with Coulomb friction against a fixed floor, written
-/// with a switch on the velocity: where the spring force is below the
-/// friction limit, both fields point into v = 0 (sticking, Filippov
-/// sliding).
-const FRICTION: &str = r#"
-[model]
-name = "friction"
-states = ["x", "v"]
-[model.parameters]
-mu = 0.5
-f = 0.3
-eta = 0.8
-[[model.switches]]
-name = "slip"
-surface = "v"
-[model.equations]
-x = "v"
-v = "-x - mu*sign(slip) + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-"#;
 
 #[test]
 fn sliding_collapses_a_direction_on_both_paths() {
@@ -175,9 +154,10 @@ fn sliding_collapses_a_direction_on_both_paths() {
     // once and for good (the forcing never overcomes friction).
     let scene = |backend: &str| {
         format!(
-            "{FRICTION}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[integration]\n\
+            "{}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[integration]\n\
              steps_per_period = 200\ntransient = 5\niterations = 5\ninitial_state = [0.1, 0.0]\n\
-             [output]\nbifurcation_points = 5\n[run]\nbackend = \"{backend}\"\n"
+             [output]\nbifurcation_points = 5\n[run]\nbackend = \"{backend}\"\n",
+            common::FRICTION
         )
     };
     let cpu = run(&model_scene(&scene("cpu"), "", &[]));

@@ -66,8 +66,10 @@ const FLAG_RANK_TWO: u32 = 8u;
 // The adapter cut this dispatch's loops short (see loop_budget_exhausted):
 // the host redoes the batch with shorter dispatches.
 const FLAG_TRUNCATED: u32 = 16u;
-// Flags that outlive the iteration they were raised in.
-const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED;
+// Flags that outlive the iteration they were raised in. (A lane that slid
+// once, even in the transient, went on from a state the kernels did not
+// integrate: all it computes after is the CPU's to redo.)
+const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED | FLAG_SLIDING;
 // A copy seeded behind the wall (its reference within δ of it): its column
 // is differenced on the other side (System::admits on the CPU).
 const FLAG_BEHIND_WALL: u32 = 32u;

@@ -189,3 +189,26 @@ name = "left stop"
 surface = "-gap - x"
 reset = { v = "-e*v + kick" }
 "#;
+
+/// A mass on a spring with Coulomb friction against a fixed floor, written
+/// with a switch on the velocity: where the spring force is below the
+/// friction limit, both fields point into v = 0 (sticking, Filippov
+/// sliding). (tests/switches.rs on the CPU, tests/gpu_models.rs on the
+/// GPU.)
+pub const FRICTION: &str = r#"
+[model]
+name = "friction"
+states = ["x", "v"]
+[model.parameters]
+mu = 0.5
+f = 0.3
+eta = 0.8
+[[model.switches]]
+name = "slip"
+surface = "v"
+[model.equations]
+x = "v"
+v = "-x - mu*sign(slip) + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+"#;
