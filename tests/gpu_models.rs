@@ -247,7 +247,11 @@ fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto(
     // Switches with a stick limit (the belts), made to be slid on: the
     // kernels do not slide. No adapter is needed: the refusal comes first.
     for (name, parameter, why) in [
-        ("friction-belt.toml", "eta", "the switch 'slip' has a stick limit"),
+        (
+            "friction-belt.toml",
+            "eta",
+            "the switch 'slip' has a stick limit",
+        ),
         (
             "two-block-belt.toml",
             "eta",
@@ -536,7 +540,10 @@ fn surfaces_agree(scene: &dyn Fn(&str) -> Scene, label: &str, tolerance: f64) ->
     assert!(variant.contains("/f64/surfaces+newton"), "{variant}");
     let (mut worst, mut cpu_sum, mut gpu_sum): (f64, f64, f64) = (0.0, 0.0, 0.0);
     let lanes = cpu.lanes.iter().zip(&cpu.expected_sums);
-    for (k, ((c, ce), (g, ge))) in lanes.zip(gpu.lanes.iter().zip(&gpu.expected_sums)).enumerate() {
+    for (k, ((c, ce), (g, ge))) in lanes
+        .zip(gpu.lanes.iter().zip(&gpu.expected_sums))
+        .enumerate()
+    {
         let lane = format!("{label} lane {k}");
         assert_eq!(c.status, LaneStatus::Ok, "{lane}");
         assert_eq!(g.status, LaneStatus::Ok, "{lane}");
@@ -553,8 +560,16 @@ fn surfaces_agree(scene: &dyn Fn(&str) -> Scene, label: &str, tolerance: f64) ->
             c.exponents,
             &c.crossings_per_period[..2]
         );
-        assert!(d <= tolerance, "{lane}: CPU {:?} vs GPU {:?}", c.exponents, g.exponents);
-        assert!(g_err <= c_err + 1e-9, "{lane}: sum rule CPU {c_err:e}, GPU {g_err:e}");
+        assert!(
+            d <= tolerance,
+            "{lane}: CPU {:?} vs GPU {:?}",
+            c.exponents,
+            g.exponents
+        );
+        assert!(
+            g_err <= c_err + 1e-9,
+            "{lane}: sum rule CPU {c_err:e}, GPU {g_err:e}"
+        );
         worst = worst.max(d);
         cpu_sum = cpu_sum.max(c_err);
         gpu_sum = gpu_sum.max(g_err);
@@ -695,7 +710,10 @@ fn an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu() {
             "table lane {k}: GPU {:?} CPU {:?}, sum rule GPU {error:e}",
             g.exponents, c.exponents
         );
-        assert!((expected - e_squared).abs() <= 1e-12, "lane {k}: {expected} vs {e_squared}");
+        assert!(
+            (expected - e_squared).abs() <= 1e-12,
+            "lane {k}: {expected} vs {e_squared}"
+        );
         assert!(error <= 1e-8, "lane {k}: sum off by {error:e}");
         assert_eq!(c.exponents[0] > 0.05, g.exponents[0] > 0.05, "lane {k}");
     }
@@ -725,8 +743,8 @@ fn switches_and_general_events_run_in_f32_close_to_f64() {
     let kicked_pair = |overrides: &[&str]| {
         common::scene(&format!("{}\n{kicked}", common::KICKED_PAIR), overrides)
     };
-    let cases: [(&str, &dyn Fn(&[&str]) -> Scene); 2] =
-        [("soft stop", &soft_stop), ("kicked pair", &kicked_pair)];
+    type SceneWith<'a> = &'a dyn Fn(&[&str]) -> Scene;
+    let cases: [(&str, SceneWith); 2] = [("soft stop", &soft_stop), ("kicked pair", &kicked_pair)];
     for (name, scene) in cases {
         let f64_cpu = run(&scene(&["run.backend=\"cpu\""]));
         let f32_gpu = run(&scene(&["run.backend=\"gpu\"", "run.precision=\"f32\""]));
@@ -771,8 +789,14 @@ fn a_lane_sliding_on_a_switch_is_flagged_by_the_kernels_and_recomputed_on_the_cp
     assert_eq!(recomputed, &[0, 1]);
     for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
         let d = exponent_difference(
-            &c.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
-            &g.exponents.iter().map(|x| x.max(-1e300)).collect::<Vec<_>>(),
+            &c.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+            &g.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
         );
         eprintln!(
             "friction lane {k}: {:?} {:?} CPU {:?} GPU {:?}: {d:e}",
@@ -787,7 +811,10 @@ fn a_lane_sliding_on_a_switch_is_flagged_by_the_kernels_and_recomputed_on_the_cp
             assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
             assert!(g.crossings_per_period[0] >= 2.0, "lane {k}");
             let error = (g.exponent_sum() - gpu.expected_sums[k]).abs();
-            eprintln!("friction lane {k}: sum rule GPU {error:e}, expected {}", gpu.expected_sums[k]);
+            eprintln!(
+                "friction lane {k}: sum rule GPU {error:e}, expected {}",
+                gpu.expected_sums[k]
+            );
             assert!(error <= 1e-8, "lane {k}: {error:e}");
         }
     }

@@ -118,12 +118,19 @@ fn the_seed_model_s_exact_backend_is_the_built_in_closed_form() {
     }
 }
 
-
 #[test]
 fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
     let etas = [0.5, 0.8, 1.2];
-    let exact = run(&model_scene(common::KICKED_PAIR, &sweep(&etas, 1800, "exact"), &[]));
-    let cpu = run(&model_scene(common::KICKED_PAIR, &sweep(&etas, 1800, "cpu"), &[]));
+    let exact = run(&model_scene(
+        common::KICKED_PAIR,
+        &sweep(&etas, 1800, "exact"),
+        &[],
+    ));
+    let cpu = run(&model_scene(
+        common::KICKED_PAIR,
+        &sweep(&etas, 1800, "cpu"),
+        &[],
+    ));
     for lane in &exact.lanes {
         assert!(
             lane.crossings_per_period[..2].iter().all(|&c| c >= 1.0),
@@ -146,7 +153,6 @@ fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
     assert!(exact_sum <= 1e-12, "exact sum rule: {exact_sum:e}");
     assert!(cpu_sum <= 1e-8, "RK4 sum rule: {cpu_sum:e}");
 }
-
 
 #[test]
 fn sliding_collapses_a_direction_on_both_paths() {

@@ -34,13 +34,32 @@
 //!   functions, not to the bit: a model that calls one matches the CPU to
 //!   rounding, not bit for bit.
 //!
+//! For a model with general surfaces (events that are not stops, and
+//! switches) the file adds what the surface code of `impact.wgsl` reads:
+//! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`),
+//! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
+//! field in force, the CPU surface tape's sum in its order),
+//! `surface_gradient` and an event's `reset` (the state after it, DR and
+//! ∂R/∂t), all emitted from the CPU's trees. `Params` then ends with the
+//! trajectory's `region` (bit b set on the positive side of switch b),
+//! which the kernels set, and `step(s)`/`sign(s)` of a switch read that
+//! bit (`side(p, b)`), never the state: the value 0 or 1 multiplies where
+//! the CPU's per-region tape has it folded in, which rounds alike.
+//!
 //! What the kernels run so far ([`check`]): a period map of a flow of 2 to
-//! 4 states (the kernels' `State` is a WGSL vector) whose events, if any,
-//! are all stops: up to `MAX_WALLS` = 4, each on any state x with its
+//! 4 states (the kernels' `State` is a WGSL vector) whose events are
+//! either all stops: up to `MAX_WALLS` = 4, each on any state x with its
 //! velocity v (x' = v), approached from either side, reset v → -e·v
 //! (`system::model::Stop`), with the CPU's sticking (a mass held at rest
-//! on a stop while the others move on) and per-stop crossing counts. Other
-//! events, switches and Poincaré sections run on the CPU.
+//! on a stop while the others move on) and per-stop crossing counts; or,
+//! without stops, up to four general surfaces: events with any surface
+//! g(y, clock) and any reset, and switches crossed transversally, each
+//! crossing located and applied as on the CPU (`integrate::surface`) with
+//! its ln |det S| for the sum rule. A switch both fields point into (a
+//! motion sliding on it) is flagged (`FLAG_SLIDING`) and its lane
+//! recomputed on the CPU by the backend; a switch with a stick limit (made
+//! to be slid on: the belts) is refused. Stops and surfaces together, and
+//! Poincaré sections, run on the CPU.
 
 use std::fmt::{self, Write};
 
@@ -160,7 +179,11 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
         trees.push(&stop.position);
         trees.push(&stop.restitution);
     }
-    let rates: Vec<Expr> = code.surfaces.iter().map(|s| s.g.derivative(Var::Time)).collect();
+    let rates: Vec<Expr> = code
+        .surfaces
+        .iter()
+        .map(|s| s.g.derivative(Var::Time))
+        .collect();
     for (s, rate) in code.surfaces.iter().zip(&rates) {
         trees.push(&s.g);
         trees.push(rate);
@@ -358,11 +381,20 @@ fn surfaces(w: &mut String, code: &Code) {
     };
     let vector = |each: &dyn Fn(usize) -> String, pad: &str| -> String {
         let parts: Vec<String> = (0..4)
-            .map(|j| if j < surfaces.len() { each(j) } else { pad.into() })
+            .map(|j| {
+                if j < surfaces.len() {
+                    each(j)
+                } else {
+                    pad.into()
+                }
+            })
             .collect();
         parts.join(", ")
     };
-    let _ = writeln!(w, "\n// The events and switches, in the CPU's order (after the stops):");
+    let _ = writeln!(
+        w,
+        "\n// The events and switches, in the CPU's order (after the stops):"
+    );
     for (j, s) in surfaces.iter().enumerate() {
         let kind = match s.kind {
             crate::integrate::Surface::Event => "event".to_owned(),
@@ -397,9 +429,13 @@ fn surfaces(w: &mut String, code: &Code) {
     let rate = |j: usize| -> String {
         let s = &surfaces[j];
         let mut sum = String::new();
-        for i in 0..n {
-            let term = format!("({} * f.{})", emit(&s.gradient[i]), COMPONENTS[i]);
-            sum = if i == 0 { term } else { format!("({sum} + {term})") };
+        for (i, (d, c)) in s.gradient.iter().zip(COMPONENTS).enumerate() {
+            let term = format!("({} * f.{c})", emit(d));
+            sum = if i == 0 {
+                term
+            } else {
+                format!("({sum} + {term})")
+            };
         }
         format!("({sum} + {})", emit(&s.g.derivative(Var::Time)))
     };

@@ -1059,8 +1059,7 @@ where
                             // report comes from a state they did not
                             // integrate: the lane is `sliding`, which the
                             // backend recomputes on the CPU.
-                            chattering: flags & FLAG_CHATTERING != 0
-                                && flags & FLAG_SLIDING == 0,
+                            chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
                             sliding: flags & FLAG_SLIDING != 0,
                             log_flux: fluxes.get(s).copied().unwrap_or(0.0),
                             // Sticking collapses the mass's position and
