@@ -108,6 +108,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
 #ifdef SURFACES
+            // A sliding motion takes the resolution path at every step (its
+            // field is the sliding one, which the plain step did not take).
+            if (is_sliding(p.region)) {
+                pending = true;
+                break;
+            }
             let after = surface_values(p, inc.phase, y1);
             if (crosses_a_surface(p.region, before, after)) {
                 pending = true;
@@ -132,7 +138,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var rest_phase = phase;
         if (stuck == WALLS) {
 #ifdef SURFACES
-            crossed = Crossed(p.region, real(0.0), false);
+            crossed = Crossed(p.region, real(0.0), false, 0u);
 #endif
             let w = resolve_impacts(p, walls, omega, phase, y, h, y1);
 #ifdef SURFACES
@@ -141,6 +147,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if (crossed.sliding) {
                 c.z = c.z | FLAG_SLIDING;
             }
+            // The sliding phases entered, counted in the flags' high half.
+            c.z = c.z + (min(crossed.sliding_phases, 0xffffu - (c.z >> 16u)) << 16u);
 #endif
             // Whatever the stops did (an impact, a rest, a departure from
             // rest), the step ends where resolve_impacts says; the

@@ -351,6 +351,24 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
     var stuck = WALLS;
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
+#ifdef SURFACES
+        if (is_sliding(p.region)) {
+            // On a switch: the rest of the step slides, unless the motion
+            // leaves it (twin of the sliding branch of resolve).
+            let slid = slide(p, omega, phase0, y0, h - done);
+            crossed.sliding = crossed.sliding || slid.flagged;
+            if (!slid.leaves) {
+                return WallStep(slid.y, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+            }
+            done = done + slid.s;
+            phase0 = rotate(phase0, cos_sin(omega * slid.s));
+            y0 = slid.y;
+            p.region = slid.region;
+            crossed.region = slid.region;
+            y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            continue;
+        }
+#endif
         let rest = h - done;
         let met = first_met(p, walls, omega, phase0, y0, rest, y1);
         let first = met.stop;
@@ -381,9 +399,14 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
                 let rest = sub_step(p, omega, phase_c, hit.y, h - done).y;
                 return WallStep(rest, impacts, crossings, crossing.chattering, rank_loss, slowest, WALLS, h, phase_c);
             }
+            if (crossing.slides) {
+                crossed.sliding_phases = crossed.sliding_phases + 1u;
+            }
             phase0 = phase_c;
             y0 = crossing.y;
-            y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            if (!is_sliding(p.region)) {
+                y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            }
             continue;
         }
 #endif
@@ -585,8 +608,134 @@ struct Crossed {
     region: u32,
     log_flux: real,
     sliding: bool,
+    // Sliding phases entered (IterationStats::sliding_phases).
+    sliding_phases: u32,
 }
 var<private> crossed: Crossed;
+
+// Region bits from SLIDING_SHIFT up mark a motion sliding on surface j
+// (bit SLIDING_SHIFT + j), the bits below are the sides (surface::SLIDING).
+const SLIDING_SHIFT: u32 = 16u;
+const SIDES: u32 = 0xffffu;
+
+fn is_sliding(region: u32) -> bool {
+    return (region >> SLIDING_SHIFT) != 0u;
+}
+
+// The equivalent control of a motion sliding on one switch (Filippov's
+// convex combination, surface::equivalent_on with one switch): the sides'
+// fields lo and hi, their rates a and b along ∇g, α = a/(a - b), the field
+// lo + α(hi - lo), and the stick margins (L - m, L + m), m = (a + b)/2, L
+// the stick limit or the half jump (a - b)/2.
+struct Equivalent {
+    field: State,
+    alpha: real,
+    margins: vec2<real>,
+}
+
+fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
+    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let bit = SURFACE_BIT[j];
+    var lo_p = p;
+    lo_p.region = (p.region & SIDES) & ~(1u << bit);
+    var hi_p = lo_p;
+    hi_p.region = lo_p.region | (1u << bit);
+    let lo = field(lo_p, phase, y);
+    let hi = field(hi_p, phase, y);
+    let n = surface_gradient(p, phase, y, j);
+    let a = dot_in_order(n, lo);
+    let b = dot_in_order(n, hi);
+    let alpha = a / (a - b);
+    let mean = real(0.5) * (a + b);
+    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
+    return Equivalent(lo + alpha * (hi - lo), alpha, vec2<real>(limit - mean, limit + mean));
+}
+
+// The sliding field (NaN where the combination does not exist, as the
+// CPU's Sliding flow).
+fn sliding_field(p: Params, phase: vec2<real>, y: State) -> State {
+    let e = equivalent(p, phase, y);
+    if (!(abs(e.alpha) <= MAX_REAL)) {
+        var zero = real(0.0);
+        return State(zero / zero);
+    }
+    return e.field;
+}
+
+// The switch still holds the motion: both margins > 0.
+fn holds(m: vec2<real>) -> bool {
+    return m.x > real(0.0) && m.y > real(0.0);
+}
+
+// How a sliding sub-step ended (Slid in impact.rs).
+struct Slid {
+    // Left the switch (to region `region`) after s, at y; else still
+    // sliding at the end, at y.
+    leaves: bool,
+    s: real,
+    y: State,
+    region: u32,
+    // Something the kernels do not integrate met while sliding (another
+    // switch, an event): the lane is the CPU's.
+    flagged: bool,
+}
+
+// Slides on the switch of p's sliding set for up to h from (phase, y):
+// twin of `slide` in impact.rs for one switch. Another surface crossed on
+// the way is flagged rather than located; an exit (a stick margin reaching
+// 0) is bisected on RK4 re-stepped along the sliding field, and the region
+// leaves to the side whose margin ran out.
+fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
+    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let end = sub_step(p, omega, phase, y, h).y;
+    let end_phase = rotate(phase, cos_sin(omega * h));
+    let end_margins = equivalent(p, end_phase, end).margins;
+    var sides = p;
+    sides.region = p.region & SIDES;
+    let before = surface_values(sides, phase, y);
+    let after = surface_values(sides, end_phase, end);
+    var flagged = false;
+    for (var k = 0u; k < SURFACES; k = k + 1u) {
+        if (k == j) {
+            continue;
+        }
+        let o = orientation(sides.region, k);
+        if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
+            flagged = true;
+        }
+    }
+    if (holds(end_margins)) {
+        return Slid(false, h, end, p.region, flagged);
+    }
+    var lo = real(0.0);
+    var hi = h;
+    var exit = end;
+    var m = end_margins;
+    for (var k = 0u; k < 128u; k = k + 1u) {
+        if (!(hi - lo > EPSILON * h)) {
+            break;
+        }
+        let mid = real(0.5) * (lo + hi);
+        let y_mid = sub_step(p, omega, phase, y, mid).y;
+        let m_mid = equivalent(p, rotate(phase, cos_sin(omega * mid)), y_mid).margins;
+        if (holds(m_mid)) {
+            lo = mid;
+        } else {
+            hi = mid;
+            exit = y_mid;
+            m = m_mid;
+        }
+    }
+    // Leaves to the side whose margin ran out (surface::leaving).
+    let bit = SURFACE_BIT[j];
+    var region = p.region & ~(1u << (SLIDING_SHIFT + j));
+    if (m.x <= m.y) {
+        region = region | (1u << bit);
+    } else {
+        region = region & ~(1u << bit);
+    }
+    return Slid(true, hi, exit, region, flagged);
+}
 
 // +1 where the crossing to watch for is g rising through 0 (an event, or a
 // switch on its negative side), -1 where it is g falling (Surface::orientation).
@@ -728,8 +877,10 @@ struct Crossing {
     approach: real,
     chattering: bool,
     sliding: bool,
-    // det S = 0: the reset collapsed a direction.
+    // det S = 0 (the reset collapsed a direction), or a sliding phase.
     rank_loss: bool,
+    // The motion slides on the switch from here.
+    slides: bool,
 }
 
 // The sum of a_i·b_i in index order from 0, as the CPU's iterator sum.
@@ -793,7 +944,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     let bit = SURFACE_BIT[j];
     let before = surface_values(p, phase, y);
     let approach_rate = before.rate[j];
-    var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, j) * approach_rate, false, false, false);
+    var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, j) * approach_rate, false, false, false, false);
     if (bit == EVENT) {
         let r = reset(p, phase, y, j);
         let now = surface_values(p, phase, r.y);
@@ -812,21 +963,36 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         out.y = r.y;
         return out;
     }
-    // The rates a, b of the two sides' fields along ∇g (joining_margins,
-    // with Filippov's limit, the half jump).
+    // The rates a, b of the two sides' fields along ∇g (joining_margins:
+    // the stick limit, or Filippov's, the half jump).
     var below = p;
     below.region = p.region & ~(1u << bit);
     var above = p;
     above.region = p.region | (1u << bit);
     let n = surface_gradient(p, phase, y, j);
-    let a = dot_in_order(n, rhs(below, phase, y));
-    let b = dot_in_order(n, rhs(above, phase, y));
+    let a = dot_in_order(n, field(below, phase, y));
+    let b = dot_in_order(n, field(above, phase, y));
     let m = real(0.5) * (a + b);
-    let limit = real(0.5) * (a - b);
+    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
     let plus = limit - m;
     let minus = limit + m;
     if (plus > real(0.0) && minus > real(0.0)) {
-        out.sliding = true;
+        // Both fields point into the switch (or the stick limit holds the
+        // motion): it slides, where its Filippov combination exists, and
+        // forgets how far from the surface it came (one direction); the
+        // volume law no longer applies (ln |det S| NaN).
+        var joined = p;
+        joined.region = p.region | (1u << (SLIDING_SHIFT + j));
+        if (!(abs(equivalent(joined, phase, y).alpha) <= MAX_REAL)) {
+            out.sliding = true;
+            return out;
+        }
+        out.region = joined.region;
+        out.resolved = true;
+        out.slides = true;
+        out.rank_loss = true;
+        var zero = real(0.0);
+        out.log_det = zero / zero;
         return out;
     }
     let to_plus = plus <= minus;

@@ -97,8 +97,8 @@ pub enum Unsupported {
     Time,
     /// A Poincaré section: the kernels run time-T maps.
     Section,
-    /// A switch with a stick limit, made to be slid on: the kernels do
-    /// not slide.
+    /// A switch with a stick limit in a model with several switches, made
+    /// to be slid on several at once: the kernels slide on one.
     Sliding(String),
 }
 
@@ -124,8 +124,8 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Sliding(name) => write!(
                 f,
-                "the switch '{name}' has a stick limit (a motion held on it): the GPU \
-                 kernels do not slide on switches so far"
+                "the switch '{name}' has a stick limit, and the model other switches: the \
+                 GPU kernels slide on one switch at a time so far"
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
@@ -164,12 +164,20 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
             crate::integrate::impact::MAX_WALLS
         )));
     }
-    // A stick limit holds the motion on its switch (static friction): the
-    // kernels do not slide. (A switch without one may still be slid on
-    // where both fields point into it: the kernels flag such a lane,
-    // `FLAG_SLIDING`, and the backend recomputes it on the CPU.)
-    if let Some(s) = code.surfaces.iter().find(|s| s.stick_limit.is_some()) {
-        return Err(Unsupported::Sliding(s.name.clone()));
+    // The kernels slide on one switch at a time (Filippov's combination,
+    // or a stick limit): a motion that would slide on two at once is
+    // flagged (`FLAG_SLIDING`) and recomputed on the CPU, and a model made
+    // to do so (stick limits on several switches: the two-block belt) is
+    // the CPU's from the start.
+    let switches = code
+        .surfaces
+        .iter()
+        .filter(|s| matches!(s.kind, crate::integrate::Surface::Switch { .. }))
+        .count();
+    if switches > 1 {
+        if let Some(s) = code.surfaces.iter().find(|s| s.stick_limit.is_some()) {
+            return Err(Unsupported::Sliding(s.name.clone()));
+        }
     }
     // Any stop (Code::compile allows MAX_WALLS, the components of the
     // kernels' vec4 per-stop values).
@@ -191,6 +199,7 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
         trees.extend(&s.reset);
         trees.extend(&s.reset_jacobian);
         trees.extend(&s.reset_rate);
+        trees.extend(&s.stick_limit);
     }
     for e in trees {
         emittable(e)?;
@@ -246,10 +255,18 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         let _ = writeln!(w, "    region: u32,");
     }
     let _ = writeln!(w, "}}\n");
+    // With surfaces, the field of p's region is `field`, and `rhs` (what
+    // RK4 steps) is it or, for a motion sliding on a switch, the sliding
+    // field of impact.wgsl built from it.
     let _ = writeln!(
         w,
         "// phase = (cos ωt, sin ωt) of the forcing clock.\n\
-         fn rhs(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State("
+         fn {}(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State(",
+        if code.surfaces.is_empty() {
+            "rhs"
+        } else {
+            "field"
+        }
     );
     for (i, e) in model.equations.iter().enumerate() {
         let _ = writeln!(
@@ -265,6 +282,7 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
     }
     if !code.surfaces.is_empty() {
         surfaces(w, code);
+        stick_limits(w, code);
     }
     if !model.angles.is_empty() {
         // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
@@ -419,6 +437,13 @@ fn surfaces(w: &mut String, code: &Code) {
          const SURFACE_BIT = vec4<u32>({});\n\n\
          // The trajectory's side of switch `bit`: 1 on its positive side.\n\
          fn side(p: Params, bit: u32) -> real {{\n    return real((p.region >> bit) & 1u);\n}}\n\n\
+         // The field RK4 steps: the region's, or the sliding field (of the\n\
+         // surface code, which a variant without it never needs).\n\
+         fn rhs(p: Params, phase: vec2<real>, y: State) -> State {{\n\
+         #ifdef SURFACES\n    \
+         if (is_sliding(p.region)) {{\n        return sliding_field(p, phase, y);\n    }}\n\
+         #endif\n    \
+         return field(p, phase, y);\n}}\n\n\
          fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{\n    return vec4<real>({});\n}}\n\n\
          struct SurfaceValues {{\n    g: vec4<real>,\n    rate: vec4<real>,\n}}\n",
         surfaces.len(),
@@ -441,9 +466,10 @@ fn surfaces(w: &mut String, code: &Code) {
     };
     let _ = writeln!(
         w,
-        "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region.\n\
+        "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region (its\n\
+         // sides: a sliding motion's rates are impact.wgsl's).\n\
          fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
-         let f = rhs(p, phase, y);\n    \
+         let f = field(p, phase, y);\n    \
          return SurfaceValues(surface_g(p, phase, y), vec4<real>({}));\n}}\n",
         vector(&rate, "real(0.0)"),
     );
@@ -486,6 +512,25 @@ fn surfaces(w: &mut String, code: &Code) {
         "        default: {{}}\n    }}\n    // A switch: no reset.\n    \
          return Reset(y, array<State, DIM>(), State());\n}}"
     );
+}
+
+/// A switch's stick limit at y (the CPU evaluates it at t = 0), or
+/// `filippov` (the half jump) for a switch without one.
+fn stick_limits(w: &mut String, code: &Code) {
+    let _ = writeln!(
+        w,
+        "\nfn stick_limit(p: Params, y: State, j: u32, filippov: real) -> real {{\n    switch j {{"
+    );
+    for (j, s) in code.surfaces.iter().enumerate() {
+        if let Some(limit) = &s.stick_limit {
+            let _ = writeln!(
+                w,
+                "        case {j}u: {{ return {}; }}",
+                Emit { expr: limit, code }
+            );
+        }
+    }
+    let _ = writeln!(w, "        default: {{ return filippov; }}\n    }}\n}}");
 }
 
 /// Whether a system file has general surfaces (`SURFACES`), for the

@@ -1061,6 +1061,8 @@ where
                             // backend recomputes on the CPU.
                             chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
                             sliding: flags & FLAG_SLIDING != 0,
+                            // Counted in the flags' high half.
+                            sliding_phases: flags >> 16,
                             log_flux: fluxes.get(s).copied().unwrap_or(0.0),
                             // Sticking collapses the mass's position and
                             // velocity (all of a 2-state system).
