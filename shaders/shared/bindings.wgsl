@@ -73,9 +73,10 @@ const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED | FLAG_SLIDING;
 // A copy seeded behind the wall (its reference within δ of it): its column
 // is differenced on the other side (System::admits on the CPU).
 const FLAG_BEHIND_WALL: u32 = 32u;
-// A switch the motion would slide on (both fields point into it), or leave
-// against its new field: not integrated by the kernels (IterationStats::
-// sliding); the backend recomputes the lane on the CPU.
+// A motion on a switch the kernels do not integrate (another surface met
+// while sliding, a switch left against its new field, or no Filippov
+// combination): IterationStats::sliding; the backend recomputes the lane
+// on the CPU.
 const FLAG_SLIDING: u32 = 64u;
 
 fn rank_flags(rank_loss: u32) -> u32 {

@@ -6,8 +6,10 @@
 // General surfaces (events and switches, src/integrate/surface.rs), with
 // SURFACES defined, go through the same loop: located on re-stepped RK4 as
 // a stop's impact is, the first crossing of the step applied (an event's
-// reset, a switch's flip of the trajectory's region), counted in the same
-// crossings (event index WALLS + j), and the step goes on from there.
+// reset, a switch's flip of the trajectory's region, or the start of a
+// sliding phase on it), counted in the same crossings (event index WALLS +
+// j), and the step goes on from there; a sliding motion slides the rest
+// of the step, or until it leaves the switch.
 //
 // Stop j of WALLS (0 to 4) acts on coordinate WALL_COORDINATE[j] (its
 // position X), whose rate is coordinate WALL_VELOCITY[j] (V = X'), from
@@ -937,9 +939,9 @@ fn event_log_det(r: Reset, gradient: State, rate: real, before: State, after: St
 }
 
 // Crosses general surface j at y (on it, at `phase`) for a trajectory in
-// p.region: an event's reset, or a switch's flip of the region, with its
-// ln |det S|. A switch both fields point into (Filippov sliding) is not
-// integrated: flagged.
+// p.region: an event's reset, a switch's flip of the region, with its
+// ln |det S|, or the start of a sliding phase on a switch both fields
+// point into (or its stick limit holds).
 fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     let bit = SURFACE_BIT[j];
     let before = surface_values(p, phase, y);

@@ -51,8 +51,7 @@ pub struct GpuReport {
     pub bytes_per_lane: u64,
     pub validation: Option<Validation>,
     /// Indices of the sweep values the kernels flagged `sliding` (a motion
-    /// on a switch, which they do not integrate) and the CPU path
-    /// recomputed.
+    /// on switches they do not integrate) and the CPU path recomputed.
     pub recomputed: Vec<usize>,
 }
 
@@ -622,10 +621,10 @@ impl Summary {
 }
 
 /// Recomputes on the CPU path (f64, with the GPU's steps and parts) the
-/// lanes the kernels flagged `sliding`: they locate a switch's crossings
-/// but do not slide on it (Filippov's motion), and flag the iteration
-/// rather than step through it; the CPU integrates the sliding. Returns
-/// their indices.
+/// lanes the kernels flagged `sliding`: a motion on a switch they do not
+/// integrate (another surface met while sliding, two switches slid on at
+/// once), which they flag rather than step through; the CPU integrates
+/// it. Returns their indices.
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
     let flagged: Vec<usize> = (0..lanes.len())
         .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))

@@ -55,11 +55,14 @@
 //! without stops, up to four general surfaces: events with any surface
 //! g(y, clock) and any reset, and switches crossed transversally, each
 //! crossing located and applied as on the CPU (`integrate::surface`) with
-//! its ln |det S| for the sum rule. A switch both fields point into (a
-//! motion sliding on it) is flagged (`FLAG_SLIDING`) and its lane
-//! recomputed on the CPU by the backend; a switch with a stick limit (made
-//! to be slid on: the belts) is refused. Stops and surfaces together, and
-//! Poincaré sections, run on the CPU.
+//! its ln |det S| for the sum rule; and sliding on one switch at a time
+//! (Filippov's combination or a stick limit: the friction belt), entered
+//! where both fields point into the switch and left where a stick margin
+//! runs out, as on the CPU. A motion they do not integrate (another
+//! surface met while sliding, sliding on two switches at once) is flagged
+//! (`FLAG_SLIDING`) and its lane recomputed on the CPU by the backend; a
+//! model with stick limits on several switches (the two-block belt), stops
+//! and surfaces together, and Poincaré sections run on the CPU.
 
 use std::fmt::{self, Write};
 
