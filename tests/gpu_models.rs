@@ -244,39 +244,54 @@ fn the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu() {
 
 #[test]
 fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
-    // Switches with a stick limit (the belts), made to be slid on: the
-    // kernels do not slide. No adapter is needed: the refusal comes first.
-    for (name, parameter, why) in [
+    // Stick limits on two switches (the two-block belt, made to slide on
+    // both at once: the kernels slide on one), and stops with a switch
+    // (the impact pair with a soft spring on v: the kernels run stops or
+    // surfaces). No adapter is needed: the refusal comes first.
+    let belts = format!(
+        "model = {:?}\n",
+        format!("{}/models/two-block-belt.toml", env!("CARGO_MANIFEST_DIR"))
+    );
+    let pair = std::fs::read_to_string(format!(
+        "{}/models/impact-pair.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("the impact pair")
+    .replace(
+        "v = \"-2*zeta*v - x + f*cos(eta*t)\"",
+        "v = \"-2*zeta*v - x - 0.1*v*step(moving) + f*cos(eta*t)\"",
+    )
+    .replace(
+        "[model.equations]",
+        "[[model.switches]]\nname = \"moving\"\nsurface = \"v\"\n[model.equations]",
+    );
+    for (model, why, reason) in [
         (
-            "friction-belt.toml",
-            "eta",
-            "the switch 'slip' has a stick limit",
+            belts.as_str(),
+            "the switch 'slip1' has a stick limit",
+            "slide on one switch at a time",
         ),
         (
-            "two-block-belt.toml",
-            "eta",
-            "the switch 'slip1' has a stick limit",
+            pair.as_str(),
+            "the model has stops and the switch 'moving' together",
+            "handle stops, or up to four events and switches without stops",
         ),
     ] {
         let body = format!(
-            "[sweep]\nparameter = \"{parameter}\"\nvalues = [0.8]\n\
+            "{model}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n\
              [integration]\ntransient = 2\niterations = 2\n"
         );
-        let body = body.as_str();
-        let scene = model_scene(name, body, &["run.backend=\"gpu\""]);
-        assert!(scene.system.wgsl.is_none(), "{name}");
+        let scene = common::scene(&body, &["run.backend=\"gpu\""]);
+        assert!(scene.system.wgsl.is_none(), "{why}");
         let err = lyapsweep::run(&scene).unwrap_err();
         let text = err.to_string();
-        assert!(matches!(err, Error::Backend { .. }), "{name}: {text}");
+        assert!(matches!(err, Error::Backend { .. }), "{text}");
         assert!(err.is_input_error(), "exit 2");
-        assert!(
-            text.contains("the GPU kernels do not slide") && text.contains(why),
-            "{name}: {text}"
-        );
-        let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
+        assert!(text.contains(reason) && text.contains(why), "{text}");
+        let auto = run(&common::scene(&body, &["run.backend=\"auto\""]));
         assert_eq!(auto.backend, Backend::Cpu);
         let choice = auto.choice.unwrap();
-        assert!(choice.contains("the GPU kernels do not slide"), "{choice}");
+        assert!(choice.contains(reason), "{choice}");
     }
 }
 
