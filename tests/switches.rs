@@ -421,7 +421,7 @@ fn model_check_describes_switches_events_and_the_exact_backend() {
         "slides while the mean rate of the two sides is below mus in size",
         "ln|det S| per crossing of the other events and switches",
         "piecewise linear: backend = \"exact\"",
-        "the switch 'slip' has a stick limit",
+        "GPU: runs on the kernels",
     ] {
         assert!(friction.contains(expected), "{expected:?} in:\n{friction}");
     }
