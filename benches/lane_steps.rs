@@ -413,7 +413,8 @@ fn models_on(backend: &str, repeats: usize) {
     );
     let model = format!("{}/models/seed-oscillator.toml", env!("CARGO_MANIFEST_DIR"));
     // The same wall written `2*(x - wall)`: not a stop's shape, so a general
-    // event (the surface tape at every step; CPU only).
+    // event (the surface tape at every step; on the GPU, the general
+    // surfaces' code: the region, the surfaces' values at every step).
     let general = std::fs::read_to_string(&model)
         .expect("the seed model")
         .replace("surface = \"x - wall\"", "surface = \"2*(x - wall)\"");

@@ -49,7 +49,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var minus = r + 1u + DIM + i;
             let step_plus = deltas[lane * 2u * DIM + i];
             let step_minus = deltas[lane * 2u * DIM + DIM + i];
-            flags = flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED));
+            flags = flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
             // A copy that met a stop a different number of times than the
             // reference crossed a grazing boundary: its difference is O(1)
             // wrong. Difference on the other side, where the map is smooth.
@@ -66,7 +66,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             let minus = r;
             let step = deltas[lane * DIM + i];
-            flags = flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED));
+            flags = flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
 #endif
             // The two images are close, so their difference is exact; their
             // low bits are what the column is made of.
@@ -98,6 +98,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #ifdef WALL
         summary[SUMMARY_STRIDE * slot + 1u] = crossings[r];
 #endif
+#ifdef SURFACES
+        fluxes[slot] = traj[r * TRAJ_STRIDE + TRAJ_FLUX];
+#endif
         if (last) {
             cr.w = cr.w + 1u;
         }
@@ -115,6 +118,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         phase = vec2<real>(traj[r * TRAJ_STRIDE + 2u * DIM], traj[r * TRAJ_STRIDE + 2u * DIM + 1u]);
         comp = load_state(r * TRAJ_STRIDE + DIM);
         traj[r * TRAJ_STRIDE + TRAJ_SLOWEST] = NO_IMPACT;
+#ifdef SURFACES
+        traj[r * TRAJ_STRIDE + TRAJ_FLUX] = real(0.0);
+#endif
     }
     cr.y = 0u;
     cr.z = flags & FLAG_STICKY;
@@ -179,9 +185,16 @@ fn departure(r: u32, t: u32) -> f32 {
     if ((counts[t].z & FLAG_BEHIND_WALL) != 0u) {
         return 1e30f;
     }
+#ifdef SURFACES
+    // No crossing of any kind (surfaces' count beside the impacts).
+    if (traj[r * TRAJ_STRIDE + TRAJ_SLOWEST] == NO_IMPACT) {
+        return 0.0f;
+    }
+#else
     if (counts[r].y == 0u) {
         return 0.0f;
     }
+#endif
     if (!same_impacts(r, t)) {
         return 1e30f;
     }
@@ -202,6 +215,15 @@ fn behind_wall(p: Params, y: State) -> u32 {
         }
     }
 #endif
+#ifdef SURFACES
+    // Beyond an event's surface (at t = 0, as the CPU's check_state).
+    let g = surface_g(p, vec2<real>(real(1.0), real(0.0)), y);
+    for (var j = 0u; j < SURFACES; j = j + 1u) {
+        if (SURFACE_BIT[j] == EVENT && g[j] > real(0.0)) {
+            return FLAG_BEHIND_WALL;
+        }
+    }
+#endif
     return 0u;
 }
 
@@ -213,4 +235,7 @@ fn restart(base: u32, y: State, phase: vec2<real>, comp: State) {
     traj[base + 2u * DIM] = phase.x;
     traj[base + 2u * DIM + 1u] = phase.y;
     traj[base + TRAJ_SLOWEST] = NO_IMPACT;
+#ifdef SURFACES
+    traj[base + TRAJ_FLUX] = real(0.0);
+#endif
 }

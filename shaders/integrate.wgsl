@@ -25,7 +25,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if ((c.z & FLAG_NONFINITE) != 0u) {
         return;
     }
+#ifdef SURFACES
+    // The lane's parameters and the trajectory's region (set below).
+    var p = load_params(lane);
+#else
     let p = load_params(lane);
+#endif
     let base = t * TRAJ_STRIDE;
     var y = load_state(base);
 #ifdef MAP
@@ -51,6 +56,28 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var slowest = traj[base + TRAJ_SLOWEST];
     let walls = stops_of(p);
     var k = c.x;
+#ifdef SURFACES
+    // The region: from the state at the start of a part (of the whole
+    // iteration in the transient), as the CPU path finds it at the start
+    // of each call; else carried over from the last dispatch.
+    let part_start = select(k % control.part_steps == 0u, k == 0u, control.transient != 0u);
+    if (part_start) {
+        p.region = region_of(p, phase, y);
+    } else {
+        p.region = u32(traj[base + TRAJ_REGION]);
+    }
+    var flux = traj[base + TRAJ_FLUX];
+    // The surfaces' values at the step's start (carried from step to
+    // step, as the CPU's at_start).
+    var before = surface_values(p, phase, y);
+    if ((c.z & FLAG_SLIDING) != 0u) {
+        // A lane flagged sliding is the CPU's to recompute: its
+        // trajectories only count their steps from here on (stepping on
+        // from a state the kernels did not integrate costs, and can run
+        // past lavapipe's loop cap).
+        k = end;
+    }
+#endif
     // The hot loop only steps and detects: a step whose plain image reaches
     // a stop or turns back inside it, or a mass at rest on a stop, ends
     // it, and the resolution path below takes that one step and goes back.
@@ -80,6 +107,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 pending = true;
                 break;
             }
+#ifdef SURFACES
+            // A sliding motion takes the resolution path at every step (its
+            // field is the sliding one, which the plain step did not take).
+            if (is_sliding(p.region)) {
+                pending = true;
+                break;
+            }
+            let after = surface_values(p, inc.phase, y1);
+            if (crosses_a_surface(p.region, before, after)) {
+                pending = true;
+                break;
+            }
+            before = after;
+#endif
             y = y1;
             comp = comp1;
             phase = rotate(rotate(phase, half), half);
@@ -96,7 +137,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var rest_at = real(0.0);
         var rest_phase = phase;
         if (stuck == WALLS) {
+#ifdef SURFACES
+            crossed = Crossed(p.region, real(0.0), false, 0u);
+#endif
             let w = resolve_impacts(p, walls, omega, phase, y, h, y1);
+#ifdef SURFACES
+            p.region = crossed.region;
+            flux = flux + crossed.log_flux;
+            if (crossed.sliding) {
+                c.z = c.z | FLAG_SLIDING;
+            }
+            // The sliding phases entered, counted in the flags' high half.
+            c.z = c.z + (min(crossed.sliding_phases, 0xffffu - (c.z >> 16u)) << 16u);
+#endif
             // Whatever the stops did (an impact, a rest, a departure from
             // rest), the step ends where resolve_impacts says; the
             // compensation belongs to the plain step it replaced.
@@ -128,6 +181,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         phase = next_phase;
         k = k + 1u;
+#ifdef SURFACES
+        before = surface_values(p, phase, y);
+#endif
     }
 #else
     for (var k = c.x; k < end; k = k + 1u) {
@@ -152,6 +208,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     traj[base + 2u * DIM + 1u] = phase.y;
 #ifdef WALL
     traj[base + TRAJ_SLOWEST] = slowest;
+#endif
+#ifdef SURFACES
+    traj[base + TRAJ_REGION] = real(p.region);
+    traj[base + TRAJ_FLUX] = flux;
 #endif
 #endif
     if (!is_finite(y)) {

@@ -340,6 +340,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
                 busy.as_secs_f64()
             );
         }
+        if !gpu.recomputed.is_empty() {
+            println!(
+                "  sliding      {} values recomputed on the CPU: the kernels flagged a sliding motion they do not integrate",
+                gpu.recomputed.len()
+            );
+        }
         if let Some(v) = &gpu.validation {
             println!(
                 "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",

@@ -241,43 +241,54 @@ fn the_duffing_oscillator_keeps_the_sum_rule_on_the_gpu() {
 
 #[test]
 fn a_model_the_kernels_cannot_run_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
-    // An event that moves with the clock (the vibrating table) and a switch
-    // (the soft stop): the GPU's impact code knows stops alone. No adapter
-    // is needed: the refusal comes first.
-    for (name, parameter, why) in [
+    // Stick limits on two switches (the two-block belt, made to slide on
+    // both at once: the kernels slide on one), and stops with a switch
+    // (the impact pair with a soft spring on v: the kernels run stops or
+    // surfaces). No adapter is needed: the refusal comes first.
+    let belts = format!(
+        "model = {:?}\n",
+        format!("{}/models/two-block-belt.toml", env!("CARGO_MANIFEST_DIR"))
+    );
+    let pair = std::fs::read_to_string(format!(
+        "{}/models/impact-pair.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("the impact pair")
+    .replace(
+        "v = \"-2*zeta*v - x + f*cos(eta*t)\"",
+        "v = \"-2*zeta*v - x - 0.1*v*step(moving) + f*cos(eta*t)\"",
+    )
+    .replace(
+        "[model.equations]",
+        "[[model.switches]]\nname = \"moving\"\nsurface = \"v\"\n[model.equations]",
+    );
+    for (model, why, reason) in [
         (
-            "vibrating-table.toml",
-            "e",
-            "the event 'table' is not a stop",
+            belts.as_str(),
+            "the switch 'slip1' has a stick limit",
+            "slide on one switch at a time",
         ),
         (
-            "soft-stop.toml",
-            "eta",
-            "the switch 'contact' is not a stop",
+            pair.as_str(),
+            "the model has stops and the switch 'moving' together",
+            "handle stops, or up to four events and switches without stops",
         ),
     ] {
         let body = format!(
-            "[sweep]\nparameter = \"{parameter}\"\nvalues = [0.8]\n\
+            "{model}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n\
              [integration]\ntransient = 2\niterations = 2\n"
         );
-        let body = body.as_str();
-        let scene = model_scene(name, body, &["run.backend=\"gpu\""]);
-        assert!(scene.system.wgsl.is_none(), "{name}");
+        let scene = common::scene(&body, &["run.backend=\"gpu\""]);
+        assert!(scene.system.wgsl.is_none(), "{why}");
         let err = lyapsweep::run(&scene).unwrap_err();
         let text = err.to_string();
-        assert!(matches!(err, Error::Backend { .. }), "{name}: {text}");
+        assert!(matches!(err, Error::Backend { .. }), "{text}");
         assert!(err.is_input_error(), "exit 2");
-        assert!(
-            text.contains("the GPU kernels handle stops alone") && text.contains(why),
-            "{name}: {text}"
-        );
-        let auto = run(&model_scene(name, body, &["run.backend=\"auto\""]));
+        assert!(text.contains(reason) && text.contains(why), "{text}");
+        let auto = run(&common::scene(&body, &["run.backend=\"auto\""]));
         assert_eq!(auto.backend, Backend::Cpu);
         let choice = auto.choice.unwrap();
-        assert!(
-            choice.contains("the GPU kernels handle stops alone"),
-            "{choice}"
-        );
+        assert!(choice.contains(reason), "{choice}");
     }
 }
 
@@ -524,5 +535,431 @@ fn models_with_stops_run_in_f32_close_to_f64() {
             );
         }
         f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
+    }
+}
+
+/// One model's sweep (a model file, or a model's text) on both paths in
+/// f64, lane by lane: both `ok`, the same impacts and crossings of every
+/// event column, the exponents within `tolerance`, and the sum rule: each
+/// lane's |λ_sum - expected| on the GPU within 1e-9 of the CPU's (the
+/// finite differences' floor, about 1e-9 at δ = 1e-6, is the same on both
+/// paths). Returns the largest exponent difference and the largest sum
+/// error of each path.
+fn surfaces_agree(scene: &dyn Fn(&str) -> Scene, label: &str, tolerance: f64) -> (f64, f64, f64) {
+    let (cpu, gpu) = (run(&scene("cpu")), run(&scene("gpu")));
+    assert_eq!(gpu.backend, Backend::Gpu);
+    let variant = &gpu.gpu.as_ref().unwrap().variant;
+    assert!(variant.contains("/f64/surfaces+newton"), "{variant}");
+    let (mut worst, mut cpu_sum, mut gpu_sum): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let lanes = cpu.lanes.iter().zip(&cpu.expected_sums);
+    for (k, ((c, ce), (g, ge))) in lanes
+        .zip(gpu.lanes.iter().zip(&gpu.expected_sums))
+        .enumerate()
+    {
+        let lane = format!("{label} lane {k}");
+        assert_eq!(c.status, LaneStatus::Ok, "{lane}");
+        assert_eq!(g.status, LaneStatus::Ok, "{lane}");
+        assert_eq!(c.plan, g.plan, "{lane}: the same steps and parts");
+        assert_eq!(c.impacts_per_period, g.impacts_per_period, "{lane}");
+        assert_eq!(
+            c.crossings_per_period, g.crossings_per_period,
+            "{lane}: the crossings of each event and switch"
+        );
+        let d = exponent_difference(&c.exponents, &g.exponents);
+        let (c_err, g_err) = ((c.exponent_sum() - ce).abs(), (g.exponent_sum() - ge).abs());
+        eprintln!(
+            "{lane}: {:?}, crossings {:?}: CPU - GPU {d:e}; sum rule CPU {c_err:e}, GPU {g_err:e}",
+            c.exponents,
+            &c.crossings_per_period[..2]
+        );
+        assert!(
+            d <= tolerance,
+            "{lane}: CPU {:?} vs GPU {:?}",
+            c.exponents,
+            g.exponents
+        );
+        assert!(
+            g_err <= c_err + 1e-9,
+            "{lane}: sum rule CPU {c_err:e}, GPU {g_err:e}"
+        );
+        worst = worst.max(d);
+        cpu_sum = cpu_sum.max(c_err);
+        gpu_sum = gpu_sum.max(g_err);
+    }
+    (worst, cpu_sum, gpu_sum)
+}
+
+#[test]
+fn the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The model's defaults (ks = 20, gap = 1, ζ = 0.05, f = 1): periodic
+    // orbits with 2 or 4 crossings of the contact a period, and one
+    // (η = 2.2) that never reaches it (tests/switches.rs checks them
+    // against the exact piecewise-linear backend).
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.4, 0.6, 0.8, 1.0, 1.2, 2.2]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        model_scene(
+            "soft-stop.toml",
+            body,
+            &[&format!("run.backend=\"{backend}\"")],
+        )
+    };
+    // Issue 15 asks for 1e-9. Measured on lavapipe: 0, every lane bit for
+    // bit the CPU's (the generated field reads the region's bit where the
+    // CPU's tape has it folded in, 0 or 1, which changes no rounding; the
+    // crossings are located by the same Newton on the same re-steps).
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "soft stop", 1e-9);
+    eprintln!("soft stop: largest CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    // The field is continuous across the contact (det S = 1, ln det S =
+    // 0 to rounding): both sums are -2ζ to the finite differences' floor
+    // (tests/switches.rs: 0.3 to 2.2e-9 on the CPU; measured 1.9e-9 on
+    // both paths here).
+    assert!(gpu_sum <= 1e-8, "{gpu_sum:e}");
+}
+
+#[test]
+fn a_general_event_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "a_general_event_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The kicked pair: two events whose reset v → -e·v ∓ kick is not a
+    // stop's, with a saltation determinant -e·v⁺/v⁻ that differs crossing
+    // by crossing: the sum rule holds only with each crossing's ln |det S|
+    // (tests/switches.rs checks the CPU against the exact backend).
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.5, 0.8, 1.2]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        common::scene(
+            &format!("{}\n{body}", common::KICKED_PAIR),
+            &[&format!("run.backend=\"{backend}\"")],
+        )
+    };
+    // Measured on lavapipe: 0, bit for bit, and the same sum error on both
+    // paths (5.8e-10): the kernels' ln |det S| per crossing (math64's log
+    // of an elimination's determinant) gave the CPU's Σ to the bit.
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "kicked pair", 1e-9);
+    eprintln!("kicked pair: largest CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    assert!(gpu_sum <= 1e-9, "{gpu_sum:e}");
+    // The seed's wall written `2*(x - wall)`: not a stop's shape, so a
+    // general event (its reset v -> -e*v, det S = e² per impact), on the
+    // general surfaces' code rather than the stops'.
+    let seed = format!("{}/models/seed-oscillator.toml", env!("CARGO_MANIFEST_DIR"));
+    let general = std::fs::read_to_string(&seed)
+        .expect("the seed model")
+        .replace("surface = \"x - wall\"", "surface = \"2*(x - wall)\"");
+    assert!(general.contains("2*(x - wall)"));
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.6, 0.7, 0.8, 0.9, 1.0, 1.2, 1.4]\n\
+                [integration]\ntransient = 200\niterations = 200\n[run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        common::scene(
+            &format!("{general}\n{body}"),
+            &[
+                &format!("run.backend=\"{backend}\""),
+                "model.parameters.e=0.8",
+                "model.parameters.f=2.0",
+            ],
+        )
+    };
+    // Periodic lanes with one to two impacts a period; measured: 0, bit
+    // for bit, sum errors up to 1.9e-9 (δ's floor) on both paths.
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "seed's wall as an event", 1e-9);
+    eprintln!("seed's wall as an event: largest CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    let impacting = run(&scene("gpu"))
+        .lanes
+        .iter()
+        .filter(|l| l.crossings_per_period[0] >= 1.0)
+        .count();
+    assert_eq!(impacting, 7, "every lane meets the wall");
+}
+
+#[test]
+fn an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu() {
+    if !gpu_or_skip(
+        "an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The vibrating table: its surface and the ball's reset read cos(w*t)
+    // and sin(w*t) (the forcing phase on the GPU), so each crossing's
+    // det S needs ∂g/∂t and ∂R/∂t, and comes to e² per impact. Chaotic
+    // lanes: the two paths' orbits decorrelate, so each is checked
+    // through its sum rule, crossing by crossing, and the sign of λ1.
+    let body = "[sweep]\nparameter = \"a\"\nvalues = [1.5, 2.5, 3.5, 4.0]\n[integration]\n\
+                steps_per_period = 900\ntransient = 100\niterations = 200\n[run]\nvalidate = 0\n";
+    let with = |backend: &str| {
+        run(&model_scene(
+            "vibrating-table.toml",
+            body,
+            &[&format!("run.backend=\"{backend}\"")],
+        ))
+    };
+    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    assert!(gpu.gpu.as_ref().unwrap().variant.contains("/f64/surfaces+"));
+    let e: f64 = 0.8;
+    for (k, ((c, g), expected)) in cpu
+        .lanes
+        .iter()
+        .zip(&gpu.lanes)
+        .zip(&gpu.expected_sums)
+        .enumerate()
+    {
+        assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+        let e_squared = 2.0 * e.ln() * g.crossings_per_period[0] / g.period;
+        let error = (g.exponent_sum() - expected).abs();
+        eprintln!(
+            "table lane {k}: GPU {:?} CPU {:?}, sum rule GPU {error:e}",
+            g.exponents, c.exponents
+        );
+        assert!(
+            (expected - e_squared).abs() <= 1e-12,
+            "lane {k}: {expected} vs {e_squared}"
+        );
+        assert!(error <= 1e-8, "lane {k}: sum off by {error:e}");
+        assert_eq!(c.exponents[0] > 0.05, g.exponents[0] > 0.05, "lane {k}");
+    }
+}
+
+#[test]
+fn switches_and_general_events_run_in_f32_close_to_f64() {
+    if !gpu_or_skip(
+        "switches_and_general_events_run_in_f32_close_to_f64",
+        Precision::F32,
+    ) {
+        return;
+    }
+    // The soft stop's and the kicked pair's periodic lanes against the
+    // CPU's f64, through the tool's own f32 tolerance (1e-3), with the same
+    // crossings of every event column.
+    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let body = |values: &str| {
+        format!(
+            "[sweep]\nparameter = \"eta\"\nvalues = {values}\n[integration]\n\
+             steps_per_period = 1800\ntransient = 300\niterations = 300\n[run]\nvalidate = 0\n"
+        )
+    };
+    let soft = body("[0.4, 0.6, 0.8, 1.0, 1.2, 2.2]");
+    let kicked = body("[0.5, 0.8, 1.2]");
+    let soft_stop = |overrides: &[&str]| model_scene("soft-stop.toml", &soft, overrides);
+    let kicked_pair = |overrides: &[&str]| {
+        common::scene(&format!("{}\n{kicked}", common::KICKED_PAIR), overrides)
+    };
+    type SceneWith<'a> = &'a dyn Fn(&[&str]) -> Scene;
+    let cases: [(&str, SceneWith); 2] = [("soft stop", &soft_stop), ("kicked pair", &kicked_pair)];
+    for (name, scene) in cases {
+        let f64_cpu = run(&scene(&["run.backend=\"cpu\""]));
+        let f32_gpu = run(&scene(&["run.backend=\"gpu\"", "run.precision=\"f32\""]));
+        for (k, (c, g)) in f64_cpu.lanes.iter().zip(&f32_gpu.lanes).enumerate() {
+            assert_eq!(
+                c.crossings_per_period, g.crossings_per_period,
+                "{name} lane {k}: the crossings of each event and switch"
+            );
+        }
+        f32_settles_like_f64(name, &f64_cpu, &f32_gpu, tolerance);
+    }
+}
+
+#[test]
+fn coulomb_friction_sticks_and_slips_on_the_gpu_as_on_the_cpu() {
+    if !gpu_or_skip(
+        "coulomb_friction_sticks_and_slips_on_the_gpu_as_on_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // Coulomb friction on a fixed floor (Filippov's limit): under a weak
+    // forcing the mass sticks (both fields point into v = 0, the sliding
+    // field holds it); under a strong one its velocity crosses 0
+    // transversally, each crossing's det S = (∇g·F⁺)/(∇g·F⁻) ≠ 1 (the
+    // friction force jumps by 2μ).
+    let body = "[sweep]\nparameter = \"f\"\nvalues = [0.3, 0.6, 2.0, 3.0, 4.0]\n\
+                [integration]\nsteps_per_period = 600\ntransient = 100\niterations = 100\n\
+                [run]\nvalidate = 0\n";
+    let with = |backend: &str| {
+        run(&common::scene(
+            &format!("{}\n{body}", common::FRICTION),
+            &[&format!("run.backend=\"{backend}\"")],
+        ))
+    };
+    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    assert_eq!(gpu.gpu.as_ref().unwrap().recomputed, Vec::<usize>::new());
+    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+        let d = exponent_difference(
+            &c.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+            &g.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+        );
+        eprintln!(
+            "friction lane {k}: {:?} {:?} CPU {:?} GPU {:?}: {d:e}",
+            c.status, g.status, c.exponents, g.exponents
+        );
+        assert_eq!(c.status, g.status, "lane {k}");
+        // Measured: 0, bit for bit.
+        assert!(d <= 1e-9, "lane {k}: {d:e}");
+        if k < 2 {
+            assert_eq!(g.status, LaneStatus::Collapsed { exponents: 1 });
+        } else {
+            // Slipping lanes, the kernels' own: measured bit for bit, and
+            // the sum rule (div F = 0, so the sum is the crossings' ln
+            // det S alone, about ±ln(1 + 2μ/|a|) each) to δ's floor.
+            assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+            assert!(g.crossings_per_period[0] >= 2.0, "lane {k}");
+            let error = (g.exponent_sum() - gpu.expected_sums[k]).abs();
+            eprintln!(
+                "friction lane {k}: sum rule GPU {error:e}, expected {}",
+                gpu.expected_sums[k]
+            );
+            assert!(error <= 1e-8, "lane {k}: {error:e}");
+        }
+    }
+}
+
+#[test]
+fn stick_slip_on_one_switch_on_the_gpu_agrees_with_the_cpu_in_f64() {
+    if !gpu_or_skip(
+        "stick_slip_on_one_switch_on_the_gpu_agrees_with_the_cpu_in_f64",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The friction belt (static limit mus = 0.6 > mu = 0.5, and Filippov's
+    // own with mus = mu) across sticking and slipping values of η
+    // (tests/switches.rs checks the CPU against the exact backend).
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.4, 0.6, 0.8, 1.9]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    for mus in ["0.6", "0.5"] {
+        let set = format!("model.parameters.mus={mus}");
+        let with = |backend: &str| {
+            run(&model_scene(
+                "friction-belt.toml",
+                body,
+                &[&format!("run.backend=\"{backend}\""), &set],
+            ))
+        };
+        let (cpu, gpu) = (with("cpu"), with("gpu"));
+        // Every lane the kernels' own: none flagged for the CPU.
+        assert_eq!(gpu.gpu.as_ref().unwrap().recomputed, Vec::<usize>::new());
+        let mut sliding = 0;
+        for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+            let d = exponent_difference(
+                &c.exponents
+                    .iter()
+                    .map(|x| x.max(-1e300))
+                    .collect::<Vec<_>>(),
+                &g.exponents
+                    .iter()
+                    .map(|x| x.max(-1e300))
+                    .collect::<Vec<_>>(),
+            );
+            eprintln!(
+                "belt mus = {mus} lane {k}: {:?} CPU {:?} GPU {:?}: {d:e}",
+                g.status, c.exponents, g.exponents
+            );
+            assert_eq!(c.status, g.status, "mus = {mus} lane {k}");
+            assert_eq!(c.crossings_per_period, g.crossings_per_period);
+            // Measured on lavapipe: 0, bit for bit, through the entries
+            // into sticking, the sliding field and the bisected exits.
+            assert!(d <= 1e-9, "mus = {mus} lane {k}: {d:e}");
+            sliding += usize::from(g.status == LaneStatus::Collapsed { exponents: 1 });
+        }
+        // The sticking phases collapse one exponent (the slip forgotten).
+        assert!(sliding >= 3, "mus = {mus}: {sliding} lanes stick");
+    }
+}
+
+/// The friction belt with a soft stop on x besides (Filippov's limit on
+/// the slip, so both switches run on the kernels): a mass stuck to the
+/// belt is carried into the stop's spring, another switch met while
+/// sliding, which the kernels flag rather than integrate.
+const BELT_AND_STOP: &str = r#"
+[model]
+name = "belt-and-stop"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+mu = 0.5
+vb = 0.2
+f = 1.0
+eta = 0.8
+gap = 0.4
+ks = 5.0
+[[model.switches]]
+name = "slip"
+surface = "v - vb"
+[[model.switches]]
+name = "contact"
+surface = "x - gap"
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x - ks*(x - gap)*step(contact) - mu*sign(slip) + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+"#;
+
+#[test]
+fn a_lane_the_kernels_cannot_slide_is_flagged_and_recomputed_on_the_cpu() {
+    if !gpu_or_skip(
+        "a_lane_the_kernels_cannot_slide_is_flagged_and_recomputed_on_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.4, 0.6, 0.8, 1.9]\n\
+                [integration]\nsteps_per_period = 600\ntransient = 100\niterations = 100\n\
+                [run]\nvalidate = 0\n";
+    let with = |backend: &str| {
+        run(&common::scene(
+            &format!("{BELT_AND_STOP}\n{body}"),
+            &[&format!("run.backend=\"{backend}\"")],
+        ))
+    };
+    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    // Measured on lavapipe: η = 0.3 flagged (stuck to the belt into the
+    // spring) and recomputed; the others, sticking (η = 0.4 to 0.8) or not
+    // (1.9), the kernels' own, bit for bit the CPU's.
+    let recomputed = &gpu.gpu.as_ref().unwrap().recomputed;
+    eprintln!("recomputed on the CPU: {recomputed:?}");
+    assert!(
+        !recomputed.is_empty() && recomputed.len() < gpu.lanes.len(),
+        "{recomputed:?}"
+    );
+    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+        let d = exponent_difference(
+            &c.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+            &g.exponents
+                .iter()
+                .map(|x| x.max(-1e300))
+                .collect::<Vec<_>>(),
+        );
+        eprintln!(
+            "belt and stop lane {k}: {:?} CPU {:?} GPU {:?}, crossings {:?}: {d:e}",
+            g.status,
+            c.exponents,
+            g.exponents,
+            &c.crossings_per_period[..2]
+        );
+        assert_eq!(c.status, g.status, "lane {k}");
+        assert_eq!(c.crossings_per_period, g.crossings_per_period, "lane {k}");
+        assert!(d <= 1e-9, "lane {k}: {d:e}");
     }
 }

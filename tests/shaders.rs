@@ -344,8 +344,9 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
     let expected = [
         ("duffing.toml", true),
         ("forced-pendulum.toml", true),
-        // A switch the motion slides on: CPU only so far.
-        ("friction-belt.toml", false),
+        // A switch with a stick limit, slid on (stick-slip): the kernels
+        // slide on one switch.
+        ("friction-belt.toml", true),
         // Two stops on x, from below and from above.
         ("impact-pair.toml", true),
         // The `lorenz` kind's time-T map.
@@ -354,16 +355,18 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("lorenz.toml", false),
         ("rossler.toml", false),
         ("seed-oscillator.toml", true),
-        // A switch: CPU only so far.
-        ("soft-stop.toml", false),
-        // Two switches the motion slides on, one at a time or at once:
-        // CPU only so far.
+        // A switch crossed transversally (the field continuous across it):
+        // the trajectories carry their region.
+        ("soft-stop.toml", true),
+        // Two switches with stick limits, slid on one at a time or at
+        // once: CPU only so far.
         ("two-block-belt.toml", false),
         // A stop on the third of four states.
         ("two-mass-chain.toml", true),
         ("van-der-pol.toml", true),
-        // An event that moves with the clock: CPU only so far.
-        ("vibrating-table.toml", false),
+        // A general event that moves with the clock (its surface and reset
+        // read cos(w*t) and sin(w*t), the forcing phase).
+        ("vibrating-table.toml", true),
     ];
     let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     assert_eq!(runs, expected);
@@ -398,6 +401,23 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
             !source.contains("fn sin64(") && !source.contains("fn sin_r("),
             "{name}"
         );
+    }
+    // Surface code (the region, the surfaces' values, ln |det S|) only for
+    // models with events or switches: the stop models' kernels are the
+    // ones they were (their speed measured in docs/BENCHMARKS.md).
+    for (name, surfaces) in [
+        ("seed-oscillator.toml", false),
+        ("impact-pair.toml", false),
+        ("two-mass-chain.toml", false),
+        ("soft-stop.toml", true),
+        ("vibrating-table.toml", true),
+    ] {
+        for kernel in Kernel::ALL {
+            let source = variant(system(name), Precision::F64).source(kernel);
+            for part in ["fn surface_values(", "TRAJ_REGION", "fluxes", "fn log64("] {
+                assert_eq!(source.contains(part), surfaces, "{name} {kernel:?}: {part}");
+            }
+        }
     }
     // The seed as a model: the hand-written file's tree, fully bracketed,
     // its wall from the stop.

@@ -37,8 +37,17 @@ const LANE_DELTA: u32 = PARAM_COUNT + 4u;
 const LANE_STRIDE: u32 = PARAM_COUNT + 5u;
 
 // Per trajectory: y (DIM), the compensation of y (DIM), the phase (2), the
-// slowest impact speed of the iteration so far (NO_IMPACT if none).
+// slowest impact speed of the iteration so far (NO_IMPACT if none); with
+// general surfaces, then its region of the switches (between dispatches;
+// recomputed from the state at the start of every part, as the CPU does)
+// and the part's Σ ln |det S| of its crossings (the sum rule's term).
+#ifdef SURFACES
+const TRAJ_STRIDE: u32 = 2u * DIM + 5u;
+const TRAJ_REGION: u32 = 2u * DIM + 3u;
+const TRAJ_FLUX: u32 = 2u * DIM + 4u;
+#else
 const TRAJ_STRIDE: u32 = 2u * DIM + 3u;
+#endif
 const TRAJ_SLOWEST: u32 = 2u * DIM + 2u;
 const NO_IMPACT: real = real(1e30);
 
@@ -57,11 +66,18 @@ const FLAG_RANK_TWO: u32 = 8u;
 // The adapter cut this dispatch's loops short (see loop_budget_exhausted):
 // the host redoes the batch with shorter dispatches.
 const FLAG_TRUNCATED: u32 = 16u;
-// Flags that outlive the iteration they were raised in.
-const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED;
+// Flags that outlive the iteration they were raised in. (A lane that slid
+// once, even in the transient, went on from a state the kernels did not
+// integrate: all it computes after is the CPU's to redo.)
+const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED | FLAG_SLIDING;
 // A copy seeded behind the wall (its reference within δ of it): its column
 // is differenced on the other side (System::admits on the CPU).
 const FLAG_BEHIND_WALL: u32 = 32u;
+// A motion on a switch the kernels do not integrate (another surface met
+// while sliding, a switch left against its new field, or no Filippov
+// combination): IterationStats::sliding; the backend recomputes the lane
+// on the CPU.
+const FLAG_SLIDING: u32 = 64u;
 
 fn rank_flags(rank_loss: u32) -> u32 {
     if (rank_loss >= 2u) {
@@ -85,6 +101,11 @@ const SUMMARY_STRIDE: u32 = 2u;
 @group(0) @binding(8) var<storage, read_write> crossings: array<vec4<u32>>;
 #else
 const SUMMARY_STRIDE: u32 = 1u;
+#endif
+#ifdef SURFACES
+// Per ring slot and lane: the reference's Σ ln |det S| over the part's
+// crossings of general surfaces (IterationStats::log_flux).
+@group(0) @binding(9) var<storage, read_write> fluxes: array<real>;
 #endif
 #ifdef LYAPUNOV
 // Per lane: the perturbation actually taken per copy, (x_i + δ) - x_i

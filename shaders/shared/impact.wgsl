@@ -3,7 +3,15 @@
 // look again (several impacts per step, on one stop or several, in the
 // order they happen).
 //
-// Stop j of WALLS (1 to 4) acts on coordinate WALL_COORDINATE[j] (its
+// General surfaces (events and switches, src/integrate/surface.rs), with
+// SURFACES defined, go through the same loop: located on re-stepped RK4 as
+// a stop's impact is, the first crossing of the step applied (an event's
+// reset, a switch's flip of the trajectory's region, or the start of a
+// sliding phase on it), counted in the same crossings (event index WALLS +
+// j), and the step goes on from there; a sliding motion slides the rest
+// of the step, or until it leaves the switch.
+//
+// Stop j of WALLS (0 to 4) acts on coordinate WALL_COORDINATE[j] (its
 // position X), whose rate is coordinate WALL_VELOCITY[j] (V = X'), from
 // side WALL_SIDE[j]: +1 confines X <= X_w (a stop approached from below),
 // -1 X >= X_w. The system file gives those constants and, per stop as the
@@ -263,25 +271,33 @@ fn locate(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: rea
 #endif
 }
 
-// The first stop met, and where.
+// The first stop (or surface) met, and where.
 struct Met {
     hit: Hit,
     stop: u32,
 }
 
-// `met`, or stop j's hit if found earlier (on a tie the lower index, as on
+// Event indices: the stops, then the general surfaces; NONE_MET is none.
+#ifdef SURFACES
+const NONE_MET: u32 = WALLS + SURFACES;
+#else
+const NONE_MET: u32 = WALLS;
+#endif
+
+// `met`, or event j's hit if found earlier (on a tie the lower index, as on
 // the CPU).
 fn earlier(met: Met, found: Hit, j: u32) -> Met {
-    if (found.found && (met.stop == WALLS || found.s < met.hit.s)) {
+    if (found.found && (met.stop == NONE_MET || found.s < met.hit.s)) {
         return Met(found, j);
     }
     return met;
 }
 
-// The first stop met in the step [0, h] from (phase0, y0) to y1 (WALLS:
-// none).
+// The first stop or surface met in the step [0, h] from (phase0, y0) to y1
+// (NONE_MET: none). Without stops (WALLS = 0) stop 0's constants are zeros
+// (side 0), and it is never met.
 fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
-    var met = earlier(Met(Hit(false, real(0.0), y0), WALLS), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
+    var met = earlier(Met(Hit(false, real(0.0), y0), NONE_MET), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
     if (WALLS > 1u) {
         met = earlier(met, locate(p, omega, stop(walls, 1u), phase0, y0, h, y1), 1u);
     }
@@ -291,6 +307,22 @@ fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State
     if (WALLS > 3u) {
         met = earlier(met, locate(p, omega, stop(walls, 3u), phase0, y0, h, y1), 3u);
     }
+#ifdef SURFACES
+    // The surfaces' values at both ends of the rest of the step, in the
+    // trajectory's region (a surface may move with the forcing).
+    let before = surface_values(p, phase0, y0);
+    let after = surface_values(p, rotate(phase0, cos_sin(omega * h)), y1);
+    met = earlier(met, locate_surface(p, omega, 0u, phase0, y0, h, y1, before, after), WALLS);
+    if (SURFACES > 1u) {
+        met = earlier(met, locate_surface(p, omega, 1u, phase0, y0, h, y1, before, after), WALLS + 1u);
+    }
+    if (SURFACES > 2u) {
+        met = earlier(met, locate_surface(p, omega, 2u, phase0, y0, h, y1, before, after), WALLS + 2u);
+    }
+    if (SURFACES > 3u) {
+        met = earlier(met, locate_surface(p, omega, 3u, phase0, y0, h, y1, before, after), WALLS + 3u);
+    }
+#endif
     return met;
 }
 
@@ -300,7 +332,13 @@ fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
 // invocation is small: see loop_budget_exhausted).
+#ifdef SURFACES
+fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
+    // A copy, whose region follows the crossings.
+    var p = p_lane;
+#else
 fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
+#endif
     var done = real(0.0);
     var phase0 = phase;
     var y0 = y;
@@ -315,14 +353,65 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
     var stuck = WALLS;
     var rank_loss = 0u;
     for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
+#ifdef SURFACES
+        if (is_sliding(p.region)) {
+            // On a switch: the rest of the step slides, unless the motion
+            // leaves it (twin of the sliding branch of resolve).
+            let slid = slide(p, omega, phase0, y0, h - done);
+            crossed.sliding = crossed.sliding || slid.flagged;
+            if (!slid.leaves) {
+                return WallStep(slid.y, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+            }
+            done = done + slid.s;
+            phase0 = rotate(phase0, cos_sin(omega * slid.s));
+            y0 = slid.y;
+            p.region = slid.region;
+            crossed.region = slid.region;
+            y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            continue;
+        }
+#endif
         let rest = h - done;
         let met = first_met(p, walls, omega, phase0, y0, rest, y1);
         let first = met.stop;
         let hit = met.hit;
-        if (first == WALLS) {
+        if (first == NONE_MET) {
             ending = 0u;
             break;
         }
+#ifdef SURFACES
+        if (first >= WALLS) {
+            // A general surface (twin of the surface branch of resolve).
+            let phase_c = rotate(phase0, cos_sin(omega * hit.s));
+            done = done + hit.s;
+            let crossing = cross(p, first - WALLS, phase_c, hit.y);
+            slowest = min(slowest, crossing.approach);
+            if (crossing.counted) {
+                crossings[first] = crossings[first] + 1u;
+            }
+            if (crossing.rank_loss) {
+                rank_loss = max(rank_loss, 1u);
+            }
+            p.region = crossing.region;
+            crossed.region = crossing.region;
+            crossed.log_flux = crossed.log_flux + crossing.log_det;
+            crossed.sliding = crossed.sliding || crossing.sliding;
+            if (!crossing.resolved) {
+                // Flagged: the rest of the step in the field now in force.
+                let rest = sub_step(p, omega, phase_c, hit.y, h - done).y;
+                return WallStep(rest, impacts, crossings, crossing.chattering, rank_loss, slowest, WALLS, h, phase_c);
+            }
+            if (crossing.slides) {
+                crossed.sliding_phases = crossed.sliding_phases + 1u;
+            }
+            phase0 = phase_c;
+            y0 = crossing.y;
+            if (!is_sliding(p.region)) {
+                y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            }
+            continue;
+        }
+#endif
         let w = stop(walls, first);
         let phase_c = rotate(phase0, cos_sin(omega * hit.s));
         let v = speed(w, hit.y);
@@ -501,5 +590,431 @@ fn hermite_first_root(c: vec4<real>, a_in: real, b_in: real) -> real {
         }
     }
     return th;
+}
+#endif
+
+#ifdef SURFACES
+// ---- General surfaces: twins of src/integrate/surface.rs and of the
+// surface branch of resolve and cross in src/integrate/impact.rs. The
+// system file gives SURFACES, each one's SURFACE_BIT (EVENT for an event),
+// surface_g, surface_values (g and the rate ∇g·F + ∂g/∂t along the field
+// of p.region), surface_gradient and reset. A trajectory's field is that
+// of its region, p.region: rhs reads a switch's side from it, never from
+// the state.
+
+// What resolve_impacts did to the surfaces in its step, beside its
+// WallStep: the region it ends in, Σ ln |det S| of its crossings, and
+// whether one could not be resolved (sliding). Set by the integrate kernel
+// before the call, read after it.
+struct Crossed {
+    region: u32,
+    log_flux: real,
+    sliding: bool,
+    // Sliding phases entered (IterationStats::sliding_phases).
+    sliding_phases: u32,
+}
+var<private> crossed: Crossed;
+
+// Region bits from SLIDING_SHIFT up mark a motion sliding on surface j
+// (bit SLIDING_SHIFT + j), the bits below are the sides (surface::SLIDING).
+const SLIDING_SHIFT: u32 = 16u;
+const SIDES: u32 = 0xffffu;
+
+fn is_sliding(region: u32) -> bool {
+    return (region >> SLIDING_SHIFT) != 0u;
+}
+
+// The equivalent control of a motion sliding on one switch (Filippov's
+// convex combination, surface::equivalent_on with one switch): the sides'
+// fields lo and hi, their rates a and b along ∇g, α = a/(a - b), the field
+// lo + α(hi - lo), and the stick margins (L - m, L + m), m = (a + b)/2, L
+// the stick limit or the half jump (a - b)/2.
+struct Equivalent {
+    field: State,
+    alpha: real,
+    margins: vec2<real>,
+}
+
+fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
+    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let bit = SURFACE_BIT[j];
+    var lo_p = p;
+    lo_p.region = (p.region & SIDES) & ~(1u << bit);
+    var hi_p = lo_p;
+    hi_p.region = lo_p.region | (1u << bit);
+    let lo = field(lo_p, phase, y);
+    let hi = field(hi_p, phase, y);
+    let n = surface_gradient(p, phase, y, j);
+    let a = dot_in_order(n, lo);
+    let b = dot_in_order(n, hi);
+    let alpha = a / (a - b);
+    let mean = real(0.5) * (a + b);
+    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
+    return Equivalent(lo + alpha * (hi - lo), alpha, vec2<real>(limit - mean, limit + mean));
+}
+
+// The sliding field (NaN where the combination does not exist, as the
+// CPU's Sliding flow).
+fn sliding_field(p: Params, phase: vec2<real>, y: State) -> State {
+    let e = equivalent(p, phase, y);
+    if (!(abs(e.alpha) <= MAX_REAL)) {
+        var zero = real(0.0);
+        return State(zero / zero);
+    }
+    return e.field;
+}
+
+// The switch still holds the motion: both margins > 0.
+fn holds(m: vec2<real>) -> bool {
+    return m.x > real(0.0) && m.y > real(0.0);
+}
+
+// How a sliding sub-step ended (Slid in impact.rs).
+struct Slid {
+    // Left the switch (to region `region`) after s, at y; else still
+    // sliding at the end, at y.
+    leaves: bool,
+    s: real,
+    y: State,
+    region: u32,
+    // Something the kernels do not integrate met while sliding (another
+    // switch, an event): the lane is the CPU's.
+    flagged: bool,
+}
+
+// Slides on the switch of p's sliding set for up to h from (phase, y):
+// twin of `slide` in impact.rs for one switch. Another surface crossed on
+// the way is flagged rather than located; an exit (a stick margin reaching
+// 0) is bisected on RK4 re-stepped along the sliding field, and the region
+// leaves to the side whose margin ran out.
+fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
+    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let end = sub_step(p, omega, phase, y, h).y;
+    let end_phase = rotate(phase, cos_sin(omega * h));
+    let end_margins = equivalent(p, end_phase, end).margins;
+    var sides = p;
+    sides.region = p.region & SIDES;
+    let before = surface_values(sides, phase, y);
+    let after = surface_values(sides, end_phase, end);
+    var flagged = false;
+    for (var k = 0u; k < SURFACES; k = k + 1u) {
+        if (k == j) {
+            continue;
+        }
+        let o = orientation(sides.region, k);
+        if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
+            flagged = true;
+        }
+    }
+    if (holds(end_margins)) {
+        return Slid(false, h, end, p.region, flagged);
+    }
+    var lo = real(0.0);
+    var hi = h;
+    var exit = end;
+    var m = end_margins;
+    for (var k = 0u; k < 128u; k = k + 1u) {
+        if (!(hi - lo > EPSILON * h)) {
+            break;
+        }
+        let mid = real(0.5) * (lo + hi);
+        let y_mid = sub_step(p, omega, phase, y, mid).y;
+        let m_mid = equivalent(p, rotate(phase, cos_sin(omega * mid)), y_mid).margins;
+        if (holds(m_mid)) {
+            lo = mid;
+        } else {
+            hi = mid;
+            exit = y_mid;
+            m = m_mid;
+        }
+    }
+    // Leaves to the side whose margin ran out (surface::leaving).
+    let bit = SURFACE_BIT[j];
+    var region = p.region & ~(1u << (SLIDING_SHIFT + j));
+    if (m.x <= m.y) {
+        region = region | (1u << bit);
+    } else {
+        region = region & ~(1u << bit);
+    }
+    return Slid(true, hi, exit, region, flagged);
+}
+
+// +1 where the crossing to watch for is g rising through 0 (an event, or a
+// switch on its negative side), -1 where it is g falling (Surface::orientation).
+fn orientation(region: u32, j: u32) -> real {
+    let bit = SURFACE_BIT[j];
+    if (bit != EVENT && ((region >> bit) & 1u) == 1u) {
+        return real(-1.0);
+    }
+    return real(1.0);
+}
+
+// The region of y: bit b set where switch b's g > 0 (surface::region_of).
+fn region_of(p: Params, phase: vec2<real>, y: State) -> u32 {
+    let g = surface_g(p, phase, y);
+    var region = 0u;
+    for (var j = 0u; j < SURFACES; j = j + 1u) {
+        if (SURFACE_BIT[j] != EVENT && g[j] > real(0.0)) {
+            region = region | (1u << SURFACE_BIT[j]);
+        }
+    }
+    return region;
+}
+
+// Whether a step from values `before` to `after` may cross surface j: its
+// end lies across, or its rate turns from approaching to leaving inside it
+// (surface::may_cross).
+fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues) -> bool {
+    let o = orientation(region, j);
+    return o * after.g[j] > real(0.0) || (o * before.rate[j] > real(0.0) && o * after.rate[j] < real(0.0));
+}
+
+// The step loop's test over every surface, written out per surface as the
+// stops' is (SURFACES is a constant).
+fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues) -> bool {
+    var hit = may_cross(region, 0u, before, after);
+    if (SURFACES > 1u) {
+        hit = hit || may_cross(region, 1u, before, after);
+    }
+    if (SURFACES > 2u) {
+        hit = hit || may_cross(region, 2u, before, after);
+    }
+    if (SURFACES > 3u) {
+        hit = hit || may_cross(region, 3u, before, after);
+    }
+    return hit;
+}
+
+// Surface j's oriented distance and rate at (s into the step from phase0, y).
+fn surface_at(p: Params, omega: real, j: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
+    let v = surface_values(p, rotate(phase0, cos_sin(omega * s)), y);
+    return orientation(p.region, j) * vec2<real>(v.g[j], v.rate[j]);
+}
+
+// Surface j's crossing in the step [0, h] from (phase0, y0) to y1, given
+// its values at both ends: twin of `locate` in impact.rs, the stops'
+// location (Hermite guess, then Newton on re-stepped RK4, an excursion
+// across and back found at the Hermite peak) on g instead of a gap.
+fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State, before: SurfaceValues, after: SurfaceValues) -> Hit {
+    let o = orientation(p.region, j);
+    let start = o * vec2<real>(before.g[j], before.rate[j]);
+    let end = o * vec2<real>(after.g[j], after.rate[j]);
+#ifdef IMPACT_LINEAR
+    if (end.x <= real(0.0)) {
+        return Hit(false, real(0.0), y0);
+    }
+    let theta = clamp(-start.x / (end.x - start.x), real(0.0), real(1.0));
+    return Hit(true, theta * h, y0 + theta * (y1 - y0));
+#else
+    let herm = hermite_new(start.x, start.y, end.x, end.y, h);
+    var scale = real(1.0);
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        scale = max(scale, abs(y0[i]));
+    }
+    var hi: real;
+    var guess: real;
+    if (end.x > real(0.0)) {
+        hi = h;
+        guess = hermite_first_root(herm, real(0.0), real(1.0));
+    } else if (start.y > real(0.0) && end.y < real(0.0)) {
+        let peak = hermite_peak(herm);
+        if (peak < real(0.0)) {
+            return Hit(false, real(0.0), y0);
+        }
+        // An excursion no deeper than the location's own tolerance is a
+        // touch in rounding, not a crossing.
+        let at_peak = sub_step(p, omega, phase0, y0, peak * h).y;
+        if (surface_at(p, omega, j, phase0, peak * h, at_peak).x <= real(4.0) * EPSILON * scale) {
+            return Hit(false, real(0.0), y0);
+        }
+        hi = peak * h;
+        guess = hermite_first_root(herm, real(0.0), peak);
+    } else {
+        return Hit(false, real(0.0), y0);
+    }
+    // Safeguarded Newton (newton_in_bracket): g resolved to 4 ulp of the
+    // state's size.
+    let tolerance = real(4.0) * EPSILON * max(abs(scale), real(1.0));
+    var lo = real(0.0);
+    var s = guess * h;
+    var y = sub_step(p, omega, phase0, y0, s).y;
+    for (var k = 0u; k < 32u; k = k + 1u) {
+        let v = surface_at(p, omega, j, phase0, s, y);
+        let g = v.x;
+        if (abs(g) <= tolerance) {
+            break;
+        }
+        if (g > real(0.0)) {
+            hi = s;
+        } else {
+            lo = s;
+        }
+        let newton = s - g / v.y;
+        if (newton > lo && newton < hi) {
+            s = newton;
+        } else {
+            s = real(0.5) * (lo + hi);
+        }
+        if (hi - lo <= EPSILON * abs(hi)) {
+            break;
+        }
+        y = sub_step(p, omega, phase0, y0, s).y;
+    }
+    return Hit(true, s, y);
+#endif
+}
+
+// A crossing of a general surface, applied (cross in impact.rs).
+struct Crossing {
+    // Applied; else flagged (chattering or sliding), the state left at the
+    // crossing.
+    resolved: bool,
+    y: State,
+    region: u32,
+    // ln |det S|, 0 where none applies.
+    log_det: real,
+    // Counted in the crossings (a touch of a switch in rounding is not).
+    counted: bool,
+    // The oriented approach rate: the crossing's "impact speed".
+    approach: real,
+    chattering: bool,
+    sliding: bool,
+    // det S = 0 (the reset collapsed a direction), or a sliding phase.
+    rank_loss: bool,
+    // The motion slides on the switch from here.
+    slides: bool,
+}
+
+// The sum of a_i·b_i in index order from 0, as the CPU's iterator sum.
+fn dot_in_order(a: State, b: State) -> real {
+    var sum = real(0.0);
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        sum = sum + a[i] * b[i];
+    }
+    return sum;
+}
+
+// ln |det S| of an event's crossing, S = DR + (F⁺ - DR·F⁻ - ∂R/∂t) ∇gᵀ /
+// rate (surface::event_log_det), det by elimination with partial pivoting.
+fn event_log_det(r: Reset, gradient: State, rate: real, before: State, after: State) -> real {
+    var s: array<State, DIM>;
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        let dr_f = dot_in_order(r.dr[i], before);
+        for (var k = 0u; k < DIM; k = k + 1u) {
+            s[i][k] = r.dr[i][k] + (after[i] - dr_f - r.rate[i]) * gradient[k] / rate;
+        }
+    }
+    var det = real(1.0);
+    for (var col = 0u; col < DIM; col = col + 1u) {
+        var pivot = col;
+        for (var row = col + 1u; row < DIM; row = row + 1u) {
+            if (abs(s[row][col]) > abs(s[pivot][col])) {
+                pivot = row;
+            }
+        }
+        if (pivot != col) {
+            let swap = s[col];
+            s[col] = s[pivot];
+            s[pivot] = swap;
+            det = -det;
+        }
+        let d = s[col][col];
+        det = det * d;
+        if (d == real(0.0)) {
+            break;
+        }
+        for (var row = col + 1u; row < DIM; row = row + 1u) {
+            let factor = s[row][col] / d;
+            for (var k = col; k < DIM; k = k + 1u) {
+                s[row][k] = s[row][k] - factor * s[col][k];
+            }
+        }
+    }
+    if (det == real(0.0)) {
+        // -∞, made at run time (a constant 1/0 is a shader-creation error).
+        var zero = real(0.0);
+        return real(-1.0) / zero;
+    }
+    return log_r(abs(det));
+}
+
+// Crosses general surface j at y (on it, at `phase`) for a trajectory in
+// p.region: an event's reset, a switch's flip of the region, with its
+// ln |det S|, or the start of a sliding phase on a switch both fields
+// point into (or its stick limit holds).
+fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
+    let bit = SURFACE_BIT[j];
+    let before = surface_values(p, phase, y);
+    let approach_rate = before.rate[j];
+    var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, j) * approach_rate, false, false, false, false);
+    if (bit == EVENT) {
+        let r = reset(p, phase, y, j);
+        let now = surface_values(p, phase, r.y);
+        var scale = real(1.0);
+        for (var i = 0u; i < DIM; i = i + 1u) {
+            scale = max(scale, abs(y[i]));
+        }
+        // Back where the motion lives, and leaving the surface.
+        if (!(now.g[j] <= real(4.0) * EPSILON * scale && now.rate[j] < real(0.0))) {
+            out.chattering = true;
+            return out;
+        }
+        out.log_det = event_log_det(r, surface_gradient(p, phase, y, j), approach_rate, rhs(p, phase, y), rhs(p, phase, r.y));
+        out.rank_loss = !(abs(out.log_det) <= MAX_REAL);
+        out.resolved = true;
+        out.y = r.y;
+        return out;
+    }
+    // The rates a, b of the two sides' fields along ∇g (joining_margins:
+    // the stick limit, or Filippov's, the half jump).
+    var below = p;
+    below.region = p.region & ~(1u << bit);
+    var above = p;
+    above.region = p.region | (1u << bit);
+    let n = surface_gradient(p, phase, y, j);
+    let a = dot_in_order(n, field(below, phase, y));
+    let b = dot_in_order(n, field(above, phase, y));
+    let m = real(0.5) * (a + b);
+    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
+    let plus = limit - m;
+    let minus = limit + m;
+    if (plus > real(0.0) && minus > real(0.0)) {
+        // Both fields point into the switch (or the stick limit holds the
+        // motion): it slides, where its Filippov combination exists, and
+        // forgets how far from the surface it came (one direction); the
+        // volume law no longer applies (ln |det S| NaN).
+        var joined = p;
+        joined.region = p.region | (1u << (SLIDING_SHIFT + j));
+        if (!(abs(equivalent(joined, phase, y).alpha) <= MAX_REAL)) {
+            out.sliding = true;
+            return out;
+        }
+        out.region = joined.region;
+        out.resolved = true;
+        out.slides = true;
+        out.rank_loss = true;
+        var zero = real(0.0);
+        out.log_det = zero / zero;
+        return out;
+    }
+    let to_plus = plus <= minus;
+    if (to_plus == (((p.region >> bit) & 1u) == 1u)) {
+        // Only touched the surface (in rounding): no crossing.
+        out.counted = false;
+        out.resolved = true;
+        return out;
+    }
+    var flipped = p;
+    flipped.region = p.region ^ (1u << bit);
+    out.region = flipped.region;
+    let leaving = surface_values(flipped, phase, y).rate[j];
+    if (leaving * approach_rate <= real(0.0)) {
+        out.sliding = true;
+        return out;
+    }
+    // det S = (∇g·F⁺)/(∇g·F⁻).
+    out.log_det = log_r(leaving / approach_rate);
+    out.resolved = true;
+    return out;
 }
 #endif

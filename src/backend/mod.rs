@@ -50,6 +50,9 @@ pub struct GpuReport {
     /// Device memory per lane (see `gpu::sweep::GpuRun::bytes_per_lane`).
     pub bytes_per_lane: u64,
     pub validation: Option<Validation>,
+    /// Indices of the sweep values the kernels flagged `sliding` (a motion
+    /// on switches they do not integrate) and the CPU path recomputed.
+    pub recomputed: Vec<usize>,
 }
 
 /// The CPU recomputation of a few sweep values of a GPU run.
@@ -476,6 +479,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
                 retries: run.retries,
                 bytes_per_lane: run.bytes_per_lane,
                 validation: None,
+                recomputed: Vec::new(),
             };
             (run.lanes, Some(report))
         }
@@ -483,6 +487,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
     let elapsed = start.elapsed();
 
     let gpu_report = gpu_report.map(|mut report| {
+        report.recomputed = recompute_sliding(scene, &mut lanes);
         report.validation = validate(scene, precision, &mut lanes);
         report
     });
@@ -591,6 +596,7 @@ impl Summary {
                     sum.retries += gpu.retries;
                     sum.bytes_per_lane = sum.bytes_per_lane.max(gpu.bytes_per_lane);
                     sum.chunk_steps = sum.chunk_steps.min(gpu.chunk_steps);
+                    sum.recomputed.extend(&gpu.recomputed);
                     if let (Some(v), Some(w)) = (&mut sum.validation, &gpu.validation) {
                         v.lanes.extend(&w.lanes);
                         v.max_difference = v.max_difference.max(w.max_difference);
@@ -615,6 +621,39 @@ impl Summary {
     pub fn all_failed(&self) -> bool {
         self.failures.values().sum::<usize>() == self.lanes
     }
+}
+
+/// Recomputes on the CPU path (f64, with the GPU's steps and parts) the
+/// lanes the kernels flagged `sliding`: a motion on a switch they do not
+/// integrate (another surface met while sliding, two switches slid on at
+/// once), which they flag rather than step through; the CPU integrates
+/// it. Returns their indices.
+fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
+    let flagged: Vec<usize> = (0..lanes.len())
+        .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))
+        .collect();
+    if flagged.is_empty() {
+        return flagged;
+    }
+    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
+    if follow_gpu_plan(scene, &mut settings).is_err() {
+        return Vec::new();
+    }
+    use rayon::prelude::*;
+    let cpu: Vec<LaneResult> = flagged
+        .par_iter()
+        .map(|&k| {
+            let lane = crate::method::Lane {
+                params: scene.lane_params(k),
+                settings: &settings,
+            };
+            (crate::method::runner(scene.system).run_lane)(&lane)
+        })
+        .collect();
+    for (&k, lane) in flagged.iter().zip(cpu) {
+        lanes[k] = lane;
+    }
+    flagged
 }
 
 /// Recomputes `scene.validate` sweep values, spread over the sweep, on the

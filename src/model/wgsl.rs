@@ -35,13 +35,35 @@
 //!   tanh, atan2 and pow are within a few ulp of Rust's functions, not to
 //!   the bit, so a model that calls one matches the CPU to rounding.
 //!
+//! For a model with general surfaces (events that are not stops, and
+//! switches) the file adds what the surface code of `impact.wgsl` reads:
+//! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`),
+//! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
+//! field in force, the CPU surface tape's sum in its order),
+//! `surface_gradient` and an event's `reset` (the state after it, DR and
+//! ∂R/∂t), all emitted from the CPU's trees. `Params` then ends with the
+//! trajectory's `region` (bit b set on the positive side of switch b),
+//! which the kernels set, and `step(s)`/`sign(s)` of a switch read that
+//! bit (`side(p, b)`), never the state: the value 0 or 1 multiplies where
+//! the CPU's per-region tape has it folded in, which rounds alike.
+//!
 //! What the kernels run so far ([`check`]): a period map of a flow of 2 to
-//! 4 states (the kernels' `State` is a WGSL vector) whose events, if any,
-//! are all stops: up to `MAX_WALLS` = 4, each on any state x with its
+//! 4 states (the kernels' `State` is a WGSL vector) whose events are
+//! either all stops: up to `MAX_WALLS` = 4, each on any state x with its
 //! velocity v (x' = v), approached from either side, reset v → -e·v
 //! (`system::model::Stop`), with the CPU's sticking (a mass held at rest
-//! on a stop while the others move on) and per-stop crossing counts. Other
-//! events, switches and Poincaré sections run on the CPU.
+//! on a stop while the others move on) and per-stop crossing counts; or,
+//! without stops, up to four general surfaces: events with any surface
+//! g(y, clock) and any reset, and switches crossed transversally, each
+//! crossing located and applied as on the CPU (`integrate::surface`) with
+//! its ln |det S| for the sum rule; and sliding on one switch at a time
+//! (Filippov's combination or a stick limit: the friction belt), entered
+//! where both fields point into the switch and left where a stick margin
+//! runs out, as on the CPU. A motion they do not integrate (another
+//! surface met while sliding, sliding on two switches at once) is flagged
+//! (`FLAG_SLIDING`) and its lane recomputed on the CPU by the backend; a
+//! model with stick limits on several switches (the two-block belt), stops
+//! and surfaces together, and Poincaré sections run on the CPU.
 
 use std::fmt::{self, Write};
 
@@ -79,6 +101,16 @@ pub enum Unsupported {
     Time,
     /// A Poincaré section: the kernels run time-T maps.
     Section,
+    /// A switch with a stick limit in a model with several switches, made
+    /// to be slid on several at once: the kernels slide on one.
+    Sliding(String),
+}
+
+fn kind_name(kind: crate::integrate::Surface) -> &'static str {
+    match kind {
+        crate::integrate::Surface::Event => "event",
+        crate::integrate::Surface::Switch { .. } => "switch",
+    }
 }
 
 impl fmt::Display for Unsupported {
@@ -91,8 +123,13 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Events(why) => write!(
                 f,
-                "{why}: the GPU kernels handle stops alone so far (surfaces `x - c` or \
-                 `c - x` on a state x whose rate is another state v, reset v -> -e*v)"
+                "{why}: the GPU kernels handle stops, or up to four events and switches \
+                 without stops"
+            ),
+            Unsupported::Sliding(name) => write!(
+                f,
+                "the switch '{name}' has a stick limit, and the model other switches: the \
+                 GPU kernels slide on one switch at a time so far"
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
@@ -113,15 +150,38 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     if !(2..=4).contains(&n) {
         return Err(Unsupported::States(n));
     }
-    if let Some(first) = code.surfaces.first() {
+    // Stops and general surfaces share the kernels' per-trajectory
+    // crossing counts (a vec4: up to four together); a model with both
+    // would also need sticking on a stop inside a step that crosses a
+    // surface, which the kernels do not do.
+    if !code.surfaces.is_empty() && !code.walls.is_empty() {
         return Err(Unsupported::Events(format!(
-            "the {} '{}' is not a stop",
-            match first.kind {
-                crate::integrate::Surface::Event => "event",
-                crate::integrate::Surface::Switch { .. } => "switch",
-            },
-            first.name
+            "the model has stops and the {} '{}' together",
+            kind_name(code.surfaces[0].kind),
+            code.surfaces[0].name
         )));
+    }
+    if code.surfaces.len() > crate::integrate::impact::MAX_WALLS {
+        return Err(Unsupported::Events(format!(
+            "{} events and switches: the kernels count up to {}",
+            code.surfaces.len(),
+            crate::integrate::impact::MAX_WALLS
+        )));
+    }
+    // The kernels slide on one switch at a time (Filippov's combination,
+    // or a stick limit): a motion that would slide on two at once is
+    // flagged (`FLAG_SLIDING`) and recomputed on the CPU, and a model made
+    // to do so (stick limits on several switches: the two-block belt) is
+    // the CPU's from the start.
+    let switches = code
+        .surfaces
+        .iter()
+        .filter(|s| matches!(s.kind, crate::integrate::Surface::Switch { .. }))
+        .count();
+    if switches > 1 {
+        if let Some(s) = code.surfaces.iter().find(|s| s.stick_limit.is_some()) {
+            return Err(Unsupported::Sliding(s.name.clone()));
+        }
     }
     // Any stop (Code::compile allows MAX_WALLS, the components of the
     // kernels' vec4 per-stop values).
@@ -130,6 +190,20 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     for stop in &code.walls {
         trees.push(&stop.position);
         trees.push(&stop.restitution);
+    }
+    let rates: Vec<Expr> = code
+        .surfaces
+        .iter()
+        .map(|s| s.g.derivative(Var::Time))
+        .collect();
+    for (s, rate) in code.surfaces.iter().zip(&rates) {
+        trees.push(&s.g);
+        trees.push(rate);
+        trees.extend(&s.gradient);
+        trees.extend(&s.reset);
+        trees.extend(&s.reset_jacobian);
+        trees.extend(&s.reset_rate);
+        trees.extend(&s.stick_limit);
     }
     for e in trees {
         emittable(e)?;
@@ -141,9 +215,9 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
 fn emittable(e: &Expr) -> Result<(), Unsupported> {
     match e {
         Expr::Num(v) if !v.is_finite() => Err(Unsupported::Number(*v)),
-        Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_)) => Ok(()),
+        // A switch's side is read from the trajectory's region (`side`).
+        Expr::Num(_) | Expr::Var(Var::State(_) | Var::Param(_) | Var::Side(_)) => Ok(()),
         Expr::Var(Var::Time) => Err(Unsupported::Time),
-        Expr::Var(Var::Side(_)) => Err(Unsupported::Events("a switch".into())),
         // The clock: its argument is not emitted (the tape compiler has
         // checked that it is w*t with w of the parameters).
         Expr::Call(Func::Cos | Func::Sin, args) if args[0].uses(Var::Time) => Ok(()),
@@ -178,11 +252,25 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         // WGSL has no empty struct; load_params builds `Params()`.
         let _ = writeln!(w, "    unused: real,");
     }
+    if !code.surfaces.is_empty() {
+        // The field in force: the region of the switches the trajectory
+        // is in (bit b set on the positive side of switch b), set by the
+        // kernels, not a parameter of the lane.
+        let _ = writeln!(w, "    region: u32,");
+    }
     let _ = writeln!(w, "}}\n");
+    // With surfaces, the field of p's region is `field`, and `rhs` (what
+    // RK4 steps) is it or, for a motion sliding on a switch, the sliding
+    // field of impact.wgsl built from it.
     let _ = writeln!(
         w,
         "// phase = (cos ωt, sin ωt) of the forcing clock.\n\
-         fn rhs(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State("
+         fn {}(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State(",
+        if code.surfaces.is_empty() {
+            "rhs"
+        } else {
+            "field"
+        }
     );
     for (i, e) in model.equations.iter().enumerate() {
         let _ = writeln!(
@@ -193,8 +281,12 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         );
     }
     let _ = writeln!(w, "    );\n}}");
-    if !code.walls.is_empty() {
+    if !code.walls.is_empty() || !code.surfaces.is_empty() {
         stops(w, code);
+    }
+    if !code.surfaces.is_empty() {
+        surfaces(w, code);
+        stick_limits(w, code);
     }
     if !model.angles.is_empty() {
         // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
@@ -293,6 +385,164 @@ fn stops(w: &mut String, code: &Code) {
     );
 }
 
+/// The general surfaces of `code` (events that are not stops, then the
+/// switches: the CPU's order, `Code::surfaces`) as the surface code of
+/// `shaders/shared/impact.wgsl` reads them: their count, each one's switch
+/// bit (or `EVENT`), g, its rate ∇g·F + ∂g/∂t along the field of the
+/// trajectory's region (the CPU's surface tape: the same sum, in the same
+/// order), ∇g, and an event's reset with its Jacobian and ∂R/∂t, all from
+/// the trees the CPU evaluates.
+fn surfaces(w: &mut String, code: &Code) {
+    let names = &code.model.names;
+    let n = names.states.len();
+    let surfaces = &code.surfaces;
+    let emit = |e: &Expr| Emit { expr: e, code }.to_string();
+    let state = |exprs: &[Expr]| -> String {
+        let parts: Vec<String> = exprs.iter().map(emit).collect();
+        format!("State({})", parts.join(", "))
+    };
+    let vector = |each: &dyn Fn(usize) -> String, pad: &str| -> String {
+        let parts: Vec<String> = (0..4)
+            .map(|j| {
+                if j < surfaces.len() {
+                    each(j)
+                } else {
+                    pad.into()
+                }
+            })
+            .collect();
+        parts.join(", ")
+    };
+    let _ = writeln!(
+        w,
+        "\n// The events and switches, in the CPU's order (after the stops):"
+    );
+    for (j, s) in surfaces.iter().enumerate() {
+        let kind = match s.kind {
+            crate::integrate::Surface::Event => "event".to_owned(),
+            crate::integrate::Surface::Switch { bit } => format!("switch (bit {bit})"),
+        };
+        let _ = writeln!(
+            w,
+            "//   {j}: {kind} '{}', g = {}",
+            s.name,
+            Written { expr: &s.g, names }
+        );
+    }
+    let bit = |j: usize| match surfaces[j].kind {
+        crate::integrate::Surface::Event => "EVENT".to_owned(),
+        crate::integrate::Surface::Switch { bit } => format!("{bit}u"),
+    };
+    let _ = writeln!(
+        w,
+        "const SURFACES: u32 = {}u;\n\
+         // A surface's switch bit, or EVENT for an event.\n\
+         const EVENT: u32 = 0xffffffffu;\n\
+         const SURFACE_BIT = vec4<u32>({});\n\n\
+         // The trajectory's side of switch `bit`: 1 on its positive side.\n\
+         fn side(p: Params, bit: u32) -> real {{\n    return real((p.region >> bit) & 1u);\n}}\n\n\
+         // The field RK4 steps: the region's, or the sliding field (of the\n\
+         // surface code, which a variant without it never needs).\n\
+         fn rhs(p: Params, phase: vec2<real>, y: State) -> State {{\n\
+         #ifdef SURFACES\n    \
+         if (is_sliding(p.region)) {{\n        return sliding_field(p, phase, y);\n    }}\n\
+         #endif\n    \
+         return field(p, phase, y);\n}}\n\n\
+         fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{\n    return vec4<real>({});\n}}\n\n\
+         struct SurfaceValues {{\n    g: vec4<real>,\n    rate: vec4<real>,\n}}\n",
+        surfaces.len(),
+        vector(&bit, "EVENT"),
+        vector(&|j| emit(&surfaces[j].g), "real(0.0)"),
+    );
+    const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
+    let rate = |j: usize| -> String {
+        let s = &surfaces[j];
+        let mut sum = String::new();
+        for (i, (d, c)) in s.gradient.iter().zip(COMPONENTS).enumerate() {
+            let term = format!("({} * f.{c})", emit(d));
+            sum = if i == 0 {
+                term
+            } else {
+                format!("({sum} + {term})")
+            };
+        }
+        format!("({sum} + {})", emit(&s.g.derivative(Var::Time)))
+    };
+    let _ = writeln!(
+        w,
+        "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region (its\n\
+         // sides: a sliding motion's rates are impact.wgsl's).\n\
+         fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
+         let f = field(p, phase, y);\n    \
+         return SurfaceValues(surface_g(p, phase, y), vec4<real>({}));\n}}\n",
+        vector(&rate, "real(0.0)"),
+    );
+    let _ = writeln!(
+        w,
+        "fn surface_gradient(p: Params, phase: vec2<real>, y: State, j: u32) -> State {{\n    \
+         switch j {{"
+    );
+    for (j, s) in surfaces.iter().enumerate().skip(1) {
+        let _ = writeln!(w, "        case {j}u: {{ return {}; }}", state(&s.gradient));
+    }
+    let _ = writeln!(
+        w,
+        "        default: {{ return {}; }}\n    }}\n}}\n",
+        state(&surfaces[0].gradient)
+    );
+    let _ = writeln!(
+        w,
+        "// An event's reset: the state after it, its Jacobian DR (rows) and ∂R/∂t.\n\
+         struct Reset {{\n    y: State,\n    dr: array<State, DIM>,\n    rate: State,\n}}\n\n\
+         fn reset(p: Params, phase: vec2<real>, y: State, j: u32) -> Reset {{\n    switch j {{"
+    );
+    for (j, s) in surfaces.iter().enumerate() {
+        if s.kind != crate::integrate::Surface::Event {
+            continue;
+        }
+        let rows: Vec<String> = (0..n)
+            .map(|i| state(&s.reset_jacobian[i * n..(i + 1) * n]))
+            .collect();
+        let _ = writeln!(
+            w,
+            "        case {j}u: {{\n            return Reset({}, array<State, DIM>({}), {});\n        }}",
+            state(&s.reset),
+            rows.join(", "),
+            state(&s.reset_rate)
+        );
+    }
+    let _ = writeln!(
+        w,
+        "        default: {{}}\n    }}\n    // A switch: no reset.\n    \
+         return Reset(y, array<State, DIM>(), State());\n}}"
+    );
+}
+
+/// A switch's stick limit at y (the CPU evaluates it at t = 0), or
+/// `filippov` (the half jump) for a switch without one.
+fn stick_limits(w: &mut String, code: &Code) {
+    let _ = writeln!(
+        w,
+        "\nfn stick_limit(p: Params, y: State, j: u32, filippov: real) -> real {{\n    switch j {{"
+    );
+    for (j, s) in code.surfaces.iter().enumerate() {
+        if let Some(limit) = &s.stick_limit {
+            let _ = writeln!(
+                w,
+                "        case {j}u: {{ return {}; }}",
+                Emit { expr: limit, code }
+            );
+        }
+    }
+    let _ = writeln!(w, "        default: {{ return filippov; }}\n    }}\n}}");
+}
+
+/// Whether a system file has general surfaces (`SURFACES`), for the
+/// kernels' surface code and the trajectories' region.
+pub fn has_surfaces(system: &str) -> bool {
+    system.contains("const SURFACES: u32")
+}
+
 /// Whether a system file wraps angles (`wrap_angles`), for the `WRAP`
 /// define of the finish kernel.
 pub fn wraps_angles(system: &str) -> bool {
@@ -355,7 +605,8 @@ fn emit(f: &mut fmt::Formatter<'_>, e: &Expr, code: &Code) -> fmt::Result {
         Expr::Var(Var::State(i)) => write!(f, "y.{}", COMPONENTS[*i]),
         Expr::Var(Var::Param(i)) => write!(f, "p.{}", field(&code.model.names, *i)),
         Expr::Var(Var::Time) => unreachable!("check refuses t outside the clock"),
-        Expr::Var(Var::Side(_)) => unreachable!("check refuses switches"),
+        // The trajectory's side of switch j: its region's bit j.
+        Expr::Var(Var::Side(j)) => write!(f, "side(p, {j}u)"),
         // The forcing clock, as the tape reads it (`Compiler::clock`).
         Expr::Call(Func::Cos, a) if a[0].uses(Var::Time) => write!(f, "phase.x"),
         Expr::Call(Func::Sin, a) if a[0].uses(Var::Time) => write!(f, "phase.y"),

@@ -159,3 +159,56 @@ pub fn assert_same_bits(model: &Report, reference: &Report, what: &str) -> f64 {
     }
     impacts
 }
+
+/// The impact pair whose stops also kick the mass away: v → -e·v ∓ kick
+/// (tests/switches.rs against the exact backend, tests/gpu_models.rs on
+/// the GPU). Not a stop (the reset is not linear in v alone), so a general event;
+/// its saltation determinant, -e·v⁺/v⁻, differs crossing by crossing.
+pub const KICKED_PAIR: &str = r#"
+[model]
+name = "kicked-pair"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 1.0
+gap = 1.0
+e = 0.8
+kick = 0.1
+eta = 0.8
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v - kick" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v + kick" }
+"#;
+
+/// A mass on a spring with Coulomb friction against a fixed floor, written
+/// with a switch on the velocity: where the spring force is below the
+/// friction limit, both fields point into v = 0 (sticking, Filippov
+/// sliding). (tests/switches.rs on the CPU, tests/gpu_models.rs on the
+/// GPU.)
+pub const FRICTION: &str = r#"
+[model]
+name = "friction"
+states = ["x", "v"]
+[model.parameters]
+mu = 0.5
+f = 0.3
+eta = 0.8
+[[model.switches]]
+name = "slip"
+surface = "v"
+[model.equations]
+x = "v"
+v = "-x - mu*sign(slip) + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+"#;

@@ -89,13 +89,25 @@ impl Variant {
         }
     }
 
+    /// General surfaces (events, switches) in the impact code: the
+    /// trajectories carry their region and the sum rule's ln |det S|.
+    pub fn surfaces(&self) -> bool {
+        self.wall
+            && self
+                .system
+                .wgsl
+                .is_some_and(crate::model::wgsl::has_surfaces)
+    }
+
     /// A short name for the summary, e.g. `impact-oscillator/f64/wall+newton/jacobian/points`.
     pub fn name(&self) -> String {
         let mut parts = vec![
             self.system.kind.to_owned(),
             self.precision.name().to_owned(),
         ];
-        if self.wall {
+        if self.surfaces() {
+            parts.push(format!("surfaces+{}", self.impact_location.name()));
+        } else if self.wall {
             parts.push(format!("wall+{}", self.impact_location.name()));
         } else if self.system.is_flow {
             parts.push("no-wall".into());
@@ -124,6 +136,9 @@ impl Variant {
             d.insert("WALL");
             if self.impact_location == ImpactLocation::Linear {
                 d.insert("IMPACT_LINEAR");
+            }
+            if self.surfaces() {
+                d.insert("SURFACES");
             }
         }
         if self.points {
@@ -157,9 +172,19 @@ impl Variant {
             Precision::F64 => ("f64", "2.220446049250313e-16", "1.7976931348623157e308"),
             Precision::F32 => ("f32", "1.1920929e-7", "3.4028235e38"),
         };
-        let fields: Vec<String> = (0..self.system.parameters.len())
+        let mut fields: Vec<String> = (0..self.system.parameters.len())
             .map(|i| format!("lanes[b + {i}u]"))
             .collect();
+        // A model with surfaces: Params ends with the trajectory's region,
+        // set by the integrate kernel (`Params()` zeroes it).
+        if !fields.is_empty()
+            && self
+                .system
+                .wgsl
+                .is_some_and(crate::model::wgsl::has_surfaces)
+        {
+            fields.push("0u".into());
+        }
         format!(
             "// Generated prelude: variant {name}\n\
              alias real = {real};\n\
@@ -187,8 +212,9 @@ impl Variant {
         let mut out = self.prelude();
         out.push_str(&preprocess(system, &defines));
         // A generated model's functions (`model::wgsl`): f64 builds them
-        // from arithmetic; a system that calls none gets neither file.
-        if crate::model::wgsl::calls_wrappers(system) {
+        // from arithmetic; a system that calls none gets neither file. The
+        // surface code takes ln |det S| (log_r).
+        if crate::model::wgsl::calls_wrappers(system) || self.surfaces() {
             if self.precision == Precision::F64 {
                 out.push_str(&preprocess(include("shared/math64.wgsl"), &defines));
             }

@@ -147,6 +147,9 @@ struct Layout {
     summary_stride: usize,
     jacobian: u64,
     point: u64,
+    /// The reference's Σ ln |det S| of its crossings of general surfaces
+    /// (a real), with surfaces.
+    flux: u64,
     /// Parts (sub-maps) per iteration, each with its ring slot.
     parts: usize,
 }
@@ -162,7 +165,8 @@ impl Layout {
             traj: variant.trajectories(),
             real,
             lane_stride: scene.system.parameters.len() + 5,
-            traj_stride: 2 * dim + 3,
+            // With surfaces, each trajectory's region and flux follow.
+            traj_stride: 2 * dim + 3 + 2 * usize::from(variant.surfaces()),
             summary: 16 * (1 + u64::from(variant.wall)),
             summary_stride: 1 + usize::from(variant.wall),
             jacobian: if variant.lyapunov {
@@ -171,12 +175,13 @@ impl Layout {
                 0
             },
             point: if variant.points { dim as u64 * real } else { 0 },
+            flux: if variant.surfaces() { real } else { 0 },
             parts: settings.submaps.unwrap_or(1),
         }
     }
 
     fn per_iteration(&self) -> u64 {
-        (self.summary + self.jacobian + self.point) * self.parts as u64
+        (self.summary + self.jacobian + self.point + self.flux) * self.parts as u64
     }
 
     /// The largest ring array's bytes per lane and iteration.
@@ -289,6 +294,8 @@ struct Pipelines {
     points: bool,
     /// The per-stop impact counts (binding 8) of a variant with stops.
     wall: bool,
+    /// The fluxes (binding 9) of a variant with general surfaces.
+    surfaces: bool,
     workgroup: u32,
 }
 
@@ -329,6 +336,9 @@ impl Pipelines {
         if variant.wall {
             entries.push(storage(8, false));
         }
+        if variant.surfaces() {
+            entries.push(storage(9, false));
+        }
         let device = &gpu.device;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sweep"),
@@ -363,6 +373,7 @@ impl Pipelines {
             lyapunov: variant.lyapunov,
             points: variant.points,
             wall: variant.wall,
+            surfaces: variant.surfaces(),
             workgroup,
         }
     }
@@ -422,6 +433,7 @@ struct Batch<'a, const D: usize> {
     summary: wgpu::Buffer,
     jac: Option<wgpu::Buffer>,
     points: Option<wgpu::Buffer>,
+    fluxes: Option<wgpu::Buffer>,
     staging: [wgpu::Buffer; 2],
     /// Where the staging buffers hold the chunk's pass timestamps.
     ticks_offset: u64,
@@ -527,6 +539,11 @@ where
                 traj_data.extend(std::iter::repeat_n(0.0, D));
                 // Phase (1, 0); the slowest impact speed: none yet (NO_IMPACT).
                 traj_data.extend_from_slice(&[1.0, 0.0, 1e30]);
+                if pipelines.surfaces {
+                    // The region (found from the state at the first step)
+                    // and the flux.
+                    traj_data.extend_from_slice(&[0.0, 0.0]);
+                }
             }
         }
 
@@ -612,6 +629,9 @@ where
         let points = pipelines
             .points
             .then(|| empty("points", layout.point * slots, storage));
+        let fluxes = pipelines
+            .surfaces
+            .then(|| empty("fluxes", layout.flux * slots, storage));
         let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         let ticks_offset = per_iteration * ring as u64;
         let ticks_bytes = if stopwatch.is_some() {
@@ -627,6 +647,7 @@ where
             .chain(&crossings)
             .chain(&jac)
             .chain(&points)
+            .chain(&fluxes)
             .chain(&staging)
             .map(|b| b.size())
             .sum();
@@ -676,6 +697,12 @@ where
                     resource: c.as_entire_binding(),
                 });
             }
+            if let Some(f) = &fluxes {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: f.as_entire_binding(),
+                });
+            }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("sweep"),
                 layout: &pipelines.layout,
@@ -712,6 +739,7 @@ where
             summary,
             jac,
             points,
+            fluxes,
             staging,
             ticks_offset,
             transient_ticks,
@@ -916,6 +944,9 @@ where
         if let Some(points) = &self.points {
             copy(points, self.layout.point * lanes);
         }
+        if let Some(fluxes) = &self.fluxes {
+            copy(fluxes, self.layout.flux * lanes);
+        }
     }
 
     fn map_staging(&self, which: usize) -> MapReceiver {
@@ -953,7 +984,7 @@ where
         let staging = &self.staging[c % 2];
         let parts = self.layout.parts;
         let lanes = (n * parts * self.count) as u64;
-        let (summary, jac, points) = {
+        let (summary, jac, points, fluxes) = {
             let view = staging
                 .get_mapped_range(..)
                 .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
@@ -965,10 +996,12 @@ where
             let s_end = (self.layout.summary * lanes) as usize;
             let j_end = s_end + (self.layout.jacobian * lanes) as usize;
             let p_end = j_end + (self.layout.point * lanes) as usize;
+            let f_end = p_end + (self.layout.flux * lanes) as usize;
             (
                 bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(&bytes[..s_end]),
                 reals_from(&bytes[s_end..j_end], self.precision),
                 reals_from(&bytes[j_end..p_end], self.precision),
+                reals_from(&bytes[p_end..f_end], self.precision),
             )
         };
         staging.unmap();
@@ -1021,7 +1054,16 @@ where
                             crossings: std::array::from_fn(|j| {
                                 per_stop.get(j).copied().unwrap_or(0)
                             }),
-                            chattering: flags & FLAG_CHATTERING != 0,
+                            // After a motion the kernels flagged sliding
+                            // (sticky: FLAG_STICKY), whatever else they
+                            // report comes from a state they did not
+                            // integrate: the lane is `sliding`, which the
+                            // backend recomputes on the CPU.
+                            chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
+                            sliding: flags & FLAG_SLIDING != 0,
+                            // Counted in the flags' high half.
+                            sliding_phases: flags >> 16,
+                            log_flux: fluxes.get(s).copied().unwrap_or(0.0),
                             // Sticking collapses the mass's position and
                             // velocity (all of a 2-state system).
                             rank_loss: if flags & FLAG_RANK_TWO != 0 {
@@ -1133,3 +1175,4 @@ const FLAG_RANK_ONE: u32 = 4;
 const FLAG_RANK_TWO: u32 = 8;
 const FLAG_TRUNCATED: u32 = 16;
 const FLAG_BEHIND_WALL: u32 = 32;
+const FLAG_SLIDING: u32 = 64;
