@@ -100,6 +100,10 @@ pub struct Field {
     /// g of every general surface, padded to `MAX_SURFACES`, then their
     /// rates ∇g·F along this field, padded the same.
     pub surfaces: Tape,
+    /// The surfaces' tape as native code, where the model has surfaces
+    /// and the host allows: the integrator evaluates it for every
+    /// trajectory at every step.
+    pub surfaces_native: Option<Native>,
     /// ∂F_i/∂x_j of this field, row-major.
     pub jacobian: Vec<Expr>,
 }
@@ -667,6 +671,11 @@ fn field(
     Ok(Field {
         native: Native::compile(&tape),
         equations: tape,
+        surfaces_native: if surfaces.is_empty() {
+            None
+        } else {
+            Native::compile(&surface_tape)
+        },
         surfaces: surface_tape,
         jacobian,
     })
