@@ -62,41 +62,41 @@ pub trait Flow<const D: usize>: Sync {
 
     /// [`surface_values`](Self::surface_values) at W states of
     /// trajectories of this flow, all in `region` and at forcing phase
-    /// `phase` (one evaluation for the batch where the flow can; each in
-    /// turn by default).
+    /// `phase`, into `out` (one evaluation for the batch where the flow
+    /// can; each in turn by default). Written where the step loop keeps
+    /// them rather than returned: the copies of a returned batch, a
+    /// `memcpy` each, and the loads right after them cost a model's step
+    /// loop a sixth of its time (measured).
     #[inline(always)]
     fn surface_values_shared<const W: usize>(
         &self,
         region: u32,
         phase: &Phase,
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
-        let mut out = SurfaceBatch::default();
+        out: &mut SurfaceBatch<W>,
+    ) {
         for k in 0..W {
             out.set_column(k, &self.surface_values(region, phase, &column(y, k)));
         }
-        out
     }
 
     /// [`surface_values`](Self::surface_values) of one trajectory of each
     /// of W flows (neighbouring lanes of a sweep), each in its region and
-    /// at its forcing phase.
+    /// at its forcing phase, into `out`.
     #[inline(always)]
     fn surface_values_each<const W: usize>(
         flows: &[&Self; W],
         regions: &[u32; W],
         phases: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W>
-    where
+        out: &mut SurfaceBatch<W>,
+    ) where
         Self: Sized,
     {
-        let mut out = SurfaceBatch::default();
         for k in 0..W {
             let v = flows[k].surface_values(regions[k], &phases[k], &column(y, k));
             out.set_column(k, &v);
         }
-        out
     }
 
     /// ∇g of surface j at y, at forcing phase `phase` (a surface may move
@@ -425,14 +425,16 @@ trait Flows<const D: usize> {
     ) -> [[f64; W]; D];
     /// The surfaces' values and rates of every trajectory, each in its
     /// region (sides only), at the forcing phase `shared` when
-    /// [`SHARED`](Self::SHARED), else each at its own in `each`.
+    /// [`SHARED`](Self::SHARED), else each at its own in `each`; into
+    /// `out`.
     fn surface_values<const W: usize>(
         &self,
         regions: &[u32; W],
         shared: &Phase,
         each: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W>;
+        out: &mut SurfaceBatch<W>,
+    );
 }
 
 /// One flow for every trajectory: a lane's reference and its copies.
@@ -483,19 +485,20 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
         shared: &Phase,
         _each: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
+        out: &mut SurfaceBatch<W>,
+    ) {
         let first = regions[0];
-        let mut out = self.0.surface_values_shared(first, shared, y);
+        self.0.surface_values_shared(first, shared, y, out);
         for (k, &r) in regions.iter().enumerate() {
             // The first slot of each other region evaluates it.
             if r != first && !regions[..k].contains(&r) {
-                let other = self.0.surface_values_shared(r, shared, y);
+                let mut other = SurfaceBatch::default();
+                self.0.surface_values_shared(r, shared, y, &mut other);
                 for m in (k..W).filter(|&m| regions[m] == r) {
                     out.take_column(m, &other);
                 }
             }
         }
-        out
     }
 }
 
@@ -544,8 +547,9 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         _shared: &Phase,
         each: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
-        F::surface_values_each(&std::array::from_fn(|k| self.of(k)), regions, each, y)
+        out: &mut SurfaceBatch<W>,
+    ) {
+        F::surface_values_each(&std::array::from_fn(|k| self.of(k)), regions, each, y, out)
     }
 }
 
@@ -625,14 +629,19 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     // (Kept outside the step loop and touched only where there are
     // surfaces: zeroing and copying them every step cost the flows without
     // any a tenth of their time.)
-    let mut at_start = SurfaceBatch::<W>::default();
-    let mut at_end = SurfaceBatch::<W>::default();
+    //
+    // The values at the step's start and end, in two buffers that swap
+    // roles each step (`at_start` indexes the start's): copying the end's
+    // values to the start each step was a `memcpy` whose stores the next
+    // step's loads waited for.
+    let mut values = [SurfaceBatch::<W>::default(); 2];
+    let mut at_start = 0;
     if SURFACES {
         for k in 0..n {
             let (flow, yk) = (flows.of(k), column(&y, k));
             let phase = phase_of(&phases, &phase, k);
             regions[k] = surface::region_of(flow, &phase, &yk);
-            at_start.set_column(k, &flow.surface_values(regions[k], &phase, &yk));
+            values[at_start].set_column(k, &flow.surface_values(regions[k], &phase, &yk));
         }
     }
     for _ in part.steps(steps) {
@@ -680,7 +689,13 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         if SURFACES {
             // Every slot's sides (unused slots repeat the last trajectory's).
             let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
-            at_end = flows.surface_values(&sides, &next_phase, &next, &y1);
+            let [first, second] = &mut values;
+            let (before, after) = if at_start == 0 {
+                (&*first, second)
+            } else {
+                (&*second, first)
+            };
+            flows.surface_values(&sides, &next_phase, &next, &y1, after);
             // Over all W slots, a vector per surface (the unused ones are
             // masked off below).
             let mut hits = [false; W];
@@ -689,14 +704,11 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 hits[k] = surface::is_sliding(regions[k]);
             }
             for (j, &kind) in surfaces.iter().enumerate() {
-                let (start, end) = (&at_start, &at_end);
+                let (g0, rate0) = (before.g(j), before.rate(j));
+                let (g1, rate1) = (after.g(j), after.rate(j));
                 for k in 0..W {
-                    hits[k] |= surface::may_cross(
-                        kind,
-                        regions[k],
-                        (start.g[j][k], start.rate[j][k]),
-                        (end.g[j][k], end.rate[j][k]),
-                    );
+                    hits[k] |=
+                        surface::may_cross(kind, regions[k], (g0[k], rate0[k]), (g1[k], rate1[k]));
                 }
             }
             for (k, &hit) in hits.iter().enumerate() {
@@ -741,8 +753,8 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 }
                 if SURFACES {
                     let end = phase_of(&next, &next_phase, k);
-                    let values = flow.surface_values(surface::sides(regions[k]), &end, &after);
-                    at_end.set_column(k, &values);
+                    let at_end = flow.surface_values(surface::sides(regions[k]), &end, &after);
+                    values[1 - at_start].set_column(k, &at_end);
                 }
             }
         }
@@ -750,7 +762,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         phases = next;
         phase = next_phase;
         if SURFACES {
-            at_start = at_end;
+            at_start = 1 - at_start;
         }
     }
     for (k, out) in ys.iter_mut().enumerate() {

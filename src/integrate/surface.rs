@@ -434,35 +434,37 @@ pub struct SurfaceValues {
     pub rate: [f64; MAX_SURFACES],
 }
 
-/// [`SurfaceValues`] of W trajectories, structure of arrays (row j:
-/// surface j in every slot), as a batch's evaluation gives them and the
-/// step loop's detection reads them, a vector per row.
+/// [`SurfaceValues`] of W trajectories, structure of arrays, as a
+/// batch's evaluation gives them and the step loop's detection reads them,
+/// a vector per row: g of surface j in row j, its rate in row
+/// `MAX_SURFACES + j` (the outputs of a model's surfaces' tape,
+/// `model::code::Field::surfaces`, which its native code writes in place).
+/// 32-byte aligned, for the AVX2 loads of the rows.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
 pub struct SurfaceBatch<const W: usize> {
-    pub g: [[f64; W]; MAX_SURFACES],
-    pub rate: [[f64; W]; MAX_SURFACES],
+    pub rows: [[f64; W]; 2 * MAX_SURFACES],
 }
 
 impl<const W: usize> Default for SurfaceBatch<W> {
     fn default() -> Self {
         SurfaceBatch {
-            g: [[0.0; W]; MAX_SURFACES],
-            rate: [[0.0; W]; MAX_SURFACES],
+            rows: [[0.0; W]; 2 * MAX_SURFACES],
         }
     }
 }
 
 impl<const W: usize> SurfaceBatch<W> {
-    /// The outputs of a surfaces' tape (`model::code::Field::surfaces`):
-    /// the values, then the rates.
+    /// g of surface j in every slot.
     #[inline(always)]
-    pub fn from_rows(rows: &[[f64; W]; 2 * MAX_SURFACES]) -> Self {
-        let mut out = SurfaceBatch::default();
-        for j in 0..MAX_SURFACES {
-            out.g[j] = rows[j];
-            out.rate[j] = rows[MAX_SURFACES + j];
-        }
-        out
+    pub fn g(&self, j: usize) -> &[f64; W] {
+        &self.rows[j]
+    }
+
+    /// The rate of surface j in every slot.
+    #[inline(always)]
+    pub fn rate(&self, j: usize) -> &[f64; W] {
+        &self.rows[MAX_SURFACES + j]
     }
 
     /// Slot k's values.
@@ -470,8 +472,8 @@ impl<const W: usize> SurfaceBatch<W> {
     pub fn column(&self, k: usize) -> SurfaceValues {
         let mut v = SurfaceValues::default();
         for j in 0..MAX_SURFACES {
-            v.g[j] = self.g[j][k];
-            v.rate[j] = self.rate[j][k];
+            v.g[j] = self.g(j)[k];
+            v.rate[j] = self.rate(j)[k];
         }
         v
     }
@@ -480,8 +482,8 @@ impl<const W: usize> SurfaceBatch<W> {
     #[inline(always)]
     pub fn set_column(&mut self, k: usize, v: &SurfaceValues) {
         for j in 0..MAX_SURFACES {
-            self.g[j][k] = v.g[j];
-            self.rate[j][k] = v.rate[j];
+            self.rows[j][k] = v.g[j];
+            self.rows[MAX_SURFACES + j][k] = v.rate[j];
         }
     }
 
@@ -489,9 +491,8 @@ impl<const W: usize> SurfaceBatch<W> {
     /// region).
     #[inline(always)]
     pub fn take_column(&mut self, k: usize, other: &Self) {
-        for j in 0..MAX_SURFACES {
-            self.g[j][k] = other.g[j][k];
-            self.rate[j][k] = other.rate[j][k];
+        for (row, from) in self.rows.iter_mut().zip(&other.rows) {
+            row[k] = from[k];
         }
     }
 }

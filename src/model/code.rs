@@ -79,6 +79,10 @@ pub struct GeneralSurface {
     pub g: Expr,
     /// ∇g, one derivative per state.
     pub gradient: Vec<Expr>,
+    /// Whether ∇g reads the time: only then does evaluating it need the
+    /// time of a forcing phase (an `atan2`, which the sliding of a
+    /// friction model paid at every stage of every step).
+    pub gradient_reads_time: bool,
     /// An event's reset: every state's value after it (the states it does
     /// not name keep theirs), and its Jacobian DR, row-major. Empty for a
     /// switch.
@@ -221,13 +225,15 @@ impl Code {
             ));
         }
         for (b, switch) in model.switches.iter().enumerate() {
+            let gradient: Vec<Expr> = (0..n)
+                .map(|i| switch.surface.derivative(Var::State(i)))
+                .collect();
             surfaces.push(GeneralSurface {
                 name: switch.name.clone(),
                 kind: Surface::Switch { bit: b as u32 },
                 g: switch.surface.clone(),
-                gradient: (0..n)
-                    .map(|i| switch.surface.derivative(Var::State(i)))
-                    .collect(),
+                gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
+                gradient,
                 reset: Vec::new(),
                 reset_jacobian: Vec::new(),
                 reset_rate: Vec::new(),
@@ -600,13 +606,15 @@ fn general_event(
         .map(|ik| reset[ik / n].derivative(Var::State(ik % n)))
         .collect();
     let reset_rate = reset.iter().map(|r| r.derivative(Var::Time)).collect();
+    let gradient: Vec<Expr> = (0..n)
+        .map(|i| event.surface.derivative(Var::State(i)))
+        .collect();
     Ok(GeneralSurface {
         name: event.name.clone(),
         kind: Surface::Event,
         g: event.surface.clone(),
-        gradient: (0..n)
-            .map(|i| event.surface.derivative(Var::State(i)))
-            .collect(),
+        gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
+        gradient,
         reset,
         reset_jacobian,
         reset_rate,

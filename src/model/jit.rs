@@ -138,6 +138,45 @@ impl Native {
         lane: &[f64],
         h: &[f64],
     ) -> [[f64; W]; N] {
+        let mut out = Aligned([[0.0; W]; N]);
+        self.write(kind, layout, y, clock, lane, h, &mut out.0);
+        read_as_written(&out)
+    }
+
+    /// [`call`](Self::call) with the outputs written into `out`, where the
+    /// caller keeps them (no copy of a batch's outputs per step), and
+    /// left there as the AVX2 code reads them (see [`read_as_written`]).
+    /// `out` should be 32-byte aligned.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn call_into<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
+        self.write(kind, layout, y, clock, lane, h, out);
+        rewrite_as_read(out);
+    }
+
+    /// Runs the function (see [`call`](Self::call)), its outputs written
+    /// into `out` by its 128-bit stores.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn write<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
         let per_slot = if layout == Layout::Shared { 1 } else { W };
         let stages = if kind == Kind::Step { 3 } else { 1 };
         let w = WIDTHS
@@ -153,7 +192,6 @@ impl Native {
         );
         let f = self.functions[kind as usize][w][layout as usize]
             .expect("a step only of a tape with as many outputs as states");
-        let mut out = Aligned([[0.0; W]; N]);
         // SAFETY: the function reads D·W states, the clock of its stages,
         // L constants and a step size per slot of `layout` (checked above),
         // and writes N·W values (N = D for a step); it was compiled for W,
@@ -164,10 +202,9 @@ impl Native {
                 clock.as_ptr(),
                 lane.as_ptr(),
                 h.as_ptr(),
-                out.0.as_mut_ptr().cast(),
+                out.as_mut_ptr().cast(),
             )
         };
-        read_as_written(&out)
     }
 }
 
@@ -223,6 +260,48 @@ unsafe fn joined<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -
         }
     }
     read.0
+}
+
+/// [`read_as_written`] in place: the native code's results rewritten
+/// where they lie as 256-bit vectors (each read as its two 128-bit halves),
+/// so that the AVX2 loads that follow take them from the store buffer.
+#[inline(always)]
+fn rewrite_as_read<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+    #[cfg(target_arch = "x86_64")]
+    if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX; W is a multiple of 4.
+        unsafe { rejoined(out) }
+    }
+    let _ = out;
+}
+
+/// [`rewrite_as_read`] with AVX (in assembly, as [`joined`] is).
+///
+/// # Safety
+/// The CPU has AVX, and W is a multiple of 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn rejoined<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+    use std::arch::x86_64::__m256d;
+    for row in out.iter_mut() {
+        for k in (0..W).step_by(4) {
+            let p = row[k..].as_mut_ptr();
+            let v: __m256d;
+            // SAFETY: row[k..k + 4] are four f64, read, then written as
+            // one unaligned 256-bit vector.
+            unsafe {
+                std::arch::asm!(
+                    "vmovupd {v:x}, xmmword ptr [{p}]",
+                    "vinsertf128 {v}, {v}, xmmword ptr [{p} + 16], 1",
+                    p = in(reg) p,
+                    v = out(ymm_reg) v,
+                    options(pure, readonly, nostack, preserves_flags),
+                );
+                p.cast::<__m256d>().write_unaligned(v);
+            }
+        }
+    }
 }
 
 /// [`Func::apply`] behind the C calling convention, one per function, for

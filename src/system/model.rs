@@ -10,7 +10,6 @@ use nalgebra::{DMatrix, DVector, SMatrix};
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
 use crate::integrate::clock::Phase;
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
-use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues, Wall,
 };
@@ -223,7 +222,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
 
     fn surface_values(&self, region: u32, phase: &Phase, y: &[f64; D]) -> SurfaceValues {
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
-        self.surface_values_shared(region, phase, &y).column(0)
+        let mut out = SurfaceBatch::default();
+        self.surface_values_shared(region, phase, &y, &mut out);
+        out.column(0)
     }
 
     /// The surfaces' native code where there is one for W (the same
@@ -234,16 +235,17 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         region: u32,
         phase: &Phase,
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
+        out: &mut SurfaceBatch<W>,
+    ) {
         let field = &self.code.regions[region as usize];
         let constants = &self.surface_constants[region as usize];
-        let out: [[f64; W]; 2 * MAX_SURFACES] = match &field.surfaces_native {
+        match &field.surfaces_native {
             Some(native) if Native::has::<W>() => {
-                native.call(Kind::Rhs, Layout::Shared, y, phase, constants, &[])
+                let rows = &mut out.rows;
+                native.call_into(Kind::Rhs, Layout::Shared, y, phase, constants, &[], rows)
             }
-            _ => field.surfaces.eval(|j| [constants[j]; W], &[*phase; W], y),
-        };
-        SurfaceBatch::from_rows(&out)
+            _ => out.rows = field.surfaces.eval(|j| [constants[j]; W], &[*phase; W], y),
+        }
     }
 
     /// Slots in different regions are evaluated once per region present,
@@ -254,25 +256,31 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         regions: &[u32; W],
         phases: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
+        out: &mut SurfaceBatch<W>,
+    ) {
         let first = regions[0];
-        let mut out = Self::surface_values_each_region(first, flows, phases, y);
+        Self::surface_values_each_region(first, flows, phases, y, out);
         for (k, &r) in regions.iter().enumerate() {
             // The first slot of each other region evaluates it.
             if r != first && !regions[..k].contains(&r) {
-                let other = Self::surface_values_each_region(r, flows, phases, y);
+                let mut other = SurfaceBatch::default();
+                Self::surface_values_each_region(r, flows, phases, y, &mut other);
                 for m in (k..W).filter(|&m| regions[m] == r) {
                     out.take_column(m, &other);
                 }
             }
         }
-        out
     }
 
     fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
-        let gradient = &self.code.surfaces[j].gradient;
-        let t = self.time_at(phase);
-        std::array::from_fn(|i| gradient[i].eval(y, &self.params, t))
+        let s = &self.code.surfaces[j];
+        // (A gradient that does not read t is the same at any t.)
+        let t = if s.gradient_reads_time {
+            self.time_at(phase)
+        } else {
+            0.0
+        };
+        std::array::from_fn(|i| s.gradient[i].eval(y, &self.params, t))
     }
 
     fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
@@ -450,12 +458,13 @@ impl<const D: usize> ModelFlow<D> {
         flows: &[&Self; W],
         phases: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> SurfaceBatch<W> {
+        out: &mut SurfaceBatch<W>,
+    ) {
         let r = region as usize;
         let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
         let l = slots[0].len();
         let field = &flows[0].code.regions[r];
-        let out: [[f64; W]; 2 * MAX_SURFACES] = match &field.surfaces_native {
+        match &field.surfaces_native {
             Some(native) if Native::has::<W>() && l <= EACH_CONSTANTS => {
                 // The slots' constants and phases side by side.
                 let mut lane = [[0.0; W]; EACH_CONSTANTS];
@@ -470,13 +479,14 @@ impl<const D: usize> ModelFlow<D> {
                     clock[1][k] = phases[k][1];
                 }
                 let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
-                native.call(Kind::Rhs, Layout::Each, y, clock, lane, &[])
+                native.call_into(Kind::Rhs, Layout::Each, y, clock, lane, &[], &mut out.rows)
             }
-            _ => field
-                .surfaces
-                .eval(|j| std::array::from_fn(|k| slots[k][j]), phases, y),
-        };
-        SurfaceBatch::from_rows(&out)
+            _ => {
+                out.rows = field
+                    .surfaces
+                    .eval(|j| std::array::from_fn(|k| slots[k][j]), phases, y)
+            }
+        }
     }
 
     /// The flow's Jacobian at y and time t, as a matrix.
