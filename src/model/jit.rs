@@ -218,12 +218,26 @@ struct Aligned<T>(T);
 /// reach the cache (a failed store forward, measured as a fifth of the
 /// step loop's time); 128-bit loads forward from the stores at once, and
 /// are joined in registers.
+///
+/// A batch of one trajectory (W = 1) is stored as scalars, which LLVM
+/// read back in pairs (one 128-bit load across two stores, the same
+/// stall: three fifths of a friction belt's field evaluations while it
+/// slides, in `perf annotate`); each is read alone, by a volatile load
+/// that LLVM may not merge.
 #[inline(always)]
 fn read_as_written<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
     #[cfg(target_arch = "x86_64")]
     if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
         // SAFETY: the CPU has AVX; W is a multiple of 4.
         return unsafe { joined(out) };
+    }
+    if W == 1 {
+        let mut read = [[0.0; W]; D];
+        for (row, from) in read.iter_mut().zip(&out.0) {
+            // SAFETY: a reference to an f64, so valid and aligned.
+            row[0] = unsafe { std::ptr::read_volatile(&from[0]) };
+        }
+        return read;
     }
     out.0
 }

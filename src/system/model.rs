@@ -10,6 +10,7 @@ use nalgebra::{DMatrix, DVector, SMatrix};
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
 use crate::integrate::clock::Phase;
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
+use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues, Wall,
 };
@@ -221,10 +222,20 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     }
 
     fn surface_values(&self, region: u32, phase: &Phase, y: &[f64; D]) -> SurfaceValues {
+        // By value (`Native::call`), not in place: a lone trajectory's
+        // values are scalars, which only the call's reading takes from the
+        // store buffer.
+        let field = &self.code.regions[region as usize];
+        let constants = &self.surface_constants[region as usize];
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
-        let mut out = SurfaceBatch::default();
-        self.surface_values_shared(region, phase, &y, &mut out);
-        out.column(0)
+        let out: [[f64; 1]; 2 * MAX_SURFACES] = match &field.surfaces_native {
+            Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, constants, &[]),
+            None => field.surfaces.eval(|j| [constants[j]], &[*phase], &y),
+        };
+        SurfaceValues {
+            g: std::array::from_fn(|j| out[j][0]),
+            rate: std::array::from_fn(|j| out[MAX_SURFACES + j][0]),
+        }
     }
 
     /// The surfaces' native code where there is one for W (the same
@@ -272,6 +283,10 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         }
     }
 
+    // Inlined into its callers (the sliding field's, per stage): returned
+    // through memory, its scalar stores were read back as one 128-bit
+    // load, which waited for them (a store-forward stall).
+    #[inline(always)]
     fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         let s = &self.code.surfaces[j];
         // (A gradient that does not read t is the same at any t.)
