@@ -637,11 +637,11 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let mut values = [SurfaceBatch::<W>::default(); 2];
     let mut at_start = 0;
     if SURFACES {
-        for k in 0..n {
+        for (k, region) in regions.iter_mut().enumerate().take(n) {
             let (flow, yk) = (flows.of(k), column(&y, k));
             let phase = phase_of(&phases, &phase, k);
-            regions[k] = surface::region_of(flow, &phase, &yk);
-            values[at_start].set_column(k, &flow.surface_values(regions[k], &phase, &yk));
+            *region = surface::region_of(flow, &phase, &yk);
+            values[at_start].set_column(k, &flow.surface_values(*region, &phase, &yk));
         }
     }
     for _ in part.steps(steps) {
