@@ -21,7 +21,8 @@
 //!    as a model, and with its wall written as a general event, on the CPU
 //!    path (and the GPU where it runs them); then the models with several
 //!    stops or a stop on another state (the impact pair, the two-mass
-//!    chain) on the same sweep.
+//!    chain) and the models with a switch (the soft stop, the friction
+//!    belt) on the same sweep.
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
@@ -445,6 +446,22 @@ fn models_on(backend: &str, repeats: usize) {
             format!(
                 "model = {:?}\n{rest}",
                 format!("{}/models/two-mass-chain.toml", env!("CARGO_MANIFEST_DIR"))
+            ),
+        ),
+        // Switch models: the switch's surface and rate at every step, as
+        // the general event's.
+        (
+            "model soft-stop (a switch of the stiffness)",
+            format!(
+                "model = {:?}\n{rest}",
+                format!("{}/models/soft-stop.toml", env!("CARGO_MANIFEST_DIR"))
+            ),
+        ),
+        (
+            "model friction-belt (a switch with sliding)",
+            format!(
+                "model = {:?}\n{rest}",
+                format!("{}/models/friction-belt.toml", env!("CARGO_MANIFEST_DIR"))
             ),
         ),
     ];

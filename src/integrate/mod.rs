@@ -15,7 +15,7 @@ pub mod surface;
 
 pub use impact::{ImpactLocation, Wall};
 pub use iteration::{FlowSettings, IterationStats, Part};
-pub use surface::{InRegion, Surface, SurfaceValues};
+pub use surface::{InRegion, Surface, SurfaceBatch, SurfaceValues};
 
 /// An event's reset at one state: the state after, DR, and ∂R/∂t.
 pub type Reset<const D: usize> = ([f64; D], [[f64; D]; D], [f64; D]);
@@ -61,16 +61,42 @@ pub trait Flow<const D: usize>: Sync {
     }
 
     /// [`surface_values`](Self::surface_values) at W states of
-    /// trajectories of this flow, all in `region` (one evaluation for the
-    /// batch where the flow can; each in turn by default).
+    /// trajectories of this flow, all in `region` and at forcing phase
+    /// `phase`, into `out` (one evaluation for the batch where the flow
+    /// can; each in turn by default). Written where the step loop keeps
+    /// them rather than returned: the copies of a returned batch, a
+    /// `memcpy` each, and the loads right after them cost a model's step
+    /// loop a sixth of its time (measured).
     #[inline(always)]
-    fn surface_values_batch<const W: usize>(
+    fn surface_values_shared<const W: usize>(
         &self,
         region: u32,
+        phase: &Phase,
+        y: &[[f64; W]; D],
+        out: &mut SurfaceBatch<W>,
+    ) {
+        for k in 0..W {
+            out.set_column(k, &self.surface_values(region, phase, &column(y, k)));
+        }
+    }
+
+    /// [`surface_values`](Self::surface_values) of one trajectory of each
+    /// of W flows (neighbouring lanes of a sweep), each in its region and
+    /// at its forcing phase, into `out`.
+    #[inline(always)]
+    fn surface_values_each<const W: usize>(
+        flows: &[&Self; W],
+        regions: &[u32; W],
         phases: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> [SurfaceValues; W] {
-        std::array::from_fn(|k| self.surface_values(region, &phases[k], &column(y, k)))
+        out: &mut SurfaceBatch<W>,
+    ) where
+        Self: Sized,
+    {
+        for k in 0..W {
+            let v = flows[k].surface_values(regions[k], &phases[k], &column(y, k));
+            out.set_column(k, &v);
+        }
     }
 
     /// ∇g of surface j at y, at forcing phase `phase` (a surface may move
@@ -398,19 +424,17 @@ trait Flows<const D: usize> {
         h: &[f64; W],
     ) -> [[f64; W]; D];
     /// The surfaces' values and rates of every trajectory, each in its
-    /// region (sides only).
-    #[inline(always)]
+    /// region (sides only), at the forcing phase `shared` when
+    /// [`SHARED`](Self::SHARED), else each at its own in `each`; into
+    /// `out`.
     fn surface_values<const W: usize>(
         &self,
         regions: &[u32; W],
-        phases: &[Phase; W],
+        shared: &Phase,
+        each: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> [SurfaceValues; W] {
-        std::array::from_fn(|k| {
-            self.of(k)
-                .surface_values(regions[k], &phases[k], &column(y, k))
-        })
-    }
+        out: &mut SurfaceBatch<W>,
+    );
 }
 
 /// One flow for every trajectory: a lane's reference and its copies.
@@ -452,17 +476,28 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
             F::step_each_in(&[self.0; W], regions, &[*shared; W], y, h)
         }
     }
+    /// Slots in different regions are evaluated once per region present,
+    /// each over the whole batch, their own region's values kept.
     #[inline(always)]
     fn surface_values<const W: usize>(
         &self,
         regions: &[u32; W],
-        phases: &[Phase; W],
+        shared: &Phase,
+        _each: &[Phase; W],
         y: &[[f64; W]; D],
-    ) -> [SurfaceValues; W] {
-        if regions.iter().all(|&r| r == regions[0]) {
-            self.0.surface_values_batch(regions[0], phases, y)
-        } else {
-            std::array::from_fn(|k| self.0.surface_values(regions[k], &phases[k], &column(y, k)))
+        out: &mut SurfaceBatch<W>,
+    ) {
+        let first = regions[0];
+        self.0.surface_values_shared(first, shared, y, out);
+        for (k, &r) in regions.iter().enumerate() {
+            // The first slot of each other region evaluates it.
+            if r != first && !regions[..k].contains(&r) {
+                let mut other = SurfaceBatch::default();
+                self.0.surface_values_shared(r, shared, y, &mut other);
+                for m in (k..W).filter(|&m| regions[m] == r) {
+                    out.take_column(m, &other);
+                }
+            }
         }
     }
 }
@@ -504,6 +539,17 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         h: &[f64; W],
     ) -> [[f64; W]; D] {
         F::step_each_in(&std::array::from_fn(|k| self.of(k)), regions, each, y, h)
+    }
+    #[inline(always)]
+    fn surface_values<const W: usize>(
+        &self,
+        regions: &[u32; W],
+        _shared: &Phase,
+        each: &[Phase; W],
+        y: &[[f64; W]; D],
+        out: &mut SurfaceBatch<W>,
+    ) {
+        F::surface_values_each(&std::array::from_fn(|k| self.of(k)), regions, each, y, out)
     }
 }
 
@@ -583,14 +629,19 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     // (Kept outside the step loop and touched only where there are
     // surfaces: zeroing and copying them every step cost the flows without
     // any a tenth of their time.)
-    let mut at_start = [SurfaceValues::default(); W];
-    let mut at_end = [SurfaceValues::default(); W];
+    //
+    // The values at the step's start and end, in two buffers that swap
+    // roles each step (`at_start` indexes the start's): copying the end's
+    // values to the start each step was a `memcpy` whose stores the next
+    // step's loads waited for.
+    let mut values = [SurfaceBatch::<W>::default(); 2];
+    let mut at_start = 0;
     if SURFACES {
-        for k in 0..n {
+        for (k, region) in regions.iter_mut().enumerate().take(n) {
             let (flow, yk) = (flows.of(k), column(&y, k));
             let phase = phase_of(&phases, &phase, k);
-            regions[k] = surface::region_of(flow, &phase, &yk);
-            at_start[k] = flow.surface_values(regions[k], &phase, &yk);
+            *region = surface::region_of(flow, &phase, &yk);
+            values[at_start].set_column(k, &flow.surface_values(*region, &phase, &yk));
         }
     }
     for _ in part.steps(steps) {
@@ -638,19 +689,29 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         if SURFACES {
             // Every slot's sides (unused slots repeat the last trajectory's).
             let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
-            let next: [Phase; W] = std::array::from_fn(|k| phase_of(&next, &next_phase, k));
-            at_end = flows.surface_values(&sides, &next, &y1);
-            for k in 0..n {
+            let [first, second] = &mut values;
+            let (before, after) = if at_start == 0 {
+                (&*first, second)
+            } else {
+                (&*second, first)
+            };
+            flows.surface_values(&sides, &next_phase, &next, &y1, after);
+            // Over all W slots, a vector per surface (the unused ones are
+            // masked off below).
+            let mut hits = [false; W];
+            for k in 0..W {
                 // A sliding trajectory takes the slow path at every step.
-                let mut hit = surface::is_sliding(regions[k]);
-                for (j, &kind) in surfaces.iter().enumerate() {
-                    hit |= surface::may_cross(
-                        kind,
-                        regions[k],
-                        (at_start[k].g[j], at_start[k].rate[j]),
-                        (at_end[k].g[j], at_end[k].rate[j]),
-                    );
+                hits[k] = surface::is_sliding(regions[k]);
+            }
+            for (j, &kind) in surfaces.iter().enumerate() {
+                let (g0, rate0) = (before.g(j), before.rate(j));
+                let (g1, rate1) = (after.g(j), after.rate(j));
+                for k in 0..W {
+                    hits[k] |=
+                        surface::may_cross(kind, regions[k], (g0[k], rate0[k]), (g1[k], rate1[k]));
                 }
+            }
+            for (k, &hit) in hits.iter().enumerate() {
                 meets |= (hit as u32) << k;
             }
         }
@@ -692,7 +753,8 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 }
                 if SURFACES {
                     let end = phase_of(&next, &next_phase, k);
-                    at_end[k] = flow.surface_values(surface::sides(regions[k]), &end, &after);
+                    let at_end = flow.surface_values(surface::sides(regions[k]), &end, &after);
+                    values[1 - at_start].set_column(k, &at_end);
                 }
             }
         }
@@ -700,7 +762,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         phases = next;
         phase = next_phase;
         if SURFACES {
-            at_start = at_end;
+            at_start = 1 - at_start;
         }
     }
     for (k, out) in ys.iter_mut().enumerate() {

@@ -434,11 +434,74 @@ pub struct SurfaceValues {
     pub rate: [f64; MAX_SURFACES],
 }
 
+/// [`SurfaceValues`] of W trajectories, structure of arrays, as a
+/// batch's evaluation gives them and the step loop's detection reads them,
+/// a vector per row: g of surface j in row j, its rate in row
+/// `MAX_SURFACES + j` (the outputs of a model's surfaces' tape,
+/// `model::code::Field::surfaces`, which its native code writes in place).
+/// 32-byte aligned, for the AVX2 loads of the rows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C, align(32))]
+pub struct SurfaceBatch<const W: usize> {
+    pub rows: [[f64; W]; 2 * MAX_SURFACES],
+}
+
+impl<const W: usize> Default for SurfaceBatch<W> {
+    fn default() -> Self {
+        SurfaceBatch {
+            rows: [[0.0; W]; 2 * MAX_SURFACES],
+        }
+    }
+}
+
+impl<const W: usize> SurfaceBatch<W> {
+    /// g of surface j in every slot.
+    #[inline(always)]
+    pub fn g(&self, j: usize) -> &[f64; W] {
+        &self.rows[j]
+    }
+
+    /// The rate of surface j in every slot.
+    #[inline(always)]
+    pub fn rate(&self, j: usize) -> &[f64; W] {
+        &self.rows[MAX_SURFACES + j]
+    }
+
+    /// Slot k's values.
+    #[inline(always)]
+    pub fn column(&self, k: usize) -> SurfaceValues {
+        let mut v = SurfaceValues::default();
+        for j in 0..MAX_SURFACES {
+            v.g[j] = self.g(j)[k];
+            v.rate[j] = self.rate(j)[k];
+        }
+        v
+    }
+
+    /// Sets slot k's values.
+    #[inline(always)]
+    pub fn set_column(&mut self, k: usize, v: &SurfaceValues) {
+        for j in 0..MAX_SURFACES {
+            self.rows[j][k] = v.g[j];
+            self.rows[MAX_SURFACES + j][k] = v.rate[j];
+        }
+    }
+
+    /// Slot k's values taken from `other` (a batch evaluated in slot k's
+    /// region).
+    #[inline(always)]
+    pub fn take_column(&mut self, k: usize, other: &Self) {
+        for (row, from) in self.rows.iter_mut().zip(&other.rows) {
+            row[k] = from[k];
+        }
+    }
+}
+
 impl Surface {
     /// The orientation of g for a trajectory in `region`: +1 where the
     /// crossing to watch for is g rising through 0 (an event, or a switch
     /// whose side is the negative one), -1 where it is g falling.
-    #[inline]
+    #[inline(always)]
     pub fn orientation(self, region: u32) -> f64 {
         match self {
             Surface::Switch { bit } if (region >> bit) & 1 == 1 => -1.0,
@@ -489,10 +552,13 @@ impl<const D: usize, F: Flow<D>> Flow<D> for InRegion<'_, F> {
 /// Whether a step from values `before` to `after` (oriented by the
 /// trajectory's region) may cross surface j: its end lies across, or its
 /// rate turns from approaching to leaving inside the step.
-#[inline]
+///
+/// (Bitwise `|` and `&`, not `||` and `&&`: the same answer without
+/// branches, so the step loop's test over a batch's slots vectorises.)
+#[inline(always)]
 pub fn may_cross(kind: Surface, region: u32, before: (f64, f64), after: (f64, f64)) -> bool {
     let o = kind.orientation(region);
-    o * after.0 > 0.0 || (o * before.1 > 0.0 && o * after.1 < 0.0)
+    (o * after.0 > 0.0) | ((o * before.1 > 0.0) & (o * after.1 < 0.0))
 }
 
 /// ln |det S| of an event's crossing: the reset's Jacobian `dr` and rate

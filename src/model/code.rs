@@ -79,6 +79,10 @@ pub struct GeneralSurface {
     pub g: Expr,
     /// ∇g, one derivative per state.
     pub gradient: Vec<Expr>,
+    /// Whether ∇g reads the time: only then does evaluating it need the
+    /// time of a forcing phase (an `atan2`, which the sliding of a
+    /// friction model paid at every stage of every step).
+    pub gradient_reads_time: bool,
     /// An event's reset: every state's value after it (the states it does
     /// not name keep theirs), and its Jacobian DR, row-major. Empty for a
     /// switch.
@@ -100,6 +104,10 @@ pub struct Field {
     /// g of every general surface, padded to `MAX_SURFACES`, then their
     /// rates ∇g·F along this field, padded the same.
     pub surfaces: Tape,
+    /// The surfaces' tape as native code, where the model has surfaces
+    /// and the host allows: the integrator evaluates it for every
+    /// trajectory at every step.
+    pub surfaces_native: Option<Native>,
     /// ∂F_i/∂x_j of this field, row-major.
     pub jacobian: Vec<Expr>,
 }
@@ -217,13 +225,15 @@ impl Code {
             ));
         }
         for (b, switch) in model.switches.iter().enumerate() {
+            let gradient: Vec<Expr> = (0..n)
+                .map(|i| switch.surface.derivative(Var::State(i)))
+                .collect();
             surfaces.push(GeneralSurface {
                 name: switch.name.clone(),
                 kind: Surface::Switch { bit: b as u32 },
                 g: switch.surface.clone(),
-                gradient: (0..n)
-                    .map(|i| switch.surface.derivative(Var::State(i)))
-                    .collect(),
+                gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
+                gradient,
                 reset: Vec::new(),
                 reset_jacobian: Vec::new(),
                 reset_rate: Vec::new(),
@@ -596,13 +606,15 @@ fn general_event(
         .map(|ik| reset[ik / n].derivative(Var::State(ik % n)))
         .collect();
     let reset_rate = reset.iter().map(|r| r.derivative(Var::Time)).collect();
+    let gradient: Vec<Expr> = (0..n)
+        .map(|i| event.surface.derivative(Var::State(i)))
+        .collect();
     Ok(GeneralSurface {
         name: event.name.clone(),
         kind: Surface::Event,
         g: event.surface.clone(),
-        gradient: (0..n)
-            .map(|i| event.surface.derivative(Var::State(i)))
-            .collect(),
+        gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
+        gradient,
         reset,
         reset_jacobian,
         reset_rate,
@@ -667,6 +679,11 @@ fn field(
     Ok(Field {
         native: Native::compile(&tape),
         equations: tape,
+        surfaces_native: if surfaces.is_empty() {
+            None
+        } else {
+            Native::compile(&surface_tape)
+        },
         surfaces: surface_tape,
         jacobian,
     })

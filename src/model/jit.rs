@@ -1,5 +1,6 @@
-//! A tape compiled to native code (cranelift): the model's equations as
-//! one function per batch width, with every value in a machine register.
+//! A tape compiled to native code (cranelift): the model's equations (or
+//! its surfaces' values and rates) as one function per batch width, with
+//! every value in a machine register.
 //!
 //! The interpreter ([`Tape::run`]) pays, per instruction, a dispatch, the
 //! loads of its operands from the register file and the store of its
@@ -24,8 +25,9 @@ use super::tape::{Code, Lowered};
 
 /// A compiled function: reads the `[[f64; W]; D]` states at `y`, the
 /// clock at `clock`, the lane constants at `lane` and the step sizes at `h`
-/// (laid out as its [`Layout`] says) and writes `[[f64; W]; D]` at `out`:
-/// the right-hand side ([`Kind::Rhs`]) or the RK4 step ([`Kind::Step`]).
+/// (laid out as its [`Layout`] says) and writes `[[f64; W]; N]` at `out`:
+/// the tape's N outputs ([`Kind::Rhs`]) or the RK4 step ([`Kind::Step`],
+/// N = D).
 pub type Function = unsafe extern "C" fn(
     y: *const f64,
     clock: *const f64,
@@ -37,7 +39,8 @@ pub type Function = unsafe extern "C" fn(
 /// What a compiled function computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
-    /// The equations at one clock phase (`clock` holds one stage).
+    /// The tape's outputs at one clock phase (`clock` holds one stage): a
+    /// field's right-hand side, or the surfaces' values and rates.
     Rhs,
     /// A whole RK4 step, `rk4::step_batch` operation for operation
     /// (`clock` holds the phases of its three stages). One call per step
@@ -63,10 +66,12 @@ pub enum Layout {
 /// The batch widths compiled, those of the integrator (`integrate::steps`).
 pub const WIDTHS: [usize; 3] = [1, 4, 8];
 
-/// A tape's native functions, by kind, width and layout.
+/// A tape's native functions, by kind, width and layout (no
+/// [`Kind::Step`] for a tape whose outputs are not a field's derivatives).
 pub struct Native {
-    functions: [[[Function; 2]; WIDTHS.len()]; 2],
+    functions: [[[Option<Function>; 2]; WIDTHS.len()]; 2],
     states: usize,
+    outputs: usize,
     constants: usize,
     /// Owns the code the functions point into; freed on drop.
     #[cfg(target_arch = "x86_64")]
@@ -93,13 +98,11 @@ impl std::fmt::Debug for Native {
 }
 
 impl Native {
-    /// The tape compiled for every kind, width and layout, or `None` where
-    /// no native code can be made (the interpreter then runs the tape).
-    /// Only tapes with as many outputs as states (a flow's equations).
+    /// The tape compiled for every width and layout, or `None` where no
+    /// native code can be made (the interpreter then runs the tape): as
+    /// [`Kind::Rhs`] always, and as [`Kind::Step`] too where it has as many
+    /// outputs as states (a flow's equations).
     pub fn compile(tape: &Tape) -> Option<Native> {
-        if tape.lowered().2.len() != tape.states {
-            return None;
-        }
         #[cfg(target_arch = "x86_64")]
         {
             build(tape).ok()
@@ -118,13 +121,15 @@ impl Native {
 
     /// Runs the function of `kind` for W and `layout` on states `y`, with
     /// the clock (one stage for `Rhs`, three for `Step`), lane constants
-    /// and step sizes laid out as `layout` says.
+    /// and step sizes laid out as `layout` says; gives the N outputs (the
+    /// D states after the step for `Step`).
     ///
     /// # Panics
-    /// If W is not a compiled width ([`has`](Self::has)), or a slice is
+    /// If W is not a compiled width ([`has`](Self::has)), D or N are not
+    /// the tape's, `Step` is asked of a tape that has none, or a slice is
     /// short.
     #[inline(always)]
-    pub fn call<const W: usize, const D: usize>(
+    pub fn call<const W: usize, const D: usize, const N: usize>(
         &self,
         kind: Kind,
         layout: Layout,
@@ -132,7 +137,46 @@ impl Native {
         clock: &[f64],
         lane: &[f64],
         h: &[f64],
-    ) -> [[f64; W]; D] {
+    ) -> [[f64; W]; N] {
+        let mut out = Aligned([[0.0; W]; N]);
+        self.write(kind, layout, y, clock, lane, h, &mut out.0);
+        read_as_written(&out)
+    }
+
+    /// [`call`](Self::call) with the outputs written into `out`, where the
+    /// caller keeps them (no copy of a batch's outputs per step), and
+    /// left there as the AVX2 code reads them (see [`read_as_written`]).
+    /// `out` should be 32-byte aligned.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn call_into<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
+        self.write(kind, layout, y, clock, lane, h, out);
+        rewrite_as_read(out);
+    }
+
+    /// Runs the function (see [`call`](Self::call)), its outputs written
+    /// into `out` by its 128-bit stores.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn write<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
         let per_slot = if layout == Layout::Shared { 1 } else { W };
         let stages = if kind == Kind::Step { 3 } else { 1 };
         let w = WIDTHS
@@ -141,25 +185,26 @@ impl Native {
             .expect("a compiled width");
         assert!(
             D == self.states
+                && N == self.outputs
                 && clock.len() >= 2 * stages * per_slot
                 && lane.len() >= self.constants * per_slot
                 && (kind == Kind::Rhs || h.len() >= per_slot)
         );
-        let f = self.functions[kind as usize][w][layout as usize];
-        let mut out = Aligned([[0.0; W]; D]);
+        let f = self.functions[kind as usize][w][layout as usize]
+            .expect("a step only of a tape with as many outputs as states");
         // SAFETY: the function reads D·W states, the clock of its stages,
         // L constants and a step size per slot of `layout` (checked above),
-        // and writes D·W values; it was compiled for W, `kind` and `layout`.
+        // and writes N·W values (N = D for a step); it was compiled for W,
+        // `kind` and `layout`.
         unsafe {
             f(
                 y.as_ptr().cast(),
                 clock.as_ptr(),
                 lane.as_ptr(),
                 h.as_ptr(),
-                out.0.as_mut_ptr().cast(),
+                out.as_mut_ptr().cast(),
             )
         };
-        read_as_written(&out)
     }
 }
 
@@ -173,12 +218,26 @@ struct Aligned<T>(T);
 /// reach the cache (a failed store forward, measured as a fifth of the
 /// step loop's time); 128-bit loads forward from the stores at once, and
 /// are joined in registers.
+///
+/// A batch of one trajectory (W = 1) is stored as scalars, which LLVM
+/// read back in pairs (one 128-bit load across two stores, the same
+/// stall: three fifths of a friction belt's field evaluations while it
+/// slides, in `perf annotate`); each is read alone, by a volatile load
+/// that LLVM may not merge.
 #[inline(always)]
 fn read_as_written<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
     #[cfg(target_arch = "x86_64")]
     if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
         // SAFETY: the CPU has AVX; W is a multiple of 4.
         return unsafe { joined(out) };
+    }
+    if W == 1 {
+        let mut read = [[0.0; W]; D];
+        for (row, from) in read.iter_mut().zip(&out.0) {
+            // SAFETY: a reference to an f64, so valid and aligned.
+            row[0] = unsafe { std::ptr::read_volatile(&from[0]) };
+        }
+        return read;
     }
     out.0
 }
@@ -217,6 +276,48 @@ unsafe fn joined<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -
     read.0
 }
 
+/// [`read_as_written`] in place: the native code's results rewritten
+/// where they lie as 256-bit vectors (each read as its two 128-bit halves),
+/// so that the AVX2 loads that follow take them from the store buffer.
+#[inline(always)]
+fn rewrite_as_read<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+    #[cfg(target_arch = "x86_64")]
+    if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX; W is a multiple of 4.
+        unsafe { rejoined(out) }
+    }
+    let _ = out;
+}
+
+/// [`rewrite_as_read`] with AVX (in assembly, as [`joined`] is).
+///
+/// # Safety
+/// The CPU has AVX, and W is a multiple of 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn rejoined<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+    use std::arch::x86_64::__m256d;
+    for row in out.iter_mut() {
+        for k in (0..W).step_by(4) {
+            let p = row[k..].as_mut_ptr();
+            let v: __m256d;
+            // SAFETY: row[k..k + 4] are four f64, read, then written as
+            // one unaligned 256-bit vector.
+            unsafe {
+                std::arch::asm!(
+                    "vmovupd {v:x}, xmmword ptr [{p}]",
+                    "vinsertf128 {v}, {v}, xmmword ptr [{p} + 16], 1",
+                    p = in(reg) p,
+                    v = out(ymm_reg) v,
+                    options(pure, readonly, nostack, preserves_flags),
+                );
+                p.cast::<__m256d>().write_unaligned(v);
+            }
+        }
+    }
+}
+
 /// [`Func::apply`] behind the C calling convention, one per function, for
 /// the native code to call: the same libm calls, so the same bits.
 fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
@@ -252,8 +353,16 @@ fn build(tape: &Tape) -> Result<Native, String> {
         isa,
         cranelift_module::default_libcall_names(),
     ));
+    let outputs = tape.lowered().2.len();
+    // A step integrates the outputs as the states' derivatives: only a
+    // field's tape has one.
+    let kinds: &[Kind] = if outputs == tape.states {
+        &[Kind::Rhs, Kind::Step]
+    } else {
+        &[Kind::Rhs]
+    };
     let mut ids = Vec::new();
-    for kind in [Kind::Rhs, Kind::Step] {
+    for &kind in kinds {
         for &w in &WIDTHS {
             for layout in [Layout::Shared, Layout::Each] {
                 let name = format!("{kind:?}{w}{layout:?}");
@@ -263,20 +372,24 @@ fn build(tape: &Tape) -> Result<Native, String> {
     }
     module.finalize_definitions().map_err(|e| e.to_string())?;
     let mut ids = ids.into_iter();
-    let functions = [(); 2].map(|_| {
+    let functions = [Kind::Rhs, Kind::Step].map(|kind| {
         [(); WIDTHS.len()].map(|_| {
             [(); 2].map(|_| {
+                if !kinds.contains(&kind) {
+                    return None;
+                }
                 let code = module.get_finalized_function(ids.next().expect("defined"));
                 // SAFETY: the code at this address was defined with the
                 // `Function` signature (pointer arguments, no result) in
                 // the host's default (C) calling convention.
-                unsafe { std::mem::transmute::<*const u8, Function>(code) }
+                Some(unsafe { std::mem::transmute::<*const u8, Function>(code) })
             })
         })
     });
     Ok(Native {
         functions,
         states: tape.states,
+        outputs,
         constants: tape.lane_constants.len(),
         module: std::mem::ManuallyDrop::new(module),
     })
@@ -538,6 +651,11 @@ mod tests {
     /// Every operation and function, with operands that reach NaN, ±0 and
     /// the ties of min/max/sign.
     fn tape() -> Tape {
+        Tape::compile(&expressions(), 2, None).unwrap()
+    }
+
+    /// [`tape`]'s expressions.
+    fn expressions() -> Vec<Expr> {
         let names = Names {
             states: vec!["x".into(), "v".into()],
             parameters: vec!["zeta".into(), "f".into(), "eta".into()],
@@ -554,15 +672,14 @@ mod tests {
             let arg = Expr::parse(text, &names).unwrap();
             Box::new(Expr::Call(Func::Sign, vec![arg]))
         };
-        let exprs: Vec<Expr> = texts
+        texts
             .iter()
             .zip(["x", "v - v"])
             .map(|(t, s)| {
                 let e = Box::new(Expr::parse(t, &names).unwrap());
                 Expr::Bin(Op::Add, e, Box::new(Expr::Bin(Op::Mul, sign(s), sign("v"))))
             })
-            .collect();
-        Tape::compile(&exprs, 2, None).unwrap()
+            .collect()
     }
 
     const STATES: [[f64; 8]; 2] = [
@@ -625,6 +742,58 @@ mod tests {
             .flat_map(|s| (0..2).flat_map(move |i| (0..8).map(move |k| stages[k][s][i])))
             .collect();
         let compiled = native.call(Kind::Step, Layout::Each, &y, &clock, &lane, &h);
+        assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
+    }
+
+    /// A tape with more outputs than states (a model's surfaces: values,
+    /// then rates) compiles to its outputs alone, with no step.
+    #[test]
+    fn native_outputs_other_than_a_field_are_the_interpreter_to_the_bit() {
+        // The two expressions of `tape`, and a padding zero (as surfaces
+        // are padded).
+        let mut exprs = expressions();
+        exprs.push(Expr::Num(0.0));
+        let tape = Tape::compile(&exprs, 2, None).unwrap();
+        let native = Native::compile(&tape).expect("cranelift targets this host");
+        assert!(native.functions[Kind::Step as usize]
+            .iter()
+            .flatten()
+            .all(Option::is_none));
+        fn bits<const W: usize>(a: &[[f64; W]; 3]) -> Vec<u64> {
+            a.iter().flatten().map(|x| x.to_bits()).collect()
+        }
+        let lanes = [[0.05, 1.2, 0.8], [0.1, -0.5, 1.3]].map(|p| tape.lane_values(&p).constants);
+        let phases: [Phase; 8] = std::array::from_fn(|k| {
+            let t = 0.37 * k as f64;
+            [t.cos(), t.sin()]
+        });
+        // One lane, W = 1, 4 and 8.
+        fn shared<const W: usize>(tape: &Tape, native: &Native, c: &[f64], phase: &Phase) {
+            let y: [[f64; W]; 2] = std::array::from_fn(|i| std::array::from_fn(|k| STATES[i][k]));
+            let mut registers = Registers::new();
+            tape.prepare(&mut registers, |j| [c[j]; W]);
+            let interpreted: [[f64; W]; 3] = tape.run(&mut registers, &[*phase; W], &y);
+            let compiled: [[f64; W]; 3] = native.call(Kind::Rhs, Layout::Shared, &y, phase, c, &[]);
+            assert_eq!(bits(&interpreted), bits(&compiled), "W = {W}");
+        }
+        shared::<1>(&tape, &native, &lanes[0], &phases[1]);
+        shared::<4>(&tape, &native, &lanes[0], &phases[2]);
+        shared::<8>(&tape, &native, &lanes[1], &phases[3]);
+        // One trajectory of each of 8 lanes, alternating parameters, each
+        // at its own phase.
+        let constant = |j: usize, k: usize| lanes[k % 2][j];
+        let l = tape.lane_constants.len();
+        let lane: Vec<f64> = (0..l)
+            .flat_map(|j| (0..8).map(move |k| constant(j, k)))
+            .collect();
+        let clock: Vec<f64> = (0..2)
+            .flat_map(|i| phases.iter().map(move |p| p[i]))
+            .collect();
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| std::array::from_fn(|k| constant(j, k)));
+        let interpreted: [[f64; 8]; 3] = tape.run(&mut registers, &phases, &STATES);
+        let compiled: [[f64; 8]; 3] =
+            native.call(Kind::Rhs, Layout::Each, &STATES, &clock, &lane, &[]);
         assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
     }
 }

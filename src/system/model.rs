@@ -12,7 +12,7 @@ use crate::integrate::clock::Phase;
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
 use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
-    part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceValues, Wall,
+    part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues, Wall,
 };
 use crate::model::code::{piecewise_linear, reads_state_or_time, walls_at, Code};
 use crate::model::expr::{Expr, Var};
@@ -243,44 +243,80 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     }
 
     fn surface_values(&self, region: u32, phase: &Phase, y: &[f64; D]) -> SurfaceValues {
+        // By value (`Native::call`), not in place: a lone trajectory's
+        // values are scalars, which only the call's reading takes from the
+        // store buffer.
+        let field = &self.code.regions[region as usize];
         let constants = &self.surface_constants[region as usize];
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
-        let out: [[f64; 1]; 2 * MAX_SURFACES] =
-            self.code.regions[region as usize]
-                .surfaces
-                .eval(|j| [constants[j]], &[*phase], &y);
+        let out: [[f64; 1]; 2 * MAX_SURFACES] = match &field.surfaces_native {
+            Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, constants, &[]),
+            None => field.surfaces.eval(|j| [constants[j]], &[*phase], &y),
+        };
         SurfaceValues {
             g: std::array::from_fn(|j| out[j][0]),
             rate: std::array::from_fn(|j| out[MAX_SURFACES + j][0]),
         }
     }
 
+    /// The surfaces' native code where there is one for W (the same
+    /// operations as the tape's interpreter, so the same bits).
     #[inline(always)]
-    fn surface_values_batch<const W: usize>(
+    fn surface_values_shared<const W: usize>(
         &self,
         region: u32,
-        phases: &[Phase; W],
+        phase: &Phase,
         y: &[[f64; W]; D],
-    ) -> [SurfaceValues; W] {
+        out: &mut SurfaceBatch<W>,
+    ) {
+        let field = &self.code.regions[region as usize];
         let constants = &self.surface_constants[region as usize];
-        let out: [[f64; W]; 2 * MAX_SURFACES] =
-            self.code.regions[region as usize]
-                .surfaces
-                .eval(|j| [constants[j]; W], phases, y);
-        let mut values = [SurfaceValues::default(); W];
-        for (k, v) in values.iter_mut().enumerate() {
-            for j in 0..MAX_SURFACES {
-                v.g[j] = out[j][k];
-                v.rate[j] = out[MAX_SURFACES + j][k];
+        match &field.surfaces_native {
+            Some(native) if Native::has::<W>() => {
+                let rows = &mut out.rows;
+                native.call_into(Kind::Rhs, Layout::Shared, y, phase, constants, &[], rows)
             }
+            _ => out.rows = field.surfaces.eval(|j| [constants[j]; W], &[*phase; W], y),
         }
-        values
     }
 
+    /// Slots in different regions are evaluated once per region present,
+    /// each region's code over the whole batch, its slots kept.
+    #[inline(always)]
+    fn surface_values_each<const W: usize>(
+        flows: &[&Self; W],
+        regions: &[u32; W],
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+        out: &mut SurfaceBatch<W>,
+    ) {
+        let first = regions[0];
+        Self::surface_values_each_region(first, flows, phases, y, out);
+        for (k, &r) in regions.iter().enumerate() {
+            // The first slot of each other region evaluates it.
+            if r != first && !regions[..k].contains(&r) {
+                let mut other = SurfaceBatch::default();
+                Self::surface_values_each_region(r, flows, phases, y, &mut other);
+                for m in (k..W).filter(|&m| regions[m] == r) {
+                    out.take_column(m, &other);
+                }
+            }
+        }
+    }
+
+    // Inlined into its callers (the sliding field's, per stage): returned
+    // through memory, its scalar stores were read back as one 128-bit
+    // load, which waited for them (a store-forward stall).
+    #[inline(always)]
     fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
-        let gradient = &self.code.surfaces[j].gradient;
-        let t = self.time_at(phase);
-        std::array::from_fn(|i| gradient[i].eval(y, &self.params, t))
+        let s = &self.code.surfaces[j];
+        // (A gradient that does not read t is the same at any t.)
+        let t = if s.gradient_reads_time {
+            self.time_at(phase)
+        } else {
+            0.0
+        };
+        std::array::from_fn(|i| s.gradient[i].eval(y, &self.params, t))
     }
 
     fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
@@ -448,6 +484,45 @@ impl<const D: usize> ModelFlow<D> {
             y,
             h,
         )
+    }
+
+    /// The surfaces' values and rates of one trajectory of each of W
+    /// flows, all in region `region` (see `Flow::surface_values_each`).
+    #[inline(always)]
+    fn surface_values_each_region<const W: usize>(
+        region: u32,
+        flows: &[&Self; W],
+        phases: &[Phase; W],
+        y: &[[f64; W]; D],
+        out: &mut SurfaceBatch<W>,
+    ) {
+        let r = region as usize;
+        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
+        let l = slots[0].len();
+        let field = &flows[0].code.regions[r];
+        match &field.surfaces_native {
+            Some(native) if Native::has::<W>() && l <= EACH_CONSTANTS => {
+                // The slots' constants and phases side by side.
+                let mut lane = [[0.0; W]; EACH_CONSTANTS];
+                for (j, row) in lane[..l].iter_mut().enumerate() {
+                    for k in 0..W {
+                        row[k] = slots[k][j];
+                    }
+                }
+                let mut clock = [[0.0; W]; 2];
+                for k in 0..W {
+                    clock[0][k] = phases[k][0];
+                    clock[1][k] = phases[k][1];
+                }
+                let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
+                native.call_into(Kind::Rhs, Layout::Each, y, clock, lane, &[], &mut out.rows)
+            }
+            _ => {
+                out.rows = field
+                    .surfaces
+                    .eval(|j| std::array::from_fn(|k| slots[k][j]), phases, y)
+            }
+        }
     }
 
     /// The flow's Jacobian at y and time t, as a matrix.
