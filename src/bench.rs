@@ -1,14 +1,19 @@
 //! The error-against-time study (`lyapsweep bench`): a grid of
 //! configurations (backend and precision, RK4 steps, impact location, δ,
 //! difference scheme) on fixed parameter values of the seed's oscillator,
-//! each timed and compared with the exact backend.
+//! or on a scene whose system has an exact backend (`lyapsweep bench
+//! SCENE`: a piecewise-linear model), each timed and compared with the
+//! exact backend.
 //!
 //! Error of a configuration: the largest of (a) |λ_i - λ_i,exact| at the
 //! periodic points, the exact backend run with the same transient,
 //! iterations and start, (b) |λ_sum - expected_sum| at the chaotic point, at
-//! a near-grazing point and over a sweep. Time: the median wall time of
-//! several runs after a warm-up, and on a GPU with timestamp queries the
-//! median device time of its compute passes.
+//! a near-grazing point and over a sweep. On a scene, the periodic points
+//! are its values where the exact backend finds λ1 < 0, and the sum rule is
+//! checked at all of them (the seed's chaotic and near-grazing points have
+//! no counterpart). Time: the median wall time of several runs after a
+//! warm-up, and on a GPU with timestamp queries the median device time of
+//! its compute passes.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -76,9 +81,20 @@ impl Config {
     }
 }
 
+/// What a study runs on.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Subject {
+    /// The seed's oscillator at [`PERIODIC`], [`CHAOTIC`], [`GRAZING`] and
+    /// the plan's sweep.
+    Seed,
+    /// A scene file, as it is (its values, transient and iterations).
+    Scene(PathBuf),
+}
+
 /// The fixed part of a study: where and how long.
 #[derive(Clone, Debug)]
 pub struct Plan {
+    pub subject: Subject,
     pub transient: usize,
     pub iterations: usize,
     /// The sum-rule sweep over [0.5, 1.5].
@@ -167,12 +183,38 @@ impl Plan {
             .map(|k| 0.5 + k as f64 / (count - 1) as f64)
             .collect();
         Plan {
+            subject: Subject::Seed,
             transient,
             iterations,
             sweep,
             repeats,
             configs,
         }
+    }
+
+    /// The study of [`new`](Self::new) on a scene instead of the seed's
+    /// oscillator: its system must have the exact backend (the ground
+    /// truth), and GPU configurations stay only where its kernels run it.
+    pub fn on_scene(quick: bool, gpu_f64: bool, gpu_f32: bool, path: &Path) -> Result<Self> {
+        let scene = scene::load(path, &[])?;
+        if !scene.system.has_exact {
+            return Err(Error::invalid(
+                "bench",
+                format!(
+                    "{}: {} has no exact backend to measure errors against \
+                     (piecewise-linear models and the impact oscillator have one)",
+                    path.display(),
+                    scene.system.kind
+                ),
+            ));
+        }
+        let kernels = scene.system.wgsl.is_some();
+        let mut plan = Plan::new(quick, gpu_f64 && kernels, gpu_f32 && kernels);
+        plan.subject = Subject::Scene(path.to_owned());
+        plan.transient = scene.integration.transient;
+        plan.iterations = scene.integration.iterations;
+        plan.sweep = Vec::new();
+        Ok(plan)
     }
 
     /// The η values of one run: periodic points, the chaotic and the
@@ -185,6 +227,12 @@ impl Plan {
     }
 
     fn scene(&self, overrides: &[String]) -> Result<Scene> {
+        if let Subject::Scene(path) = &self.subject {
+            // Figures and progress are not what is timed.
+            let mut all = vec!["output.plot=false".to_owned()];
+            all.extend_from_slice(overrides);
+            return scene::load(path, &all);
+        }
         let values: Vec<String> = self.values().iter().map(|v| format!("{v}")).collect();
         let text = format!(
             "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [{}]\n[integration]\ntransient = {}\niterations = {}\ninitial_state = [0.0, 0.0]\n",
@@ -202,9 +250,9 @@ pub struct Measurement {
     pub config: Config,
     /// Largest |λ_i - λ_i,exact| over the periodic points.
     pub periodic_error: f64,
-    /// |λ_sum - expected_sum| at the chaotic point.
+    /// |λ_sum - expected_sum| at the chaotic point (NaN on a scene).
     pub chaotic_sum_error: f64,
-    /// |λ_sum - expected_sum| at the near-grazing point.
+    /// |λ_sum - expected_sum| at the near-grazing point (NaN on a scene).
     pub grazing_sum_error: f64,
     /// Largest |λ_sum - expected_sum| over the sweep.
     pub sweep_sum_error: f64,
@@ -220,7 +268,8 @@ pub struct Measurement {
 }
 
 impl Measurement {
-    /// The headline error: the largest of the four.
+    /// The headline error: the largest of the four (of the two on a
+    /// scene: `max` passes over NaN).
     pub fn error(&self) -> f64 {
         self.periodic_error
             .max(self.chaotic_sum_error)
@@ -233,7 +282,20 @@ impl Measurement {
 pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
     let exact_scene = plan.scene(&["run.backend=\"exact\"".into()])?;
     let exact = backend::run(&exact_scene)?;
-    let n_periodic = PERIODIC.len();
+    // Lanes compared per exponent with exact, and lanes whose sum rule counts.
+    let (periodic, sums): (Vec<usize>, Vec<usize>) = match plan.subject {
+        Subject::Seed => (
+            (0..PERIODIC.len()).collect(),
+            (PERIODIC.len() + 2..exact.lanes.len()).collect(),
+        ),
+        Subject::Scene(_) => (
+            (0..exact.lanes.len())
+                .filter(|&k| exact.lanes[k].exponents.first().is_some_and(|&l| l < 0.0))
+                .collect(),
+            (0..exact.lanes.len()).collect(),
+        ),
+    };
+    let seed = plan.subject == Subject::Seed;
     let mut out = Vec::new();
     for (k, config) in plan.configs.iter().enumerate() {
         let scene = plan.scene(&config.overrides())?;
@@ -261,8 +323,9 @@ pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
         times.sort_by(f64::total_cmp);
         device.sort_by(f64::total_cmp);
         let sum_error = |k: usize| (report.lanes[k].exponent_sum() - report.expected_sums[k]).abs();
-        let periodic_error = (0..n_periodic)
-            .flat_map(|k| {
+        let periodic_error = periodic
+            .iter()
+            .flat_map(|&k| {
                 report.lanes[k]
                     .exponents
                     .iter()
@@ -283,11 +346,17 @@ pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
         out.push(Measurement {
             config: *config,
             periodic_error,
-            chaotic_sum_error: sum_error(n_periodic),
-            grazing_sum_error: sum_error(n_periodic + 1),
-            sweep_sum_error: (n_periodic + 2..report.lanes.len())
-                .map(sum_error)
-                .fold(0.0, f64::max),
+            chaotic_sum_error: if seed {
+                sum_error(PERIODIC.len())
+            } else {
+                f64::NAN
+            },
+            grazing_sum_error: if seed {
+                sum_error(PERIODIC.len() + 1)
+            } else {
+                f64::NAN
+            },
+            sweep_sum_error: sums.iter().map(|&k| sum_error(k)).fold(0.0, f64::max),
             seconds: times[times.len() / 2],
             device_seconds: device.get(device.len() / 2).copied(),
             lane_steps,
@@ -386,20 +455,35 @@ pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Resu
     let md_path = dir.join("bench.md");
     std::fs::write(&md_path, markdown(plan, ms, machine)).map_err(|e| fail(&md_path, e))?;
     let png_path = dir.join("bench.png");
-    plot(&png_path, ms).map_err(|e| fail(&png_path, std::io::Error::other(e)))?;
+    let caption = match &plan.subject {
+        Subject::Seed => "seed oscillator".to_owned(),
+        Subject::Scene(path) => path.display().to_string(),
+    };
+    plot(&png_path, ms, &caption).map_err(|e| fail(&png_path, std::io::Error::other(e)))?;
     Ok(vec![csv_path, md_path, png_path])
 }
 
 /// The Markdown report: every configuration, then the best per error target.
 pub fn markdown(plan: &Plan, ms: &[Measurement], machine: &str) -> String {
+    let subject = match &plan.subject {
+        Subject::Seed => format!(
+            "Seed oscillator (ζ = 0.05, f = 1, X_w = 2, e = 1, start (0, 0)), transient {}, iterations {}; \
+             periodic points η = {:?}, chaotic η = {CHAOTIC}, near-grazing η = {GRAZING}, sum-rule sweep of {} values over [0.5, 1.5].",
+            plan.transient,
+            plan.iterations,
+            PERIODIC,
+            plan.sweep.len(),
+        ),
+        Subject::Scene(path) => format!(
+            "Scene {} as written (transient {}, iterations {}): per exponent against the exact backend at its values \
+             where exact finds λ1 < 0 (periodic), the sum rule at all of them; the chaotic and grazing columns are the seed's only.",
+            path.display(),
+            plan.transient,
+            plan.iterations,
+        ),
+    };
     let mut s = format!(
-        "Seed oscillator (ζ = 0.05, f = 1, X_w = 2, e = 1, start (0, 0)), transient {}, iterations {}; \
-         periodic points η = {:?}, chaotic η = {CHAOTIC}, near-grazing η = {GRAZING}, sum-rule sweep of {} values over [0.5, 1.5]. \
-         Time: median of {} runs after a warm-up (device: the GPU's compute passes by timestamp queries). Machine: {machine}.\n\n",
-        plan.transient,
-        plan.iterations,
-        PERIODIC,
-        plan.sweep.len(),
+        "{subject} Time: median of {} runs after a warm-up (device: the GPU's compute passes by timestamp queries). Machine: {machine}.\n\n",
         plan.repeats
     );
     s += "| path | steps | impacts | δ | difference | periodic \\|Δλ\\| | chaotic \\|Δsum\\| | grazing \\|Δsum\\| | sweep \\|Δsum\\| | time s | device s | Pareto |\n";
@@ -407,16 +491,16 @@ pub fn markdown(plan: &Plan, ms: &[Measurement], machine: &str) -> String {
     for m in ms {
         let c = &m.config;
         s += &format!(
-            "| {} | {} | {} | {:.0e} | {} | {:.1e} | {:.1e} | {:.1e} | {:.1e} | {:.3} | {} | {} |\n",
+            "| {} | {} | {} | {:.0e} | {} | {} | {} | {} | {} | {:.3} | {} | {} |\n",
             c.path(),
             c.steps,
             c.location.name(),
             c.perturbation,
             c.difference.name(),
-            m.periodic_error,
-            m.chaotic_sum_error,
-            m.grazing_sum_error,
-            m.sweep_sum_error,
+            cell(m.periodic_error),
+            cell(m.chaotic_sum_error),
+            cell(m.grazing_sum_error),
+            cell(m.sweep_sum_error),
             m.seconds,
             m.device_seconds.map_or("–".into(), |d| format!("{d:.3}")),
             if m.pareto { "★" } else { "" }
@@ -440,7 +524,16 @@ pub fn markdown(plan: &Plan, ms: &[Measurement], machine: &str) -> String {
     s
 }
 
-fn plot(path: &Path, ms: &[Measurement]) -> std::result::Result<(), String> {
+/// An error in the report's table; "–" where it has no meaning.
+fn cell(error: f64) -> String {
+    if error.is_nan() {
+        "–".into()
+    } else {
+        format!("{error:.1e}")
+    }
+}
+
+fn plot(path: &Path, ms: &[Measurement], subject: &str) -> std::result::Result<(), String> {
     use plotters::prelude::*;
     crate::output::figure::register_font();
     let points: Vec<&Measurement> = ms
@@ -464,7 +557,7 @@ fn plot(path: &Path, ms: &[Measurement]) -> std::result::Result<(), String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "Error against run time (seed oscillator)",
+            format!("Error against run time ({subject})"),
             ("sans-serif", 26),
         )
         .margin(20)

@@ -74,10 +74,12 @@ enum Command {
     },
     /// Error against run time over a grid of configurations (writes bench.csv, bench.md, bench.png).
     Bench {
+        /// A scene whose system has the exact backend (a piecewise-linear model), run as written; default: the seed's oscillator at fixed values.
+        scene: Option<PathBuf>,
         /// A CI-sized grid: fewer configurations, shorter runs.
         #[arg(long)]
         quick: bool,
-        /// Output folder [default: out/bench].
+        /// Output folder [default: out/bench, or out/bench-<scene name>].
         #[arg(long)]
         out: Option<PathBuf>,
     },
@@ -99,10 +101,7 @@ fn main() -> ExitCode {
         Command::Model {
             command: ModelCommand::Check { file },
         } => exit_code(check_model(&file)),
-        Command::Bench { quick, out } => exit_code(bench(
-            quick,
-            out.unwrap_or_else(|| PathBuf::from("out/bench")),
-        )),
+        Command::Bench { scene, quick, out } => exit_code(bench(scene, quick, out)),
         Command::Run {
             scene,
             out,
@@ -395,11 +394,24 @@ fn print_devices() -> Result<(), Error> {
     Ok(())
 }
 
-fn bench(quick: bool, out: PathBuf) -> Result<(), Error> {
+fn bench(scene: Option<PathBuf>, quick: bool, out: Option<PathBuf>) -> Result<(), Error> {
     use lyapsweep::bench;
     let adapters = lyapsweep::backend::gpu::context::list();
     let gpu_f64 = adapters.iter().any(|a| a.f64);
-    let plan = bench::Plan::new(quick, gpu_f64, !adapters.is_empty());
+    let (plan, default_out) = match &scene {
+        None => (
+            bench::Plan::new(quick, gpu_f64, !adapters.is_empty()),
+            PathBuf::from("out/bench"),
+        ),
+        Some(path) => {
+            let name = lyapsweep::scene::load(path, &[])?.name;
+            (
+                bench::Plan::on_scene(quick, gpu_f64, !adapters.is_empty(), path)?,
+                PathBuf::from(format!("out/bench-{name}")),
+            )
+        }
+    };
+    let out = out.unwrap_or(default_out);
     let measurements = bench::run(&plan)?;
     let mut machine = format!(
         "{} cores of {}",

@@ -97,3 +97,64 @@ fn the_quick_bench_command_writes_csv_markdown_and_plot() {
         "a plot with points and labels, not a blank image"
     );
 }
+
+/// `lyapsweep bench SCENE`: the same study on a piecewise-linear model
+/// (the soft stop), against the exact backend the model's linearity gives.
+#[test]
+fn a_piecewise_linear_scene_is_measured_against_its_exact_backend() {
+    use lyapsweep::bench::Subject;
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("soft-stop.toml");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models/soft-stop.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "model = {model:?}\n[sweep]\nparameter = \"eta\"\nvalues = [0.6, 1.0, 2.2]\n\
+             [integration]\ntransient = 50\niterations = 100\n"
+        ),
+    )
+    .unwrap();
+    let plan = Plan::on_scene(true, false, false, &scene).expect("a scene with an exact backend");
+    assert_eq!(plan.subject, Subject::Scene(scene.clone()));
+    let ms = bench::run(&plan).expect("the quick study runs");
+    let exact_row = ms
+        .iter()
+        .find(|m| m.config.backend == Backend::Exact)
+        .unwrap();
+    assert_eq!(exact_row.periodic_error, 0.0);
+    // The seed's chaotic and grazing points have no counterpart on a scene.
+    assert!(ms
+        .iter()
+        .all(|m| m.chaotic_sum_error.is_nan() && m.grazing_sum_error.is_nan()));
+    // RK4 with newton location against the closed form: the periodic error
+    // is RK4's (2.6e-7 measured on six η, at the steps the plan raises these lanes
+    // to); linear location (the paper's) is far worse at a switch.
+    let worst = |location: ImpactLocation| {
+        ms.iter()
+            .filter(|m| m.config.backend == Backend::Cpu && m.config.location == location)
+            .map(|m| m.periodic_error)
+            .fold(0.0, f64::max)
+    };
+    let (newton, linear) = (worst(ImpactLocation::Newton), worst(ImpactLocation::Linear));
+    assert!(newton > 0.0 && newton < 1e-6, "newton: {newton:e}");
+    assert!(
+        linear > 100.0 * newton,
+        "linear {linear:e} against newton {newton:e}"
+    );
+    assert!(ms.iter().all(|m| m.error().is_finite()));
+
+    // A system without an exact backend is refused, naming the command.
+    let lorenz = dir.path().join("lorenz.toml");
+    std::fs::write(&lorenz, "[system]\nkind = \"lorenz\"\n").unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .arg("bench")
+        .arg(&lorenz)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("bench") && stderr.contains("no exact backend"),
+        "{stderr}"
+    );
+}
