@@ -436,9 +436,10 @@ pub struct SurfaceValues {
 
 /// [`SurfaceValues`] of W trajectories, structure of arrays, as a
 /// batch's evaluation gives them and the step loop's detection reads them,
-/// a vector per row: g of surface j in row j, its rate in row
-/// `MAX_SURFACES + j` (the outputs of a model's surfaces' tape,
-/// `model::code::Field::surfaces`, which its native code writes in place).
+/// a vector per row: g of surface j in row 2j, its rate in row 2j + 1 (the
+/// outputs of a model's surfaces' tape, `model::code::Field::surfaces`,
+/// which its native code writes in place). A model with fewer surfaces
+/// leaves the rows past its own at their zeros, unwritten.
 /// 32-byte aligned, for the AVX2 loads of the rows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[repr(C, align(32))]
@@ -458,13 +459,13 @@ impl<const W: usize> SurfaceBatch<W> {
     /// g of surface j in every slot.
     #[inline(always)]
     pub fn g(&self, j: usize) -> &[f64; W] {
-        &self.rows[j]
+        &self.rows[2 * j]
     }
 
     /// The rate of surface j in every slot.
     #[inline(always)]
     pub fn rate(&self, j: usize) -> &[f64; W] {
-        &self.rows[MAX_SURFACES + j]
+        &self.rows[2 * j + 1]
     }
 
     /// Slot k's values.
@@ -482,8 +483,8 @@ impl<const W: usize> SurfaceBatch<W> {
     #[inline(always)]
     pub fn set_column(&mut self, k: usize, v: &SurfaceValues) {
         for j in 0..MAX_SURFACES {
-            self.rows[j][k] = v.g[j];
-            self.rows[MAX_SURFACES + j][k] = v.rate[j];
+            self.rows[2 * j][k] = v.g[j];
+            self.rows[2 * j + 1][k] = v.rate[j];
         }
     }
 

@@ -101,8 +101,9 @@ pub struct Field {
     /// The equations as native code, where the host allows (else the
     /// tape's interpreter runs them).
     pub native: Option<Native>,
-    /// g of every general surface, padded to `MAX_SURFACES`, then their
-    /// rates ∇g·F along this field, padded the same.
+    /// g of each general surface followed by its rate ∇g·F along this
+    /// field, surface by surface (rows 2j and 2j + 1 of a
+    /// `surface::SurfaceBatch`).
     pub surfaces: Tape,
     /// The surfaces' tape as native code, where the model has surfaces
     /// and the host allows: the integrator evaluates it for every
@@ -641,17 +642,13 @@ fn field(
     let tape = Tape::compile(&equations, n, frequency.clone()).map_err(|(i, why)| {
         Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
     })?;
-    let zero = Expr::Num(0.0);
-    let pad = |v: Vec<Expr>| -> Vec<Expr> {
-        let mut v = v;
-        v.resize(MAX_SURFACES, zero.clone());
-        v
-    };
-    let values = pad(surfaces.iter().map(|s| s.g.clone()).collect());
-    let rates = pad(surfaces
+    // Each surface's g, then its rate, surface by surface: the rows a
+    // batch keeps them in (`surface::SurfaceBatch`), so a model with one
+    // surface computes and stores two rows, not `2·MAX_SURFACES`.
+    let rows: Vec<Expr> = surfaces
         .iter()
-        .map(|s| {
-            (0..n)
+        .flat_map(|s| {
+            let rate = (0..n)
                 .map(|i| {
                     Expr::Bin(
                         crate::model::expr::Op::Mul,
@@ -662,17 +659,16 @@ fn field(
                 // ∂g/∂t: a surface that moves with the forcing.
                 .chain([s.g.derivative(Var::Time)])
                 .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
-                .expect("a model has a state")
+                .expect("a model has a state");
+            [s.g.clone(), rate]
         })
-        .collect());
-    let surface_tape =
-        Tape::compile(values.iter().chain(&rates), n, frequency).map_err(|(i, why)| {
-            let s = &surfaces[i % MAX_SURFACES];
-            Error::invalid(
-                format!("{key}: the surface of '{}'", s.name),
-                why.to_string(),
-            )
-        })?;
+        .collect();
+    let surface_tape = Tape::compile(&rows, n, frequency).map_err(|(i, why)| {
+        Error::invalid(
+            format!("{key}: the surface of '{}'", surfaces[i / 2].name),
+            why.to_string(),
+        )
+    })?;
     let jacobian = (0..n * n)
         .map(|ij| equations[ij / n].derivative(Var::State(ij % n)))
         .collect();

@@ -121,8 +121,9 @@ impl Native {
 
     /// Runs the function of `kind` for W and `layout` on states `y`, with
     /// the clock (one stage for `Rhs`, three for `Step`), lane constants
-    /// and step sizes laid out as `layout` says; gives the N outputs (the
-    /// D states after the step for `Step`).
+    /// and step sizes laid out as `layout` says; gives the tape's outputs
+    /// (the D states after the step for `Step`) in the first rows of N, the
+    /// rows past them zero.
     ///
     /// # Panics
     /// If W is not a compiled width ([`has`](Self::has)), D or N are not
@@ -146,7 +147,8 @@ impl Native {
     /// [`call`](Self::call) with the outputs written into `out`, where the
     /// caller keeps them (no copy of a batch's outputs per step), and
     /// left there as the AVX2 code reads them (see [`read_as_written`]).
-    /// `out` should be 32-byte aligned.
+    /// Only the tape's rows are written: the rows of `out` past them keep
+    /// what they held. `out` should be 32-byte aligned.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     pub fn call_into<const W: usize, const D: usize, const N: usize>(
@@ -160,7 +162,7 @@ impl Native {
         out: &mut [[f64; W]; N],
     ) {
         self.write(kind, layout, y, clock, lane, h, out);
-        rewrite_as_read(out);
+        rewrite_as_read(&mut out[..self.outputs]);
     }
 
     /// Runs the function (see [`call`](Self::call)), its outputs written
@@ -185,7 +187,7 @@ impl Native {
             .expect("a compiled width");
         assert!(
             D == self.states
-                && N == self.outputs
+                && N >= self.outputs
                 && clock.len() >= 2 * stages * per_slot
                 && lane.len() >= self.constants * per_slot
                 && (kind == Kind::Rhs || h.len() >= per_slot)
@@ -194,7 +196,8 @@ impl Native {
             .expect("a step only of a tape with as many outputs as states");
         // SAFETY: the function reads D·W states, the clock of its stages,
         // L constants and a step size per slot of `layout` (checked above),
-        // and writes N·W values (N = D for a step); it was compiled for W,
+        // and writes its outputs' W values each, within `out`'s N rows
+        // (checked above; D of them for a step); it was compiled for W,
         // `kind` and `layout`.
         unsafe {
             f(
@@ -280,7 +283,7 @@ unsafe fn joined<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -
 /// where they lie as 256-bit vectors (each read as its two 128-bit halves),
 /// so that the AVX2 loads that follow take them from the store buffer.
 #[inline(always)]
-fn rewrite_as_read<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+fn rewrite_as_read<const W: usize>(out: &mut [[f64; W]]) {
     #[cfg(target_arch = "x86_64")]
     if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
         // SAFETY: the CPU has AVX; W is a multiple of 4.
@@ -296,7 +299,7 @@ fn rewrite_as_read<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 #[inline]
-unsafe fn rejoined<const W: usize, const N: usize>(out: &mut [[f64; W]; N]) {
+unsafe fn rejoined<const W: usize>(out: &mut [[f64; W]]) {
     use std::arch::x86_64::__m256d;
     for row in out.iter_mut() {
         for k in (0..W).step_by(4) {

@@ -254,8 +254,8 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             None => field.surfaces.eval(|j| [constants[j]], &[*phase], &y),
         };
         SurfaceValues {
-            g: std::array::from_fn(|j| out[j][0]),
-            rate: std::array::from_fn(|j| out[MAX_SURFACES + j][0]),
+            g: std::array::from_fn(|j| out[2 * j][0]),
+            rate: std::array::from_fn(|j| out[2 * j + 1][0]),
         }
     }
 
