@@ -174,6 +174,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             rest_phase = w.rest_phase;
         }
         if (stuck < WALLS) {
+#ifdef SURFACES
+            // Released from a stop, the CPU resolves the rest of the step
+            // with its surfaces, where stuck_step takes one plain step:
+            // the lane is the CPU's, as a motion the kernels cannot slide.
+            c.z = c.z | FLAG_SLIDING;
+#endif
             let w = stuck_step(p, walls, stuck, omega, rest_phase, y, h - rest_at);
             y = w.y;
             comp = State();

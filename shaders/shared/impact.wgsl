@@ -440,6 +440,12 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
             break;
         }
         y0 = on_stop(w, hit.y, -rebound);
+#ifdef SURFACES
+        // The rebound may jump across a switch (a velocity reversed across
+        // a friction's slip): the field after it is that side's.
+        p.region = jumped(p, phase0, hit.y, y0);
+        crossed.region = p.region;
+#endif
         y1 = sub_step(p, omega, phase0, y0, h - done).y;
     }
     if (ending == 2u) {
@@ -684,7 +690,7 @@ struct Slid {
 
 // Slides on the switch of p's sliding set for up to h from (phase, y):
 // twin of `slide` in impact.rs for one switch. Another surface crossed on
-// the way is flagged rather than located; an exit (a stick margin reaching
+// the way, or a stop reached, is flagged rather than located; an exit (a stick margin reaching
 // 0) is bisected on RK4 re-stepped along the sliding field, and the region
 // leaves to the side whose margin ran out.
 fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
@@ -705,6 +711,21 @@ fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
         if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
             flagged = true;
         }
+    }
+    // A stop reached while sliding would need a motion along the switch
+    // and into the stop at once: flagged, as on the CPU.
+    let walls = stops_of(p);
+    if (WALLS > 0u && gap(stop(walls, 0u), end) > real(0.0)) {
+        flagged = true;
+    }
+    if (WALLS > 1u && gap(stop(walls, 1u), end) > real(0.0)) {
+        flagged = true;
+    }
+    if (WALLS > 2u && gap(stop(walls, 2u), end) > real(0.0)) {
+        flagged = true;
+    }
+    if (WALLS > 3u && gap(stop(walls, 3u), end) > real(0.0)) {
+        flagged = true;
     }
     if (holds(end_margins)) {
         return Slid(false, h, end, p.region, flagged);
@@ -756,6 +777,31 @@ fn region_of(p: Params, phase: vec2<real>, y: State) -> u32 {
     for (var j = 0u; j < SURFACES; j = j + 1u) {
         if (SURFACE_BIT[j] != EVENT && g[j] > real(0.0)) {
             region = region | (1u << SURFACE_BIT[j]);
+        }
+    }
+    return region;
+}
+
+// The region after a reset jumps the state from y to `after` (an event's
+// reset, a stop's rebound): a switch whose g has strictly opposite signs at
+// the two takes the side of `after`, the others keep their bit
+// (surface::jumped). A sliding region is kept (a reset met while sliding
+// is flagged first).
+fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
+    if (is_sliding(p.region)) {
+        return p.region;
+    }
+    let g0 = surface_g(p, phase, y);
+    let g1 = surface_g(p, phase, after);
+    var region = p.region;
+    for (var j = 0u; j < SURFACES; j = j + 1u) {
+        let bit = SURFACE_BIT[j];
+        if (bit != EVENT && ((g0[j] > real(0.0) && g1[j] < real(0.0)) || (g0[j] < real(0.0) && g1[j] > real(0.0)))) {
+            if (g1[j] > real(0.0)) {
+                region = region | (1u << bit);
+            } else {
+                region = region & ~(1u << bit);
+            }
         }
     }
     return region;
@@ -949,7 +995,11 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, j) * approach_rate, false, false, false, false);
     if (bit == EVENT) {
         let r = reset(p, phase, y, j);
-        let now = surface_values(p, phase, r.y);
+        // The reset may jump across a switch: what follows is that side's
+        // field (F⁺ of the saltation below, the rate leaving).
+        var after = p;
+        after.region = jumped(p, phase, y, r.y);
+        let now = surface_values(after, phase, r.y);
         var scale = real(1.0);
         for (var i = 0u; i < DIM; i = i + 1u) {
             scale = max(scale, abs(y[i]));
@@ -959,7 +1009,8 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
             out.chattering = true;
             return out;
         }
-        out.log_det = event_log_det(r, surface_gradient(p, phase, y, j), approach_rate, rhs(p, phase, y), rhs(p, phase, r.y));
+        out.region = after.region;
+        out.log_det = event_log_det(r, surface_gradient(p, phase, y, j), approach_rate, rhs(p, phase, y), rhs(after, phase, r.y));
         out.rank_loss = !(abs(out.log_det) <= MAX_REAL);
         out.resolved = true;
         out.y = r.y;

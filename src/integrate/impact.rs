@@ -454,6 +454,16 @@ pub fn resolve<const D: usize, F: Flow<D>>(
         }
         phase0 = phase_c;
         y0 = wall.on_wall(yc, -rebound);
+        if !surfaces.is_empty() {
+            // The rebound may jump across a switch (a velocity reversed
+            // across a friction's slip): the field after it is that side's.
+            *region = surface::jumped(
+                surfaces,
+                *region,
+                &base.surface_values(*region, &phase0, &yc),
+                &base.surface_values(*region, &phase0, &y0),
+            );
+        }
         y1 = SubStep {
             flow: &flow_in(base, *region),
             omega,
@@ -523,7 +533,14 @@ fn cross<const D: usize, F: Flow<D>>(
     match kind {
         Surface::Event => {
             let (after, dr, reset_rate) = base.reset(j, phase, y);
-            let now = base.surface_values(*region, phase, &after);
+            let mut now = base.surface_values(*region, phase, &after);
+            // The reset may jump across a switch: what follows is that
+            // side's field (F⁺ of the saltation below, the rate leaving).
+            let from = *region;
+            let to = surface::jumped(base.surfaces(), from, &before, &now);
+            if to != from {
+                now = base.surface_values(to, phase, &after);
+            }
             // Back where the motion lives (to the location's tolerance:
             // a reset that does not move g leaves it at the root's
             // rounding) and leaving the surface.
@@ -533,13 +550,14 @@ fn cross<const D: usize, F: Flow<D>>(
                 stats.chattering = true;
                 return None;
             }
+            *region = to;
             stats.log_flux += surface::event_log_det(
                 &dr,
                 &reset_rate,
                 &base.surface_gradient(j, phase, y),
                 before.rate[j],
-                &base.rhs_in(*region, phase, y),
-                &base.rhs_in(*region, phase, &after),
+                &base.rhs_in(from, phase, y),
+                &base.rhs_in(to, phase, &after),
             );
             if !stats.log_flux.is_finite() {
                 stats.rank_loss = stats.rank_loss.max(1);

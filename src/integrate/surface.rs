@@ -21,7 +21,10 @@
 //! ```
 //!
 //! F⁻ the field before the crossing, F⁺ after it (after the reset R, in the
-//! new region).
+//! new region). A reset (an event's, or a stop's rebound) that jumps the
+//! state across a switch puts the trajectory on that switch's other side
+//! ([`jumped`]): F⁺ is that side's field. (For a stop, det S = e²
+//! whatever F⁺ is.)
 //!
 //! **Sliding.** Where the fields on both sides point into a switch (the
 //! rates a = ∇g·F on the negative side and b on the positive side with
@@ -528,6 +531,39 @@ pub fn region_of<const D: usize, F: Flow<D>>(flow: &F, phase: &Phase, y: &[f64; 
     region
 }
 
+/// The region after a reset jumps the state (an event's reset, a stop's
+/// rebound) from where the surfaces had `before` to where they have
+/// `after`: a switch whose g has strictly opposite signs at the two takes
+/// the side of `after` (a rebound that reverses a velocity across a
+/// friction's slip), the others keep their bit (a trajectory just across
+/// a switch may lie on its other side to the location's rounding). A
+/// sliding region is kept as it is: a reset met while sliding is flagged
+/// before it is applied.
+pub fn jumped(
+    surfaces: &[Surface],
+    region: u32,
+    before: &SurfaceValues,
+    after: &SurfaceValues,
+) -> u32 {
+    if is_sliding(region) {
+        return region;
+    }
+    let mut region = region;
+    for (j, s) in surfaces.iter().enumerate() {
+        if let Surface::Switch { bit } = *s {
+            let (g0, g1) = (before.g[j], after.g[j]);
+            if (g0 > 0.0 && g1 < 0.0) || (g0 < 0.0 && g1 > 0.0) {
+                region = if g1 > 0.0 {
+                    region | 1 << bit
+                } else {
+                    region & !(1 << bit)
+                };
+            }
+        }
+    }
+    region
+}
+
 /// A flow in one region of its switches: the one smooth field a step of
 /// that region integrates.
 pub struct InRegion<'a, F> {
@@ -629,6 +665,42 @@ mod tests {
                 -2.0 * y[2] + y[0] - self.mu * sign(1),
             ]
         }
+    }
+
+    #[test]
+    fn a_reset_across_a_switch_takes_its_other_side_and_rounding_does_not() {
+        // An event (no bit) and switches on bits 0 and 1.
+        let surfaces = [
+            Surface::Event,
+            Surface::Switch { bit: 0 },
+            Surface::Switch { bit: 1 },
+        ];
+        let values = |g: [f64; 3]| SurfaceValues {
+            g: [g[0], g[1], g[2], 0.0],
+            rate: [0.0; MAX_SURFACES],
+        };
+        // A rebound reverses a velocity across switch 0 (0.3 → -0.1), not
+        // across switch 1: bit 0 is cleared, bit 1 kept.
+        let before = values([0.0, 0.3, 2.0]);
+        let after = values([0.0, -0.1, 1.5]);
+        assert_eq!(jumped(&surfaces, 0b11, &before, &after), 0b10);
+        // The other way: a bit set.
+        assert_eq!(jumped(&surfaces, 0b10, &after, &before), 0b11);
+        // Just across switch 0 by the location's rounding (on its positive
+        // side, g a hair below 0), a reset that does not cross it keeps
+        // the side; one that lands on it exactly (g = 0) too.
+        let hair = values([0.0, -1e-17, 1.5]);
+        assert_eq!(
+            jumped(&surfaces, 0b11, &hair, &values([0.0, -0.2, 1.5])),
+            0b11
+        );
+        assert_eq!(
+            jumped(&surfaces, 0b11, &before, &values([0.0, 0.0, 1.5])),
+            0b11
+        );
+        // An event's own g never moves a bit; a sliding region is kept.
+        let sliding = sliding_on(0b01, 1);
+        assert_eq!(jumped(&surfaces, sliding, &before, &after), sliding);
     }
 
     #[test]

@@ -48,22 +48,23 @@
 //! the CPU's per-region tape has it folded in, which rounds alike.
 //!
 //! What the kernels run so far ([`check`]): a period map of a flow of 2 to
-//! 4 states (the kernels' `State` is a WGSL vector) whose events are
-//! either all stops: up to `MAX_WALLS` = 4, each on any state x with its
-//! velocity v (x' = v), approached from either side, reset v → -e·v
-//! (`system::model::Stop`), with the CPU's sticking (a mass held at rest
-//! on a stop while the others move on) and per-stop crossing counts; or,
-//! without stops, up to four general surfaces: events with any surface
+//! 4 states (the kernels' `State` is a WGSL vector) with up to four stops,
+//! events and switches in all (one vec4 of crossing counts): stops on any
+//! state x with its velocity v (x' = v), approached from either side,
+//! reset v → -e·v (`system::model::Stop`), with the CPU's sticking (a mass
+//! held at rest on a stop while the others move on) and per-stop crossing
+//! counts; and general surfaces: events with any surface
 //! g(y, clock) and any reset, and switches crossed transversally, each
 //! crossing located and applied as on the CPU (`integrate::surface`) with
 //! its ln |det S| for the sum rule; and sliding on one switch at a time
 //! (Filippov's combination or a stick limit: the friction belt), entered
 //! where both fields point into the switch and left where a stick margin
 //! runs out, as on the CPU. A motion they do not integrate (another
-//! surface met while sliding, sliding on two switches at once) is flagged
-//! (`FLAG_SLIDING`) and its lane recomputed on the CPU by the backend; a
-//! model with stick limits on several switches (the two-block belt), stops
-//! and surfaces together, and Poincaré sections run on the CPU.
+//! surface or a stop met while sliding, sliding on two switches at once, a
+//! mass at rest on a stop of a model with surfaces, whose release the CPU
+//! resolves with them) is flagged (`FLAG_SLIDING`) and its lane recomputed
+//! on the CPU by the backend; a model with stick limits on several
+//! switches (the two-block belt) and Poincaré sections run on the CPU.
 
 use std::fmt::{self, Write};
 
@@ -93,7 +94,7 @@ pub fn calls_wrappers(system: &str) -> bool {
 pub enum Unsupported {
     /// The kernels' `State` is `vec2`..`vec4`.
     States(usize),
-    /// Events that are not stops, or switches: the impact code knows stops.
+    /// More stops, events and switches than the kernels count.
     Events(String),
     /// A number with no WGSL literal (∞ or NaN from folding).
     Number(f64),
@@ -106,13 +107,6 @@ pub enum Unsupported {
     Sliding(String),
 }
 
-fn kind_name(kind: crate::integrate::Surface) -> &'static str {
-    match kind {
-        crate::integrate::Surface::Event => "event",
-        crate::integrate::Surface::Switch { .. } => "switch",
-    }
-}
-
 impl fmt::Display for Unsupported {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
@@ -123,8 +117,7 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Events(why) => write!(
                 f,
-                "{why}: the GPU kernels handle stops, or up to four events and switches \
-                 without stops"
+                "{why}: the GPU kernels count up to four stops, events and switches together"
             ),
             Unsupported::Sliding(name) => write!(
                 f,
@@ -151,21 +144,16 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
         return Err(Unsupported::States(n));
     }
     // Stops and general surfaces share the kernels' per-trajectory
-    // crossing counts (a vec4: up to four together); a model with both
-    // would also need sticking on a stop inside a step that crosses a
-    // surface, which the kernels do not do.
-    if !code.surfaces.is_empty() && !code.walls.is_empty() {
+    // crossing counts, a vec4: up to four together. A mass at rest on a
+    // stop of a model with surfaces is left to the CPU (the kernels' held
+    // step does not watch the surfaces): the lane is flagged and
+    // recomputed there.
+    let events = code.walls.len() + code.surfaces.len();
+    if events > crate::integrate::impact::MAX_WALLS {
         return Err(Unsupported::Events(format!(
-            "the model has stops and the {} '{}' together",
-            kind_name(code.surfaces[0].kind),
-            code.surfaces[0].name
-        )));
-    }
-    if code.surfaces.len() > crate::integrate::impact::MAX_WALLS {
-        return Err(Unsupported::Events(format!(
-            "{} events and switches: the kernels count up to {}",
-            code.surfaces.len(),
-            crate::integrate::impact::MAX_WALLS
+            "{} stops and {} events and switches",
+            code.walls.len(),
+            code.surfaces.len()
         )));
     }
     // The kernels slide on one switch at a time (Filippov's combination,
