@@ -963,39 +963,6 @@ fn belt_lanes_agree(model: &str, label: &str) -> Vec<usize> {
     recomputed
 }
 
-/// The impact pair with a soft spring besides, engaging at x = `contact`
-/// (a switch): stops and a general surface in one model, in the kernels'
-/// one impact loop.
-const PAIR_AND_SPRING: &str = r#"
-[model]
-name = "pair-and-spring"
-states = ["x", "v"]
-[model.parameters]
-zeta = 0.05
-f = 2.0
-gap = 1.0
-e = 0.8
-eta = 0.8
-contact = 0.5
-ks = 2.0
-[[model.switches]]
-name = "spring"
-surface = "x - contact"
-[model.equations]
-x = "v"
-v = "-2*zeta*v - x - ks*(x - contact)*step(spring) + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-[[model.events]]
-name = "right stop"
-surface = "x - gap"
-reset = { v = "-e*v" }
-[[model.events]]
-name = "left stop"
-surface = "-gap - x"
-reset = { v = "-e*v" }
-"#;
-
 #[test]
 fn stops_and_a_switch_in_one_model_on_the_gpu_agree_with_the_cpu_in_f64() {
     if !gpu_or_skip(
@@ -1010,7 +977,10 @@ fn stops_and_a_switch_in_one_model_on_the_gpu_agree_with_the_cpu_in_f64() {
         let mut all = vec![format!("run.backend=\"{backend}\"")];
         all.extend(overrides.iter().map(|s| s.to_string()));
         let all: Vec<&str> = all.iter().map(String::as_str).collect();
-        run(&common::scene(&format!("{PAIR_AND_SPRING}\n{body}"), &all))
+        run(&common::scene(
+            &format!("{}\n{body}", common::PAIR_AND_SPRING),
+            &all,
+        ))
     };
     // e = 0.8: the mass bounces off the stops and crosses the spring's
     // contact, both in the kernels' loop; e = 0: it stops dead on a stop,

@@ -173,6 +173,37 @@ fn a_general_reset_keeps_the_sum_rule_crossing_by_crossing() {
 }
 
 #[test]
+fn stops_and_a_switch_together_agree_with_the_exact_backend() {
+    // The impact pair (f = 2, e = 0.8) with a spring engaging at x = 0.5:
+    // both stops and the spring's contact are met in every lane but the
+    // last (η = 2.5, which stays clear of both).
+    let etas = [0.4, 0.8, 1.3, 1.8, 2.5];
+    let exact = run(&model_scene(
+        common::PAIR_AND_SPRING,
+        &sweep(&etas, 1800, "exact"),
+        &[],
+    ));
+    let cpu = run(&model_scene(
+        common::PAIR_AND_SPRING,
+        &sweep(&etas, 1800, "cpu"),
+        &[],
+    ));
+    let both = exact
+        .lanes
+        .iter()
+        .filter(|l| l.crossings_per_period[..3].iter().all(|&c| c >= 1.0))
+        .count();
+    assert_eq!(both, 4, "the sweep must exercise the stops and the switch");
+    // Measured: 1.1e-9 at worst (η = 0.4); sum rule 1.1e-9 on the RK4 path
+    // (η = 1.3), 9e-16 exact.
+    let worst = worst_difference(&cpu, &exact, 3);
+    assert!(worst <= 1e-8, "RK4 against exact: {worst:e}");
+    let (exact_sum, cpu_sum) = (worst_sum_error(&exact), worst_sum_error(&cpu));
+    assert!(exact_sum <= 1e-12, "exact sum rule: {exact_sum:e}");
+    assert!(cpu_sum <= 1e-8, "RK4 sum rule: {cpu_sum:e}");
+}
+
+#[test]
 fn sliding_collapses_a_direction_on_both_paths() {
     // Started at rest inside the sticking band |x| < μ - f: it sticks at
     // once and for good (the forcing never overcomes friction).

@@ -212,3 +212,37 @@ v = "-x - mu*sign(slip) + f*cos(eta*t)"
 [model.map]
 period = "2*pi/eta"
 "#;
+
+/// The impact pair with a soft spring besides, engaging at x = `contact`
+/// (a switch): stops and a general surface in one model, in the kernels'
+/// one impact loop. (tests/switches.rs against the exact backend,
+/// tests/gpu_models.rs on the GPU.)
+pub const PAIR_AND_SPRING: &str = r#"
+[model]
+name = "pair-and-spring"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 2.0
+gap = 1.0
+e = 0.8
+eta = 0.8
+contact = 0.5
+ks = 2.0
+[[model.switches]]
+name = "spring"
+surface = "x - contact"
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x - ks*(x - contact)*step(spring) + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v" }
+"#;
