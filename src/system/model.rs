@@ -5,6 +5,8 @@
 //! ([`info`]). A model that is piecewise linear also gets the exact
 //! backend (`crate::model::code::piecewise_linear`).
 
+use std::mem::MaybeUninit;
+
 use nalgebra::{DMatrix, DVector, SMatrix};
 
 use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
@@ -422,6 +424,25 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
 /// code (on the stack, per step); a model with more runs the interpreter.
 const EACH_CONSTANTS: usize = 32;
 
+/// The W slots' constants side by side, constant j of every slot in row j,
+/// in `scratch`'s first rows (as many as a slot has constants). Only those
+/// rows are written: zeroing the whole scratch (2 KiB at W = 8, a
+/// `memset` before every step and every surfaces' evaluation of a batch of
+/// lanes) cost the models 2 to 6 percent of their run (docs/BENCHMARKS.md).
+#[inline(always)]
+fn side_by_side<'s, const W: usize>(
+    slots: &[&[f64]; W],
+    scratch: &'s mut [MaybeUninit<[f64; W]>; EACH_CONSTANTS],
+) -> &'s [[f64; W]] {
+    let l = slots[0].len();
+    for (j, row) in scratch[..l].iter_mut().enumerate() {
+        row.write(std::array::from_fn(|k| slots[k][j]));
+    }
+    // SAFETY: rows 0..l were written just above; MaybeUninit<T> has T's
+    // layout.
+    unsafe { std::slice::from_raw_parts(scratch.as_ptr().cast::<[f64; W]>(), l) }
+}
+
 impl<const D: usize> ModelFlow<D> {
     /// The local time of forcing phase (cos ωt, sin ωt) within the period:
     /// where an expression evaluated as a tree (a reset, a gradient) reads
@@ -459,12 +480,8 @@ impl<const D: usize> ModelFlow<D> {
         let l = slots[0].len();
         if let Some(native) = flows[0].native::<W>(region).filter(|_| l <= EACH_CONSTANTS) {
             // The slots' constants and stage phases side by side.
-            let mut lane = [[0.0; W]; EACH_CONSTANTS];
-            for (j, row) in lane[..l].iter_mut().enumerate() {
-                for k in 0..W {
-                    row[k] = slots[k][j];
-                }
-            }
+            let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
+            let lane = side_by_side(&slots, &mut scratch);
             let mut clock = [[0.0; W]; 6];
             for s in 0..3 {
                 for k in 0..W {
@@ -472,7 +489,7 @@ impl<const D: usize> ModelFlow<D> {
                     clock[2 * s + 1][k] = stages[k][s][1];
                 }
             }
-            let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
+            let (lane, clock) = (lane.as_flattened(), clock.as_flattened());
             return native.call(Kind::Step, Layout::Each, y, clock, lane, h);
         }
         let tape = &flows[0].code.regions[r].equations;
@@ -503,18 +520,14 @@ impl<const D: usize> ModelFlow<D> {
         match &field.surfaces_native {
             Some(native) if Native::has::<W>() && l <= EACH_CONSTANTS => {
                 // The slots' constants and phases side by side.
-                let mut lane = [[0.0; W]; EACH_CONSTANTS];
-                for (j, row) in lane[..l].iter_mut().enumerate() {
-                    for k in 0..W {
-                        row[k] = slots[k][j];
-                    }
-                }
+                let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
+                let lane = side_by_side(&slots, &mut scratch);
                 let mut clock = [[0.0; W]; 2];
                 for k in 0..W {
                     clock[0][k] = phases[k][0];
                     clock[1][k] = phases[k][1];
                 }
-                let (lane, clock) = (lane[..l].as_flattened(), clock.as_flattened());
+                let (lane, clock) = (lane.as_flattened(), clock.as_flattened());
                 native.call_into(Kind::Rhs, Layout::Each, y, clock, lane, &[], &mut out.rows)
             }
             _ => {
