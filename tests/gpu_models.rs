@@ -1074,3 +1074,29 @@ fn a_mass_carried_by_the_belt_into_a_stop_is_recomputed_on_the_cpu() {
     let recomputed = belt_lanes_agree(&model, "belt into a stop");
     assert!(!recomputed.is_empty(), "{recomputed:?}");
 }
+
+#[test]
+fn a_rebound_across_a_switch_on_the_gpu_is_the_cpu_s() {
+    if !gpu_or_skip(
+        "a_rebound_across_a_switch_on_the_gpu_is_the_cpu_s",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // Every rebound off the stop jumps the velocity across the belt's slip
+    // (tests/switches.rs checks the CPU against the exact backend): the
+    // kernels take the other side's friction as the CPU does. Measured on
+    // lavapipe: every lane the CPU's bits.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [1.0, 1.3, 1.6, 1.9, 2.2, 2.5]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 300\niterations = 300\n\
+                [run]\nvalidate = 0\n";
+    let scene = |backend: &str| {
+        common::scene(
+            &format!("{}\n{body}", common::BELT_INTO_STOP),
+            &[&format!("run.backend=\"{backend}\"")],
+        )
+    };
+    let (d, cpu_sum, gpu_sum) = surfaces_agree(&scene, "belt into a stop", 1e-9);
+    eprintln!("belt into a stop: CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
+    assert!(gpu_sum <= 1e-8, "{gpu_sum:e}");
+}

@@ -203,34 +203,6 @@ fn stops_and_a_switch_together_agree_with_the_exact_backend() {
     assert!(cpu_sum <= 1e-8, "RK4 sum rule: {cpu_sum:e}");
 }
 
-/// A mass driven along a slow belt (Coulomb friction on the slip, switch
-/// `slip`) into a rigid stop that reverses its velocity: every rebound jumps
-/// the velocity from above the belt's to below it, across the switch.
-const BELT_INTO_STOP: &str = r#"
-[model]
-name = "belt-into-stop"
-states = ["x", "v"]
-[model.parameters]
-zeta = 0.05
-mu = 0.3
-vb = 0.05
-f = 2.0
-eta = 1.9
-gap = 0.4
-[[model.switches]]
-name = "slip"
-surface = "v - vb"
-[model.equations]
-x = "v"
-v = "-2*zeta*v - x - mu*sign(slip) + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-[[model.events]]
-name = "stop"
-surface = "x - gap"
-reset = { v = "-0.5*v" }
-"#;
-
 #[test]
 fn a_rebound_across_a_switch_takes_the_field_of_its_other_side() {
     // Each lane meets the stop (once a period, or every other at η = 2.5)
@@ -241,12 +213,12 @@ fn a_rebound_across_a_switch_takes_the_field_of_its_other_side() {
     // side's friction until the next crossing before `surface::jumped`.
     let etas = [1.0, 1.3, 1.6, 1.9, 2.2, 2.5];
     let exact = run(&model_scene(
-        BELT_INTO_STOP,
+        common::BELT_INTO_STOP,
         &sweep(&etas, 1800, "exact"),
         &[],
     ));
     let cpu = run(&model_scene(
-        BELT_INTO_STOP,
+        common::BELT_INTO_STOP,
         &sweep(&etas, 1800, "cpu"),
         &[],
     ));
