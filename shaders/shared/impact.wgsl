@@ -783,10 +783,10 @@ fn region_of(p: Params, phase: vec2<real>, y: State) -> u32 {
 }
 
 // The region after a reset jumps the state from y to `after` (an event's
-// reset, a stop's rebound): a switch whose g has strictly opposite signs at
-// the two takes the side of `after`, the others keep their bit
-// (surface::jumped). A sliding region is kept (a reset met while sliding
-// is flagged first).
+// reset, a stop's rebound): a switch that the jump moves strictly off its
+// side (g from ≤ 0 to > 0, or from ≥ 0 to < 0) takes the side of `after`,
+// the others keep their bit (surface::jumped). A sliding region is kept (a
+// reset met while sliding is flagged first).
 fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
     if (is_sliding(p.region)) {
         return p.region;
@@ -796,12 +796,10 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
     var region = p.region;
     for (var j = 0u; j < SURFACES; j = j + 1u) {
         let bit = SURFACE_BIT[j];
-        if (bit != EVENT && ((g0[j] > real(0.0) && g1[j] < real(0.0)) || (g0[j] < real(0.0) && g1[j] > real(0.0)))) {
-            if (g1[j] > real(0.0)) {
-                region = region | (1u << bit);
-            } else {
-                region = region & ~(1u << bit);
-            }
+        if (bit != EVENT && g1[j] > real(0.0) && g0[j] <= real(0.0)) {
+            region = region | (1u << bit);
+        } else if (bit != EVENT && g1[j] < real(0.0) && g0[j] >= real(0.0)) {
+            region = region & ~(1u << bit);
         }
     }
     return region;

@@ -1056,11 +1056,12 @@ impl PiecewiseLinear {
         dynamics.b.rows(0, n) * augment(y, self.omega, t)
     }
 
-    /// The region after a reset from y⁻ to y⁺: a switch whose h changed sign
-    /// in the reset (a stop reversing the velocity across a friction
-    /// surface v = 0) flips its bit. A switch the reset leaves on its side
-    /// keeps its bit, so that a state on a switching surface keeps the
-    /// region it was given.
+    /// The region after a reset from y⁻ to y⁺: a switch the reset moves
+    /// strictly off its side (h from ≤ 0 to > 0, or from ≥ 0 to < 0: a stop
+    /// reversing the velocity across a friction surface v = 0) takes the
+    /// side of y⁺. A switch the reset leaves on its side keeps its bit, so
+    /// that a state on a switching surface, or a rounding across it, keeps
+    /// the region it was given. The RK4 path's rule (`surface::jumped`).
     fn region_after_reset(
         &self,
         region: usize,
@@ -1071,8 +1072,10 @@ impl PiecewiseLinear {
         for (s, bit) in self.surfaces.iter().zip(&self.bits) {
             if let Some(b) = bit {
                 let (h0, h1) = (s.value(before), s.value(after));
-                if (h0 > 0.0) != (h1 > 0.0) && h1 != 0.0 {
-                    region ^= 1 << b;
+                if h1 > 0.0 && h0 <= 0.0 {
+                    region |= 1 << b;
+                } else if h1 < 0.0 && h0 >= 0.0 {
+                    region &= !(1 << b);
                 }
             }
         }

@@ -533,12 +533,14 @@ pub fn region_of<const D: usize, F: Flow<D>>(flow: &F, phase: &Phase, y: &[f64; 
 
 /// The region after a reset jumps the state (an event's reset, a stop's
 /// rebound) from where the surfaces had `before` to where they have
-/// `after`: a switch whose g has strictly opposite signs at the two takes
-/// the side of `after` (a rebound that reverses a velocity across a
-/// friction's slip), the others keep their bit (a trajectory just across
-/// a switch may lie on its other side to the location's rounding). A
-/// sliding region is kept as it is: a reset met while sliding is flagged
-/// before it is applied.
+/// `after`: a switch that the jump moves strictly off its side of it (g
+/// from ≤ 0 to > 0, or from ≥ 0 to < 0: a rebound that reverses a velocity
+/// across a friction's slip) takes the side of `after`; the others keep
+/// their bit (a trajectory just across a switch may lie on its other side
+/// to the location's rounding, and a jump that does not cross must not
+/// undo that crossing). A sliding region is kept as it is: a reset met
+/// while sliding is flagged before it is applied. The exact backend's
+/// `PiecewiseLinear::region_after_reset` is the same rule.
 pub fn jumped(
     surfaces: &[Surface],
     region: u32,
@@ -552,12 +554,10 @@ pub fn jumped(
     for (j, s) in surfaces.iter().enumerate() {
         if let Surface::Switch { bit } = *s {
             let (g0, g1) = (before.g[j], after.g[j]);
-            if (g0 > 0.0 && g1 < 0.0) || (g0 < 0.0 && g1 > 0.0) {
-                region = if g1 > 0.0 {
-                    region | 1 << bit
-                } else {
-                    region & !(1 << bit)
-                };
+            if g1 > 0.0 && g0 <= 0.0 {
+                region |= 1 << bit;
+            } else if g1 < 0.0 && g0 >= 0.0 {
+                region &= !(1 << bit);
             }
         }
     }
@@ -697,6 +697,13 @@ mod tests {
         assert_eq!(
             jumped(&surfaces, 0b11, &before, &values([0.0, 0.0, 1.5])),
             0b11
+        );
+        // From exactly on it, a jump to either side takes that side.
+        let on = values([0.0, 0.0, 1.5]);
+        assert_eq!(jumped(&surfaces, 0b10, &on, &values([0.0, 0.1, 1.5])), 0b11);
+        assert_eq!(
+            jumped(&surfaces, 0b11, &on, &values([0.0, -0.1, 1.5])),
+            0b10
         );
         // An event's own g never moves a bit; a sliding region is kept.
         let sliding = sliding_on(0b01, 1);
