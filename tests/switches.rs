@@ -239,6 +239,64 @@ fn a_rebound_across_a_switch_takes_the_field_of_its_other_side() {
 }
 
 #[test]
+fn a_mass_held_on_a_stop_in_the_exact_backend_is_the_closed_form_s() {
+    // The seed oscillator at f = 3, e = 0.5 (tests/stability.rs for the
+    // built-in): at η = 0.3 the bounces accumulate and the mass rests on
+    // the wall every period until the forcing pulls it off. The model's
+    // exact backend now holds it there (as the RK4 path does) instead of
+    // stopping the iteration: the same orbit as the seed's own closed form
+    // (measured 6e-15 at the sampled point), both exponents -∞.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.5, 0.8, 1.2]\n\
+                [integration]\ntransient = 100\niterations = 200\n\
+                [output]\nbifurcation_points = 1\n[run]\nbackend = \"exact\"\n";
+    let model = run(&model_scene(
+        &file("seed-oscillator.toml"),
+        body,
+        &["model.parameters.f=3", "model.parameters.e=0.5"],
+    ));
+    let built_in = run(&common::scene(
+        &format!("[system]\nkind = \"impact-oscillator\"\n{body}"),
+        &["system.f=3", "system.restitution=0.5"],
+    ));
+    for (k, (a, b)) in model.lanes.iter().zip(&built_in.lanes).enumerate() {
+        assert_eq!(a.status, b.status, "lane {k}");
+        assert_eq!(a.impacts_per_period, b.impacts_per_period, "lane {k}");
+        for (x, y) in a.bifurcation.iter().zip(&b.bifurcation) {
+            assert!((x - y).abs() <= 1e-12, "lane {k}: point {x} vs {y}");
+        }
+        for (x, y) in a.exponents.iter().zip(&b.exponents) {
+            assert!(x == y || (x - y).abs() <= 1e-12, "lane {k}: {x} vs {y}");
+        }
+    }
+    assert_eq!(
+        model.lanes[0].status,
+        LaneStatus::Collapsed { exponents: 2 }
+    );
+    // Four states, the second mass held on its stop (e = 0: it stops dead
+    // and the forcing presses it there): two exponents -∞, the first
+    // mass's two against the RK4 path's (1800 steps): measured 4.4e-7 at
+    // worst (η = 1.2, a strongly contracting third one), 1.1e-9 where two
+    // collapse.
+    let chain = |backend: &str| {
+        run(&model_scene(
+            &file("two-mass-chain.toml"),
+            &sweep(&[0.3, 0.5, 0.8, 1.2, 1.6], 1800, backend),
+            &["model.parameters.f=3", "model.parameters.e=0"],
+        ))
+    };
+    let (exact, rk4) = (chain("exact"), chain("cpu"));
+    let mut held = 0;
+    for (k, (a, b)) in exact.lanes.iter().zip(&rk4.lanes).enumerate() {
+        assert_eq!(a.status, b.status, "lane {k}");
+        held += usize::from(a.status == LaneStatus::Collapsed { exponents: 2 });
+        for (x, y) in a.exponents.iter().zip(&b.exponents) {
+            assert!(x == y || (x - y).abs() <= 1e-6, "lane {k}: {x} vs {y}");
+        }
+    }
+    assert!(held >= 3, "the sweep must hold the mass on its stop");
+}
+
+#[test]
 fn sliding_collapses_a_direction_on_both_paths() {
     // Started at rest inside the sticking band |x| < μ - f: it sticks at
     // once and for good (the forcing never overcomes friction).

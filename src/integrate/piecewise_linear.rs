@@ -83,9 +83,24 @@
 //! propagated ([`PiecewiseStatus::Sliding`]) on a plain
 //! [`LinearSurface::switch`], where the jump is not constant, where the jump
 //! is not attracting (n·Δ ≥ 0), and where the sliding motion meets another
-//! surface (motion on two surfaces at once). Sticking after an event (at
-//! rest on the surface, pressed into it) is not propagated either: the
-//! iteration stops and says so.
+//! surface (motion on two surfaces at once).
+//!
+//! **Sticking on a stop.** On a stop (an event x_i = d whose reset reverses
+//! the velocity x_v, x_i' = x_v: [`PiecewiseLinear::stop_of`]), a mass that
+//! arrives at rest pressed into it, or ends an accumulating (Zeno)
+//! sequence of bounces there, is held ([`Mode::Held`]): the region's field
+//! with x_v's row removed, linear again, while the pressing force
+//! σ·F_v (a linear function of z) stays positive; the scan watches it and
+//! the mass leaves from rest where it falls to 0 (taken just past the
+//! root, where the force pulls away by a margin, as the closed form does).
+//! The hold forgets x_i and x_v (S_in zeroes their rows and columns; the
+//! other states' rows of the held field are the free field's, so the
+//! arrival time moves them only at second order): two exponents -∞, as on
+//! the RK4 path (`impact::stuck_step`). A contact without approach right
+//! after a release (the force pulling away is tiny there) is read as the
+//! mass at rest: held again if pressed, else moving on. Sticking on an
+//! event that is not a stop is not propagated: the iteration stops and
+//! says so.
 
 use nalgebra::{DMatrix, DVector};
 use std::f64::consts::SQRT_2;
@@ -411,6 +426,9 @@ enum Watch {
     /// A stick margin of the sliding switch: L − m (reaching 0, the motion
     /// leaves to the positive side, `plus`) or L + m (to the negative).
     Margin { plus: bool },
+    /// The force pressing a mass at rest into its stop (reaching 0, it
+    /// leaves).
+    Release,
 }
 
 /// A linear function of z that the scan watches: g = σ k·z.
@@ -452,6 +470,11 @@ enum Mode {
     /// Sliding on switch `switch`, the other switches' sides those of
     /// `sides` (whose own bit is the side the motion arrived from).
     Sliding { switch: usize, sides: usize },
+    /// At rest on stop `event` (an event surface x_i = d whose reset
+    /// reverses x_i's velocity x_j, [`PiecewiseLinear::stop_of`]), pressed
+    /// into it, in region `sides`: x_i and x_j held, the other states
+    /// moving on (the RK4 path's `impact::stuck_step`).
+    Held { event: usize, sides: usize },
 }
 
 /// A piecewise-linear, harmonically forced system with its surfaces.
@@ -502,8 +525,10 @@ enum Next {
     End(Point),
     /// The watched function of this index reached 0.
     Crossing(usize, Point),
-    Chattering(Point),
-    Sticking(Point),
+    /// An accumulation of events on watched event surface j.
+    Chattering(Option<usize>, Point),
+    /// At rest on watched event surface j, pressed into it.
+    Sticking(Option<usize>, Point),
     Diverged(Point),
 }
 
@@ -602,7 +627,7 @@ impl PiecewiseLinear {
                     .collect();
                 let event = |w: Watch| match w {
                     Watch::Surface(j) => bits[j].is_none(),
-                    Watch::Margin { .. } => false,
+                    Watch::Margin { .. } | Watch::Release => false,
                 };
                 Arc::new(dynamics(field.augmented(omega), watch, event))
             })
@@ -749,10 +774,35 @@ impl PiecewiseLinear {
         };
 
         let (end, status) = loop {
-            let (w, p) = match self.next_crossing(&segment, start, &span, &mut budget) {
+            // An accumulation of impacts on a stop, or a mass arriving at
+            // rest on it, pressed: held there (as on the RK4 path), where
+            // the surface is a stop.
+            let at_rest = |w: Option<usize>, segment: &Segment| match (segment.mode, w) {
+                (Mode::Region(r), Some(w)) => match segment.dynamics.watch[w].what {
+                    Watch::Surface(j) => self.stop_of(j).map(|_| (j, r)),
+                    _ => None,
+                },
+                _ => None,
+            };
+            let next = self.next_crossing(&segment, start, &span, &mut budget);
+            if let Next::Chattering(w, p) | Next::Sticking(w, p) = &next {
+                if let Some((j, r)) = at_rest(*w, &segment) {
+                    let (held, s) = self.hold(j, p);
+                    let dt = p.t - segment.t0;
+                    jacobian = s * self.flow(&segment.dynamics, dt) * jacobian;
+                    trace_integral += segment.dynamics.trace * dt;
+                    // The held motion forgets the stop's coordinate and
+                    // its velocity; the volume law does not apply to it.
+                    (log_det_saltation, rank_loss) = (f64::NAN, rank_loss.max(2.min(n as u32)));
+                    segment = self.segment(p.t, &held, Mode::Held { event: j, sides: r });
+                    start = self.point(&segment, p.t, held);
+                    continue;
+                }
+            }
+            let (w, p) = match next {
                 Next::End(p) => break (p, PiecewiseStatus::Ok),
-                Next::Chattering(p) => break (p, PiecewiseStatus::Chattering),
-                Next::Sticking(p) => break (p, PiecewiseStatus::Sticking),
+                Next::Chattering(_, p) => break (p, PiecewiseStatus::Chattering),
+                Next::Sticking(_, p) => break (p, PiecewiseStatus::Sticking),
                 Next::Diverged(p) => break (p, PiecewiseStatus::Diverged),
                 Next::Crossing(w, p) => (w, p),
             };
@@ -766,6 +816,35 @@ impl PiecewiseLinear {
             // the root is a tangency that rounding turned over.
             let approach = p.g1[w];
             let rate = watched.sign * approach;
+            if let (Mode::Region(r), Watch::Surface(j), true) =
+                (segment.mode, watched.what, approach <= 0.0)
+            {
+                if let Some((i, v)) = self.stop_of(j) {
+                    // A stop touched without approaching it, to rounding:
+                    // a mass at rest there (right after a release, where
+                    // the force pulling away is tiny). Held if pressed,
+                    // else it moves on from rest; nothing to reverse.
+                    let mut y = p.y.clone();
+                    y[i] = self.surfaces[j].offset / self.surfaces[j].normal[i];
+                    y[v] = 0.0;
+                    let side = self.surfaces[j].normal[i].signum();
+                    let pressed = side * self.fields[r].eval(self.omega, p.t, &y)[v] > 0.0;
+                    let dt = p.t - segment.t0;
+                    jacobian = self.flow(&segment.dynamics, dt) * jacobian;
+                    trace_integral += segment.dynamics.trace * dt;
+                    let mode = if pressed {
+                        let (_, s) = self.hold(j, &p);
+                        jacobian = s * jacobian;
+                        (log_det_saltation, rank_loss) = (f64::NAN, rank_loss.max(2.min(n as u32)));
+                        Mode::Held { event: j, sides: r }
+                    } else {
+                        Mode::Region(r)
+                    };
+                    segment = self.segment(p.t, &y, mode);
+                    start = self.point(&segment, p.t, y);
+                    continue;
+                }
+            }
             if approach.is_nan() || approach <= 0.0 {
                 break (p, PiecewiseStatus::Grazing);
             }
@@ -775,6 +854,17 @@ impl PiecewiseLinear {
             if approach < GRAZING_RATE * gradient.norm() * p.field.norm() {
                 grazing = true;
             }
+            // A release from a stop is taken just past the root, where the
+            // force pulls away by a margin: at the root itself the mass
+            // leaves with zero speed and zero acceleration, which the scan
+            // that follows would read back, to rounding, as a contact (the
+            // closed form's `release_after` does the same).
+            let p = match (segment.mode, watched.what) {
+                (Mode::Held { event, sides }, Watch::Release) => {
+                    self.released(&segment, event, sides, p)
+                }
+                _ => p,
+            };
             // The next mode, the state there, the saltation matrix, its
             // ln|det|, and the surface just left tangentially (if any).
             let (next_mode, y_plus, saltation, log_det, leaving) =
@@ -841,6 +931,23 @@ impl PiecewiseLinear {
                         // propagated.
                         break (p, PiecewiseStatus::Sliding);
                     }
+                    (Mode::Held { .. }, Watch::Surface(_)) => {
+                        // Another surface met while held on a stop: not
+                        // propagated.
+                        break (p, PiecewiseStatus::Sticking);
+                    }
+                    (Mode::Held { event, sides }, Watch::Release) => {
+                        // The pressing force q = k·z reaches 0: the mass
+                        // leaves the stop, in its region's field, from rest.
+                        // Its release time moves by −k_y·δy/(dq/dt); the two
+                        // fields agree there (the held one differs by the
+                        // pressing force along the velocity, now 0), so the
+                        // saltation is I to rounding.
+                        let f_plus = self.fields[sides].eval(self.omega, p.t, &p.y);
+                        let s = DMatrix::identity(n, n)
+                            + (&f_plus - &p.field) * gradient.transpose() / rate;
+                        (Mode::Region(sides), p.y.clone(), s, f64::NAN, Some(event))
+                    }
                     (Mode::Sliding { switch, sides }, Watch::Margin { plus }) => {
                         let bit = 1 << self.bits[switch].expect("a switch has a region bit");
                         let next_region = if plus { sides | bit } else { sides & !bit };
@@ -852,8 +959,10 @@ impl PiecewiseLinear {
                             + (&f_plus - &p.field) * gradient.transpose() / rate;
                         (Mode::Region(next_region), y_off, s, f64::NAN, Some(switch))
                     }
-                    (Mode::Region(_), Watch::Margin { .. }) => {
-                        unreachable!("margins are watched while sliding only")
+                    (Mode::Region(_), Watch::Margin { .. } | Watch::Release)
+                    | (Mode::Sliding { .. }, Watch::Release)
+                    | (Mode::Held { .. }, Watch::Margin { .. }) => {
+                        unreachable!("margins are watched while sliding, the release while held")
                     }
                 };
             let dt = p.t - segment.t0;
@@ -868,6 +977,12 @@ impl PiecewiseLinear {
                 // where the new side's rate n·F⁺ starts at 0): rounding
                 // must not read that rate as a return to the surface.
                 start.g1[j] = start.g1[j].min(0.0);
+                if self.bits[j].is_none() {
+                    // Released from a stop, where the pressing force (the
+                    // stop's g'') has just fallen through 0: rounding must
+                    // not read it as pressed again.
+                    start.g2[j] = start.g2[j].min(0.0);
+                }
             }
         };
         let dt = end.t - segment.t0;
@@ -878,7 +993,7 @@ impl PiecewiseLinear {
             s => s,
         };
         let (region, sliding, state) = match segment.mode {
-            Mode::Region(r) => (r, None, end.y),
+            Mode::Region(r) | Mode::Held { sides: r, .. } => (r, None, end.y),
             Mode::Sliding { switch, sides } => (sides, Some(switch), self.onto(switch, &end.y)),
         };
         PiecewiseIteration {
@@ -1034,9 +1149,125 @@ impl PiecewiseLinear {
         watch.push((Watch::Margin { plus: false }, minus, -1.0));
         let event = |w: Watch| match w {
             Watch::Surface(k) => self.bits[k].is_none(),
-            Watch::Margin { .. } => false,
+            Watch::Margin { .. } | Watch::Release => false,
         };
         Some(dynamics(b, watch, event))
+    }
+
+    /// Surface j as a stop: (i, j_v), where it is an event x_i = d (its
+    /// normal along state i alone) whose reset changes the velocity x_v
+    /// alone, x_i' = x_v in every region. The RK4 path's stops
+    /// (`integrate::Wall`) are these.
+    fn stop_of(&self, j: usize) -> Option<(usize, usize)> {
+        let surface = &self.surfaces[j];
+        let SurfaceKind::Event { reset, .. } = &surface.kind else {
+            return None;
+        };
+        let n = self.dimension();
+        let mut along = (0..n).filter(|&i| surface.normal[i] != 0.0);
+        let (i, None) = (along.next()?, along.next()) else {
+            return None;
+        };
+        let moved: Vec<usize> = (0..n)
+            .filter(|&c| (0..n).any(|r| reset[(r, c)] != if r == c { 1.0 } else { 0.0 }))
+            .collect();
+        let [v] = moved[..] else {
+            return None;
+        };
+        let velocity_of_i = self.fields.iter().all(|f| {
+            f.constant[i] == 0.0
+                && f.cos[i] == 0.0
+                && f.sin[i] == 0.0
+                && (0..n).all(|c| f.a[(i, c)] == if c == v { 1.0 } else { 0.0 })
+        });
+        (v != i && velocity_of_i).then_some((i, v))
+    }
+
+    /// The held motion on stop `event` in region `sides`: the region's
+    /// field with the velocity's row removed (the pressing force taken up
+    /// by the stop; x_i' = x_v = 0 follows), and the scan's watch: the
+    /// other surfaces, and the release, where the pressing force
+    /// σ·F_v (σ the stop's side) falls to 0.
+    fn held_dynamics(&self, event: usize, sides: usize) -> Dynamics {
+        let n = self.dimension();
+        let (i, v) = self
+            .stop_of(event)
+            .expect("a held mode is entered on a stop");
+        let mut b = self.regions[sides].b.clone();
+        b.row_mut(v).fill(0.0);
+        // The pressing force σ·F_v = σ·(row v of B)·z, σ = sign of n_i.
+        let side = self.surfaces[event].normal[i].signum();
+        let pressing = self.regions[sides].b.row(v).transpose() * side;
+        let mut watch: Vec<(Watch, DVector<f64>, f64)> = self
+            .surfaces
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| k != event)
+            .map(|(k, s)| {
+                (
+                    Watch::Surface(k),
+                    s.augmented(),
+                    side_sign(self.bits[k], sides),
+                )
+            })
+            .collect();
+        // The pressing force reaching 0 from above: g = −q rises through 0.
+        watch.push((Watch::Release, pressing, -1.0));
+        debug_assert_eq!(b.nrows(), n + FORCING);
+        let event_surface = |w: Watch| match w {
+            Watch::Surface(k) => self.bits[k].is_none(),
+            Watch::Margin { .. } | Watch::Release => false,
+        };
+        dynamics(b, watch, event_surface)
+    }
+
+    /// A mass coming to rest on stop `event` at `p`: the
+    /// state put on the stop at rest (x_i = d, x_v = 0) and the saltation
+    /// into the held motion, which forgets x_i and x_v (the other states'
+    /// rows of the held field are the free field's, so the arrival time
+    /// moves them only at second order).
+    fn hold(&self, event: usize, p: &Point) -> (DVector<f64>, DMatrix<f64>) {
+        let n = self.dimension();
+        let (i, v) = self.stop_of(event).expect("a stop");
+        let surface = &self.surfaces[event];
+        let mut y = p.y.clone();
+        y[i] = surface.offset / surface.normal[i];
+        y[v] = 0.0;
+        let mut s = DMatrix::identity(n, n);
+        s[(i, i)] = 0.0;
+        s[(v, v)] = 0.0;
+        (y, s)
+    }
+
+    /// The release from stop `event` (region `sides`) found at `p`, moved
+    /// on along the held segment until the free field's force pulls away
+    /// from the stop by 1e-12 of the size of its terms, with the stop's
+    /// coordinate and velocity put back exactly at rest.
+    fn released(&self, segment: &Segment, event: usize, sides: usize, p: Point) -> Point {
+        let (i, v) = self
+            .stop_of(event)
+            .expect("a held mode is entered on a stop");
+        let side = self.surfaces[event].normal[i].signum();
+        let row = self.regions[sides].b.row(v).transpose();
+        let at_rest = |q: Point| -> (DVector<f64>, f64, f64) {
+            let mut y = q.y;
+            y[i] = self.surfaces[event].offset / self.surfaces[event].normal[i];
+            y[v] = 0.0;
+            let z = augment(&y, self.omega, q.t);
+            let terms: f64 = row.iter().zip(z.iter()).map(|(a, b)| (a * b).abs()).sum();
+            (y, side * row.dot(&z), 1e-12 * terms)
+        };
+        let (mut t, mut nudge) = (p.t, 4.0 * f64::EPSILON * p.t.abs().max(1.0));
+        let (mut y, mut pressing, margin) = at_rest(p);
+        for _ in 0..60 {
+            if pressing <= -margin {
+                break;
+            }
+            t += nudge;
+            nudge *= 2.0;
+            (y, pressing, _) = at_rest(self.eval(segment, t));
+        }
+        self.point(segment, t, y)
     }
 
     /// y moved along n onto switch j's surface (a sliding state kept on it
@@ -1096,6 +1327,7 @@ impl PiecewiseLinear {
                 self.sliding_dynamics(switch, sides)
                     .expect("a sliding mode is entered only where it is propagated"),
             ),
+            Mode::Held { event, sides } => Arc::new(self.held_dynamics(event, sides)),
         };
         Segment {
             t0,
@@ -1197,7 +1429,7 @@ impl PiecewiseLinear {
                 {
                     // On an event surface (to rounding), pressed into it.
                     if a.g1[j] == 0.0 {
-                        return Next::Sticking(a);
+                        return Next::Sticking(Some(j), a);
                     }
                     // A bounce below the time or position resolution: the
                     // tail of an accumulating sequence of events.
@@ -1205,7 +1437,7 @@ impl PiecewiseLinear {
                     if -2.0 * a.g1[j] < span.chatter_time * a.g2[j]
                         || a.g1[j] * a.g1[j] < 2.0 * a.g2[j] * resolution
                     {
-                        return Next::Chattering(a);
+                        return Next::Chattering(Some(j), a);
                     }
                 }
                 if a.g[j] >= 0.0 && (a.g1[j] > 0.0 || (a.g1[j] == 0.0 && a.g2[j] > 0.0)) {
@@ -1217,7 +1449,7 @@ impl PiecewiseLinear {
                 return Next::End(a);
             }
             if *budget == 0 {
-                return Next::Chattering(a);
+                return Next::Chattering(None, a);
             }
             *budget -= 1;
             let remaining = span.end - a.t;
@@ -2120,7 +2352,7 @@ mod tests {
     }
 
     #[test]
-    fn resets_to_rest_and_accumulating_events_stop() {
+    fn resets_to_rest_and_accumulating_events_hold_the_mass() {
         // e = 0 with the force pulling off the wall (-X_w + f cos ηt < 0):
         // propagated, the Jacobian of rank 1 (ln det S = -∞), as the
         // closed form has it.
@@ -2139,25 +2371,36 @@ mod tests {
                 assert!((it.jacobian[(i, j)] - exact.jacobian[(i, j)]).abs() < 1e-12);
             }
         }
-        // X_w = -2: the force -X_w + f cos ηt ≥ 1 presses into the wall.
-        // e = 0 comes to rest on it: sticking, stopped after the reset.
-        let stick = seed(0.05, 1.0, eta, -2.0, 0.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
-        assert_eq!(
-            (stick.status, stick.crossings[0]),
-            (PiecewiseStatus::Sticking, 1)
-        );
-        // At the refined contact (the nearer end of the final bracket).
-        assert!((stick.state[0] + 2.0).abs() < 1e-15 && stick.state[1] == 0.0);
-        assert!(stick.time < TAU / eta);
-        // e = 0.5: a Zeno sequence of bounces, stopped at its tail.
-        let zeno = seed(0.05, 1.0, eta, -2.0, 0.5).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
-        assert_eq!(zeno.status, PiecewiseStatus::Chattering);
-        assert!(
-            zeno.crossings[0] > 10 && zeno.crossings[0] < 100,
-            "{:?}",
-            zeno.crossings
-        );
-        assert!(zeno.time < TAU / eta);
+        // X_w = -2: the force -X_w + f cos ηt ≥ 1 presses into the wall for
+        // ever. e = 0 comes to rest on it at the first contact, e = 0.5 at
+        // the end of a Zeno sequence of bounces: held there to the period's
+        // end (Mode::Held), the stop's coordinate and velocity forgotten,
+        // as in the closed form.
+        for (e, bounces) in [(0.0, 1..2), (0.5, 11..100)] {
+            let held = seed(0.05, 1.0, eta, -2.0, e).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
+            let closed = ForcedImpactOscillator::new(0.05, 1.0, eta, -2.0, e)
+                .unwrap()
+                .iterate([-3.0, 0.0]);
+            assert_eq!(
+                (held.status, held.rank_loss),
+                (PiecewiseStatus::Ok, 2),
+                "e = {e}"
+            );
+            assert_eq!(
+                (closed.status, closed.rank_loss),
+                (ExactStatus::Ok, 2),
+                "e = {e}"
+            );
+            assert!(
+                bounces.contains(&held.crossings[0]),
+                "e = {e}: {:?}",
+                held.crossings
+            );
+            assert_eq!((held.state[0], held.state[1]), (-2.0, 0.0), "e = {e}");
+            assert_eq!(held.state.as_slice(), closed.state.as_slice(), "e = {e}");
+            assert_eq!(held.time, TAU / eta);
+            assert!(held.jacobian.iter().all(|&j| j == 0.0), "e = {e}");
+        }
         // e = 1 bounces all period long and completes it.
         let bounce = seed(0.05, 1.0, eta, -2.0, 1.0).iterate(&vector(&[-3.0, 0.0]), 0, TAU / eta);
         assert_eq!(bounce.status, PiecewiseStatus::Ok);

@@ -624,6 +624,8 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         } else {
             stats.rank_loss = stats.rank_loss.max(1);
         }
+        // Sliding forgets one direction, a mass held on a stop two.
+        stats.rank_loss = stats.rank_loss.max(it.rank_loss);
         stats.slowest_impact = stats.slowest_impact.min(it.min_crossing_rate);
         match it.status {
             PiecewiseStatus::Ok => {}
