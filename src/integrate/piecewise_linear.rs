@@ -86,9 +86,9 @@
 //! surface (motion on two surfaces at once).
 //!
 //! **Sticking on a stop.** On a stop (an event x_i = d whose reset reverses
-//! the velocity x_v, x_i' = x_v: [`PiecewiseLinear::stop_of`]), a mass that
+//! the velocity x_v, x_i' = x_v: `PiecewiseLinear::stop_of`), a mass that
 //! arrives at rest pressed into it, or ends an accumulating (Zeno)
-//! sequence of bounces there, is held ([`Mode::Held`]): the region's field
+//! sequence of bounces there, is held (`Mode::Held`): the region's field
 //! with x_v's row removed, linear again, while the pressing force
 //! σ·F_v (a linear function of z) stays positive; the scan watches it and
 //! the mass leaves from rest where it falls to 0 (taken just past the

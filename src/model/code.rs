@@ -48,7 +48,7 @@ pub struct Code {
     /// `system::section`), its time average enters the sum rule.
     pub divergence_along: Option<Tape>,
     /// ∂F_i/∂x_j, row-major: the time scales of the flow (see
-    /// [`ModelFlow::stiffness`]).
+    /// `system::model::ModelFlow::stiffness`).
     pub jacobian: Vec<Expr>,
     /// The Poincaré section of a section map (see `system::section`).
     pub section: Option<SectionSpec>,

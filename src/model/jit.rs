@@ -146,7 +146,7 @@ impl Native {
 
     /// [`call`](Self::call) with the outputs written into `out`, where the
     /// caller keeps them (no copy of a batch's outputs per step), and
-    /// left there as the AVX2 code reads them (see [`read_as_written`]).
+    /// left there as the AVX2 code reads them (see `read_as_written`).
     /// Only the tape's rows are written: the rows of `out` past them keep
     /// what they held. `out` should be 32-byte aligned.
     #[inline(always)]

@@ -136,7 +136,7 @@ pub struct GridData {
     pub x: Vec<f64>,
     /// The grid's y values (ny of them, in any order).
     pub y: Vec<f64>,
-    /// λ₁ at (x[i], y[j]) is `lambda1[j * nx + i]` (x fastest); NaN marks a
+    /// λ₁ at (x\[i\], y\[j\]) is `lambda1[j * nx + i]` (x fastest); NaN marks a
     /// failed lane, drawn grey.
     pub lambda1: Vec<f64>,
     /// Flows: λ₁ per unit time; maps: per iteration.
