@@ -977,12 +977,6 @@ impl PiecewiseLinear {
                 // where the new side's rate n·F⁺ starts at 0): rounding
                 // must not read that rate as a return to the surface.
                 start.g1[j] = start.g1[j].min(0.0);
-                if self.bits[j].is_none() {
-                    // Released from a stop, where the pressing force (the
-                    // stop's g'') has just fallen through 0: rounding must
-                    // not read it as pressed again.
-                    start.g2[j] = start.g2[j].min(0.0);
-                }
             }
         };
         let dt = end.t - segment.t0;
