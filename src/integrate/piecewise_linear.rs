@@ -1125,27 +1125,11 @@ impl PiecewiseLinear {
         plus[n] += limit - 0.5 * normal_jump;
         let mut minus = k_a; // L + m
         minus[n] += limit + 0.5 * normal_jump;
-        let mut watch: Vec<(Watch, DVector<f64>, f64)> = self
-            .surfaces
-            .iter()
-            .enumerate()
-            .filter(|&(k, _)| k != j)
-            .map(|(k, s)| {
-                (
-                    Watch::Surface(k),
-                    s.augmented(),
-                    side_sign(self.bits[k], sides),
-                )
-            })
-            .collect();
+        let mut watch = self.other_surfaces(j, sides);
         // A margin reaching 0 from above: g = −q rises through 0.
         watch.push((Watch::Margin { plus: true }, plus, -1.0));
         watch.push((Watch::Margin { plus: false }, minus, -1.0));
-        let event = |w: Watch| match w {
-            Watch::Surface(k) => self.bits[k].is_none(),
-            Watch::Margin { .. } | Watch::Release => false,
-        };
-        Some(dynamics(b, watch, event))
+        Some(dynamics(b, watch, |w| self.is_event(w)))
     }
 
     /// Surface j as a stop: (i, j_v), where it is an event x_i = d (its
@@ -1192,11 +1176,20 @@ impl PiecewiseLinear {
         // The pressing force σ·F_v = σ·(row v of B)·z, σ = sign of n_i.
         let side = self.surfaces[event].normal[i].signum();
         let pressing = self.regions[sides].b.row(v).transpose() * side;
-        let mut watch: Vec<(Watch, DVector<f64>, f64)> = self
-            .surfaces
+        let mut watch = self.other_surfaces(event, sides);
+        // The pressing force reaching 0 from above: g = −q rises through 0.
+        watch.push((Watch::Release, pressing, -1.0));
+        debug_assert_eq!(b.nrows(), n + FORCING);
+        dynamics(b, watch, |w| self.is_event(w))
+    }
+
+    /// What a mode on surface `on` (sliding on it, or held on it) watches
+    /// of the other surfaces, with the orientations of region `sides`.
+    fn other_surfaces(&self, on: usize, sides: usize) -> Vec<(Watch, DVector<f64>, f64)> {
+        self.surfaces
             .iter()
             .enumerate()
-            .filter(|&(k, _)| k != event)
+            .filter(|&(k, _)| k != on)
             .map(|(k, s)| {
                 (
                     Watch::Surface(k),
@@ -1204,15 +1197,16 @@ impl PiecewiseLinear {
                     side_sign(self.bits[k], sides),
                 )
             })
-            .collect();
-        // The pressing force reaching 0 from above: g = −q rises through 0.
-        watch.push((Watch::Release, pressing, -1.0));
-        debug_assert_eq!(b.nrows(), n + FORCING);
-        let event_surface = |w: Watch| match w {
+            .collect()
+    }
+
+    /// Whether a watched function is an event surface's h (bounces and
+    /// sticking apply to it).
+    fn is_event(&self, w: Watch) -> bool {
+        match w {
             Watch::Surface(k) => self.bits[k].is_none(),
             Watch::Margin { .. } | Watch::Release => false,
-        };
-        dynamics(b, watch, event_surface)
+        }
     }
 
     /// A mass coming to rest on stop `event` at `p`: the
