@@ -342,6 +342,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         .map(|(name, s)| (name, s.wgsl.is_some()))
         .collect();
     let expected = [
+        // A stop and a switch together (one vec4 of counts for both).
+        ("belt-into-stop.toml", true),
         ("duffing.toml", true),
         ("forced-pendulum.toml", true),
         // A switch with a stick limit, slid on (stick-slip): the kernels

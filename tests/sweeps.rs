@@ -294,6 +294,7 @@ fn every_committed_scene_is_valid() {
     assert_eq!(
         names,
         [
+            "belt-into-stop",
             "chaotic-window",
             "duffing",
             "eta-f-map",
