@@ -1092,7 +1092,7 @@ fn a_rebound_across_a_switch_on_the_gpu_is_the_cpu_s() {
                 [run]\nvalidate = 0\n";
     let scene = |backend: &str| {
         common::scene(
-            &format!("{}\n{body}", common::BELT_INTO_STOP),
+            &format!("{}\n{body}", common::belt_into_stop()),
             &[&format!("run.backend=\"{backend}\"")],
         )
     };

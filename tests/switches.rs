@@ -213,12 +213,12 @@ fn a_rebound_across_a_switch_takes_the_field_of_its_other_side() {
     // side's friction until the next crossing before `surface::jumped`.
     let etas = [1.0, 1.3, 1.6, 1.9, 2.2, 2.5];
     let exact = run(&model_scene(
-        common::BELT_INTO_STOP,
+        &common::belt_into_stop(),
         &sweep(&etas, 1800, "exact"),
         &[],
     ));
     let cpu = run(&model_scene(
-        common::BELT_INTO_STOP,
+        &common::belt_into_stop(),
         &sweep(&etas, 1800, "cpu"),
         &[],
     ));

@@ -247,32 +247,15 @@ surface = "-gap - x"
 reset = { v = "-e*v" }
 "#;
 
-/// A mass driven along a slow belt (Coulomb friction on the slip, switch
-/// `slip`) into a rigid stop that reverses its velocity: every rebound jumps
-/// the velocity from above the belt's to below it, across the switch.
+/// models/belt-into-stop.toml as a scene's `model` line: a mass driven
+/// along a slow belt (Coulomb friction on the slip, switch `slip`) into a
+/// rigid stop that reverses its velocity, every rebound jumping the
+/// velocity from above the belt's to below it, across the switch.
 /// (tests/switches.rs against the exact backend, tests/gpu_models.rs on the
 /// GPU.)
-pub const BELT_INTO_STOP: &str = r#"
-[model]
-name = "belt-into-stop"
-states = ["x", "v"]
-[model.parameters]
-zeta = 0.05
-mu = 0.3
-vb = 0.05
-f = 2.0
-eta = 1.9
-gap = 0.4
-[[model.switches]]
-name = "slip"
-surface = "v - vb"
-[model.equations]
-x = "v"
-v = "-2*zeta*v - x - mu*sign(slip) + f*cos(eta*t)"
-[model.map]
-period = "2*pi/eta"
-[[model.events]]
-name = "stop"
-surface = "x - gap"
-reset = { v = "-0.5*v" }
-"#;
+pub fn belt_into_stop() -> String {
+    format!(
+        "model = {:?}",
+        format!("{}/models/belt-into-stop.toml", env!("CARGO_MANIFEST_DIR"))
+    )
+}
