@@ -1100,3 +1100,140 @@ fn a_rebound_across_a_switch_on_the_gpu_is_the_cpu_s() {
     eprintln!("belt into a stop: CPU - GPU {d:e}, sum rule CPU {cpu_sum:e}, GPU {gpu_sum:e}");
     assert!(gpu_sum <= 1e-8, "{gpu_sum:e}");
 }
+
+/// A section model on the GPU and on the CPU path, the same scene.
+fn section_runs(name: &str, body: &str) -> (Report, Report) {
+    let gpu = run(&model_scene(
+        name,
+        body,
+        &["run.backend=\"gpu\"", "run.precision=\"f64\""],
+    ));
+    assert_eq!(gpu.backend, Backend::Gpu);
+    assert!(gpu.gpu.as_ref().unwrap().variant.contains("/section"));
+    let cpu = run(&model_scene(name, body, &["run.backend=\"cpu\""]));
+    (gpu, cpu)
+}
+
+#[test]
+fn lorenz_on_its_section_on_the_gpu_has_the_flow_s_exponents_and_the_cpu_s() {
+    if !gpu_or_skip(
+        "lorenz_on_its_section_on_the_gpu_has_the_flow_s_exponents_and_the_cpu_s",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // ρ = 28: chaotic, published 0.9056 and -14.5723; ρ = 350: a periodic
+    // orbit, where the two paths must agree lane for lane.
+    let body = "[sweep]\nparameter = \"rho\"\nvalues = [28.0, 350.0]\n\
+                [integration]\nsteps_per_period = 2000\ntransient = 100\niterations = 3000\n\
+                initial_state = [1.0, 1.0, 1.0]\n";
+    let (gpu, cpu) = section_runs("lorenz.toml", body);
+    for (k, lane) in gpu.lanes.iter().enumerate() {
+        assert_eq!(lane.status, LaneStatus::Ok, "lane {k}");
+        // -(σ + 1 + β) plus the flux term, as on the CPU.
+        let residual = lane.exponent_sum() - gpu.expected_sums[k];
+        eprintln!(
+            "lorenz lane {k}: {:?}, sum rule {residual:e}",
+            lane.exponents
+        );
+        assert!(residual.abs() <= 1e-8, "lane {k}: {residual:e}");
+    }
+    let chaotic = &gpu.lanes[0].exponents;
+    assert!((chaotic[0] - 0.9056).abs() < 0.01, "{chaotic:?}");
+    assert!((chaotic[1] + 14.5723).abs() < 0.02, "{chaotic:?}");
+    // Measured on lavapipe: 1.2e-9 (the steps are the CPU's to rounding,
+    // not to the bit, for this model's field).
+    let d = exponent_difference(&gpu.lanes[1].exponents, &cpu.lanes[1].exponents);
+    eprintln!("lorenz ρ = 350: GPU vs CPU {d:e}");
+    assert!(d <= 1e-8, "{d:e}");
+    let validation = gpu.gpu.as_ref().unwrap().validation.as_ref().unwrap();
+    assert!(validation.max_difference <= validation.tolerance);
+}
+
+#[test]
+fn rossler_on_its_section_on_the_gpu_agrees_with_the_cpu_and_keeps_its_sum_rule() {
+    if !gpu_or_skip(
+        "rossler_on_its_section_on_the_gpu_agrees_with_the_cpu_and_keeps_its_sum_rule",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // c = 2.5 and 3.5: periodic orbits; 5.7: chaotic. Its divergence
+    // a + x - c depends on the state: the host integrates it along the
+    // reference's steps, so the sum rule is known on the GPU too.
+    let body = "[sweep]\nparameter = \"c\"\nvalues = [2.5, 3.5, 5.7]\n\
+                [integration]\nsteps_per_period = 200\ntransient = 100\niterations = 300\n\
+                initial_state = [1.0, 1.0, 1.0]\n";
+    let (gpu, cpu) = section_runs("rossler.toml", body);
+    for k in 0..3 {
+        let (g, c) = (&gpu.lanes[k], &cpu.lanes[k]);
+        assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+        let residual = g.exponent_sum() - gpu.expected_sums[k];
+        let cpu_residual = c.exponent_sum() - cpu.expected_sums[k];
+        let d = exponent_difference(&g.exponents, &c.exponents);
+        eprintln!(
+            "rossler lane {k}: GPU vs CPU {d:e}, sum rule {residual:e} (CPU {cpu_residual:e})"
+        );
+        // RK4's error in the divergence integral at 200 steps per unit
+        // time: 4.2e-7 on the chaotic lane, on either path.
+        assert!(residual.abs() <= 1e-6, "lane {k}: {residual:e}");
+        assert!((residual - cpu_residual).abs() <= 1e-9, "lane {k}");
+        if k < 2 {
+            // Measured on lavapipe: 0 (the CPU's bits).
+            assert!(d <= 1e-10, "lane {k}: {d:e}");
+        }
+    }
+}
+
+#[test]
+fn a_section_never_reached_fails_its_lane_on_the_gpu_as_on_the_cpu() {
+    if !gpu_or_skip(
+        "a_section_never_reached_fails_its_lane_on_the_gpu_as_on_the_cpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // At ρ = 0.5 the origin attracts every trajectory: z never comes up
+    // through ρ - 1 = -0.5, and after 10^4 time units the return is given
+    // up. The other lane goes on.
+    let body = "[sweep]\nparameter = \"rho\"\nvalues = [0.5, 28.0]\n\
+                [integration]\nsteps_per_period = 20\ntransient = 2\niterations = 5\n\
+                initial_state = [1.0, 1.0, 1.0]\n";
+    let (gpu, cpu) = section_runs("lorenz.toml", body);
+    for report in [&gpu, &cpu] {
+        assert!(
+            report.lanes[0].status.is_failure(),
+            "{}",
+            report.lanes[0].status
+        );
+        assert!(report.lanes[0].exponents.iter().all(|e| e.is_nan()));
+        assert_eq!(report.lanes[1].status, LaneStatus::Ok);
+    }
+    assert_eq!(gpu.lanes[0].status, cpu.lanes[0].status);
+}
+
+#[test]
+fn a_section_in_f32_is_refused_by_gpu_and_left_to_the_cpu_by_auto() {
+    // No adapter needed: the refusal comes first.
+    let body = "[integration]\ntransient = 1\niterations = 1\n";
+    let scene = model_scene(
+        "lorenz.toml",
+        body,
+        &["run.backend=\"gpu\"", "run.precision=\"f32\""],
+    );
+    let err = lyapsweep::run(&scene).unwrap_err();
+    assert!(err.is_input_error(), "exit 2");
+    let text = err.to_string();
+    assert!(
+        text.contains("run.precision")
+            && text.contains("a Poincaré section runs in f64 on the GPU"),
+        "{text}"
+    );
+    let auto = run(&model_scene(
+        "lorenz.toml",
+        body,
+        &["run.backend=\"auto\"", "run.precision=\"f32\""],
+    ));
+    assert_eq!(auto.backend, Backend::Cpu);
+    assert!(auto.choice.unwrap().contains("runs in f64 on the GPU"));
+}

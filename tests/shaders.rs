@@ -148,7 +148,7 @@ fn every_variant_validates() {
     let variants = all_variants();
     assert!(variants.len() >= 40);
     for v in &variants {
-        for kernel in Kernel::ALL {
+        for &kernel in v.kernels() {
             module(v, kernel);
         }
     }
@@ -182,7 +182,7 @@ fn no_variant_calls_a_transcendental_builtin() {
         if v.precision == Precision::F32 && v.system.model.is_some() {
             continue;
         }
-        for kernel in Kernel::ALL {
+        for &kernel in v.kernels() {
             let m = module(&v, kernel);
             let functions = m
                 .functions
@@ -353,9 +353,10 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         ("impact-pair.toml", true),
         // The `lorenz` kind's time-T map.
         ("lorenz-flow.toml", true),
-        // Poincaré sections: the kernels run period maps.
-        ("lorenz.toml", false),
-        ("rossler.toml", false),
+        // Poincaré sections: the section kernel steps, the host locates
+        // the crossings and builds the factors.
+        ("lorenz.toml", true),
+        ("rossler.toml", true),
         ("seed-oscillator.toml", true),
         // A switch crossed transversally (the field continuous across it):
         // the trajectories carry their region.
@@ -414,8 +415,9 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
         ("soft-stop.toml", true),
         ("vibrating-table.toml", true),
     ] {
-        for kernel in Kernel::ALL {
-            let source = variant(system(name), Precision::F64).source(kernel);
+        let v = variant(system(name), Precision::F64);
+        for &kernel in v.kernels() {
+            let source = v.source(kernel);
             for part in ["fn surface_values(", "TRAJ_REGION", "fluxes", "fn log64("] {
                 assert_eq!(source.contains(part), surfaces, "{name} {kernel:?}: {part}");
             }
@@ -429,4 +431,41 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
         "{seed}"
     );
     assert!(seed.contains("fn wall_position(p: Params)"), "{seed}");
+}
+
+#[test]
+fn a_section_model_runs_the_section_kernel_alone_and_period_maps_never_do() {
+    let systems = model_files();
+    let system = |name: &str| systems.iter().find(|(n, _)| n == name).unwrap().1;
+    for name in ["lorenz.toml", "rossler.toml"] {
+        let v = Variant {
+            system: system(name),
+            precision: Precision::F64,
+            lyapunov: true,
+            difference: Difference::Central,
+            wall: false,
+            points: true,
+            impact_location: ImpactLocation::Newton,
+        };
+        assert!(v.section(), "{name}");
+        assert_eq!(v.kernels(), &[Kernel::Section]);
+        let source = v.source(Kernel::Section);
+        // The flow's three states, and the map's two coordinates.
+        assert!(source.contains("alias State = vec3<real>;"), "{name}");
+        assert!(source.contains("const SECTION_STATE: u32 = "), "{name}");
+        let m = module(&v, Kernel::Section);
+        assert!(has_function(&m, "crossed") && !has_function(&m, "resolve_impacts"));
+        assert!(!has_global(&m, "jac") && !has_global(&m, "traj"));
+    }
+    // The period maps' kernels know nothing of sections.
+    for v in all_variants().iter().filter(|v| !v.section()) {
+        for &kernel in v.kernels() {
+            let source = v.source(kernel);
+            assert!(
+                !source.contains("SECTION_") && !source.contains("fn crossed("),
+                "{} {kernel:?}",
+                v.name()
+            );
+        }
+    }
 }

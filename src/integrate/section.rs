@@ -26,6 +26,14 @@ impl Section {
         self.direction * (y[self.state] - self.at)
     }
 
+    /// Whether a step from `before` to `after` crosses it: from behind it
+    /// to on or past it (the GPU's `crossed` in shaders/section.wgsl is
+    /// its twin).
+    #[inline(always)]
+    pub fn crossed<const N: usize>(&self, before: &[f64; N], after: &[f64; N]) -> bool {
+        self.distance(before) < 0.0 && self.distance(after) >= 0.0
+    }
+
     /// Its rate of change along the flow.
     pub fn rate<const N: usize, F: Flow<N>>(&self, flow: &F, y: &[f64; N]) -> f64 {
         self.direction * flow.rhs(&ZERO_PHASE, y)[self.state]
@@ -85,9 +93,8 @@ fn batch<const N: usize, const W: usize, F: Flow<N>>(
             }
             let before: [f64; N] = std::array::from_fn(|i| y[i][k]);
             let after: [f64; N] = std::array::from_fn(|i| y1[i][k]);
-            if section.distance(&before) < 0.0 && section.distance(&after) >= 0.0 {
-                let (s, at) = locate(flow, section, &before, &after, h);
-                crossed[k] = Some((at, step as f64 * h + s));
+            if section.crossed(&before, &after) {
+                crossed[k] = Some(crossing_in_step(flow, section, &before, &after, h, step));
                 open -= 1;
             }
         }
@@ -131,6 +138,23 @@ fn advance_batch<const N: usize, const W: usize, F: Flow<N>>(
     for (k, out) in ys.iter_mut().enumerate() {
         *out = std::array::from_fn(|i| y[i][k]);
     }
+}
+
+/// The crossing inside RK4 step number `step` (of h, counted from the
+/// start) from `before` to `after`, which [`Section::crossed`]: the state
+/// on the section and the time from the start. The GPU steps the
+/// trajectories and hands the host the crossing step, which locates it
+/// here as the CPU does.
+pub fn crossing_in_step<const N: usize, F: Flow<N>>(
+    flow: &F,
+    section: &Section,
+    before: &[f64; N],
+    after: &[f64; N],
+    h: f64,
+    step: usize,
+) -> ([f64; N], f64) {
+    let (s, at) = locate(flow, section, before, after, h);
+    (at, step as f64 * h + s)
 }
 
 /// The crossing inside the step from y0 to y1 (distance < 0 before, ≥ 0

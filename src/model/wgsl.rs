@@ -64,7 +64,11 @@
 //! mass at rest on a stop of a model with surfaces, whose release the CPU
 //! resolves with them) is flagged (`FLAG_SLIDING`) and its lane recomputed
 //! on the CPU by the backend; a model with stick limits on several
-//! switches (the two-block belt) and Poincaré sections run on the CPU.
+//! switches (the two-block belt) runs on the CPU.
+//!
+//! A Poincaré section's file adds `SECTION_STATE` and `SECTION_DIRECTION`
+//! (its `at` comes per lane from the host): `shaders/section.wgsl` steps
+//! its trajectories, and the host does the rest (`backend::gpu::section`).
 
 use std::fmt::{self, Write};
 
@@ -100,8 +104,6 @@ pub enum Unsupported {
     Number(f64),
     /// `t` outside the forcing clock (the CPU compiler refuses it first).
     Time,
-    /// A Poincaré section: the kernels run time-T maps.
-    Section,
     /// A switch with a stick limit in a model with several switches, made
     /// to be slid on several at once: the kernels slide on one.
     Sliding(String),
@@ -126,20 +128,15 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
-            Unsupported::Section => write!(
-                f,
-                "its map is a Poincaré section: the GPU kernels run period maps so far"
-            ),
         }
     }
 }
 
 /// Whether the kernels can run `code`, and if not why not.
 pub fn check(code: &Code) -> Result<(), Unsupported> {
-    if code.section.is_some() {
-        return Err(Unsupported::Section);
-    }
-    let n = code.dimension();
+    // The kernels' State is the flow's: N states, a map of N - 1 for a
+    // Poincaré section (which shaders/section.wgsl runs).
+    let n = code.states();
     if !(2..=4).contains(&n) {
         return Err(Unsupported::States(n));
     }
@@ -276,6 +273,9 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         surfaces(w, code);
         stick_limits(w, code);
     }
+    if let Some(section) = &code.section {
+        section_constants(w, code, section);
+    }
     if !model.angles.is_empty() {
         // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
         // with Rust's π and 2π to the bit.
@@ -296,6 +296,36 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         let _ = writeln!(w, "    return w;\n}}");
     }
     Ok(out)
+}
+
+/// A Poincaré section y_k = at(p), as `shaders/section.wgsl` reads it:
+/// the state k and the direction it is crossed in; `at` per lane, from
+/// the host (the CPU's own value of the expression).
+fn section_constants(w: &mut String, code: &Code, section: &crate::model::code::SectionSpec) {
+    let _ = writeln!(
+        w,
+        "\n// The Poincaré section {} = {}, crossed {}.\n\
+         const SECTION_STATE: u32 = {}u;\n\
+         const SECTION_DIRECTION: real = real({});",
+        code.model.names.states[section.state],
+        Written {
+            expr: &section.at,
+            names: &code.model.names
+        },
+        if section.increasing {
+            "increasing"
+        } else {
+            "decreasing"
+        },
+        section.state,
+        if section.increasing { "1.0" } else { "-1.0" },
+    );
+}
+
+/// Whether a system file is a Poincaré section's, which
+/// `shaders/section.wgsl` runs in place of the period-map kernels.
+pub fn has_section(system: &str) -> bool {
+    system.contains("const SECTION_STATE: u32")
 }
 
 /// The stops of `code` as `shaders/shared/impact.wgsl` reads them: per

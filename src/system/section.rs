@@ -16,7 +16,7 @@ use nalgebra::{DMatrix, SMatrix};
 use super::model::ModelFlow;
 use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
-use crate::integrate::section::{advance, next_crossings, Section};
+use crate::integrate::section::{advance, next_crossings, Crossing, Section};
 use crate::integrate::Flow;
 use crate::model::code::Code;
 use crate::model::tape::Tape;
@@ -40,9 +40,45 @@ pub struct SectionFlow<const D: usize, const N: usize> {
     divergence: Option<(&'static Tape, Vec<f64>)>,
 }
 
+/// One return of the reference to the section: the map's image (NaN
+/// where there is no return), the time it took, the flux term
+/// ln |F_k(start)/F_k(end)| and the speed through the section.
+#[derive(Clone, Copy, Debug)]
+pub struct Return<const D: usize> {
+    pub image: [f64; D],
+    pub time: f64,
+    pub log_flux: f64,
+    pub speed: f64,
+}
+
+impl<const D: usize> Return<D> {
+    pub fn add_to(&self, stats: &mut IterationStats) {
+        stats.time += self.time;
+        stats.log_flux += self.log_flux;
+        // A slow crossing is a near-tangency of the section, where a copy
+        // may cross elsewhere (or a loop later): the grazing test of
+        // impacts applies to it as it is.
+        stats.slowest_impact = stats.slowest_impact.min(self.speed);
+    }
+}
+
+/// The tangent map of one return, built part by part (see
+/// `tangent_factors`): each part runs the reference and its copies for
+/// `steps` RK4 steps of `h` from `y`.
+#[derive(Clone, Debug)]
+pub struct TangentParts<const N: usize> {
+    pub parts: usize,
+    pub steps: usize,
+    pub h: f64,
+    /// The reference at the start of the next part.
+    pub y: [f64; N],
+    /// The directions the copies start along (N×D, orthonormal).
+    frame: DMatrix<f64>,
+}
+
 impl<const D: usize, const N: usize> SectionFlow<D, N> {
     /// The point of the flow on the section with map coordinates x.
-    fn lift(&self, x: &[f64; D]) -> [f64; N] {
+    pub fn lift(&self, x: &[f64; D]) -> [f64; N] {
         let k = self.section.state;
         std::array::from_fn(|i| match i.cmp(&k) {
             std::cmp::Ordering::Less => x[i],
@@ -57,25 +93,164 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
         std::array::from_fn(|i| if i < k { y[i] } else { y[i + 1] })
     }
 
-    /// The next crossing of each of `ys`: the map point, the time, the
-    /// flux term and the speed through the section.
-    fn returns(&self, ys: &[[f64; N]], flow: &FlowSettings) -> Vec<([f64; D], f64, f64, f64)> {
-        let h = 1.0 / flow.steps_per_period as f64;
-        let max_steps = (MAX_RETURN_TIME * flow.steps_per_period as f64) as usize;
+    pub fn flow(&self) -> &ModelFlow<N> {
+        &self.flow
+    }
+
+    pub fn section(&self) -> &Section {
+        &self.section
+    }
+
+    /// The RK4 step of a return and the most steps one may take.
+    pub fn return_steps(flow: &FlowSettings) -> (f64, usize) {
+        (
+            1.0 / flow.steps_per_period as f64,
+            (MAX_RETURN_TIME * flow.steps_per_period as f64) as usize,
+        )
+    }
+
+    /// The return from `start` that ended in `crossing` (none: NaN).
+    pub fn return_from(&self, start: &[f64; N], crossing: Crossing<N>) -> Return<D> {
         let velocity = |y: &[f64; N]| self.flow.rhs(&ZERO_PHASE, y)[self.section.state];
+        match crossing {
+            Some((y, time)) => Return {
+                image: self.project(&y),
+                time,
+                log_flux: (velocity(start) / velocity(&y)).abs().ln(),
+                speed: velocity(&y).abs(),
+            },
+            None => Return {
+                image: [f64::NAN; D],
+                time: f64::NAN,
+                log_flux: f64::NAN,
+                speed: f64::NAN,
+            },
+        }
+    }
+
+    /// The next crossing of each of `ys`.
+    fn returns(&self, ys: &[[f64; N]], flow: &FlowSettings) -> Vec<Return<D>> {
+        let (h, max_steps) = Self::return_steps(flow);
         next_crossings(&self.flow, &self.section, ys, h, max_steps)
             .into_iter()
             .zip(ys)
-            .map(|(crossing, start)| match crossing {
-                Some((y, time)) => (
-                    self.project(&y),
-                    time,
-                    (velocity(start) / velocity(&y)).abs().ln(),
-                    velocity(&y).abs(),
-                ),
-                None => ([f64::NAN; D], f64::NAN, f64::NAN, f64::NAN),
-            })
+            .map(|(crossing, start)| self.return_from(start, crossing))
             .collect()
+    }
+
+    /// The parts of the tangent map of a return of time τ from x: as many
+    /// as keep each part's contraction within e^PART_CONTRACTION, each of
+    /// whole steps no longer than the return's.
+    pub fn tangent_parts(&self, x: &[f64; D], tau: f64, flow: &FlowSettings) -> TangentParts<N> {
+        let h = 1.0 / flow.steps_per_period as f64;
+        let parts = ((self.flow.contraction() * tau / PART_CONTRACTION).ceil() as usize).max(1);
+        let span = tau / parts as f64;
+        let steps = (span / h).ceil().max(1.0) as usize;
+        let k = self.section.state;
+        // The frame: the section's coordinates, as directions of the flow.
+        let mut frame = DMatrix::<f64>::zeros(N, D);
+        for i in 0..D {
+            frame[(if i < k { i } else { i + 1 }, i)] = 1.0;
+        }
+        TangentParts {
+            parts,
+            steps,
+            h: span / steps as f64,
+            y: self.lift(x),
+            frame,
+        }
+    }
+
+    /// The next part's perturbation δ and its trajectories: the reference,
+    /// then the copies at y ± δ·q_i along the frame's columns.
+    pub fn part_starts(
+        &self,
+        part: &TangentParts<N>,
+        relative_delta: f64,
+        difference: Difference,
+    ) -> (f64, Vec<[f64; N]>) {
+        let delta = perturbation_at(relative_delta, &part.y);
+        let copies = difference.copies(D);
+        let mut ys = vec![part.y; 1 + copies];
+        for (c, copy) in ys[1..].iter_mut().enumerate() {
+            let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
+            for (r, v) in copy.iter_mut().enumerate() {
+                *v += sign * delta * part.frame[(r, i)];
+            }
+        }
+        (delta, ys)
+    }
+
+    /// ∫ div F along the reference over the next part, where div F depends
+    /// on the state (its end is the reference's to the bit).
+    pub fn part_divergence(&self, part: &TangentParts<N>) -> Option<f64> {
+        let (tape, constants) = self.divergence.as_ref()?;
+        let density = |_: &Phase, y: &[f64; N]| -> f64 {
+            let y: [[f64; 1]; N] = std::array::from_fn(|i| [y[i]]);
+            let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[ZERO_PHASE], &y);
+            out[0][0]
+        };
+        let (_, integral) = crate::integrate::advance_integrating(
+            &self.flow, &part.y, ZERO_PHASE, part.h, part.steps, density,
+        );
+        Some(integral)
+    }
+
+    /// The factor R_j of a part from its trajectories' ends `ys`, with the
+    /// next part's frame and start.
+    pub fn part_end(
+        &self,
+        part: &mut TangentParts<N>,
+        ys: &[[f64; N]],
+        delta: f64,
+        difference: Difference,
+    ) -> SMatrix<f64, D, D> {
+        let mut columns = DMatrix::<f64>::zeros(N, D);
+        for i in 0..D {
+            for r in 0..N {
+                columns[(r, i)] = match difference {
+                    Difference::Forward => (ys[1 + i][r] - ys[0][r]) / delta,
+                    Difference::Central => (ys[1 + i][r] - ys[1 + D + i][r]) / (2.0 * delta),
+                };
+            }
+        }
+        // Remove the flow direction: the projection onto the section at
+        // the return kills it (P·Φ(τ, t)·F(y(t)) = P·F(y(τ)) = 0), and
+        // left in, the neutral direction would crowd the contracting
+        // one out of the frame, to be cancelled at the end.
+        let f = self.flow.rhs(&ZERO_PHASE, &ys[0]);
+        let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if norm > 0.0 {
+            for i in 0..D {
+                let along: f64 = (0..N).map(|r| f[r] * columns[(r, i)]).sum::<f64>() / norm;
+                for r in 0..N {
+                    columns[(r, i)] -= along * f[r] / norm;
+                }
+            }
+        }
+        let qr = columns.qr();
+        let (mut q, mut r) = (qr.q(), qr.r());
+        for i in 0..D {
+            if r[(i, i)] < 0.0 {
+                q.column_mut(i).neg_mut();
+                r.row_mut(i).neg_mut();
+            }
+        }
+        part.frame = q;
+        part.y = ys[0];
+        SMatrix::from_fn(|a, b| r[(a, b)])
+    }
+
+    /// The last factor, P·Q at the return point (the located crossing, on
+    /// the section): the frame projected onto the section along the flow.
+    pub fn last_factor(&self, part: &TangentParts<N>, image: &[f64; D]) -> SMatrix<f64, D, D> {
+        let k = self.section.state;
+        let end = self.lift(image);
+        let f = self.flow.rhs(&ZERO_PHASE, &end);
+        SMatrix::<f64, D, D>::from_fn(|a, b| {
+            let row = if a < k { a } else { a + 1 };
+            part.frame[(row, b)] - f[row] / f[k] * part.frame[(k, b)]
+        })
     }
 }
 
@@ -110,18 +285,13 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
 
     fn iterate_many(&self, xs: &mut [[f64; D]], flow: &FlowSettings, stats: &mut [IterationStats]) {
         let starts: Vec<[f64; N]> = xs.iter().map(|x| self.lift(x)).collect();
-        for ((x, st), (image, time, log_flux, speed)) in xs
+        for ((x, st), back) in xs
             .iter_mut()
             .zip(stats.iter_mut())
             .zip(self.returns(&starts, flow))
         {
-            *x = image;
-            st.time += time;
-            st.log_flux += log_flux;
-            // A slow crossing is a near-tangency of the section, where a
-            // copy may cross elsewhere (or a loop later): the grazing test
-            // of impacts applies to it as it is.
-            st.slowest_impact = st.slowest_impact.min(speed);
+            *x = back.image;
+            back.add_to(st);
         }
     }
 
@@ -145,105 +315,28 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
         stats: &mut IterationStats,
         factors: &mut Vec<SMatrix<f64, D, D>>,
     ) -> Option<[f64; D]> {
-        let start = self.lift(x);
-        let (image, tau, log_flux, speed) = self.returns(&[start], flow)[0];
-        stats.time += tau;
-        stats.log_flux += log_flux;
-        stats.slowest_impact = stats.slowest_impact.min(speed);
-        if !tau.is_finite() {
-            return Some(image);
+        let back = self.returns(&[self.lift(x)], flow)[0];
+        back.add_to(stats);
+        if !back.time.is_finite() {
+            return Some(back.image);
         }
-        let h = 1.0 / flow.steps_per_period as f64;
-        let parts = ((self.flow.contraction() * tau / PART_CONTRACTION).ceil() as usize).max(1);
-        let k = self.section.state;
-        // The frame: the section's coordinates, as directions of the flow.
-        let mut frame = DMatrix::<f64>::zeros(N, D);
-        for i in 0..D {
-            frame[(if i < k { i } else { i + 1 }, i)] = 1.0;
-        }
-        let mut y = start;
-        let copies = difference.copies(D);
-        for _ in 0..parts {
-            let span = tau / parts as f64;
-            let steps = (span / h).ceil().max(1.0) as usize;
-            let delta = perturbation_at(relative_delta, &y);
-            let mut ys = vec![y; 1 + copies];
-            for c in 0..copies {
-                let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
-                for r in 0..N {
-                    ys[1 + c][r] += sign * delta * frame[(r, i)];
-                }
-            }
-            advance(&self.flow, &mut ys, span / steps as f64, steps);
-            if let Some((tape, constants)) = &self.divergence {
-                // The same steps again for the reference alone, with div F
-                // integrated along them (its end is ys[0] to the bit).
-                let density = |_: &Phase, y: &[f64; N]| -> f64 {
-                    let y: [[f64; 1]; N] = std::array::from_fn(|i| [y[i]]);
-                    let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[ZERO_PHASE], &y);
-                    out[0][0]
-                };
-                let (end, integral) = crate::integrate::advance_integrating(
-                    &self.flow,
-                    &y,
-                    ZERO_PHASE,
-                    span / steps as f64,
-                    steps,
-                    density,
-                );
-                debug_assert_eq!(end, ys[0]);
+        let mut part = self.tangent_parts(x, back.time, flow);
+        for _ in 0..part.parts {
+            let (delta, mut ys) = self.part_starts(&part, relative_delta, difference);
+            advance(&self.flow, &mut ys, part.h, part.steps);
+            if let Some(integral) = self.part_divergence(&part) {
                 stats.log_flux += integral;
             }
-            let mut columns = DMatrix::<f64>::zeros(N, D);
-            for i in 0..D {
-                for r in 0..N {
-                    columns[(r, i)] = match difference {
-                        Difference::Forward => (ys[1 + i][r] - ys[0][r]) / delta,
-                        Difference::Central => (ys[1 + i][r] - ys[1 + D + i][r]) / (2.0 * delta),
-                    };
-                }
-            }
-            // Remove the flow direction: the projection onto the section at
-            // the return kills it (P·Φ(τ, t)·F(y(t)) = P·F(y(τ)) = 0), and
-            // left in, the neutral direction would crowd the contracting
-            // one out of the frame, to be cancelled at the end.
-            let f = self.flow.rhs(&ZERO_PHASE, &ys[0]);
-            let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                for i in 0..D {
-                    let along: f64 = (0..N).map(|r| f[r] * columns[(r, i)]).sum::<f64>() / norm;
-                    for r in 0..N {
-                        columns[(r, i)] -= along * f[r] / norm;
-                    }
-                }
-            }
-            let qr = columns.qr();
-            let (mut q, mut r) = (qr.q(), qr.r());
-            for i in 0..D {
-                if r[(i, i)] < 0.0 {
-                    q.column_mut(i).neg_mut();
-                    r.row_mut(i).neg_mut();
-                }
-            }
-            factors.push(SMatrix::from_fn(|a, b| r[(a, b)]));
-            frame = q;
-            y = ys[0];
+            factors.push(self.part_end(&mut part, &ys, delta, difference));
         }
-        // P·Q at the return point (the located crossing, on the section).
-        let end = self.lift(&image);
-        let f = self.flow.rhs(&ZERO_PHASE, &end);
-        let last = SMatrix::<f64, D, D>::from_fn(|a, b| {
-            let row = if a < k { a } else { a + 1 };
-            frame[(row, b)] - f[row] / f[k] * frame[(k, b)]
-        });
-        factors.push(last);
-        Some(image)
+        factors.push(self.last_factor(&part, &back.image));
+        Some(back.image)
     }
 
     /// From a point of the flow (all N states) to its first crossing.
     fn start(&self, initial: &[f64], flow: &FlowSettings) -> [f64; D] {
         let y: [f64; N] = std::array::from_fn(|i| initial[i]);
-        self.returns(&[y], flow)[0].0
+        self.returns(&[y], flow)[0].image
     }
 
     fn stiffness(&self) -> f64 {

@@ -41,24 +41,30 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/integrate.wgsl"),
     ),
     ("finish.wgsl", include_str!("../../../shaders/finish.wgsl")),
+    (
+        "section.wgsl",
+        include_str!("../../../shaders/section.wgsl"),
+    ),
 ];
 
-/// The two kernels of a sweep.
+/// The kernels: the two of a period map's sweep, or a Poincaré map's one.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {
     /// Advance trajectories by a bounded number of RK4 steps.
     Integrate,
     /// End a map iteration: Jacobian, point, summary, re-seeding.
     Finish,
+    /// A Poincaré map's steps: each trajectory advanced by its own steps,
+    /// or to its next crossing of the section (the host does the rest).
+    Section,
 }
 
 impl Kernel {
-    pub const ALL: [Kernel; 2] = [Kernel::Integrate, Kernel::Finish];
-
     fn file(self) -> &'static str {
         match self {
             Kernel::Integrate => "integrate.wgsl",
             Kernel::Finish => "finish.wgsl",
+            Kernel::Section => "section.wgsl",
         }
     }
 }
@@ -99,6 +105,22 @@ impl Variant {
                 .is_some_and(crate::model::wgsl::has_surfaces)
     }
 
+    /// A Poincaré map, which the section kernel runs.
+    pub fn section(&self) -> bool {
+        self.system
+            .wgsl
+            .is_some_and(crate::model::wgsl::has_section)
+    }
+
+    /// The kernels this variant runs.
+    pub fn kernels(&self) -> &'static [Kernel] {
+        if self.section() {
+            &[Kernel::Section]
+        } else {
+            &[Kernel::Integrate, Kernel::Finish]
+        }
+    }
+
     /// A short name for the summary, e.g. `impact-oscillator/f64/wall+newton/jacobian/points`.
     pub fn name(&self) -> String {
         let mut parts = vec![
@@ -109,6 +131,8 @@ impl Variant {
             parts.push(format!("surfaces+{}", self.impact_location.name()));
         } else if self.wall {
             parts.push(format!("wall+{}", self.impact_location.name()));
+        } else if self.section() {
+            parts.push("section".into());
         } else if self.system.is_flow {
             parts.push("no-wall".into());
         }
@@ -167,7 +191,9 @@ impl Variant {
 
     /// The generated prelude: types and sizes of this variant.
     fn prelude(&self) -> String {
-        let dim = self.system.dimension();
+        // The flow's states: a Poincaré map's dimension and the one the
+        // section fixes.
+        let dim = self.system.dimension() + usize::from(self.section());
         let (real, epsilon, max) = match self.precision {
             Precision::F64 => ("f64", "2.220446049250313e-16", "1.7976931348623157e308"),
             Precision::F32 => ("f32", "1.1920929e-7", "3.4028235e38"),
@@ -204,6 +230,11 @@ impl Variant {
 
     /// The complete WGSL of one kernel of this variant.
     pub fn source(&self, kernel: Kernel) -> String {
+        assert!(
+            self.kernels().contains(&kernel),
+            "{} runs no {kernel:?} kernel",
+            self.name()
+        );
         let system = self
             .system
             .wgsl

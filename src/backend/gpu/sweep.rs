@@ -36,7 +36,7 @@ use crate::system::{IterationStats, Part};
 /// steps per dispatch, and lavapipe ran it at 3.2e7 lane-steps per second
 /// against 2.2e8 at 4 096 values (docs/BENCHMARKS.md, "Throughput against
 /// sweep size").
-const DISPATCH_LANE_STEPS: usize = 1 << 26;
+pub(super) const DISPATCH_LANE_STEPS: usize = 1 << 26;
 /// Steps per integrate dispatch with a wall on a software adapter. lavapipe
 /// caps the loop iterations of one invocation at 65 535 (every loop
 /// together, shared by a SIMD group; see `loop_budget_exhausted` in
@@ -46,7 +46,7 @@ const DISPATCH_LANE_STEPS: usize = 1 << 26;
 /// each; a batch whose dispatches still ran past the cap is redone with
 /// dispatches `TRUNCATION_RETRY` times shorter.
 const SOFTWARE_WALL_CHUNK: usize = 256;
-const TRUNCATION_RETRY: usize = 8;
+pub(super) const TRUNCATION_RETRY: usize = 8;
 /// Lane-steps per transient submission, after which the host waits.
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
@@ -122,6 +122,9 @@ pub fn run(
     settings: &MethodSettings,
     options: &RunOptions,
 ) -> Result<GpuRun> {
+    if variant.section() {
+        return super::section::run(gpu, scene, variant, settings, options);
+    }
     match scene.system.dimension() {
         1 => run_dim::<1>(gpu, scene, variant, settings, options),
         2 => run_dim::<2>(gpu, scene, variant, settings, options),
@@ -1124,7 +1127,7 @@ struct Pending {
     index: wgpu::SubmissionIndex,
 }
 
-fn gpu_error(reason: String) -> Error {
+pub(super) fn gpu_error(reason: String) -> Error {
     Error::Backend {
         backend: "gpu".into(),
         reason,
@@ -1132,7 +1135,7 @@ fn gpu_error(reason: String) -> Error {
 }
 
 /// Maps a small buffer whose copy has finished and reads it through `read`.
-fn read_back<T>(
+pub(super) fn read_back<T>(
     device: &wgpu::Device,
     buffer: &wgpu::Buffer,
     read: impl FnOnce(&[u8]) -> T,
@@ -1159,7 +1162,7 @@ fn read_back<T>(
 }
 
 /// Blocks until the submission `index` has finished on the device.
-fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<()> {
+pub(super) fn wait_for(device: &wgpu::Device, index: wgpu::SubmissionIndex) -> Result<()> {
     device
         .poll(wgpu::PollType::Wait {
             submission_index: Some(index),

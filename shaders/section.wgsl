@@ -1,0 +1,131 @@
+// Kernel: the RK4 steps of a Poincaré map's trajectories.
+//
+// The host (src/backend/gpu/section.rs) runs the map's algorithm, the
+// CPU's own (src/system/section.rs): returns of the reference to the
+// section, then the tangent map in parts, each a fixed number of steps of
+// the reference and its copies. It hands the GPU the steps, as one job per
+// trajectory, and locates each crossing, builds each factor and takes the
+// QR itself. A job either
+// - ADVANCEs its trajectory by `limit` steps of its h, or
+// - SEEKs the section: steps of h until one crosses it (from behind it to
+//   on or past it, the CPU's `Section::crossed`), leaving the step's start
+//   in the state and its end after it, with `taken` the step's index; past
+//   `limit` steps it gives up (MISSED: no return, a failed lane).
+// Each dispatch takes at most `chunk_steps` steps of every job, so no
+// dispatch trips a driver watchdog or lavapipe's loop cap.
+
+struct Control {
+    // Jobs in this round.
+    job_count: u32,
+    chunk_steps: u32,
+    // Always 0 (see bindings.wgsl's opaque_zero).
+    opaque_zero: u32,
+    pad: u32,
+}
+
+// Per lane: the system's parameters, then the section's `at`.
+const LANE_AT: u32 = PARAM_COUNT;
+const LANE_STRIDE: u32 = PARAM_COUNT + 1u;
+
+// jobs[j].y, the job's mode; the host's twins are in section.rs.
+const DONE: u32 = 0u;
+const ADVANCE: u32 = 1u;
+const SEEK: u32 = 2u;
+const CROSSED: u32 = 3u;
+const MISSED: u32 = 4u;
+// Set (with the mode kept) when the adapter cut a dispatch's loops short:
+// that dispatch stored nothing, and the host shortens the next ones.
+const TRUNCATED: u32 = 0x100u;
+
+// Invocations per workgroup, set by the host when it builds the pipeline.
+override WORKGROUP_SIZE: u32 = 64u;
+
+@group(0) @binding(0) var<uniform> control: Control;
+@group(0) @binding(1) var<storage, read> lanes: array<real>;
+// Per job: (lane, mode, limit, steps taken).
+@group(0) @binding(2) var<storage, read_write> jobs: array<vec4<u32>>;
+// Per job: its step h.
+@group(0) @binding(3) var<storage, read> steps: array<real>;
+// Per job: the state (DIM), then for a crossing the state after the
+// crossing step (DIM).
+@group(0) @binding(4) var<storage, read_write> states: array<real>;
+
+fn load(base: u32) -> State {
+    var y: State;
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        y[k] = states[base + k];
+    }
+    return y;
+}
+
+fn store(base: u32, y: State) {
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        states[base + k] = y[k];
+    }
+}
+
+fn crossed(at: real, before: State, after: State) -> bool {
+    let d0 = SECTION_DIRECTION * (before[SECTION_STATE] - at);
+    let d1 = SECTION_DIRECTION * (after[SECTION_STATE] - at);
+    return d0 < real(0.0) && d1 >= real(0.0);
+}
+
+// As bindings.wgsl's: whether this invocation stayed within lavapipe's cap
+// of 65 535 loop iterations.
+fn loop_budget_exhausted() -> bool {
+    var passes = 0u;
+    for (var i = 0u; i < 2u + control.opaque_zero; i = i + 1u) {
+        passes = passes + 1u;
+    }
+    return passes < 2u;
+}
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let j = gid.x;
+    if (j >= control.job_count) {
+        return;
+    }
+    var job = jobs[j];
+    let mode = job.y & 0xffu;
+    if (mode != ADVANCE && mode != SEEK) {
+        return;
+    }
+    let p = load_params(job.x);
+    let at = lanes[job.x * LANE_STRIDE + LANE_AT];
+    let h = steps[j];
+    let base = j * 2u * DIM;
+    var y = load(base);
+    // An autonomous flow: the clock stands still at phase 0.
+    let still = vec2<real>(real(1.0), real(0.0));
+    let end = min(job.w + control.chunk_steps, job.z);
+    var k = job.w;
+    var after = y;
+    for (; k < end; k = k + 1u) {
+        after = y + rk4_increment(p, still, still, y, h).y;
+        if (mode == SEEK && crossed(at, y, after)) {
+            break;
+        }
+        y = after;
+        // NaN crosses nothing: a failed trajectory stops here (the CPU
+        // steps it to the end of its budget for the same None).
+        if (!all(abs(y) <= State(MAX_REAL))) {
+            k = job.z;
+            break;
+        }
+    }
+    if (loop_budget_exhausted()) {
+        jobs[j].y = job.y | TRUNCATED;
+        return;
+    }
+    if (k < end) {
+        // Only a crossing leaves the loop before its end.
+        job.y = CROSSED;
+        store(base + DIM, after);
+    } else if (k >= job.z) {
+        job.y = select(DONE, MISSED, mode == SEEK);
+    }
+    job.w = min(k, job.z);
+    store(base, y);
+    jobs[j] = job;
+}

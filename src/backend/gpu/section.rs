@@ -1,0 +1,710 @@
+//! Poincaré maps on the GPU: the CPU's algorithm (`system::section`), with
+//! its RK4 steps on the device.
+//!
+//! One iteration of a section map is a return of the reference to the
+//! section, then the tangent map of that return in parts, each part a
+//! fixed number of steps of the reference and its copies from a frame
+//! (see `SectionFlow::tangent_factors`). The number of steps is the
+//! lane's own (its return time), and so is the number of parts. The host
+//! runs each lane through these stages with the very functions the CPU
+//! path calls (`tangent_parts`, `part_starts`, `part_end`,
+//! `last_factor`), and hands every stepping to the GPU as rounds of jobs
+//! across lanes: one round for the returns, then one per part. The kernel
+//! (`shaders/section.wgsl`) only steps: it leaves a crossing's step to the
+//! host, which locates it as the CPU does (`crossing_in_step`). So on an
+//! adapter whose f64 RK4 step is the CPU's to the bit (lavapipe), a lane's
+//! exponents are the CPU path's to the bit, chaotic lanes included.
+//!
+//! The price is a readback per round (a few per iteration), which a period
+//! map's schedule avoids; the steps, which dominate, run on the GPU. A
+//! state-dependent divergence (Rössler's) is integrated along the
+//! reference on the host, the CPU's integral, so that the sum rule holds.
+
+use std::borrow::Cow;
+use std::time::Instant;
+
+use nalgebra::{Const, DimMin, SMatrix};
+use rayon::prelude::*;
+
+use super::context::Gpu;
+use super::shader::{Kernel, Variant};
+use super::sweep::{
+    gpu_error, read_back, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+};
+use crate::backend::RunOptions;
+use crate::error::Result;
+use crate::integrate::section::{crossing_in_step, Crossing};
+use crate::method::lane::{not_run, plan_lane};
+use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
+use crate::scene::{Precision, Scene};
+use crate::system::section::{Return, SectionFlow, TangentParts};
+use crate::system::{FlowSettings, IterationStats, System};
+
+/// Steps per dispatch on a software adapter: lavapipe caps the loop
+/// iterations of one invocation at 65 535 (see `SOFTWARE_WALL_CHUNK` in
+/// sweep.rs), and a step of a model that calls math64's functions runs
+/// loops of its own. A dispatch cut short stores nothing and is redone
+/// with dispatches `TRUNCATION_RETRY` times shorter.
+const SOFTWARE_CHUNK: usize = 1024;
+
+// The kernel's job modes (`shaders/section.wgsl`).
+const DONE: u32 = 0;
+const ADVANCE: u32 = 1;
+const SEEK: u32 = 2;
+const CROSSED: u32 = 3;
+const MISSED: u32 = 4;
+const TRUNCATED: u32 = 0x100;
+
+/// Runs a section model's sweep on the GPU.
+pub fn run(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    options: &RunOptions,
+) -> Result<GpuRun> {
+    if variant.precision != Precision::F64 {
+        return Err(gpu_error(format!(
+            "{}: a Poincaré section runs in f64 on the GPU (the crossing is located on \
+             the host in f64): set run.precision = \"f64\"",
+            scene.system.kind
+        )));
+    }
+    match scene.system.dimension() {
+        1 => run_dim::<1, 2>(gpu, scene, variant, settings, options),
+        2 => run_dim::<2, 3>(gpu, scene, variant, settings, options),
+        3 => run_dim::<3, 4>(gpu, scene, variant, settings, options),
+        d => Err(gpu_error(format!(
+            "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
+        ))),
+    }
+}
+
+/// One trajectory's stepping, for one round.
+struct Job<const N: usize> {
+    lane: u32,
+    /// To the section (at most `limit` steps), or `limit` steps.
+    seek: bool,
+    limit: u32,
+    h: f64,
+    y: [f64; N],
+}
+
+/// How a job ended.
+enum Outcome<const N: usize> {
+    /// The state after the job's steps.
+    Advanced([f64; N]),
+    /// The section was crossed in step `step`, from `before` to `after`.
+    Crossed {
+        step: usize,
+        before: [f64; N],
+        after: [f64; N],
+    },
+    /// No crossing within the steps allowed (or the state overflowed).
+    Missed,
+}
+
+/// `Control` in shaders/section.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Control {
+    job_count: u32,
+    chunk_steps: u32,
+    opaque_zero: u32,
+    pad: u32,
+}
+
+/// The kernel and its buffers, sized for `capacity` jobs.
+struct Stepper<'a> {
+    gpu: &'a Gpu,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    control: wgpu::Buffer,
+    jobs: wgpu::Buffer,
+    steps: wgpu::Buffer,
+    states: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    workgroup: u32,
+    /// Steps per dispatch.
+    chunk: usize,
+    retries: usize,
+    /// The most steps a return has taken so far: how many to dispatch for
+    /// the next returns before looking.
+    longest_return: usize,
+    timings: Timings,
+}
+
+impl<'a> Stepper<'a> {
+    fn new(
+        gpu: &'a Gpu,
+        variant: &Variant,
+        lane_data: &[f64],
+        capacity: usize,
+        dim: usize,
+        workgroup: u32,
+    ) -> Self {
+        use wgpu::util::DeviceExt;
+        let device = &gpu.device;
+        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let entries = [
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            },
+            storage(1, true),
+            storage(2, false),
+            storage(3, true),
+            storage(4, false),
+        ];
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("section"),
+            entries: &entries,
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("section"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(&variant.name()),
+            source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(Kernel::Section))),
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(&variant.name()),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
+                ..Default::default()
+            },
+            cache: None,
+        });
+        let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let rw = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC;
+        let capacity = capacity as u64;
+        let control = buffer(
+            "section control",
+            std::mem::size_of::<Control>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        );
+        let lanes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("section lanes"),
+            contents: bytemuck::cast_slice(lane_data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let jobs = buffer("section jobs", 16 * capacity, rw);
+        let steps = buffer("section steps", 8 * capacity, rw);
+        let states = buffer("section states", 16 * dim as u64 * capacity, rw);
+        let readback = buffer(
+            "section readback",
+            (16 + 16 * dim as u64) * capacity,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("section"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: control.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: lanes.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: jobs.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: steps.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: states.as_entire_binding(),
+                },
+            ],
+        });
+        let chunk = if gpu.summary.is_hardware() {
+            (DISPATCH_LANE_STEPS / capacity.max(1) as usize).max(1)
+        } else {
+            SOFTWARE_CHUNK
+        };
+        Stepper {
+            gpu,
+            pipeline,
+            bind_group,
+            control,
+            jobs,
+            steps,
+            states,
+            readback,
+            workgroup,
+            chunk,
+            retries: 0,
+            longest_return: 0,
+            timings: Timings::default(),
+        }
+    }
+
+    /// Runs one round of jobs to their ends.
+    fn run<const N: usize>(&mut self, jobs: &[Job<N>]) -> Result<Vec<Outcome<N>>> {
+        if jobs.is_empty() {
+            return Ok(Vec::new());
+        }
+        let queue = &self.gpu.queue;
+        let mut table: Vec<[u32; 4]> = jobs
+            .iter()
+            .map(|j| [j.lane, if j.seek { SEEK } else { ADVANCE }, j.limit, 0])
+            .collect();
+        let hs: Vec<f64> = jobs.iter().map(|j| j.h).collect();
+        let mut states = vec![0.0; 2 * N * jobs.len()];
+        for (k, j) in jobs.iter().enumerate() {
+            states[2 * N * k..2 * N * k + N].copy_from_slice(&j.y);
+        }
+        queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&table));
+        queue.write_buffer(&self.steps, 0, bytemuck::cast_slice(&hs));
+        queue.write_buffer(&self.states, 0, bytemuck::cast_slice(&states));
+        let jobs_bytes = 16 * jobs.len() as u64;
+        let states_bytes = 8 * states.len() as u64;
+        // Steps to dispatch before each look: all of them for ADVANCE, the
+        // longest return so far for SEEK.
+        let ahead = jobs
+            .iter()
+            .map(|j| {
+                if j.seek {
+                    self.longest_return.max(1)
+                } else {
+                    j.limit as usize
+                }
+            })
+            .max()
+            .unwrap_or(1)
+            .min(jobs.iter().map(|j| j.limit as usize).max().unwrap_or(1))
+            .max(1);
+        loop {
+            let control = Control {
+                job_count: jobs.len() as u32,
+                chunk_steps: self.chunk as u32,
+                opaque_zero: 0,
+                pad: 0,
+            };
+            queue.write_buffer(&self.control, 0, bytemuck::bytes_of(&control));
+            let dispatches = ahead.div_ceil(self.chunk);
+            let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("section"),
+                    timestamp_writes: None,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                let groups = jobs.len().div_ceil(self.workgroup as usize) as u32;
+                for _ in 0..dispatches {
+                    pass.dispatch_workgroups(groups, 1, 1);
+                }
+            }
+            encoder.copy_buffer_to_buffer(&self.jobs, 0, &self.readback, 0, jobs_bytes);
+            encoder.copy_buffer_to_buffer(
+                &self.states,
+                0,
+                &self.readback,
+                jobs_bytes,
+                states_bytes,
+            );
+            queue.submit([encoder.finish()]);
+            let wait = Instant::now();
+            let (read_jobs, read_states) = read_back(&self.gpu.device, &self.readback, |b| {
+                let jobs_part = &b[..jobs_bytes as usize];
+                let states_part = &b[jobs_bytes as usize..(jobs_bytes + states_bytes) as usize];
+                (
+                    bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(jobs_part),
+                    bytemuck::pod_collect_to_vec::<u8, f64>(states_part),
+                )
+            })?;
+            self.timings.gpu_wait += wait.elapsed();
+            table = read_jobs;
+            states = read_states;
+            if table.iter().any(|j| j[1] & TRUNCATED != 0) {
+                // The adapter cut a dispatch's loops short: that dispatch
+                // stored nothing, so the jobs go on from where they were,
+                // with shorter dispatches.
+                if self.chunk == 1 {
+                    return Err(gpu_error(
+                        "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
+                         of 65 535 loop iterations per invocation): use backend = \"cpu\""
+                            .into(),
+                    ));
+                }
+                for j in &mut table {
+                    j[1] &= !TRUNCATED;
+                }
+                queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&table));
+                self.chunk = (self.chunk / TRUNCATION_RETRY).max(1);
+                self.retries += 1;
+                continue;
+            }
+            if table.iter().all(|j| j[1] != ADVANCE && j[1] != SEEK) {
+                break;
+            }
+        }
+        let outcomes = table
+            .iter()
+            .enumerate()
+            .map(|(k, j)| {
+                let state = |offset: usize| -> [f64; N] {
+                    std::array::from_fn(|i| states[2 * N * k + offset + i])
+                };
+                match j[1] {
+                    CROSSED => {
+                        self.longest_return = self.longest_return.max(j[3] as usize + 1);
+                        Outcome::Crossed {
+                            step: j[3] as usize,
+                            before: state(0),
+                            after: state(N),
+                        }
+                    }
+                    MISSED => Outcome::Missed,
+                    mode => {
+                        debug_assert_eq!(mode, DONE);
+                        Outcome::Advanced(state(0))
+                    }
+                }
+            })
+            .collect();
+        Ok(outcomes)
+    }
+}
+
+/// A lane through its iterations.
+struct Lane<const D: usize, const N: usize> {
+    system: SectionFlow<D, N>,
+    flow: FlowSettings,
+    x: [f64; D],
+    accumulator: LaneAccumulator<D>,
+    /// The result, once the lane has one (not run, or failed in the
+    /// transient).
+    result: Option<LaneResult>,
+    /// The iteration under way: its statistics, its return, its tangent
+    /// parts and the factors so far.
+    stats: IterationStats,
+    back: Option<Return<D>>,
+    tangent: Option<TangentParts<N>>,
+    factors: Vec<SMatrix<f64, D, D>>,
+}
+
+impl<const D: usize, const N: usize> Lane<D, N>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    fn active(&self) -> bool {
+        self.result.is_none()
+    }
+
+    fn h(&self) -> f64 {
+        SectionFlow::<D, N>::return_steps(&self.flow).0
+    }
+
+    fn return_job(&self, lane: usize, start: [f64; N]) -> Job<N> {
+        let (h, max_steps) = SectionFlow::<D, N>::return_steps(&self.flow);
+        Job {
+            lane: lane as u32,
+            seek: true,
+            limit: max_steps.min(u32::MAX as usize) as u32,
+            h,
+            y: start,
+        }
+    }
+
+    /// The return that ended in `outcome`, from `start`.
+    fn return_of(&self, start: &[f64; N], outcome: Outcome<N>) -> Return<D> {
+        let crossing: Crossing<N> = match outcome {
+            Outcome::Crossed {
+                step,
+                before,
+                after,
+            } => Some(crossing_in_step(
+                self.system.flow(),
+                self.system.section(),
+                &before,
+                &after,
+                self.h(),
+                step,
+            )),
+            _ => None,
+        };
+        self.system.return_from(start, crossing)
+    }
+}
+
+fn run_dim<const D: usize, const N: usize>(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    options: &RunOptions,
+) -> Result<GpuRun>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let start = Instant::now();
+    let progress = options.progress.clone().unwrap_or_default();
+    let count = scene.lane_count();
+    let mut lanes: Vec<Lane<D, N>> = (0..count)
+        .map(|k| {
+            let params = scene.lane_params(k);
+            let system = SectionFlow::<D, N>::new(&params);
+            let plan = plan_lane(&system, settings);
+            let flow = FlowSettings {
+                steps_per_period: plan.steps_per_period,
+                ..settings.flow
+            };
+            let result = (!plan.affordable()).then(|| not_run(settings, D, system.period(), plan));
+            Lane {
+                accumulator: LaneAccumulator::new(settings, system.period(), plan),
+                system,
+                flow,
+                x: [f64::NAN; D],
+                result,
+                stats: IterationStats::default(),
+                back: None,
+                tangent: None,
+                factors: Vec::new(),
+            }
+        })
+        .collect();
+    // Per lane: its parameters and the section's position.
+    let mut lane_data = Vec::new();
+    for (k, lane) in lanes.iter().enumerate() {
+        lane_data.extend_from_slice(&scene.lane_params(k).values);
+        lane_data.push(lane.system.section().at);
+    }
+    let trajectories = 1 + if settings.lyapunov {
+        settings.difference.copies(D)
+    } else {
+        0
+    };
+    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, workgroup);
+    stepper.timings.setup = start.elapsed();
+
+    // The first point: from the scene's state of the flow to the section.
+    let transient_start = Instant::now();
+    let initial: [f64; N] = std::array::from_fn(|i| settings.initial_state[i]);
+    returns(&mut stepper, &mut lanes, |_| initial)?;
+    for lane in lanes.iter_mut().filter(|l| l.active()) {
+        lane.x = lane.back.take().expect("a return").image;
+    }
+    for n in 0..settings.transient {
+        returns(&mut stepper, &mut lanes, |lane| lane.system.lift(&lane.x))?;
+        for lane in lanes.iter_mut().filter(|l| l.active()) {
+            lane.x = lane.back.take().expect("a return").image;
+            lane.system.wrap(&mut lane.x);
+            if !lane.x.iter().all(|v| v.is_finite()) {
+                let mut accumulator = lane.accumulator.clone();
+                accumulator.fail(n);
+                lane.result = Some(accumulator.finish());
+            }
+        }
+        progress.advance(count as u64);
+    }
+    stepper.timings.transient = transient_start.elapsed();
+
+    let averaging = Instant::now();
+    for _ in 0..settings.iterations {
+        for lane in lanes.iter_mut() {
+            lane.stats = IterationStats::default();
+            lane.factors.clear();
+        }
+        returns(&mut stepper, &mut lanes, |lane| lane.system.lift(&lane.x))?;
+        // In the CPU's order: the return's terms, then each part's
+        // divergence integral (the same sum to the bit).
+        for lane in lanes.iter_mut().filter(|l| l.active()) {
+            lane.back.expect("a return").add_to(&mut lane.stats);
+        }
+        if settings.lyapunov {
+            tangents(&mut stepper, &mut lanes, settings)?;
+        }
+        let host = Instant::now();
+        lanes
+            .par_iter_mut()
+            .filter(|l| l.active())
+            .for_each(|lane| {
+                let mut next = lane.back.take().expect("a return").image;
+                lane.system.wrap(&mut next);
+                if lane.accumulator.push(&next, &lane.factors, &lane.stats) {
+                    lane.x = next;
+                } else {
+                    lane.result = Some(lane.accumulator.clone().finish());
+                }
+            });
+        stepper.timings.host_qr += host.elapsed();
+        progress.advance(count as u64);
+    }
+    stepper.timings.averaging = averaging.elapsed();
+    let results = lanes
+        .into_iter()
+        .map(|lane| match lane.result {
+            Some(result) => result,
+            None => lane.accumulator.finish(),
+        })
+        .collect();
+    Ok(GpuRun {
+        lanes: results,
+        timings: stepper.timings,
+        batches: 1,
+        chunk_steps: stepper.chunk,
+        retries: stepper.retries,
+        bytes_per_lane: ((16 + 8 + 16 * N) * trajectories + 8 * (lane_data.len() / count.max(1)))
+            as u64,
+    })
+}
+
+/// A return of every active lane's reference from `start(lane)`, left in
+/// `lane.back`.
+fn returns<const D: usize, const N: usize>(
+    stepper: &mut Stepper,
+    lanes: &mut [Lane<D, N>],
+    start: impl Fn(&Lane<D, N>) -> [f64; N],
+) -> Result<()>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let active: Vec<usize> = (0..lanes.len()).filter(|&k| lanes[k].active()).collect();
+    let starts: Vec<[f64; N]> = active.iter().map(|&k| start(&lanes[k])).collect();
+    let jobs: Vec<Job<N>> = active
+        .iter()
+        .zip(&starts)
+        .map(|(&k, &y)| lanes[k].return_job(k, y))
+        .collect();
+    let outcomes = stepper.run(&jobs)?;
+    let host = Instant::now();
+    let backs: Vec<Return<D>> = active
+        .par_iter()
+        .zip(starts.par_iter())
+        .zip(outcomes.into_par_iter())
+        .map(|((&k, start), outcome)| lanes[k].return_of(start, outcome))
+        .collect();
+    for (&k, back) in active.iter().zip(backs) {
+        lanes[k].back = Some(back);
+    }
+    stepper.timings.host_qr += host.elapsed();
+    Ok(())
+}
+
+/// The tangent maps of the active lanes' returns, part by part, into
+/// `lane.factors` (with their divergence integrals in `lane.stats`).
+fn tangents<const D: usize, const N: usize>(
+    stepper: &mut Stepper,
+    lanes: &mut [Lane<D, N>],
+    settings: &MethodSettings,
+) -> Result<()>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    for lane in lanes.iter_mut().filter(|l| l.active()) {
+        let back = lane.back.as_ref().expect("a return");
+        lane.tangent = back
+            .time
+            .is_finite()
+            .then(|| lane.system.tangent_parts(&lane.x, back.time, &lane.flow));
+    }
+    let parts = lanes
+        .iter()
+        .filter_map(|l| l.tangent.as_ref().map(|t| t.parts))
+        .max()
+        .unwrap_or(0);
+    for part in 0..parts {
+        let in_part = |l: &Lane<D, N>| l.tangent.as_ref().is_some_and(|t| part < t.parts);
+        let host = Instant::now();
+        // Per lane in this part: its trajectories' starts.
+        let starts: Vec<(usize, f64, Vec<[f64; N]>)> = lanes
+            .par_iter()
+            .enumerate()
+            .filter(|(_, l)| l.active() && in_part(l))
+            .map(|(k, l)| {
+                let t = l.tangent.as_ref().expect("in a part");
+                let (delta, ys) =
+                    l.system
+                        .part_starts(t, settings.perturbation, settings.difference);
+                (k, delta, ys)
+            })
+            .collect();
+        stepper.timings.host_qr += host.elapsed();
+        let jobs: Vec<Job<N>> = starts
+            .iter()
+            .flat_map(|(k, _, ys)| {
+                let t = lanes[*k].tangent.as_ref().expect("in a part");
+                ys.iter().map(move |&y| Job {
+                    lane: *k as u32,
+                    seek: false,
+                    limit: t.steps as u32,
+                    h: t.h,
+                    y,
+                })
+            })
+            .collect();
+        let mut outcomes = stepper.run(&jobs)?.into_iter();
+        let host = Instant::now();
+        let mut ends: Vec<(usize, f64, Vec<[f64; N]>)> = Vec::with_capacity(starts.len());
+        for (k, delta, ys) in starts {
+            let reached = (0..ys.len())
+                .map(|_| match outcomes.next() {
+                    Some(Outcome::Advanced(y)) => y,
+                    _ => [f64::NAN; N],
+                })
+                .collect();
+            ends.push((k, delta, reached));
+        }
+        let mut by_lane: Vec<Option<(f64, Vec<[f64; N]>)>> = vec![None; lanes.len()];
+        for (k, delta, ys) in ends {
+            by_lane[k] = Some((delta, ys));
+        }
+        lanes
+            .par_iter_mut()
+            .zip(by_lane.into_par_iter())
+            .filter_map(|(lane, end)| end.map(|e| (lane, e)))
+            .for_each(|(lane, (delta, ys))| {
+                let t = lane.tangent.as_mut().expect("in a part");
+                if let Some(integral) = lane.system.part_divergence(t) {
+                    lane.stats.log_flux += integral;
+                }
+                let factor = lane.system.part_end(t, &ys, delta, settings.difference);
+                lane.factors.push(factor);
+            });
+        stepper.timings.host_qr += host.elapsed();
+    }
+    for lane in lanes.iter_mut().filter(|l| l.active()) {
+        if let (Some(t), Some(back)) = (&lane.tangent, &lane.back) {
+            let last = lane.system.last_factor(t, &back.image);
+            lane.factors.push(last);
+        }
+    }
+    Ok(())
+}
