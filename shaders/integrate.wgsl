@@ -167,6 +167,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             slowest = min(slowest, w.slowest);
             if (w.chattering) {
                 c.z = c.z | FLAG_CHATTERING;
+#ifdef SURFACES
+                // Crossings of a general event that accumulate (a ball
+                // locking onto a vibrating table) are held on the surface
+                // by the CPU path (impact::hold_step), not here: the lane
+                // is the CPU's.
+                c.z = c.z | FLAG_SLIDING;
+#endif
             }
             c.z = c.z | rank_flags(w.rank_loss);
             stuck = w.stuck;

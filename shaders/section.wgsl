@@ -47,7 +47,7 @@ override WORKGROUP_SIZE: u32 = 64u;
 // Per job: its step h.
 @group(0) @binding(3) var<storage, read> steps: array<real>;
 // Per job: the state (DIM), then for a crossing the state after the
-// crossing step (DIM).
+// crossing step (DIM); in f32, until then, the state's compensation.
 @group(0) @binding(4) var<storage, read_write> states: array<real>;
 
 fn load(base: u32) -> State {
@@ -101,12 +101,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let end = min(job.w + control.chunk_steps, job.z);
     var k = job.w;
     var after = y;
+#ifdef COMPENSATED
+    // Kahan summation over the job's steps: an increment is far smaller
+    // than y, and f32 would drop its low bits every step. Between
+    // dispatches the compensation waits in the job's second state.
+    var comp = load(base + DIM);
+#endif
     for (; k < end; k = k + 1u) {
+#ifdef COMPENSATED
+        let corrected = rk4_increment(p, still, still, y, h).y - comp;
+        after = select(y + corrected, y, control.opaque_zero != 0u);
+        let next_comp = (after - y) - corrected;
+#else
         after = y + rk4_increment(p, still, still, y, h).y;
+#endif
         if (mode == SEEK && crossed(at, y, after)) {
             break;
         }
         y = after;
+#ifdef COMPENSATED
+        comp = next_comp;
+#endif
         // NaN crosses nothing: a failed trajectory stops here (the CPU
         // steps it to the end of its budget for the same None).
         if (!all(abs(y) <= State(MAX_REAL))) {
@@ -122,8 +137,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // Only a crossing leaves the loop before its end.
         job.y = CROSSED;
         store(base + DIM, after);
-    } else if (k >= job.z) {
-        job.y = select(DONE, MISSED, mode == SEEK);
+    } else {
+        if (k >= job.z) {
+            job.y = select(DONE, MISSED, mode == SEEK);
+        }
+#ifdef COMPENSATED
+        store(base + DIM, comp);
+#endif
     }
     job.w = min(k, job.z);
     store(base, y);

@@ -341,7 +341,7 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         }
         if !gpu.recomputed.is_empty() {
             println!(
-                "  sliding      {} values recomputed on the CPU: the kernels flagged a sliding motion they do not integrate",
+                "  sliding      {} values recomputed on the CPU: the kernels flagged a motion they do not integrate (sliding, or held on an event)",
                 gpu.recomputed.len()
             );
         }

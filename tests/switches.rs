@@ -852,3 +852,63 @@ fn collapsed_exponents_are_minus_infinity_as_many_as_the_jacobians_lose() {
     }
     assert!(seen[1] >= 2 && seen[2] >= 2, "{seen:?}");
 }
+
+/// The vibrating table (models/vibrating-table.toml, w = 1) with e = 0.5:
+/// the ball's bounces accumulate and it locks onto the table, held there
+/// by the table's push while the table's acceleration -a·cos t stays above
+/// gravity's -1, released where it falls below (cos t = 1/a).
+fn vibrating_table(amplitudes: &[f64]) -> Report {
+    let values: Vec<String> = amplitudes.iter().map(|v| v.to_string()).collect();
+    let body = format!(
+        "[sweep]\nparameter = \"a\"\nvalues = [{}]\n\
+         [integration]\nsteps_per_period = 1800\ntransient = 100\niterations = 50\n\
+         initial_state = [0.0, 0.0]\n[output]\nbifurcation_points = 50\n[run]\nbackend = \"cpu\"\n",
+        values.join(", ")
+    );
+    run(&model_scene(
+        &file("vibrating-table.toml"),
+        &body,
+        &["model.parameters.e=0.5"],
+    ))
+}
+
+#[test]
+fn a_ball_locked_onto_a_vibrating_table_is_held_there_and_released_on_time() {
+    let report = vibrating_table(&[0.8, 1.5]);
+    for lane in &report.lanes {
+        // Held phases forget both directions: the exponents collapse, and
+        // no iteration is left unresolved (before holding, every lane was
+        // flagged `chattering`).
+        assert!(
+            matches!(lane.status, LaneStatus::Collapsed { .. }),
+            "{}",
+            lane.status
+        );
+        assert!(lane.exponents.iter().all(|&l| l == f64::NEG_INFINITY));
+    }
+    // a = 0.8: the table never accelerates down faster than gravity, so
+    // the ball stays on it; at t = 0 the table is at x = -1, at rest.
+    let held = &report.lanes[0].bifurcation;
+    for point in held.chunks(2) {
+        assert!(
+            (point[0] + 1.0).abs() <= 1e-12 && point[1].abs() <= 1e-12,
+            "{point:?}"
+        );
+    }
+    // a = 1.5: released at t_r = -acos(1/a) from the table's state there,
+    // it flies freely (x'' = -1, which RK4 integrates exactly) to t = 0:
+    // every period the same point, in closed form.
+    let a: f64 = 1.5;
+    let tau = (1.0 / a).acos();
+    let (x_r, v_r) = (a * (1.0 / a) - a - 1.0, a * tau.sin());
+    let expected = [x_r + v_r * tau - 0.5 * tau * tau, v_r - tau];
+    let released = &report.lanes[1].bifurcation;
+    assert_eq!(released.len(), 100);
+    for point in released.chunks(2) {
+        let error = (point[0] - expected[0])
+            .abs()
+            .max((point[1] - expected[1]).abs());
+        assert!(error <= 1e-10, "{point:?} vs {expected:?}: {error:e}");
+    }
+    eprintln!("released: {:?} vs closed form {expected:?}", &released[..2]);
+}

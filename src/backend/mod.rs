@@ -143,7 +143,7 @@ enum Plan {
 fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option<String>)> {
     match scene.backend {
         Backend::Auto => {
-            if let Some(why) = no_kernels(scene).or_else(|| f64_only(scene)) {
+            if let Some(why) = no_kernels(scene) {
                 return Ok((
                     Plan::Cpu,
                     Precision::F64,
@@ -192,9 +192,6 @@ fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option
             Ok((Plan::Gpu(chosen.0, chosen.1), scene.precision, Some(why)))
         }
         Backend::Gpu => {
-            if let Some(why) = f64_only(scene) {
-                return Err(Error::invalid("run.precision", why));
-            }
             if let Some(why) = no_kernels(scene) {
                 return Err(Error::Backend {
                     backend: "gpu".into(),
@@ -245,19 +242,6 @@ fn no_kernels(scene: &Scene) -> Option<String> {
         let why = (system.gpu_refuses)(&scene.params_at(0))
             .unwrap_or_else(|| "it has no WGSL kernel".into());
         format!("{}: {why}", system.kind)
-    })
-}
-
-/// Why the GPU cannot run the scene in f32, where it cannot: a Poincaré
-/// section's crossings are located on the host, in f64, from the kernel's
-/// steps (`gpu::section`).
-fn f64_only(scene: &Scene) -> Option<String> {
-    let section = scene.system.model.is_some_and(|c| c.section.is_some());
-    (section && scene.precision == Precision::F32).then(|| {
-        format!(
-            "{}: a Poincaré section runs in f64 on the GPU, got \"f32\"",
-            scene.system.kind
-        )
     })
 }
 
@@ -648,9 +632,23 @@ impl Summary {
 /// integrate (another surface met while sliding, two switches slid on at
 /// once), which they flag rather than step through; the CPU integrates
 /// it. Returns their indices.
+///
+/// So are the lanes that failed on the GPU in a model whose events can
+/// hold a motion on their surface (a ball locking onto a vibrating
+/// table): the kernels resolve the bounces until they accumulate, where
+/// the finite differences of copies at rest on the surface can give out
+/// before the accumulation is seen; the CPU path holds the motion.
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
+    let holds = scene
+        .system
+        .model
+        .is_some_and(|code| code.surfaces.iter().any(|s| s.hold.is_some()));
     let flagged: Vec<usize> = (0..lanes.len())
-        .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))
+        .filter(|&k| match lanes[k].status {
+            LaneStatus::Sliding { .. } => true,
+            LaneStatus::NonFinite { .. } => holds,
+            _ => false,
+        })
         .collect();
     if flagged.is_empty() {
         return flagged;

@@ -269,6 +269,21 @@ pub fn resolve<const D: usize, F: Flow<D>>(
     // Sub-steps from (phase0, y0), `done` into the step.
     let (mut done, mut phase0, mut y0, mut y1) = (0.0, *phase, *y, y1);
     for _ in 0..MAX_IMPACTS_PER_STEP {
+        if let Some(j) = surface::held_on(*region) {
+            // Held on event j: the rest of the step on its surface, unless
+            // the field lets go of the motion inside it.
+            match hold_step(base, j, omega, &phase0, &y0, h - done, stats) {
+                Hold::Through(y_end) => return y_end,
+                Hold::Releases(s, y_free) => {
+                    *region &= !(1 << (surface::HELD + j as u32));
+                    done += s;
+                    phase0 = rotate(&phase0, &cos_sin(omega * s));
+                    y0 = y_free;
+                    y1 = field_step(base, *region, omega, &phase0, &y0, h - done);
+                    continue;
+                }
+            }
+        }
         if surface::is_sliding(*region) {
             // On one switch or several: the rest of the step slides, unless
             // the motion leaves one of them or meets another.
@@ -278,7 +293,7 @@ pub fn resolve<const D: usize, F: Flow<D>>(
                     Slid::Leaves(s, y_exit) => (s, y_exit),
                     Slid::Meets(k, s, yc) => {
                         let phase_c = rotate(&phase0, &cos_sin(omega * s));
-                        match cross(base, region, k, &phase_c, &yc, stats) {
+                        match cross(base, region, k, &phase_c, &yc, h, stats) {
                             Some(after) => (s, after),
                             // Not resolved (flagged): the rest of the step in
                             // the field now in force.
@@ -352,6 +367,7 @@ pub fn resolve<const D: usize, F: Flow<D>>(
                         &y1,
                         (o * before.g[j], o * before.rate[j]),
                         (o * after.g[j], o * after.rate[j]),
+                        kind == Surface::Event,
                         distance,
                         rate,
                     ),
@@ -366,12 +382,13 @@ pub fn resolve<const D: usize, F: Flow<D>>(
         if j >= walls.len() {
             // A general surface.
             let j = j - walls.len();
-            match cross(base, region, j, &phase_c, &yc, stats) {
+            match cross(base, region, j, &phase_c, &yc, h, stats) {
                 Some(after) => {
                     phase0 = phase_c;
                     y0 = after;
-                    if surface::is_sliding(*region) {
-                        // The loop's top slides the rest of the step.
+                    if surface::is_constrained(*region) {
+                        // The loop's top slides, or holds, the rest of
+                        // the step.
                         continue;
                     }
                     let flow = &InRegion {
@@ -517,6 +534,7 @@ fn cross<const D: usize, F: Flow<D>>(
     j: usize,
     phase: &Phase,
     y: &[f64; D],
+    h: f64,
     stats: &mut IterationStats,
 ) -> Option<[f64; D]> {
     let walls = base.walls().len();
@@ -532,6 +550,16 @@ fn cross<const D: usize, F: Flow<D>>(
     stats.crossings[walls + j] += 1;
     match kind {
         Surface::Event => {
+            if approach <= 0.0 {
+                // Met without approaching it: a bounce too short for the
+                // step to resolve (the Hermite never dips below the
+                // surface), the motion at rest on it. Pressed in, it is
+                // held, as a mass touching a stop at rest sticks.
+                if let Some(held) = hold_here(base, region, j, phase, y, stats) {
+                    stats.crossings[walls + j] -= 1;
+                    return Some(held);
+                }
+            }
             let (after, dr, reset_rate) = base.reset(j, phase, y);
             let mut now = base.surface_values(*region, phase, &after);
             // The reset may jump across a switch: what follows is that
@@ -546,9 +574,25 @@ fn cross<const D: usize, F: Flow<D>>(
             // rounding) and leaving the surface.
             let scale = y.iter().fold(1.0, |m: f64, v| m.max(v.abs()));
             if !(now.g[j] <= 4.0 * f64::EPSILON * scale && now.rate[j] < 0.0) {
-                // The reset does not send the motion back where it lives.
+                // The reset does not send the motion back where it lives:
+                // an approach at the rate's rounding, pressed in, is a
+                // motion at rest on the surface (held); else the
+                // iteration cannot be trusted.
+                if let Some(held) = hold_here(base, region, j, phase, y, stats) {
+                    return Some(held);
+                }
                 stats.chattering = true;
                 return None;
+            }
+            if accumulating(base, j, phase, &after, before.rate[j], h) {
+                // The crossings accumulate within a sliver of the step: the
+                // motion sticks to the surface, which forgets how far from
+                // it and how fast towards it the motion was (two
+                // directions), and the volume law no longer applies.
+                *region = to;
+                if let Some(held) = hold_here(base, region, j, phase, &after, stats) {
+                    return Some(held);
+                }
             }
             *region = to;
             stats.log_flux += surface::event_log_det(
@@ -616,6 +660,188 @@ fn cross<const D: usize, F: Flow<D>>(
             Some(*y)
         }
     }
+}
+
+/// Holds a motion at y, at rest on event j's surface, where the free field
+/// presses it in: the held state, with the trajectory's region and the
+/// iteration's record marked.
+fn hold_here<const D: usize, F: Flow<D>>(
+    base: &F,
+    region: &mut u32,
+    j: usize,
+    phase: &Phase,
+    y: &[f64; D],
+    stats: &mut IterationStats,
+) -> Option<[f64; D]> {
+    let pressed = base.event_hold(j, phase, y)?.pressing > 0.0;
+    let held = onto_hold(base, j, phase, y).filter(|_| pressed)?;
+    *region |= 1 << (surface::HELD + j as u32);
+    stats.rank_loss = stats.rank_loss.max(2);
+    stats.log_flux = f64::NAN;
+    Some(held)
+}
+
+/// Whether event j's crossings accumulate after a reset to `after` that
+/// came in at rate `approach` (> 0): the rebound leaves at rate r = -ġ⁺
+/// against a free g̈ > 0 that brings the motion back after 2r/g̈, each
+/// flight shorter by the ratio e = r/approach, all of them within
+/// 2r/(g̈(1 - e)), which is below a sliver of the step, as a stop's
+/// bounces (`ACCUMULATION_FRACTION`). Never where the flow cannot hold the
+/// motion on the surface.
+fn accumulating<const D: usize, F: Flow<D>>(
+    base: &F,
+    j: usize,
+    phase: &Phase,
+    after: &[f64; D],
+    approach: f64,
+    h: f64,
+) -> bool {
+    let Some(v) = base.event_hold(j, phase, after) else {
+        return false;
+    };
+    let rebound = -v.rate;
+    let e = rebound / approach;
+    v.pressing > 0.0
+        && (rebound <= 0.0
+            || (e < 1.0 && 2.0 * rebound / (v.pressing * (1.0 - e)) < ACCUMULATION_FRACTION * h))
+}
+
+/// y moved onto event j's surface with no rate through it (g = 0 along the
+/// states the reset leaves, then ġ = 0 along those it changes): the held
+/// motion's constraints, kept to rounding at every step. `None` where the
+/// surface's rates give no direction to move along.
+fn onto_hold<const D: usize, F: Flow<D>>(
+    base: &F,
+    j: usize,
+    phase: &Phase,
+    y: &[f64; D],
+) -> Option<[f64; D]> {
+    let mut y = *y;
+    let v = base.event_hold(j, phase, &y)?;
+    let w: [f64; D] = std::array::from_fn(|i| if v.pushed[i] { 0.0 } else { v.gradient[i] });
+    let ww: f64 = w.iter().map(|a| a * a).sum();
+    if ww > 0.0 {
+        for i in 0..D {
+            y[i] -= v.g * w[i] / ww;
+        }
+    }
+    let v = base.event_hold(j, phase, &y)?;
+    let u = pushing(&v);
+    let uu: f64 = u.iter().zip(&v.rate_gradient).map(|(a, b)| a * b).sum();
+    if uu == 0.0 {
+        return None;
+    }
+    for i in 0..D {
+        y[i] -= v.rate * u[i] / uu;
+    }
+    Some(y)
+}
+
+/// The direction the constraint force of a hold pushes in: ∇ġ on the
+/// states the reset changes (for a ball on a table, its velocity).
+fn pushing<const D: usize>(v: &crate::integrate::EventHoldValues<D>) -> [f64; D] {
+    std::array::from_fn(|i| if v.pushed[i] { v.rate_gradient[i] } else { 0.0 })
+}
+
+/// The flow of a motion held on event j's surface: the free field plus
+/// the constraint force λ·u along [`pushing`]'s u, λ such that g̈ = 0
+/// (ġ stays 0, so g does).
+struct HeldOnEvent<'a, F> {
+    flow: &'a F,
+    j: usize,
+}
+
+impl<const D: usize, F: Flow<D>> Flow<D> for HeldOnEvent<'_, F> {
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        let f = self.flow.rhs_in(0, phase, y);
+        let Some(v) = self.flow.event_hold(self.j, phase, y) else {
+            return f;
+        };
+        let u = pushing(&v);
+        let uu: f64 = u.iter().zip(&v.rate_gradient).map(|(a, b)| a * b).sum();
+        let lambda = -v.pressing / uu;
+        std::array::from_fn(|i| f[i] + lambda * u[i])
+    }
+
+    fn forcing_frequency(&self) -> f64 {
+        self.flow.forcing_frequency()
+    }
+
+    fn walls(&self) -> &[Wall] {
+        self.flow.walls()
+    }
+}
+
+/// How a held step ends.
+enum Hold<const D: usize> {
+    /// Still held at the end of the step, at this state.
+    Through([f64; D]),
+    /// Let go after this offset, at this state (on the surface, the free
+    /// field pulling away).
+    Releases(f64, [f64; D]),
+}
+
+/// Holds a motion on event j's surface (at y, phase `phase`) for up to
+/// `h`; where the free field stops pressing it in (g̈ turns negative), the
+/// release is located by bisection on the held motion (re-stepped RK4) and
+/// taken just past the root, where the field pulls away. Another surface
+/// crossed meanwhile is not integrated: the iteration is flagged.
+fn hold_step<const D: usize, F: Flow<D>>(
+    base: &F,
+    j: usize,
+    omega: f64,
+    phase: &Phase,
+    y: &[f64; D],
+    h: f64,
+    stats: &mut IterationStats,
+) -> Hold<D> {
+    // An iteration with a held phase has forgotten the two directions
+    // through the surface (however the phase began: a hold entered in an
+    // earlier iteration goes on here), and the volume law does not apply.
+    stats.rank_loss = stats.rank_loss.max(2);
+    stats.log_flux = f64::NAN;
+    let held = HeldOnEvent { flow: base, j };
+    let sub = SubStep { flow: &held, omega };
+    let at = |s: f64| -> ([f64; D], Phase) {
+        let (y1, end) = sub.step(phase, y, s);
+        (onto_hold(base, j, &end, &y1).unwrap_or(y1), end)
+    };
+    let pressing =
+        |y: &[f64; D], end: &Phase| base.event_hold(j, end, y).map_or(-1.0, |v| v.pressing);
+    let (y1, end) = at(h);
+    let others = |end: &Phase, y1: &[f64; D]| {
+        let values = base.surface_values(0, end, y1);
+        base.surfaces()
+            .iter()
+            .enumerate()
+            .any(|(k, &kind)| k != j && kind == Surface::Event && values.g[k] > 0.0)
+            || base.walls().iter().any(|w| w.gap(y1) > 0.0)
+    };
+    if pressing(&y1, &end) >= 0.0 {
+        if others(&end, &y1) {
+            stats.chattering = true;
+        }
+        return Hold::Through(y1);
+    }
+    // pressing(0) > 0 (held), pressing(h) < 0: bisect to the release.
+    let (mut lo, mut hi) = (0.0, h);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        let (ym, em) = at(mid);
+        if pressing(&ym, &em) >= 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let (y_free, end) = at(hi);
+    if others(&end, &y_free) {
+        stats.chattering = true;
+    }
+    Hold::Releases(hi, y_free)
 }
 
 /// One RK4 step of s from (phase, y) in the field a trajectory in
@@ -727,7 +953,7 @@ fn slide<const D: usize, F: Flow<D>>(
             continue;
         }
         let hit = locate(
-            &sub, location, phase, y, h, &end, start, stop, distance, rate,
+            &sub, location, phase, y, h, &end, start, stop, false, distance, rate,
         );
         if let Some((s, yc)) = hit {
             if first.is_none_or(|(_, earliest, _)| s < earliest) {
@@ -798,6 +1024,7 @@ fn locate<const D: usize, F: Flow<D>>(
     y1: &[f64; D],
     start: (f64, f64),
     end: (f64, f64),
+    rebounding: bool,
     distance: impl Fn(f64, &[f64; D]) -> f64,
     rate: impl Fn(f64, &[f64; D]) -> f64,
 ) -> Option<(f64, [f64; D])> {
@@ -813,6 +1040,28 @@ fn locate<const D: usize, F: Flow<D>>(
     }
     let hermite = Hermite::new(start.0, start.1, end.0, end.1, h);
     let scale = y0.iter().fold(1.0, |m: f64, v| m.max(v.abs()));
+    if rebounding && end.0 > 0.0 && start.0 >= 0.0 && start.1 < 0.0 {
+        // Just reset onto an event's surface (g at its rounding, ≥ 0) and
+        // leaving it, the motion comes back within the step (a bounce
+        // shorter than a step, as bounces accumulating are): the crossing
+        // from below is the one after the trough, not the rounding at 0.
+        let trough = Hermite::new(-start.0, -start.1, -end.0, -end.1, h).peak()?;
+        if hermite.value(trough) >= 0.0 {
+            // No flight at all: it meets the surface at once, at rest
+            // relative to it (its crossings accumulate there).
+            let s = trough * h;
+            return Some((s, sub.step(phase0, y0, s).0));
+        }
+        return Some(newton_from(
+            |s| sub.step(phase0, y0, s).0,
+            distance,
+            rate,
+            scale,
+            trough * h,
+            h,
+            hermite.first_root(trough, 1.0) * h,
+        ));
+    }
     let (hi, guess) = if end.0 > 0.0 {
         (h, hermite.first_root(0.0, 1.0))
     } else if start.1 > 0.0 && end.1 < 0.0 {
@@ -939,11 +1188,23 @@ pub(crate) fn newton_in_bracket<const D: usize>(
     distance: impl Fn(f64, &[f64; D]) -> f64,
     rate: impl Fn(f64, &[f64; D]) -> f64,
     scale: f64,
+    hi: f64,
+    s: f64,
+) -> (f64, [f64; D]) {
+    newton_from(at, distance, rate, scale, 0.0, hi, s)
+}
+
+/// [`newton_in_bracket`] in the bracket [lo, hi].
+fn newton_from<const D: usize>(
+    at: impl Fn(f64) -> [f64; D],
+    distance: impl Fn(f64, &[f64; D]) -> f64,
+    rate: impl Fn(f64, &[f64; D]) -> f64,
+    scale: f64,
+    mut lo: f64,
     mut hi: f64,
     mut s: f64,
 ) -> (f64, [f64; D]) {
     let tolerance = 4.0 * f64::EPSILON * scale.abs().max(1.0);
-    let mut lo = 0.0;
     let mut y = at(s);
     for _ in 0..32 {
         let g = distance(s, &y);

@@ -20,6 +20,19 @@ pub use surface::{InRegion, Surface, SurfaceBatch, SurfaceValues};
 /// An event's reset at one state: the state after, DR, and ∂R/∂t.
 pub type Reset<const D: usize> = ([f64; D], [[f64; D]; D], [f64; D]);
 
+/// Event j's surface and its rates at a state, for holding the motion on
+/// it (`model::code::EventHold`): g and ∇g, ġ and ∇ġ, g̈ along the free
+/// field (> 0 presses into the surface), and the states the reset changes.
+#[derive(Clone, Copy, Debug)]
+pub struct EventHoldValues<const D: usize> {
+    pub g: f64,
+    pub gradient: [f64; D],
+    pub rate: f64,
+    pub rate_gradient: [f64; D],
+    pub pressing: f64,
+    pub pushed: [bool; D],
+}
+
 /// Crossings counted apart per iteration: the walls', then the general
 /// surfaces' (the output's event columns).
 pub const MAX_EVENTS: usize = impact::MAX_WALLS + surface::MAX_SURFACES;
@@ -117,6 +130,13 @@ pub trait Flow<const D: usize>: Sync {
     /// reset that does not read the time).
     fn reset(&self, _j: usize, _phase: &Phase, _y: &[f64; D]) -> Reset<D> {
         unreachable!("a flow with events resets")
+    }
+
+    /// Event j's values for holding the motion on its surface, where the
+    /// flow can hold it there (`None`: an accumulation of its crossings is
+    /// flagged, not integrated).
+    fn event_hold(&self, _j: usize, _phase: &Phase, _y: &[f64; D]) -> Option<EventHoldValues<D>> {
+        None
     }
 
     /// The field in region `region` of the switches (bit b set: on the
@@ -641,7 +661,10 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             let (flow, yk) = (flows.of(k), column(&y, k));
             let phase = phase_of(&phases, &phase, k);
             *region = surface::region_of(flow, &phase, &yk);
-            values[at_start].set_column(k, &flow.surface_values(*region, &phase, &yk));
+            values[at_start].set_column(
+                k,
+                &flow.surface_values(surface::sides(*region), &phase, &yk),
+            );
         }
     }
     for _ in part.steps(steps) {
@@ -700,8 +723,9 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             // masked off below).
             let mut hits = [false; W];
             for k in 0..W {
-                // A sliding trajectory takes the slow path at every step.
-                hits[k] = surface::is_sliding(regions[k]);
+                // A sliding or held trajectory takes the slow path at
+                // every step.
+                hits[k] = surface::is_constrained(regions[k]);
             }
             for (j, &kind) in surfaces.iter().enumerate() {
                 let (g0, rate0) = (before.g(j), before.rate(j));

@@ -86,10 +86,28 @@ pub fn sides(region: u32) -> u32 {
     region & ((1 << SLIDING) - 1)
 }
 
+/// Region bits from this one up mark a trajectory held on an event's
+/// surface (sticking): bit `HELD + j` for surface j.
+pub const HELD: u32 = 24;
+
 /// The surfaces a trajectory in `region` slides on: bit j for surface j.
 #[inline(always)]
 pub fn sliding_set(region: u32) -> u32 {
-    region >> SLIDING
+    (region >> SLIDING) & ((1 << (HELD - SLIDING)) - 1)
+}
+
+/// The event a trajectory in `region` is held on, if any.
+#[inline(always)]
+pub fn held_on(region: u32) -> Option<usize> {
+    let set = region >> HELD;
+    (set != 0).then(|| set.trailing_zeros() as usize)
+}
+
+/// Whether a trajectory in `region` slides on a switch or is held on an
+/// event: its steps take the resolution path.
+#[inline(always)]
+pub fn is_constrained(region: u32) -> bool {
+    region >> SLIDING != 0
 }
 
 /// Whether a trajectory in `region` slides on any switch.
@@ -528,8 +546,27 @@ pub fn region_of<const D: usize, F: Flow<D>>(flow: &F, phase: &Phase, y: &[f64; 
             }
         }
     }
+    // A motion held on an event's surface (sticking) is on it with no rate
+    // through it, pressed in: the held steps keep g and ġ at rounding (see
+    // `impact::onto_hold`), far below a tolerance that no free motion
+    // meets without its crossings accumulating at once.
+    let tolerance = HELD_TOLERANCE * y.iter().fold(1.0, |m: f64, v| m.max(v.abs()));
+    for (j, s) in flow.surfaces().iter().enumerate() {
+        if *s != Surface::Event || region >> HELD != 0 {
+            continue;
+        }
+        if let Some(v) = flow.event_hold(j, phase, y) {
+            if v.g.abs() <= tolerance && v.rate.abs() <= tolerance && v.pressing > 0.0 {
+                region |= 1 << (HELD + j as u32);
+            }
+        }
+    }
     region
 }
+
+/// How close to an event's surface, and how slowly through it, a state
+/// counts as held there, relative to its largest component.
+const HELD_TOLERANCE: f64 = 1e-10;
 
 /// The region after a reset jumps the state (an event's reset, a stop's
 /// rebound) from where the surfaces had `before` to where they have

@@ -92,6 +92,58 @@ pub struct GeneralSurface {
     pub reset_rate: Vec<Expr>,
     /// A switch's stick limit (see `integrate::surface`), if it has one.
     pub stick_limit: Option<Expr>,
+    /// What holding the motion on an event's surface takes (an event of a
+    /// model without switches): see [`EventHold`].
+    pub hold: Option<EventHold>,
+}
+
+/// Sticking on an event's surface (a ball locked onto a vibrating table):
+/// where the event's crossings accumulate, the motion stays on g = 0 with
+/// ġ = 0, pushed by a constraint force along the states the reset changes
+/// (the velocities), as large as keeps g̈ = 0, for as long as the free
+/// field presses the motion into the surface (`integrate::impact`'s
+/// held-on-event motion). The trees are built from the event's g and the
+/// field by symbolic derivatives.
+#[derive(Debug)]
+pub struct EventHold {
+    /// ġ = ∇g·F + ∂g/∂t along the field.
+    pub rate: Expr,
+    /// ∇ġ, one derivative per state.
+    pub rate_gradient: Vec<Expr>,
+    /// g̈ = ∇ġ·F + ∂ġ/∂t along the free field: > 0 presses the motion into
+    /// the surface (it sticks), < 0 pulls it away (it leaves).
+    pub pressing: Expr,
+    /// The states the reset changes: the constraint force acts on them.
+    pub pushed: Vec<bool>,
+}
+
+impl EventHold {
+    fn new(g: &Expr, gradient: &[Expr], reset: &[Expr], field: &[Expr]) -> Self {
+        use super::expr::{add, mul};
+        let along = |gradient: &[Expr], of: &Expr| {
+            gradient
+                .iter()
+                .zip(field)
+                .fold(of.derivative(Var::Time), |sum, (d, f)| {
+                    add(sum, mul(d.clone(), f.clone()))
+                })
+        };
+        let rate = along(gradient, g);
+        let rate_gradient: Vec<Expr> = (0..field.len())
+            .map(|i| rate.derivative(Var::State(i)))
+            .collect();
+        let pressing = along(&rate_gradient, &rate);
+        EventHold {
+            pushed: reset
+                .iter()
+                .enumerate()
+                .map(|(i, r)| !matches!(r, Expr::Var(Var::State(k)) if *k == i))
+                .collect(),
+            rate,
+            rate_gradient,
+            pressing,
+        }
+    }
 }
 
 /// One region's field, compiled.
@@ -239,7 +291,20 @@ impl Code {
                 reset_jacobian: Vec::new(),
                 reset_rate: Vec::new(),
                 stick_limit: switch.stick_limit.clone(),
+                hold: None,
             });
+        }
+        if model.switches.is_empty() {
+            // Sticking on an event is integrated where one smooth field
+            // holds (no switches); elsewhere an accumulation is flagged.
+            for s in surfaces.iter_mut().filter(|s| s.kind == Surface::Event) {
+                s.hold = Some(EventHold::new(
+                    &s.g,
+                    &s.gradient,
+                    &s.reset,
+                    &model.equations,
+                ));
+            }
         }
         if surfaces.len() > MAX_SURFACES {
             return Err(Error::invalid(
@@ -620,6 +685,8 @@ fn general_event(
         reset_jacobian,
         reset_rate,
         stick_limit: None,
+        // Set once the switches are known (`Code::compile`).
+        hold: None,
     })
 }
 

@@ -648,7 +648,7 @@ fn neg(a: Expr) -> Expr {
     }
 }
 
-fn add(a: Expr, b: Expr) -> Expr {
+pub(crate) fn add(a: Expr, b: Expr) -> Expr {
     match (num(&a), num(&b)) {
         (Some(x), Some(y)) => Expr::Num(x + y),
         (Some(0.0), _) => b,
@@ -666,7 +666,7 @@ fn sub(a: Expr, b: Expr) -> Expr {
     }
 }
 
-fn mul(a: Expr, b: Expr) -> Expr {
+pub(crate) fn mul(a: Expr, b: Expr) -> Expr {
     match (num(&a), num(&b)) {
         (Some(x), Some(y)) => Expr::Num(x * y),
         (Some(0.0), _) | (_, Some(0.0)) => Expr::Num(0.0),

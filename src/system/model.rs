@@ -222,11 +222,8 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     /// The field of the region y lies in (integration goes through
     /// [`rhs_in`](Flow::rhs_in), each step in its trajectory's region).
     fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
-        self.rhs_in(
-            crate::integrate::surface::region_of(self, phase, y),
-            phase,
-            y,
-        )
+        use crate::integrate::surface::{region_of, sides};
+        self.rhs_in(sides(region_of(self, phase, y)), phase, y)
     }
 
     fn rhs_in(&self, region: u32, phase: &Phase, y: &[f64; D]) -> [f64; D] {
@@ -326,6 +323,26 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             .stick_limit
             .as_ref()
             .map(|l| l.eval(y, &self.params, 0.0))
+    }
+
+    fn event_hold(
+        &self,
+        j: usize,
+        phase: &Phase,
+        y: &[f64; D],
+    ) -> Option<crate::integrate::EventHoldValues<D>> {
+        let s = &self.code.surfaces[j];
+        let hold = s.hold.as_ref()?;
+        let t = self.time_at(phase);
+        let at = |e: &Expr| e.eval(y, &self.params, t);
+        Some(crate::integrate::EventHoldValues {
+            g: at(&s.g),
+            gradient: std::array::from_fn(|i| at(&s.gradient[i])),
+            rate: at(&hold.rate),
+            rate_gradient: std::array::from_fn(|i| at(&hold.rate_gradient[i])),
+            pressing: at(&hold.pressing),
+            pushed: std::array::from_fn(|i| hold.pushed[i]),
+        })
     }
 
     fn reset(&self, j: usize, phase: &Phase, y: &[f64; D]) -> crate::integrate::Reset<D> {
@@ -714,7 +731,9 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             let mut phase = crate::integrate::clock::ZERO_PHASE;
             for part in Part::all(PILOT_SAMPLES) {
                 let t = self.period * part.index as f64 / PILOT_SAMPLES as f64;
-                let region = crate::integrate::surface::region_of(self, &phase, &y);
+                let region = crate::integrate::surface::sides(
+                    crate::integrate::surface::region_of(self, &phase, &y),
+                );
                 let (stiffness, contraction) = eigen_scales(&self.jacobian_at(&y, t, region));
                 scales = (scales.0.max(stiffness), scales.1.max(contraction));
                 let mut ys = [y];

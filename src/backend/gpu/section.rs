@@ -15,6 +15,9 @@
 //! adapter whose f64 RK4 step is the CPU's to the bit (lavapipe), a lane's
 //! exponents are the CPU path's to the bit, chaotic lanes included.
 //!
+//! In f32 the kernel compensates its steps (Kahan) and the host works in
+//! f64 from the f32 states.
+//!
 //! The price is a readback per round (a few per iteration), which a period
 //! map's schedule avoids; the steps, which dominate, run on the GPU. A
 //! state-dependent divergence (Rössler's) is integrated along the
@@ -29,7 +32,8 @@ use rayon::prelude::*;
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
 use super::sweep::{
-    gpu_error, read_back, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    gpu_error, read_back, real_bytes, reals_from, GpuRun, Timings, DEFAULT_WORKGROUP,
+    DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
 use crate::backend::RunOptions;
 use crate::error::Result;
@@ -63,13 +67,6 @@ pub fn run(
     settings: &MethodSettings,
     options: &RunOptions,
 ) -> Result<GpuRun> {
-    if variant.precision != Precision::F64 {
-        return Err(gpu_error(format!(
-            "{}: a Poincaré section runs in f64 on the GPU (the crossing is located on \
-             the host in f64): set run.precision = \"f64\"",
-            scene.system.kind
-        )));
-    }
     match scene.system.dimension() {
         1 => run_dim::<1, 2>(gpu, scene, variant, settings, options),
         2 => run_dim::<2, 3>(gpu, scene, variant, settings, options),
@@ -125,6 +122,8 @@ struct Stepper<'a> {
     states: wgpu::Buffer,
     readback: wgpu::Buffer,
     workgroup: u32,
+    /// The reals of the buffers.
+    precision: Precision,
     /// Steps per dispatch.
     chunk: usize,
     retries: usize,
@@ -212,17 +211,22 @@ impl<'a> Stepper<'a> {
             std::mem::size_of::<Control>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
+        let precision = variant.precision;
+        let real = match precision {
+            Precision::F64 => 8,
+            Precision::F32 => 4,
+        };
         let lanes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("section lanes"),
-            contents: bytemuck::cast_slice(lane_data),
+            contents: &real_bytes(lane_data, precision),
             usage: wgpu::BufferUsages::STORAGE,
         });
         let jobs = buffer("section jobs", 16 * capacity, rw);
-        let steps = buffer("section steps", 8 * capacity, rw);
-        let states = buffer("section states", 16 * dim as u64 * capacity, rw);
+        let steps = buffer("section steps", real * capacity, rw);
+        let states = buffer("section states", 2 * real * dim as u64 * capacity, rw);
         let readback = buffer(
             "section readback",
-            (16 + 16 * dim as u64) * capacity,
+            (16 + 2 * real * dim as u64) * capacity,
             wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         );
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -266,6 +270,7 @@ impl<'a> Stepper<'a> {
             states,
             readback,
             workgroup,
+            precision,
             chunk,
             retries: 0,
             longest_return: 0,
@@ -289,10 +294,11 @@ impl<'a> Stepper<'a> {
             states[2 * N * k..2 * N * k + N].copy_from_slice(&j.y);
         }
         queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&table));
-        queue.write_buffer(&self.steps, 0, bytemuck::cast_slice(&hs));
-        queue.write_buffer(&self.states, 0, bytemuck::cast_slice(&states));
+        queue.write_buffer(&self.steps, 0, &real_bytes(&hs, self.precision));
+        let state_bytes = real_bytes(&states, self.precision);
+        queue.write_buffer(&self.states, 0, &state_bytes);
         let jobs_bytes = 16 * jobs.len() as u64;
-        let states_bytes = 8 * states.len() as u64;
+        let states_bytes = state_bytes.len() as u64;
         // Steps to dispatch before each look: all of them for ADVANCE, the
         // longest return so far for SEEK.
         let ahead = jobs
@@ -345,7 +351,7 @@ impl<'a> Stepper<'a> {
                 let states_part = &b[jobs_bytes as usize..(jobs_bytes + states_bytes) as usize];
                 (
                     bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(jobs_part),
-                    bytemuck::pod_collect_to_vec::<u8, f64>(states_part),
+                    reals_from(states_part, self.precision),
                 )
             })?;
             self.timings.gpu_wait += wait.elapsed();

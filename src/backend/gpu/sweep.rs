@@ -398,7 +398,7 @@ struct Control {
 }
 
 /// Reals in the precision of the variant, as bytes.
-fn real_bytes(values: &[f64], precision: Precision) -> Vec<u8> {
+pub(super) fn real_bytes(values: &[f64], precision: Precision) -> Vec<u8> {
     match precision {
         Precision::F64 => bytemuck::cast_slice(values).to_vec(),
         Precision::F32 => {
@@ -408,7 +408,7 @@ fn real_bytes(values: &[f64], precision: Precision) -> Vec<u8> {
     }
 }
 
-fn reals_from(bytes: &[u8], precision: Precision) -> Vec<f64> {
+pub(super) fn reals_from(bytes: &[u8], precision: Precision) -> Vec<f64> {
     match precision {
         Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(bytes),
         Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(bytes)
