@@ -1290,3 +1290,33 @@ fn a_ball_locking_onto_the_table_is_recomputed_on_the_cpu() {
         );
     }
 }
+
+#[test]
+fn a_section_sweep_split_into_batches_is_the_sweep_in_one() {
+    if !gpu_or_skip(
+        "a_section_sweep_split_into_batches_is_the_sweep_in_one",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // Five values of ρ in batches of at most two lanes (the device's
+    // limits split a large sweep the same way): every lane's numbers and
+    // points are those of the one-batch run, to the bit.
+    let body = "[sweep]\nparameter = \"rho\"\nfrom = 24.0\nto = 30.0\ncount = 5\n\
+                [integration]\nsteps_per_period = 1000\ntransient = 20\niterations = 40\n\
+                initial_state = [1.0, 1.0, 1.0]\n[output]\nbifurcation_points = 4\n";
+    let scene = model_scene("lorenz.toml", body, &["run.backend=\"gpu\""]);
+    let whole = run(&scene);
+    let options = lyapsweep::RunOptions {
+        max_batch_lanes: Some(2),
+        ..Default::default()
+    };
+    let split = lyapsweep::run_with(&scene, &options).expect("runs");
+    assert_eq!(whole.gpu.as_ref().unwrap().batches, 1);
+    assert_eq!(split.gpu.as_ref().unwrap().batches, 3);
+    for (k, (a, b)) in whole.lanes.iter().zip(&split.lanes).enumerate() {
+        assert_eq!(a.status, LaneStatus::Ok, "lane {k}");
+        assert_eq!(a.exponents, b.exponents, "lane {k}");
+        assert_eq!(a.bifurcation, b.bifurcation, "lane {k}");
+    }
+}

@@ -67,14 +67,57 @@ pub fn run(
     settings: &MethodSettings,
     options: &RunOptions,
 ) -> Result<GpuRun> {
-    match scene.system.dimension() {
-        1 => run_dim::<1, 2>(gpu, scene, variant, settings, options),
-        2 => run_dim::<2, 3>(gpu, scene, variant, settings, options),
-        3 => run_dim::<3, 4>(gpu, scene, variant, settings, options),
-        d => Err(gpu_error(format!(
-            "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
-        ))),
+    let d = scene.system.dimension();
+    let trajectories = 1 + if settings.lyapunov {
+        settings.difference.copies(d)
+    } else {
+        0
+    };
+    // Batches that fit the device: the readback of a round (every job's
+    // table entry and two states) in one buffer, the states in one
+    // binding, the jobs in one dispatch.
+    let real = match variant.precision {
+        Precision::F64 => 8,
+        Precision::F32 => 4,
+    };
+    let per_lane = ((16 + 2 * real * (d + 1)) * trajectories) as u64;
+    let limits = &gpu.limits;
+    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let by_buffer = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+        / per_lane;
+    let by_dispatch = limits.max_compute_workgroups_per_dimension as u64 * u64::from(workgroup)
+        / trajectories as u64;
+    let batch = (by_buffer.min(by_dispatch) as usize)
+        .min(options.max_batch_lanes.unwrap_or(usize::MAX))
+        .max(1);
+    let total = scene.lane_count();
+    let mut run = GpuRun {
+        lanes: Vec::with_capacity(total),
+        timings: Timings::default(),
+        batches: 0,
+        chunk_steps: 0,
+        retries: 0,
+        bytes_per_lane: per_lane + 8 * (scene.system.parameters.len() as u64 + 1),
+    };
+    for first in (0..total).step_by(batch) {
+        let lanes = first..total.min(first + batch);
+        let part = match d {
+            1 => run_dim::<1, 2>(gpu, scene, variant, settings, options, lanes),
+            2 => run_dim::<2, 3>(gpu, scene, variant, settings, options, lanes),
+            3 => run_dim::<3, 4>(gpu, scene, variant, settings, options, lanes),
+            d => Err(gpu_error(format!(
+                "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
+            ))),
+        }?;
+        run.lanes.extend(part.lanes);
+        run.timings.add(&part.timings);
+        run.batches += 1;
+        run.chunk_steps = part.chunk_steps;
+        run.retries += part.retries;
     }
+    Ok(run)
 }
 
 /// One trajectory's stepping, for one round.
@@ -475,14 +518,16 @@ fn run_dim<const D: usize, const N: usize>(
     variant: &Variant,
     settings: &MethodSettings,
     options: &RunOptions,
+    batch: std::ops::Range<usize>,
 ) -> Result<GpuRun>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
     let progress = options.progress.clone().unwrap_or_default();
-    let count = scene.lane_count();
-    let mut lanes: Vec<Lane<D, N>> = (0..count)
+    let count = batch.len();
+    let mut lanes: Vec<Lane<D, N>> = batch
+        .clone()
         .map(|k| {
             let params = scene.lane_params(k);
             let system = SectionFlow::<D, N>::new(&params);
@@ -507,7 +552,7 @@ where
         .collect();
     // Per lane: its parameters and the section's position.
     let mut lane_data = Vec::new();
-    for (k, lane) in lanes.iter().enumerate() {
+    for (k, lane) in batch.zip(&lanes) {
         lane_data.extend_from_slice(&scene.lane_params(k).values);
         lane_data.push(lane.system.section().at);
     }
@@ -587,8 +632,8 @@ where
         batches: 1,
         chunk_steps: stepper.chunk,
         retries: stepper.retries,
-        bytes_per_lane: ((16 + 8 + 16 * N) * trajectories + 8 * (lane_data.len() / count.max(1)))
-            as u64,
+        // (Set by `run`.)
+        bytes_per_lane: 0,
     })
 }
 
