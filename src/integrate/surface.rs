@@ -56,6 +56,12 @@
 //! different switches one after the other collapse between one and one
 //! per phase (`IterationStats::sliding_phases`), which the lane decides
 //! from the finite differences (`LaneAccumulator`).
+//!
+//! **Held on an event** (a ball locked onto a vibrating table): where an
+//! event's crossings accumulate, the region carries bit `HELD + j` and the
+//! motion stays on g = 0 with ġ = 0 (`impact::hold_step`) until the free
+//! field pulls it away; two directions collapse, and the volume law does
+//! not apply. Only in a model without switches (one field).
 
 use nalgebra::DMatrix;
 
