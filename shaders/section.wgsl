@@ -70,15 +70,7 @@ fn crossed(at: real, before: State, after: State) -> bool {
     return d0 < real(0.0) && d1 >= real(0.0);
 }
 
-// As bindings.wgsl's: whether this invocation stayed within lavapipe's cap
-// of 65 535 loop iterations.
-fn loop_budget_exhausted() -> bool {
-    var passes = 0u;
-    for (var i = 0u; i < 2u + control.opaque_zero; i = i + 1u) {
-        passes = passes + 1u;
-    }
-    return passes < 2u;
-}
+#include "shared/loop_budget.wgsl"
 
 @compute @workgroup_size(WORKGROUP_SIZE)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {

@@ -23,7 +23,6 @@
 //! state-dependent divergence (Rössler's) is integrated along the
 //! reference on the host, the CPU's integral, so that the sum rule holds.
 
-use std::borrow::Cow;
 use std::time::Instant;
 
 use nalgebra::{Const, DimMin, SMatrix};
@@ -32,8 +31,8 @@ use rayon::prelude::*;
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
 use super::sweep::{
-    gpu_error, read_back, real_bytes, reals_from, GpuRun, Timings, DEFAULT_WORKGROUP,
-    DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry, uniform_entry,
+    GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
 use crate::backend::RunOptions;
 use crate::error::Result;
@@ -187,56 +186,18 @@ impl<'a> Stepper<'a> {
     ) -> Self {
         use wgpu::util::DeviceExt;
         let device = &gpu.device;
-        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         let entries = [
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-            storage(1, true),
-            storage(2, false),
-            storage(3, true),
-            storage(4, false),
+            uniform_entry(0),
+            storage_entry(1, true),
+            storage_entry(2, false),
+            storage_entry(3, true),
+            storage_entry(4, false),
         ];
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("section"),
             entries: &entries,
         });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("section"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(&variant.name()),
-            source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(Kernel::Section))),
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(&variant.name()),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
-                ..Default::default()
-            },
-            cache: None,
-        });
+        let pipeline = compute_pipeline(gpu, &layout, variant, Kernel::Section, workgroup);
         let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

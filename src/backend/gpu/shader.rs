@@ -17,6 +17,10 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/bindings.wgsl"),
     ),
     (
+        "shared/loop_budget.wgsl",
+        include_str!("../../../shaders/shared/loop_budget.wgsl"),
+    ),
+    (
         "shared/clock.wgsl",
         include_str!("../../../shaders/shared/clock.wgsl"),
     ),

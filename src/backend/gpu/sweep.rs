@@ -304,71 +304,32 @@ struct Pipelines {
 
 impl Pipelines {
     fn new(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
-        let storage = |binding: u32, read_only: bool| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
         let mut entries = vec![
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-            storage(1, true),
-            storage(2, false),
-            storage(3, false),
-            storage(4, false),
+            uniform_entry(0),
+            storage_entry(1, true),
+            storage_entry(2, false),
+            storage_entry(3, false),
+            storage_entry(4, false),
         ];
         if variant.lyapunov {
-            entries.extend([storage(5, false), storage(6, false)]);
+            entries.extend([storage_entry(5, false), storage_entry(6, false)]);
         }
         if variant.points {
-            entries.push(storage(7, false));
+            entries.push(storage_entry(7, false));
         }
         if variant.wall {
-            entries.push(storage(8, false));
+            entries.push(storage_entry(8, false));
         }
         if variant.surfaces() {
-            entries.push(storage(9, false));
+            entries.push(storage_entry(9, false));
         }
-        let device = &gpu.device;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("sweep"),
-            entries: &entries,
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("sweep"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = |kernel: Kernel| {
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some(&variant.name()),
-                source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(kernel))),
+        let layout = gpu
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("sweep"),
+                entries: &entries,
             });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(&variant.name()),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
-                    ..Default::default()
-                },
-                cache: None,
-            })
-        };
+        let pipeline = |kernel: Kernel| compute_pipeline(gpu, &layout, variant, kernel, workgroup);
         Pipelines {
             integrate: pipeline(Kernel::Integrate),
             finish: pipeline(Kernel::Finish),
@@ -380,6 +341,66 @@ impl Pipelines {
             workgroup,
         }
     }
+}
+
+/// A storage buffer of a kernel's bind group.
+pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// The uniform `control` of a kernel's bind group.
+pub(super) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// The compute pipeline of one kernel of `variant` over bind group
+/// `layout`, with `workgroup` invocations per workgroup.
+pub(super) fn compute_pipeline(
+    gpu: &Gpu,
+    layout: &wgpu::BindGroupLayout,
+    variant: &Variant,
+    kernel: Kernel,
+    workgroup: u32,
+) -> wgpu::ComputePipeline {
+    let device = &gpu.device;
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(&variant.name()),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(&variant.name()),
+        source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(kernel))),
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(&variant.name()),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some("main"),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
+            ..Default::default()
+        },
+        cache: None,
+    })
 }
 
 /// `Control` in shared/bindings.wgsl.
