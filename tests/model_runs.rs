@@ -617,6 +617,11 @@ fn model_check_prints_the_equations_the_sum_rule_the_events_and_the_kernel() {
         "{text}"
     );
     assert!(text.contains("ln|F_z(x_0) / F_z(x_n)|"), "{text}");
+    assert!(
+        text.contains("GPU: runs on the section kernel")
+            && text.contains("const SECTION_STATE: u32 = 2u;"),
+        "{text}"
+    );
     // A problem is reported with its key and column, exit code 2.
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.toml");

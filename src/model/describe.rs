@@ -206,7 +206,13 @@ pub fn describe(code: &Code) -> String {
     );
     match wgsl::system_source(code) {
         Ok(source) => {
-            let _ = writeln!(w, "GPU: runs on the kernels; the generated system file:\n");
+            let how = if code.section.is_some() {
+                "runs on the section kernel (the steps on the GPU, crossings and factors on the \
+                 host)"
+            } else {
+                "runs on the kernels"
+            };
+            let _ = writeln!(w, "GPU: {how}; the generated system file:\n");
             let _ = write!(w, "{source}");
         }
         Err(why) => {
