@@ -282,7 +282,7 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
     }
     if scene.system.is_flow && report.backend != Backend::Exact {
         method += &format!(", RK4 {} steps/period", i.steps_per_period);
-        if scene.system.kind == "impact-oscillator" {
+        if scene.system.wall_reachable.is_some() {
             method += &format!(", impacts located by {}", i.impact_location.name());
         }
     }

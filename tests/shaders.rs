@@ -218,7 +218,7 @@ fn has_global(m: &naga::Module, name: &str) -> bool {
 
 #[test]
 fn variants_leave_out_what_the_scene_does_not_need() {
-    let oscillator = SYSTEMS[0];
+    let oscillator = lyapsweep::system::by_kind("impact-oscillator").unwrap();
     let full = Variant {
         system: oscillator,
         precision: Precision::F64,
@@ -349,6 +349,8 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         // A switch with a stick limit, slid on (stick-slip): the kernels
         // slide on one switch.
         ("friction-belt.toml", true),
+        // The `impact-oscillator` kind: one stop.
+        ("impact-oscillator.toml", true),
         // Two stops on x, from below and from above.
         ("impact-pair.toml", true),
         // The `lorenz` kind's time-T map.
@@ -357,7 +359,6 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
         // the crossings and builds the factors.
         ("lorenz.toml", true),
         ("rossler.toml", true),
-        ("seed-oscillator.toml", true),
         // A switch crossed transversally (the field continuous across it):
         // the trajectories carry their region.
         ("soft-stop.toml", true),
@@ -397,7 +398,7 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
     let f32_source = variant(pendulum, Precision::F32).source(Kernel::Integrate);
     assert!(f32_source.contains("fn sin_r(") && !f32_source.contains("fn sin64("));
     // cos(ηt) is the clock, not a call; no other function: neither file.
-    for name in ["seed-oscillator.toml", "duffing.toml"] {
+    for name in ["impact-oscillator.toml", "duffing.toml"] {
         let source = variant(system(name), Precision::F64).source(Kernel::Finish);
         assert!(source.contains("phase.x"), "{name}");
         assert!(
@@ -409,7 +410,7 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
     // models with events or switches: the stop models' kernels are the
     // ones they were (their speed measured in docs/BENCHMARKS.md).
     for (name, surfaces) in [
-        ("seed-oscillator.toml", false),
+        ("impact-oscillator.toml", false),
         ("impact-pair.toml", false),
         ("two-mass-chain.toml", false),
         ("soft-stop.toml", true),
@@ -423,9 +424,10 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
             }
         }
     }
-    // The seed as a model: the hand-written file's tree, fully bracketed,
-    // its wall from the stop.
-    let seed = system("seed-oscillator.toml").wgsl.unwrap();
+    // The seed as a model: the retired hand-written file's tree
+    // (`(-2ζ)·v - x + f·cos`, which the model matched to the bit), fully
+    // bracketed, its wall from the stop.
+    let seed = system("impact-oscillator.toml").wgsl.unwrap();
     assert!(
         seed.contains("((((-real(2.0)) * p.p_zeta) * y.y) - y.x) + (p.p_f * phase.x)"),
         "{seed}"

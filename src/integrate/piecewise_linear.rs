@@ -661,6 +661,69 @@ impl PiecewiseLinear {
         self.fields[0].dimension()
     }
 
+    /// Whether the motion from y0 at t = 0 can reach an event's surface:
+    /// `false` only where a bound proves it never does, so that the GPU
+    /// kernels may leave the impact code out (`true` when unsure: with
+    /// switches, or a field that is not asymptotically stable).
+    ///
+    /// Before the first event the motion is the free one, y = y_p + u: the
+    /// periodic response y_p(t) = y_c + a cos ωt + b sin ωt (A y_c = −c,
+    /// A a − ω b = −p, ω a + A b = −q) and u' = A u. Where A is stable, the
+    /// solution P > 0 of Aᵀ P + P A = −I makes uᵀ P u non-increasing, so by
+    /// Cauchy–Schwarz in P's metric |n·u(t)| ≤ √(u(0)ᵀ P u(0) · nᵀ P⁻¹ n).
+    /// So n·y never exceeds n·y_c + √((n·a)² + (n·b)²) + that, and a
+    /// surface n·y = d beyond it is never reached. (For the seed's wall this
+    /// is the energy bound |X_p| + √(u² + u'²) up to P's condition number,
+    /// 1.1 at ζ = 0.05.)
+    pub fn may_reach_an_event(&self, y0: &DVector<f64>) -> bool {
+        if self.fields.len() != 1 || self.bits.iter().any(Option::is_some) {
+            return true;
+        }
+        let field = &self.fields[0];
+        let (a, omega) = (&field.a, self.omega);
+        let n = self.dimension();
+        let Some(center) = a.clone().lu().solve(&-&field.constant) else {
+            return true;
+        };
+        let mut harmonic = DMatrix::zeros(2 * n, 2 * n);
+        harmonic.view_mut((0, 0), (n, n)).copy_from(a);
+        harmonic.view_mut((n, n), (n, n)).copy_from(a);
+        for i in 0..n {
+            harmonic[(i, n + i)] = -omega;
+            harmonic[(n + i, i)] = omega;
+        }
+        let mut forcing = DVector::zeros(2 * n);
+        forcing.rows_mut(0, n).copy_from(&-&field.cos);
+        forcing.rows_mut(n, n).copy_from(&-&field.sin);
+        let Some(ab) = harmonic.lu().solve(&forcing) else {
+            return true;
+        };
+        let (cos, sin) = (ab.rows(0, n), ab.rows(n, n));
+        // Aᵀ P + P A = −I as (I ⊗ Aᵀ + Aᵀ ⊗ I) vec P = −vec I (columns).
+        let identity = DMatrix::<f64>::identity(n, n);
+        let kron = identity.kronecker(&a.transpose()) + a.transpose().kronecker(&identity);
+        let minus_identity = DVector::from_iterator(n * n, identity.iter().map(|v| -v));
+        let Some(vec_p) = kron.lu().solve(&minus_identity) else {
+            return true;
+        };
+        let p = DMatrix::from_column_slice(n, n, vec_p.as_slice());
+        let p = (&p + p.transpose()) * 0.5;
+        let Some(cholesky) = p.clone().cholesky() else {
+            return true;
+        };
+        let u0 = y0 - &center - cos;
+        let energy = u0.dot(&(&p * &u0));
+        self.surfaces.iter().any(|surface| {
+            let normal = &surface.normal;
+            let reach = normal.dot(&center)
+                + normal.dot(&cos).hypot(normal.dot(&sin))
+                + (energy * normal.dot(&cholesky.solve(normal))).sqrt();
+            // NaN counts as reachable; so does a surface within rounding.
+            let beyond = reach < surface.offset - 1e-9 * (reach.abs() + surface.offset.abs());
+            !beyond
+        })
+    }
+
     /// The region of y: bit k set where the k-th switch has h > 0.
     pub fn region(&self, y: &DVector<f64>) -> usize {
         self.surfaces
@@ -1718,6 +1781,48 @@ mod tests {
     /// |a - b| / max(1, scale): the error, relative where the scale is large.
     fn error(a: f64, b: f64, scale: f64) -> f64 {
         (a - b).abs() / scale.max(1.0)
+    }
+
+    #[test]
+    fn a_stop_is_unreachable_only_beyond_the_free_motion_s_reach() {
+        // The seed's free motion sampled over 40 periods (the closed form's
+        // free flight, far wall): its largest x against the bound's verdict
+        // for a stop just short of it, and the nearest stop the bound
+        // calls unreachable.
+        let mut decided = 0;
+        for (zeta, eta) in [(0.05, 1.0), (0.05, 0.6), (0.3, 1.4), (2.0, 0.5)] {
+            let free = ForcedImpactOscillator::new(zeta, 1.0, eta, 1e9, 1.0).unwrap();
+            for start in [[0.0, 0.0], [3.0, -2.0], [-5.0, 4.0]] {
+                let samples = 40 * 400;
+                let dt = 40.0 * free.period() / samples as f64;
+                let highest = (0..=samples)
+                    .map(|k| free.free_flight(0.0, start, k as f64 * dt)[0])
+                    .fold(f64::NEG_INFINITY, f64::max);
+                let reaches =
+                    |wall: f64| seed(zeta, 1.0, eta, wall, 1.0).may_reach_an_event(&vector(&start));
+                // Never "unreachable" for a wall the motion reaches.
+                assert!(
+                    reaches(highest * (1.0 - 1e-6) - 1e-6),
+                    "ζ = {zeta}, η = {eta}, {start:?}"
+                );
+                // And not far beyond it: the first wall found unreachable
+                // (measured: 1.0 to 2.2 times the reach, and 6.5 against
+                // 0.47 overdamped from (-5, 4), P's conditioning).
+                let mut wall = highest.abs() * (1.0 + 1e-6) + 1e-6;
+                while reaches(wall) {
+                    wall *= 1.01;
+                }
+                let size = start[0].hypot(start[1]);
+                assert!(
+                    wall <= 2.5 * highest.abs() + size + 0.1,
+                    "ζ = {zeta}, η = {eta}, {start:?}: reach {highest}, bound {wall}"
+                );
+                decided += 1;
+            }
+        }
+        assert_eq!(decided, 12);
+        // Undamped, the bound does not hold (no P): reachable, to be safe.
+        assert!(seed(0.0, 1.0, 0.5, 1e6, 1.0).may_reach_an_event(&vector(&[0.0, 0.0])));
     }
 
     #[test]

@@ -14,7 +14,6 @@ use super::lane::{self, LanePlan};
 use super::{Lane, LaneResult, MethodSettings};
 use crate::integrate::{IterationStats, Part};
 use crate::system::henon::Henon;
-use crate::system::impact_oscillator::ImpactOscillator;
 use crate::system::model::ModelFlow;
 use crate::system::section::SectionFlow;
 use crate::system::{Params, System, SystemInfo};
@@ -77,7 +76,6 @@ pub fn runner(system: &SystemInfo) -> Runner {
         };
     }
     match system.kind {
-        "impact-oscillator" => Runner::of::<2, ImpactOscillator>(),
         "henon" => Runner::of::<2, Henon>(),
         kind => unreachable!("the built-in system '{kind}' has no runner"),
     }

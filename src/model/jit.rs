@@ -5,7 +5,7 @@
 //! The interpreter ([`Tape::run`]) pays, per instruction, a dispatch, the
 //! loads of its operands from the register file and the store of its
 //! result; on the seed's oscillator that left the model at 0.44× the
-//! built-in's lane-steps per second. Here the same lowered tape becomes
+//! (since retired) hand-written system's lane-steps per second. Here the same lowered tape becomes
 //! straight-line code over SSA values: each `[f64; W]` value is W/2
 //! `F64X2` vectors (or one `f64` for W = 1), the operations are the
 //! tape's, one IEEE operation each in the tape's order (cranelift neither

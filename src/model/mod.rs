@@ -8,7 +8,8 @@
 //! generated system file ([`wgsl`]), both built from those trees, with
 //! sin, cos and tan computed by the same arithmetic on both ([`math64`]); and
 //! `model check`'s report ([`describe`]). `system::model` and
-//! `system::section` make a compiled model a system like the built-ins.
+//! `system::section` make a compiled model a system like the hand-written
+//! one (Hénon's map).
 
 pub mod code;
 pub mod describe;

@@ -1,8 +1,8 @@
 //! Models compiled for the GPU: the system file the kernels include
 //! (`SystemInfo::wgsl`), generated from the model's expression trees, the
-//! twin of a built-in's hand-written `shaders/system/<kind>.wgsl`.
+//! twin of a hand-written `shaders/system/<kind>.wgsl` (Hénon's).
 //!
-//! The file has the built-ins' shape: `struct Params` (every parameter, in
+//! The file has the hand-written files' shape: `struct Params` (every parameter, in
 //! the model's order), `fn rhs(p, phase, y) -> State` (one expression per
 //! state) and, for a model with stops, what `shaders/shared/impact.wgsl`
 //! reads of them: `WALLS`, each stop's coordinate, velocity and side
@@ -19,8 +19,8 @@
 //!   with [`Expr::eval`]; the GPU recomputes it per call with the same
 //!   operations in the same order, which gives the same bits. (A driver may
 //!   still fuse a product into the sum that uses it, as lavapipe does: the
-//!   seed oscillator as a model is then the built-in kernel to the bit, and
-//!   the CPU path to rounding.)
+//!   seed oscillator as a model was the retired hand-written kernel to the
+//!   bit, and the CPU path to rounding.)
 //! - `cos(w*t)` and `sin(w*t)` read the forcing clock, `phase.x` and
 //!   `phase.y`, exactly where the tape reads its clock (`Tape::compile`);
 //! - numbers are `real(…)` of Rust's shortest round-trip form, so an f64

@@ -29,6 +29,7 @@ pub const INFO: SystemInfo = SystemInfo {
     default_initial_state: &[0.0, 0.0],
     is_flow: false,
     has_exact: true,
+    exact: super::ExactPropagator::PiecewiseLinear,
     check,
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| p.get("b").abs().ln(),

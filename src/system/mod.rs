@@ -13,7 +13,6 @@
 //! and speed is that file ([`MODEL_KINDS`]): one code path, not two.
 
 pub mod henon;
-pub mod impact_oscillator;
 pub mod model;
 pub mod section;
 
@@ -24,7 +23,7 @@ use crate::integrate::clock::Phase;
 pub use crate::integrate::{FlowSettings, IterationStats, Part};
 
 /// The systems written here by hand, by their scene `kind`.
-pub static SYSTEMS: &[&SystemInfo] = &[&impact_oscillator::INFO, &henon::INFO];
+pub static SYSTEMS: &[&SystemInfo] = &[&henon::INFO];
 
 /// A scene `kind` that runs a model file of `models/`, its `[system]` keys
 /// the model's parameters.
@@ -33,18 +32,48 @@ pub struct ModelKind {
     pub text: &'static str,
     /// The parameter a sweep naming none sweeps.
     pub default_sweep: &'static str,
+    /// The exact backend's propagator.
+    pub exact: ExactPropagator,
 }
 
-/// The built-in kinds given as models. The Lorenz flow's hand-written
-/// Rust and WGSL were retired for its model: on the same scene (256 ρ,
-/// 2000 iterations of the time-0.2 map) the model ran 1.11 times the
-/// built-in's speed on the CPU and 0.89 times on lavapipe
-/// (docs/BENCHMARKS.md).
-pub static MODEL_KINDS: &[ModelKind] = &[ModelKind {
-    kind: "lorenz",
-    text: include_str!("../../models/lorenz-flow.toml"),
-    default_sweep: "rho",
-}];
+/// How the exact backend propagates a model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExactPropagator {
+    /// The piecewise-linear propagator read off the model's expressions
+    /// (`integrate::piecewise_linear`), where the model is piecewise linear.
+    PiecewiseLinear,
+    /// The seed oscillator's hand-written closed form
+    /// (`integrate::closed_form`), for the `impact-oscillator` kind: the
+    /// ground truth the piecewise-linear propagator is tested against, and
+    /// the one that stays fast where a stiffly damped mass bounces on the
+    /// wall without end (e = 1: 10 000 crossings a part before either gives
+    /// up, at 2x2 closed-form cost rather than the general scan's).
+    SeedClosedForm,
+}
+
+/// The built-in kinds given as models: each kind's hand-written Rust and
+/// WGSL were retired for its model file once the model matched it in
+/// results and speed (docs/BENCHMARKS.md, "Models against the built-in
+/// system"). The Lorenz flow's model ran 1.11 times the built-in's speed on
+/// the CPU and 0.89 times on lavapipe; the seed's impact oscillator's gave
+/// the same spectra to the bit over the main job's 4096 η, at 0.79 times
+/// the built-in's lane-steps per second on the CPU and 1.00 times on
+/// lavapipe. Its closed form (`integrate::closed_form`) stays as the
+/// kind's exact backend, the ground truth.
+pub static MODEL_KINDS: &[ModelKind] = &[
+    ModelKind {
+        kind: "impact-oscillator",
+        text: include_str!("../../models/impact-oscillator.toml"),
+        default_sweep: "eta",
+        exact: ExactPropagator::SeedClosedForm,
+    },
+    ModelKind {
+        kind: "lorenz",
+        text: include_str!("../../models/lorenz-flow.toml"),
+        default_sweep: "rho",
+        exact: ExactPropagator::PiecewiseLinear,
+    },
+];
 
 /// Every scene `kind`, for messages.
 pub fn kinds() -> impl Iterator<Item = &'static str> {
@@ -74,7 +103,7 @@ fn model_kind(m: &ModelKind) -> &'static SystemInfo {
     let compiled = crate::model::Model::parse(&table, "model")
         .and_then(|model| crate::model::code::Code::compile(model, "model"));
     match compiled {
-        Ok(code) => model::info_as(code, "system", m.default_sweep),
+        Ok(code) => model::info_as(code, "system", m.default_sweep, m.exact),
         Err(e) => panic!("the {} kind's model file: {e}", m.kind),
     }
 }
@@ -102,6 +131,8 @@ pub struct SystemInfo {
     pub is_flow: bool,
     /// Whether the `exact` backend (closed-form tangent map) exists for it.
     pub has_exact: bool,
+    /// A model's exact propagator (`PiecewiseLinear` for the others).
+    pub exact: ExactPropagator,
     /// Checks parameter values; on failure names the parameter and the reason.
     pub check: fn(&Params) -> Result<(), (&'static str, String)>,
     /// Checks an initial state against the parameters (e.g. not behind a wall).
@@ -134,7 +165,7 @@ pub struct SystemInfo {
     /// "model.parameters"), for messages.
     pub table: &'static str,
     /// The names of its walls (a model's events), one output column each;
-    /// empty for the built-ins, whose one wall is `impacts_per_period`.
+    /// empty for the built-in kinds, whose one wall is `impacts_per_period`.
     pub events: &'static [&'static str],
 }
 

@@ -9,8 +9,11 @@ use std::mem::MaybeUninit;
 
 use nalgebra::{DMatrix, DVector, SMatrix};
 
-use super::{FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo};
+use super::{
+    ExactPropagator, FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo,
+};
 use crate::integrate::clock::Phase;
+use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
 use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
@@ -34,13 +37,20 @@ pub fn info(code: Code) -> &'static SystemInfo {
         code,
         "model.parameters",
         sweep.as_deref().unwrap_or_default(),
+        ExactPropagator::PiecewiseLinear,
     )
 }
 
 /// [`info`] for a built-in kind given as a model (`system::MODEL_KINDS`):
 /// its parameters are the scene's `[system]` keys, and `default_sweep` is
-/// what a sweep naming no parameter sweeps.
-pub fn info_as(code: Code, table: &'static str, default_sweep: &str) -> &'static SystemInfo {
+/// what a sweep naming no parameter sweeps, and `exact` how the exact
+/// backend propagates it.
+pub fn info_as(
+    code: Code,
+    table: &'static str,
+    default_sweep: &str,
+    exact: ExactPropagator,
+) -> &'static SystemInfo {
     let code: &'static Code = Box::leak(Box::new(code));
     let model = &code.model;
     let parameters: Vec<Parameter> = model
@@ -63,12 +73,17 @@ pub fn info_as(code: Code, table: &'static str, default_sweep: &str) -> &'static
         .filter(|(i, _)| Some(*i) != on_section)
         .map(|(_, s)| leak(s))
         .collect();
-    let events: Vec<&'static str> = code
+    let mut events: Vec<&'static str> = code
         .walls
         .iter()
         .map(|w| leak(&w.name))
         .chain(code.surfaces.iter().map(|s| leak(&s.name)))
         .collect();
+    // A built-in kind keeps the columns its scenes always had: its one
+    // wall's crossings are `impacts_per_period`.
+    if table == "system" && events.len() <= 1 {
+        events.clear();
+    }
     // A Poincaré map starts from a point of the flow (all states).
     let initial = if code.section.is_some() { 1.0 } else { 0.0 };
     Box::leak(Box::new(SystemInfo {
@@ -79,6 +94,7 @@ pub fn info_as(code: Code, table: &'static str, default_sweep: &str) -> &'static
         default_initial_state: Box::leak(vec![initial; code.states()].into_boxed_slice()),
         is_flow: true,
         has_exact: code.is_piecewise_linear,
+        exact,
         check,
         check_state,
         expected_sum,
@@ -89,7 +105,7 @@ pub fn info_as(code: Code, table: &'static str, default_sweep: &str) -> &'static
         wall_reachable: if code.walls.is_empty() && code.surfaces.is_empty() {
             None
         } else {
-            Some(|_, _| true)
+            Some(may_reach_an_event)
         },
         model: Some(code),
         table,
@@ -106,14 +122,21 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
     super::check_finite(p)?;
     let t = code.period(&p.values);
     if !(t.is_finite() && t > 0.0) {
-        // A period that is one parameter is that parameter's fault (the
-        // `lorenz` kind's `system.period`).
-        return Err(match &code.model.map {
-            crate::model::Map::Period(Expr::Var(Var::Param(i))) => (
-                p.info.parameters[*i].name,
+        let crate::model::Map::Period(period) = &code.model.map else {
+            unreachable!("a Poincaré map has no period expression")
+        };
+        // A period that is one parameter (the `lorenz` kind's
+        // `system.period`) is that parameter's fault.
+        let bare = match period {
+            Expr::Var(Var::Param(i)) => Some(p.info.parameters[*i].name),
+            _ => None,
+        };
+        return Err(match bare.or_else(|| blamed(p, period)) {
+            Some(name) => (
+                name,
                 format!("the map's period must be a finite number > 0, got {t}"),
             ),
-            _ => (
+            None => (
                 "model.map.period",
                 format!("must be a finite number > 0, got {t}"),
             ),
@@ -129,12 +152,36 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
         let e = w.restitution.eval(&[], &p.values, 0.0);
         if !(0.0..=1.0).contains(&e) {
             return Err((
-                w.reset_key.as_str(),
+                blamed(p, &w.restitution).unwrap_or(w.reset_key.as_str()),
                 format!("the restitution e must lie in [0, 1], got {e}"),
             ));
         }
     }
     Ok(())
+}
+
+/// The parameter a bad value of an expression that the scene's author did
+/// not write is blamed on: a built-in kind given as a model
+/// (`system::MODEL_KINDS`) has no `model.map.period` in its `[system]`
+/// table to name, so an expression of one parameter names that parameter.
+fn blamed(p: &Params, expr: &Expr) -> Option<&'static str> {
+    if p.info.table != "system" {
+        return None;
+    }
+    let mut read = (0..p.values.len()).filter(|&i| expr.uses(Var::Param(i)));
+    match (read.next(), read.next()) {
+        (Some(i), None) => Some(p.info.parameters[i].name),
+        _ => None,
+    }
+}
+
+/// Whether the motion from `x` can reach one of the model's events at
+/// these parameters (`SystemInfo::wall_reachable`): proved unreachable only
+/// for a linear field between events
+/// ([`PiecewiseLinear::may_reach_an_event`]).
+fn may_reach_an_event(p: &Params, x: &[f64]) -> bool {
+    piecewise_linear(code_of(p), &p.values)
+        .is_none_or(|system| system.may_reach_an_event(&DVector::from_column_slice(x)))
 }
 
 fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
@@ -213,9 +260,46 @@ pub struct ModelFlow<const D: usize> {
     frequency: f64,
     period: f64,
     walls: Vec<Wall>,
-    /// The lane as a piecewise-linear system, where the model is one: the
-    /// exact backend's propagator, built when that backend first asks.
-    exact: std::sync::OnceLock<Option<PiecewiseLinear>>,
+    /// The exact backend's propagator of the lane, where the model has
+    /// one, built when that backend first asks.
+    exact: std::sync::OnceLock<Option<Exact>>,
+    /// Which one (`SystemInfo::exact`), and the parameters by name for
+    /// the seed's closed form.
+    exact_kind: ExactPropagator,
+    info: &'static SystemInfo,
+}
+
+/// A lane's exact propagator ([`ExactPropagator`]).
+#[derive(Clone, Debug)]
+enum Exact {
+    PiecewiseLinear(PiecewiseLinear),
+    SeedClosedForm(ForcedImpactOscillator),
+}
+
+impl<const D: usize> ModelFlow<D> {
+    /// The lane's exact propagator, if its model has one.
+    fn exact_propagator(&self) -> Option<Exact> {
+        match self.exact_kind {
+            ExactPropagator::PiecewiseLinear => {
+                piecewise_linear(self.code, &self.params).map(Exact::PiecewiseLinear)
+            }
+            ExactPropagator::SeedClosedForm => {
+                let p = Params {
+                    info: self.info,
+                    values: self.params.clone(),
+                };
+                ForcedImpactOscillator::new(
+                    p.get("zeta"),
+                    p.get("f"),
+                    p.get("eta"),
+                    p.get("wall"),
+                    p.get("restitution"),
+                )
+                .ok()
+                .map(Exact::SeedClosedForm)
+            }
+        }
+    }
 }
 
 impl<const D: usize> Flow<D> for ModelFlow<D> {
@@ -596,6 +680,8 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
             exact: std::sync::OnceLock::new(),
+            exact_kind: p.info.exact,
+            info: p.info,
         }
     }
 
@@ -608,7 +694,8 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     }
 
     /// The piecewise-linear propagator's span: exact flow matrices between
-    /// crossings located by a certified search, saltation matrices at them.
+    /// crossings located by a certified search, saltation matrices at them
+    /// (or the seed's closed form, for its kind).
     fn iterate_exact(
         &self,
         x: &[f64; D],
@@ -617,9 +704,21 @@ impl<const D: usize> System<D> for ModelFlow<D> {
     ) -> Option<([f64; D], SMatrix<f64, D, D>)> {
         let exact = self
             .exact
-            .get_or_init(|| piecewise_linear(self.code, &self.params))
+            .get_or_init(|| self.exact_propagator())
             .as_ref()?;
         let (t0, t1) = part.span(self.period);
+        let exact = match exact {
+            Exact::PiecewiseLinear(exact) => exact,
+            Exact::SeedClosedForm(closed) => {
+                let it = closed.iterate_span([x[0], x[1]], t0, t1);
+                stats.impacts += it.impacts;
+                stats.crossings[0] += it.impacts;
+                stats.rank_loss = stats.rank_loss.max(it.rank_loss);
+                stats.chattering |= it.status != ExactStatus::Ok;
+                let state: [f64; D] = std::array::from_fn(|i| it.state[i]);
+                return Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())));
+            }
+        };
         let y = DVector::from_column_slice(x);
         let it = exact.iterate_span(&y, exact.region(&y), t0, t1);
         let walls = self.walls.len();
