@@ -627,7 +627,18 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<String> {
             .as_table_mut()
             .ok_or_else(|| bad(&format!("`{key}` is not a table")))?;
     }
-    node.insert(last.to_string(), value);
+    match node.get_mut(*last) {
+        // A model parameter given with its range ({ value, min, max }):
+        // the override sets its value and keeps the range.
+        Some(toml::Value::Table(parameter))
+            if parameter.contains_key("value") && !value.is_table() =>
+        {
+            parameter.insert("value".into(), value);
+        }
+        _ => {
+            node.insert(last.to_string(), value);
+        }
+    }
     Ok(keys.join("."))
 }
 

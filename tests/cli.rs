@@ -68,6 +68,13 @@ fn impossible_values_name_their_key() {
         "system.restitution",
     );
     refused(&BASE.replace("eta = 0.8", "eta = nan"), &[], "system.eta");
+    // The kind's model file bounds its parameters (negative damping is
+    // refused, as the retired hand-written system did).
+    refused(
+        &BASE.replace("eta = 0.8", "eta = 0.8\nzeta = -0.05"),
+        &[],
+        "system.zeta: must be >= 0, got -0.05",
+    );
     refused(
         &BASE.replace("iterations = 10", "iterations = 10\nperturbation = 0.0"),
         &[],

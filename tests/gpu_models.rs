@@ -57,6 +57,40 @@ fn f32_settles_like_f64(name: &str, f64_cpu: &Report, f32_gpu: &Report, toleranc
     }
 }
 
+#[test]
+fn the_seed_oscillator_as_a_model_agrees_with_its_closed_form_on_the_gpu() {
+    if !gpu_or_skip(
+        "the_seed_oscillator_as_a_model_agrees_with_its_closed_form_on_the_gpu",
+        Precision::F64,
+    ) {
+        return;
+    }
+    // The `impact-oscillator` kind (its model file, the generated kernel)
+    // at the paper's 1800 steps against the seed's closed form (the kind's
+    // exact backend), at the periodic η, as tests/model_runs.rs does on
+    // the CPU.
+    let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.95, 1.1, 1.25, 1.5]\n\
+                [integration]\nsteps_per_period = 1800\ntransient = 500\niterations = 1000\n";
+    let kind = format!("[system]\nkind = \"impact-oscillator\"\n{body}");
+    let gpu = run(&common::scene(
+        &kind,
+        &["run.backend=\"gpu\"", "run.precision=\"f64\""],
+    ));
+    let exact = run(&common::scene(&kind, &["run.backend=\"exact\""]));
+    assert_eq!(gpu.backend, Backend::Gpu);
+    assert!(gpu.gpu.as_ref().unwrap().variant.contains("/f64/wall+"));
+    let mut worst: f64 = 0.0;
+    for (g, e) in gpu.lanes.iter().zip(&exact.lanes) {
+        assert_eq!(g.status, LaneStatus::Ok);
+        assert_eq!(g.impacts_per_period, e.impacts_per_period);
+        for (x, y) in g.exponents.iter().zip(&e.exponents) {
+            worst = worst.max((x - y).abs());
+        }
+    }
+    assert!(gpu.lanes.iter().any(|l| l.impacts_per_period > 0.0));
+    assert!(worst <= 1e-9, "GPU against the closed form: {worst:e}");
+}
+
 /// The forced pendulum's periodic lanes (λ1 < 0 at each): a period-1
 /// orbit (f = 0.9) and orbits on the way into the cascade.
 const PENDULUM: &str = "[sweep]\nparameter = \"f\"\nvalues = [0.9, 1.0, 1.05, 1.07]\n\

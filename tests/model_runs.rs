@@ -408,6 +408,27 @@ fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
             "name = \"right-stop\"",
             "model.events[1].name: 'right-stop' names the column right_stop_per_period",
         ),
+        // A parameter's allowed range: its table, and its value inside it.
+        (
+            "zeta = 0.05",
+            "zeta = { value = 0.05, min = 1 }",
+            "model.parameters.zeta.value: 0.05 lies outside [1, inf]",
+        ),
+        (
+            "zeta = 0.05",
+            "zeta = { value = 0.05, min = 1, max = 0 }",
+            "model.parameters.zeta: min 1 exceeds max 0",
+        ),
+        (
+            "zeta = 0.05",
+            "zeta = { value = 0.05, minimum = 0 }",
+            "model.parameters.zeta.minimum: unknown key (a parameter has value, min and max)",
+        ),
+        (
+            "zeta = 0.05",
+            "zeta = { min = 0 }",
+            "model.parameters.zeta: a parameter's table needs `value`",
+        ),
     ];
     for (from, to, message) in cases {
         assert!(PAIR.contains(from), "{from}");
@@ -418,6 +439,18 @@ fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
         &format!("{PAIR}[sweep]\nparameter = \"eta\"\nvalues = [0.8, -0.5]\n"),
         &[],
         "model.map.period: must be a finite number > 0, got -12.566370614359172 (with eta = -0.5)",
+    );
+    // A swept or overridden value outside a parameter's range is named.
+    let bounded = PAIR.replacen("zeta = 0.05", "zeta = { value = 0.05, min = 0 }", 1);
+    refused(
+        &format!("{bounded}[sweep]\nparameter = \"zeta\"\nvalues = [0.1, -0.5]\n"),
+        &[],
+        "sweep.values: zeta = -0.5: zeta must be >= 0, got -0.5",
+    );
+    refused(
+        &bounded,
+        &["--set", "model.parameters.zeta=-1"],
+        "model.parameters.zeta.value: -1 lies outside [0, inf]",
     );
     // Overrides of a model's parameters are checked like the file.
     refused(

@@ -27,7 +27,13 @@ pub fn describe(code: &Code) -> String {
         .parameters
         .iter()
         .zip(&model.defaults)
-        .map(|(p, v)| format!("{p} = {v}"))
+        .zip(&model.ranges)
+        .map(
+            |((p, v), &(min, max))| match (min.is_finite(), max.is_finite()) {
+                (false, false) => format!("{p} = {v}"),
+                _ => format!("{p} = {v} in [{min}, {max}]"),
+            },
+        )
         .collect();
     let _ = writeln!(
         w,

@@ -14,6 +14,9 @@ pub struct Model {
     pub names: Names,
     /// Parameter defaults, in `names.parameters` order.
     pub defaults: Vec<f64>,
+    /// Each parameter's allowed range, inclusive, in the same order
+    /// (`zeta = { value = 0.05, min = 0 }`; unbounded by default).
+    pub ranges: Vec<(f64, f64)>,
     /// d(state)/dt, one per state, in `names.states` order.
     pub equations: Vec<Expr>,
     pub map: Map,
@@ -147,6 +150,50 @@ fn known_keys(table: &toml::Table, key: &str, what: &str, allowed: &[&str]) -> R
     }
 }
 
+/// A parameter's default and allowed range: a number, or a table
+/// `{ value = 0.05, min = 0, max = 1 }` (`min` and `max` optional,
+/// inclusive), so that a value outside the range the model means is
+/// refused naming the parameter rather than run.
+fn parameter(v: &toml::Value, key: &str) -> Result<(f64, (f64, f64))> {
+    let number = |v: &toml::Value, key: &str| -> Result<f64> {
+        let x = match v {
+            toml::Value::Float(x) => *x,
+            toml::Value::Integer(x) => *x as f64,
+            other => return Err(invalid(key, format!("expected a number, got {other}"))),
+        };
+        if !x.is_finite() {
+            return Err(invalid(key, format!("must be finite, got {x}")));
+        }
+        Ok(x)
+    };
+    let toml::Value::Table(t) = v else {
+        return Ok((number(v, key)?, (f64::NEG_INFINITY, f64::INFINITY)));
+    };
+    known_keys(t, key, "a parameter", &["value", "min", "max"])?;
+    let value = match t.get("value") {
+        Some(v) => number(v, &format!("{key}.value"))?,
+        None => return Err(invalid(key, "a parameter's table needs `value`")),
+    };
+    let bound = |name: &str, unbounded: f64| -> Result<f64> {
+        t.get(name)
+            .map_or(Ok(unbounded), |v| number(v, &format!("{key}.{name}")))
+    };
+    let (min, max) = (
+        bound("min", f64::NEG_INFINITY)?,
+        bound("max", f64::INFINITY)?,
+    );
+    if min > max {
+        return Err(invalid(key, format!("min {min} exceeds max {max}")));
+    }
+    if !(min..=max).contains(&value) {
+        return Err(invalid(
+            &format!("{key}.value"),
+            format!("{value} lies outside [{min}, {max}]"),
+        ));
+    }
+    Ok((value, (min, max)))
+}
+
 fn any(_: Var) -> Option<&'static str> {
     None
 }
@@ -204,6 +251,7 @@ impl Model {
         let parameters_key = at("parameters");
         let mut parameters = Vec::new();
         let mut defaults = Vec::new();
+        let mut ranges = Vec::new();
         if let Some(value) = root.get("parameters") {
             for (p, v) in table(value, &parameters_key)? {
                 let key = format!("{parameters_key}.{p}");
@@ -214,16 +262,10 @@ impl Model {
                         format!("'{p}' is both a state and a parameter"),
                     ));
                 }
-                let number = match v {
-                    toml::Value::Float(x) => *x,
-                    toml::Value::Integer(x) => *x as f64,
-                    other => return Err(invalid(&key, format!("expected a number, got {other}"))),
-                };
-                if !number.is_finite() {
-                    return Err(invalid(&key, format!("must be finite, got {number}")));
-                }
+                let (number, range) = parameter(v, &key)?;
                 parameters.push(p.clone());
                 defaults.push(number);
+                ranges.push(range);
             }
         }
         let mut names = Names {
@@ -499,6 +541,7 @@ impl Model {
             name,
             names,
             defaults,
+            ranges,
             equations,
             map,
             events,

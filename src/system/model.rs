@@ -120,6 +120,22 @@ fn code_of(p: &Params) -> &'static Code {
 fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
     let code = code_of(p);
     super::check_finite(p)?;
+    for ((param, &value), &(min, max)) in p
+        .info
+        .parameters
+        .iter()
+        .zip(&p.values)
+        .zip(&code.model.ranges)
+    {
+        if !(min..=max).contains(&value) {
+            let reason = match (min.is_finite(), max.is_finite()) {
+                (true, true) => format!("must lie in [{min}, {max}], got {value}"),
+                (true, false) => format!("must be >= {min}, got {value}"),
+                _ => format!("must be <= {max}, got {value}"),
+            };
+            return Err((param.name, reason));
+        }
+    }
     let t = code.period(&p.values);
     if !(t.is_finite() && t > 0.0) {
         let crate::model::Map::Period(period) = &code.model.map else {
