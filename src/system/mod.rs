@@ -45,9 +45,9 @@ pub enum ExactPropagator {
     /// The seed oscillator's hand-written closed form
     /// (`integrate::closed_form`), for the `impact-oscillator` kind: the
     /// ground truth the piecewise-linear propagator is tested against, and
-    /// the one that stays fast where a stiffly damped mass bounces on the
-    /// wall without end (e = 1: 10 000 crossings a part before either gives
-    /// up, at 2x2 closed-form cost rather than the general scan's).
+    /// fast where a stiffly damped mass bounces on the wall thousands of
+    /// times a period (e = 1: 2x2 closed-form cost per bounce rather than
+    /// the general scan's; docs/BENCHMARKS.md).
     SeedClosedForm,
 }
 

@@ -281,7 +281,6 @@ pub struct ModelFlow<const D: usize> {
     exact: std::sync::OnceLock<Option<Exact>>,
     /// Which one (`SystemInfo::exact`), and the parameters by name for
     /// the seed's closed form.
-    exact_kind: ExactPropagator,
     info: &'static SystemInfo,
 }
 
@@ -295,7 +294,7 @@ enum Exact {
 impl<const D: usize> ModelFlow<D> {
     /// The lane's exact propagator, if its model has one.
     fn exact_propagator(&self) -> Option<Exact> {
-        match self.exact_kind {
+        match self.info.exact {
             ExactPropagator::PiecewiseLinear => {
                 piecewise_linear(self.code, &self.params).map(Exact::PiecewiseLinear)
             }
@@ -696,7 +695,6 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
             exact: std::sync::OnceLock::new(),
-            exact_kind: p.info.exact,
             info: p.info,
         }
     }
