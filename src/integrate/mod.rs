@@ -139,6 +139,29 @@ pub trait Flow<const D: usize>: Sync {
         None
     }
 
+    /// Up to `steps` RK4 steps of W trajectories of this flow (a lane's
+    /// reference and copies), all at forcing phase `phase` turned by `half`
+    /// per half step and with step size h, in a step loop of the flow's
+    /// own (native code) that stops before the first step in which a live
+    /// slot (bit k of `live`) meets a wall, as the detection of
+    /// [`part_map_many`]'s loop finds it. Returns the steps taken, with
+    /// `y` and `phase` advanced by them to the bits that loop gives;
+    /// `None` where the flow has no such loop (the step loop then takes
+    /// every step). Only for flows without general surfaces.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn walk_shared<const W: usize>(
+        &self,
+        _y: &mut [[f64; W]; D],
+        _phase: &mut Phase,
+        _half: &Phase,
+        _h: f64,
+        _live: u32,
+        _steps: usize,
+    ) -> Option<usize> {
+        None
+    }
+
     /// The field in region `region` of the switches (bit b set: on the
     /// positive side of switch b); a flow without switches has one.
     #[inline(always)]
@@ -667,7 +690,21 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             );
         }
     }
-    for _ in part.steps(steps) {
+    // A flow with a step loop of its own takes the steps that meet no wall
+    // there, and this loop the one that does (or every step, without).
+    let live = (1u32 << n) - 1;
+    let mut left = part.steps(steps).len();
+    while left > 0 {
+        if S::SHARED && !SURFACES {
+            let walked = flows
+                .of(0)
+                .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left);
+            left -= walked.unwrap_or(0);
+            if left == 0 {
+                break;
+            }
+        }
+        left -= 1;
         // The batch's step (see `Flow::step_shared`), then detection.
         let shared = rk4::stage_phases(&phase, &half[0]);
         let each: [[Phase; 3]; W] = if S::SHARED {

@@ -336,8 +336,27 @@ impl Code {
             }
         }
         let kinds: Vec<Surface> = surfaces.iter().map(|s| s.kind).collect();
+        // A period map without general surfaces steps in a loop of native
+        // code between the steps that meet a stop (`Flow::walk_shared`).
+        let stepping: Option<Vec<(usize, usize)>> = (section.is_none() && surfaces.is_empty())
+            .then(|| {
+                walls
+                    .iter()
+                    .map(|w: &Stop| (w.coordinate, w.velocity))
+                    .collect()
+            });
         let regions = (0..1u32 << model.switches.len())
-            .map(|r| field(&model, &surfaces, r, equations.frequency.clone(), key))
+            .map(|r| {
+                let stops = stepping.as_deref();
+                field(
+                    &model,
+                    &surfaces,
+                    r,
+                    equations.frequency.clone(),
+                    stops,
+                    key,
+                )
+            })
             .collect::<Result<Vec<_>>>()?;
         let whole_divergence = (0..n)
             .map(|i| model.equations[i].derivative(Var::State(i)))
@@ -697,6 +716,7 @@ fn field(
     surfaces: &[GeneralSurface],
     region: u32,
     frequency: Option<Expr>,
+    stops: Option<&[(usize, usize)]>,
     key: &str,
 ) -> Result<Field> {
     let n = model.names.states.len();
@@ -740,7 +760,7 @@ fn field(
         .map(|ij| equations[ij / n].derivative(Var::State(ij % n)))
         .collect();
     Ok(Field {
-        native: Native::compile(&tape),
+        native: Native::compile_stepping(&tape, stops),
         equations: tape,
         surfaces_native: if surfaces.is_empty() {
             None

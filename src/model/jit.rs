@@ -36,6 +36,28 @@ pub type Function = unsafe extern "C" fn(
     out: *mut f64,
 );
 
+/// A compiled step loop ([`Native::walk`]): takes up to `steps` RK4 steps
+/// of the `[[f64; W]; D]` states at `y` (in place) from the forcing phase
+/// `phase[0..2]`, turned by `phase[2..4]` per half step (written back
+/// where the loop stopped), with the lane constants at `lane` and the step
+/// size `h[0]`; stops before the first step in which a slot whose mask in
+/// `live` (W `i64`, all ones or zero) is set meets one of the stops
+/// compiled in (positions and sides at `walls`, `[position, side]` per
+/// stop). Returns the steps taken.
+pub type Walk = unsafe extern "C" fn(
+    y: *mut f64,
+    phase: *mut f64,
+    lane: *const f64,
+    h: *const f64,
+    walls: *const f64,
+    live: *const i64,
+    steps: u64,
+) -> u64;
+
+/// The widths a step loop is compiled for ([`Native::walk`]): a lane's
+/// reference and copies (3 to 9 trajectories) in batches of 4 or 8.
+const WALK_WIDTHS: [usize; 2] = [4, 8];
+
 /// What a compiled function computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -70,6 +92,8 @@ pub const WIDTHS: [usize; 3] = [1, 4, 8];
 /// [`Kind::Step`] for a tape whose outputs are not a field's derivatives).
 pub struct Native {
     functions: [[[Option<Function>; 2]; WIDTHS.len()]; 2],
+    walks: [Option<Walk>; WALK_WIDTHS.len()],
+    stops: usize,
     states: usize,
     outputs: usize,
     constants: usize,
@@ -103,14 +127,71 @@ impl Native {
     /// [`Kind::Rhs`] always, and as [`Kind::Step`] too where it has as many
     /// outputs as states (a flow's equations).
     pub fn compile(tape: &Tape) -> Option<Native> {
+        Native::compile_stepping(tape, None)
+    }
+
+    /// [`compile`](Self::compile) for a field's equations, with its step
+    /// loop ([`walk`](Self::walk)) where `stops` are given: each stop's
+    /// coordinate and velocity (`model::code::Stop`), detected in the loop
+    /// as the step loop of `integrate` detects them.
+    pub fn compile_stepping(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Option<Native> {
         #[cfg(target_arch = "x86_64")]
         {
-            build(tape).ok()
+            build(tape, stops).ok()
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
+            let _ = (tape, stops);
             None
         }
+    }
+
+    /// Up to `steps` RK4 steps of a lane's W trajectories `y`, from the
+    /// forcing phase `phase` turned by `half` per half step, in one loop
+    /// of native code that stops before the first step in which a live
+    /// slot (bit k of `live`) meets a stop: the step the step loop would
+    /// hand to the impact code (`integrate::steps`'s detection, the same
+    /// comparisons of the same values). Returns the steps taken, `y` and
+    /// `phase` advanced by them, each step's arithmetic
+    /// [`Kind::Step`]'s and `rk4::stage_phases`'s; `None` where there is
+    /// no loop for W. `walls` holds `[position, side]` per stop.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn walk<const W: usize, const D: usize>(
+        &self,
+        y: &mut [[f64; W]; D],
+        phase: &mut [f64; 2],
+        half: &[f64; 2],
+        lane: &[f64],
+        h: f64,
+        walls: &[f64],
+        live: u32,
+        steps: usize,
+    ) -> Option<usize> {
+        let w = WALK_WIDTHS.iter().position(|&w| w == W)?;
+        let f = self.walks[w]?;
+        assert!(D == self.states && lane.len() >= self.constants && walls.len() >= 2 * self.stops);
+        let mut clock = [phase[0], phase[1], half[0], half[1]];
+        let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
+        let h = [h];
+        // SAFETY: the loop reads and writes D·W states in `y` and the four
+        // values of `clock`, reads the tape's constants, one step size,
+        // two values per stop and W masks (checked above); it was
+        // compiled for W and this tape's D states.
+        let taken = unsafe {
+            f(
+                y.as_mut_ptr().cast(),
+                clock.as_mut_ptr(),
+                lane.as_ptr(),
+                h.as_ptr(),
+                walls.as_ptr(),
+                live.as_ptr(),
+                steps as u64,
+            )
+        };
+        *phase = [clock[0], clock[1]];
+        rewrite_as_read(y);
+        Some(taken as usize)
     }
 
     /// Whether there is a function for batches of W.
@@ -343,7 +424,7 @@ fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
 use cranelift_jit::JITModule as Module;
 
 #[cfg(target_arch = "x86_64")]
-fn build(tape: &Tape) -> Result<Native, String> {
+fn build(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Result<Native, String> {
     use cranelift_codegen::settings::{self, Configurable};
     use cranelift_jit::JITBuilder;
 
@@ -369,11 +450,32 @@ fn build(tape: &Tape) -> Result<Native, String> {
         for &w in &WIDTHS {
             for layout in [Layout::Shared, Layout::Each] {
                 let name = format!("{kind:?}{w}{layout:?}");
-                ids.push(define(&mut module, tape, kind, w, layout, &name)?);
+                ids.push(define(
+                    &mut module,
+                    tape,
+                    What::Function(kind, layout),
+                    w,
+                    &name,
+                )?);
             }
         }
     }
+    let stepping = stops.filter(|_| kinds.contains(&Kind::Step));
+    let mut walk_ids = Vec::new();
+    if let Some(stops) = stepping {
+        for &w in &WALK_WIDTHS {
+            let name = format!("Walk{w}");
+            walk_ids.push(define(&mut module, tape, What::Walk(stops), w, &name)?);
+        }
+    }
     module.finalize_definitions().map_err(|e| e.to_string())?;
+    let mut walk_ids = walk_ids.into_iter();
+    let walks = [(); WALK_WIDTHS.len()].map(|_| {
+        let code = module.get_finalized_function(walk_ids.next()?);
+        // SAFETY: the code at this address was defined with the `Walk`
+        // signature in the host's default (C) calling convention.
+        Some(unsafe { std::mem::transmute::<*const u8, Walk>(code) })
+    });
     let mut ids = ids.into_iter();
     let functions = [Kind::Rhs, Kind::Step].map(|kind| {
         [(); WIDTHS.len()].map(|_| {
@@ -391,6 +493,8 @@ fn build(tape: &Tape) -> Result<Native, String> {
     });
     Ok(Native {
         functions,
+        walks,
+        stops: stepping.map_or(0, <[_]>::len),
         states: tape.states,
         outputs,
         constants: tape.lane_constants.len(),
@@ -398,24 +502,43 @@ fn build(tape: &Tape) -> Result<Native, String> {
     })
 }
 
-/// Defines the tape's function for batches of `w` in `layout`.
+/// What [`define`] defines.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+enum What<'a> {
+    /// A [`Function`] of this kind and layout.
+    Function(Kind, Layout),
+    /// A step loop ([`Walk`]) detecting these stops (coordinate,
+    /// velocity).
+    Walk(&'a [(usize, usize)]),
+}
+
+/// Defines the tape's function for batches of `w`.
 #[cfg(target_arch = "x86_64")]
 fn define(
     module: &mut Module,
     tape: &Tape,
-    kind: Kind,
+    what: What,
     w: usize,
-    layout: Layout,
     name: &str,
 ) -> Result<cranelift_module::FuncId, String> {
     use cranelift_codegen::ir::immediates::Ieee64;
     use cranelift_codegen::ir::{types, AbiParam, InstBuilder, MemFlags, Value};
     use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
-    use cranelift_module::{Linkage, Module as _};
+    use cranelift_module::Module as _;
 
     let pointer = module.target_config().pointer_type();
     let mut ctx = module.make_context();
+    let layout = match what {
+        What::Function(_, layout) => layout,
+        What::Walk(_) => Layout::Shared,
+    };
     ctx.func.signature.params = vec![AbiParam::new(pointer); 5];
+    if let What::Walk(_) = what {
+        ctx.func.signature.params.push(AbiParam::new(pointer));
+        ctx.func.signature.params.push(AbiParam::new(types::I64));
+        ctx.func.signature.returns.push(AbiParam::new(types::I64));
+    }
     let mut apply = module.make_signature();
     apply.params = vec![AbiParam::new(types::F64); 2];
     apply.returns = vec![AbiParam::new(types::F64)];
@@ -435,7 +558,8 @@ fn define(
     b.append_block_params_for_function_params(entry);
     b.switch_to_block(entry);
     b.seal_block(entry);
-    let [y, clock, lane, h, out] = <[Value; 5]>::try_from(b.block_params(entry)).expect("5 params");
+    let params = b.block_params(entry).to_vec();
+    let [y, clock, lane, h, out] = <[Value; 5]>::try_from(&params[..5]).expect("5 params");
 
     // A row of W values at `base` + `row`·W, as `chunks` vectors.
     let load_row = |b: &mut FunctionBuilder, base: Value, row: usize| -> Vec<Value> {
@@ -503,66 +627,97 @@ fn define(
             .map(|&slot| slots[slot as usize].clone())
             .collect::<Vec<_>>()
     };
-
-    let state: Vec<Vec<Value>> = (0..d).map(|i| load_row(&mut b, y, i)).collect();
-    let result = match kind {
-        Kind::Rhs => {
-            let cos_sin = load_clock(&mut b, 0);
-            rhs(&mut b, &state, cos_sin)
+    // The constants of a step: h, h/2, h/6 and 2.
+    let step_sizes = |b: &mut FunctionBuilder| -> [Vec<Value>; 4] {
+        let hs = match layout {
+            Layout::Shared => load_splat(b, h, 0),
+            Layout::Each => load_row(b, h, 0),
+        };
+        let (half, six) = (number(b, 0.5), number(b, 6.0));
+        let (mut h2, mut sixth) = (Vec::new(), Vec::new());
+        for k in 0..chunks {
+            h2.push(b.ins().fmul(half[k], hs[k]));
+            sixth.push(b.ins().fdiv(hs[k], six[k]));
         }
-        // `rk4::step_batch`, operation for operation.
-        Kind::Step => {
-            let hs = match layout {
-                Layout::Shared => load_splat(&mut b, h, 0),
-                Layout::Each => load_row(&mut b, h, 0),
-            };
-            let (half, six) = (number(&mut b, 0.5), number(&mut b, 6.0));
-            let (mut h2, mut sixth) = (Vec::new(), Vec::new());
-            for k in 0..chunks {
-                h2.push(b.ins().fmul(half[k], hs[k]));
-                sixth.push(b.ins().fdiv(hs[k], six[k]));
-            }
-            // y + a·k
-            let axpy = |b: &mut FunctionBuilder, a: &[Value], k: &[Vec<Value>]| {
-                (0..d)
-                    .map(|i| {
-                        (0..chunks)
-                            .map(|c| {
-                                let p = b.ins().fmul(a[c], k[i][c]);
-                                b.ins().fadd(state[i][c], p)
-                            })
-                            .collect::<Vec<_>>()
-                    })
-                    .collect::<Vec<_>>()
-            };
-            let (start, middle, end) = (
-                load_clock(&mut b, 0),
-                load_clock(&mut b, 1),
-                load_clock(&mut b, 2),
-            );
-            let k1 = rhs(&mut b, &state, start);
-            let y2 = axpy(&mut b, &h2, &k1);
-            let k2 = rhs(&mut b, &y2, middle.clone());
-            let y3 = axpy(&mut b, &h2, &k2);
-            let k3 = rhs(&mut b, &y3, middle);
-            let y4 = axpy(&mut b, &hs, &k3);
-            let k4 = rhs(&mut b, &y4, end);
-            let two = number(&mut b, 2.0);
+        [hs, h2, sixth, number(b, 2.0)]
+    };
+    // `rk4::step_batch`, operation for operation, from `state` with the
+    // stages' clocks.
+    let rk4 = |b: &mut FunctionBuilder,
+               state: &[Vec<Value>],
+               [hs, h2, sixth, two]: &[Vec<Value>; 4],
+               [start, middle, end]: [[Vec<Value>; 2]; 3]| {
+        // y + a·k
+        let axpy = |b: &mut FunctionBuilder, a: &[Value], k: &[Vec<Value>]| {
             (0..d)
                 .map(|i| {
                     (0..chunks)
                         .map(|c| {
-                            // y + h/6·(k1 + 2(k2 + k3) + k4)
-                            let t = b.ins().fadd(k2[i][c], k3[i][c]);
-                            let t = b.ins().fmul(two[c], t);
-                            let t = b.ins().fadd(k1[i][c], t);
-                            let t = b.ins().fadd(t, k4[i][c]);
-                            let t = b.ins().fmul(sixth[c], t);
-                            b.ins().fadd(state[i][c], t)
+                            let p = b.ins().fmul(a[c], k[i][c]);
+                            b.ins().fadd(state[i][c], p)
                         })
                         .collect::<Vec<_>>()
                 })
-                .collect()
+                .collect::<Vec<_>>()
+        };
+        let k1 = rhs(b, state, start);
+        let y2 = axpy(b, h2, &k1);
+        let k2 = rhs(b, &y2, middle.clone());
+        let y3 = axpy(b, h2, &k2);
+        let k3 = rhs(b, &y3, middle);
+        let y4 = axpy(b, hs, &k3);
+        let k4 = rhs(b, &y4, end);
+        (0..d)
+            .map(|i| {
+                (0..chunks)
+                    .map(|c| {
+                        // y + h/6·(k1 + 2(k2 + k3) + k4)
+                        let t = b.ins().fadd(k2[i][c], k3[i][c]);
+                        let t = b.ins().fmul(two[c], t);
+                        let t = b.ins().fadd(k1[i][c], t);
+                        let t = b.ins().fadd(t, k4[i][c]);
+                        let t = b.ins().fmul(sixth[c], t);
+                        b.ins().fadd(state[i][c], t)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect::<Vec<_>>()
+    };
+
+    let state: Vec<Vec<Value>> = (0..d).map(|i| load_row(&mut b, y, i)).collect();
+    let result = match what {
+        What::Function(Kind::Rhs, _) => {
+            let cos_sin = load_clock(&mut b, 0);
+            rhs(&mut b, &state, cos_sin)
+        }
+        What::Function(Kind::Step, _) => {
+            let sizes = step_sizes(&mut b);
+            let clocks = [0, 1, 2].map(|s| load_clock(&mut b, s));
+            rk4(&mut b, &state, &sizes, clocks)
+        }
+        What::Walk(stops) => {
+            // The fifth pointer is the stops', then the masks and count.
+            let [live, steps] = <[Value; 2]>::try_from(&params[5..]).expect("7 params");
+            walk(
+                &mut b,
+                Walker {
+                    state,
+                    y,
+                    clock,
+                    walls: out,
+                    live,
+                    steps,
+                    stops,
+                    chunks,
+                    ty,
+                    flags,
+                },
+                |b| step_sizes(b),
+                |b, state, sizes, clocks| rk4(b, state, sizes, clocks),
+                &splat,
+            );
+            b.finalize();
+            return declare(module, &mut ctx, name);
         }
     };
     for (i, row) in result.iter().enumerate() {
@@ -572,15 +727,224 @@ fn define(
     }
     b.ins().return_(&[]);
     b.finalize();
+    declare(module, &mut ctx, name)
+}
 
+/// Declares and defines the function built in `ctx`.
+#[cfg(target_arch = "x86_64")]
+fn declare(
+    module: &mut Module,
+    ctx: &mut cranelift_codegen::Context,
+    name: &str,
+) -> Result<cranelift_module::FuncId, String> {
+    use cranelift_module::{Linkage, Module as _};
     let id = module
         .declare_function(name, Linkage::Local, &ctx.func.signature)
         .map_err(|e| e.to_string())?;
-    module
-        .define_function(id, &mut ctx)
-        .map_err(|e| e.to_string())?;
-    module.clear_context(&mut ctx);
+    module.define_function(id, ctx).map_err(|e| e.to_string())?;
+    module.clear_context(ctx);
     Ok(id)
+}
+
+/// What the step loop's code reads ([`walk`]).
+#[cfg(target_arch = "x86_64")]
+struct Walker<'a> {
+    /// The states at the loop's start, a vector per `chunks` slots.
+    state: Vec<Vec<cranelift_codegen::ir::Value>>,
+    /// Pointers to the states, the phase and half-step turn, the stops'
+    /// positions and sides, the slots' live masks; and the most steps to
+    /// take.
+    y: cranelift_codegen::ir::Value,
+    clock: cranelift_codegen::ir::Value,
+    walls: cranelift_codegen::ir::Value,
+    live: cranelift_codegen::ir::Value,
+    steps: cranelift_codegen::ir::Value,
+    stops: &'a [(usize, usize)],
+    chunks: usize,
+    ty: cranelift_codegen::ir::Type,
+    flags: cranelift_codegen::ir::MemFlags,
+}
+
+/// The step loop ([`Walk`]): a header that counts the steps, a body that
+/// turns the phase (`rk4::stage_phases`), takes the RK4 step and detects
+/// the stops as `integrate::steps` does, and an exit that stores the
+/// states and phase where the loop stopped. The states and phase live in
+/// the loop's block parameters (registers), never in memory.
+#[cfg(target_arch = "x86_64")]
+fn walk<S, K>(
+    b: &mut cranelift_frontend::FunctionBuilder,
+    walker: Walker,
+    step_sizes: impl Fn(&mut cranelift_frontend::FunctionBuilder) -> S,
+    rk4: K,
+    splat: impl Fn(
+        &mut cranelift_frontend::FunctionBuilder,
+        cranelift_codegen::ir::Value,
+    ) -> Vec<cranelift_codegen::ir::Value>,
+) where
+    K: Fn(
+        &mut cranelift_frontend::FunctionBuilder,
+        &[Vec<cranelift_codegen::ir::Value>],
+        &S,
+        [[Vec<cranelift_codegen::ir::Value>; 2]; 3],
+    ) -> Vec<Vec<cranelift_codegen::ir::Value>>,
+{
+    use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
+    use cranelift_codegen::ir::immediates::Ieee64;
+    use cranelift_codegen::ir::{types, BlockArg, InstBuilder, Value};
+
+    let Walker {
+        state,
+        y: states,
+        clock,
+        walls,
+        live,
+        steps,
+        stops,
+        chunks,
+        ty,
+        flags,
+    } = walker;
+    let d = state.len();
+    let sizes = step_sizes(b);
+    let scalar = |b: &mut cranelift_frontend::FunctionBuilder, i: usize| {
+        b.ins().load(types::F64, flags, clock, (8 * i) as i32)
+    };
+    let (c0, s0, hc, hs) = (scalar(b, 0), scalar(b, 1), scalar(b, 2), scalar(b, 3));
+    let mask_ty = types::I64X2;
+    let masks: Vec<Value> = (0..chunks)
+        .map(|c| b.ins().load(mask_ty, flags, live, (16 * c) as i32))
+        .collect();
+    // Each stop's position and side, in every slot.
+    let bounds: Vec<(Vec<Value>, Vec<Value>)> = (0..stops.len())
+        .map(|j| {
+            let p = b.ins().load(types::F64, flags, walls, (16 * j) as i32);
+            let s = b.ins().load(types::F64, flags, walls, (16 * j + 8) as i32);
+            (splat(b, p), splat(b, s))
+        })
+        .collect();
+    let zero = {
+        let z = b.ins().f64const(Ieee64::with_bits(0));
+        splat(b, z)
+    };
+    let (one_half, three_halves) = (
+        b.ins().f64const(Ieee64::with_bits(0.5f64.to_bits())),
+        b.ins().f64const(Ieee64::with_bits(1.5f64.to_bits())),
+    );
+    let counted = b.ins().iconst(types::I64, 0);
+
+    // Block parameters: the states (d·chunks vectors), cos, sin, the steps
+    // taken.
+    let (header, body, exit) = (b.create_block(), b.create_block(), b.create_block());
+    for block in [header, exit] {
+        for _ in 0..d * chunks {
+            b.append_block_param(block, ty);
+        }
+        b.append_block_param(block, types::F64);
+        b.append_block_param(block, types::F64);
+        b.append_block_param(block, types::I64);
+    }
+    let args = |state: &[Vec<Value>], c: Value, s: Value, n: Value| -> Vec<BlockArg> {
+        state
+            .iter()
+            .flatten()
+            .copied()
+            .chain([c, s, n])
+            .map(BlockArg::Value)
+            .collect()
+    };
+    b.ins().jump(header, &args(&state, c0, s0, counted));
+
+    // The header: stop after `steps` steps.
+    b.switch_to_block(header);
+    let at: Vec<Value> = b.block_params(header).to_vec();
+    let rows = |flat: &[Value]| -> Vec<Vec<Value>> {
+        flat.chunks(chunks).map(<[Value]>::to_vec).collect()
+    };
+    let (y, c, s, n) = (
+        rows(&at[..d * chunks]),
+        at[d * chunks],
+        at[d * chunks + 1],
+        at[d * chunks + 2],
+    );
+    let more = b.ins().icmp(IntCC::UnsignedLessThan, n, steps);
+    b.ins().brif(more, body, &[], exit, &args(&y, c, s, n));
+
+    // The body: `rk4::stage_phases`, then the step, then detection.
+    b.switch_to_block(body);
+    b.seal_block(body);
+    // `clock::rotate`: (c, s)·(hc, hs), renormalised to first order.
+    let rotate = |b: &mut cranelift_frontend::FunctionBuilder, c: Value, s: Value| {
+        let (p, q) = (b.ins().fmul(c, hc), b.ins().fmul(s, hs));
+        let c1 = b.ins().fsub(p, q);
+        let (p, q) = (b.ins().fmul(s, hc), b.ins().fmul(c, hs));
+        let s1 = b.ins().fadd(p, q);
+        let (cc, ss) = (b.ins().fmul(c1, c1), b.ins().fmul(s1, s1));
+        let norm = b.ins().fadd(cc, ss);
+        let half_norm = b.ins().fmul(one_half, norm);
+        let scale = b.ins().fsub(three_halves, half_norm);
+        (b.ins().fmul(c1, scale), b.ins().fmul(s1, scale))
+    };
+    let (mc, ms) = rotate(b, c, s);
+    let (ec, es) = rotate(b, mc, ms);
+    let clocks = [(c, s), (mc, ms), (ec, es)].map(|(c, s)| [splat(b, c), splat(b, s)]);
+    let y1 = rk4(b, &y, &sizes, clocks);
+    // As `integrate::steps`: at rest on a stop before the step, beyond it
+    // after the step, or turning back inside it.
+    let mut hit: Option<Value> = None;
+    for (&(ci, vi), (position, side)) in stops.iter().zip(&bounds) {
+        for k in 0..chunks {
+            let at_stop = b.ins().fcmp(FloatCC::Equal, y[ci][k], position[k]);
+            let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero[k]);
+            let resting = b.ins().band(at_stop, still);
+            let gap = b.ins().fsub(y1[ci][k], position[k]);
+            let gap = b.ins().fmul(side[k], gap);
+            let beyond = b.ins().fcmp(FloatCC::GreaterThan, gap, zero[k]);
+            let toward = b.ins().fmul(side[k], y[vi][k]);
+            let toward = b.ins().fcmp(FloatCC::GreaterThan, toward, zero[k]);
+            let back = b.ins().fmul(side[k], y1[vi][k]);
+            let back = b.ins().fcmp(FloatCC::LessThan, back, zero[k]);
+            let turning = b.ins().band(toward, back);
+            let any = b.ins().bor(resting, beyond);
+            let any = b.ins().bor(any, turning);
+            let any = b.ins().band(any, masks[k]);
+            hit = Some(match hit {
+                Some(h) => b.ins().bor(h, any),
+                None => any,
+            });
+        }
+    }
+    let next = b.ins().iadd_imm(n, 1);
+    match hit {
+        Some(hit) => {
+            let met = b.ins().vany_true(hit);
+            b.ins().brif(
+                met,
+                exit,
+                &args(&y, c, s, n),
+                header,
+                &args(&y1, ec, es, next),
+            );
+        }
+        None => {
+            b.ins().jump(header, &args(&y1, ec, es, next));
+        }
+    }
+    b.seal_block(header);
+
+    // The exit: the states and phase where the loop stopped.
+    b.switch_to_block(exit);
+    b.seal_block(exit);
+    let at: Vec<Value> = b.block_params(exit).to_vec();
+    let per = ty.lane_count() as usize;
+    for (i, row) in rows(&at[..d * chunks]).iter().enumerate() {
+        for (k, &v) in row.iter().enumerate() {
+            let offset = 8 * (i * chunks + k) * per;
+            b.ins().store(flags, v, states, offset as i32);
+        }
+    }
+    b.ins().store(flags, at[d * chunks], clock, 0);
+    b.ins().store(flags, at[d * chunks + 1], clock, 8);
+    b.ins().return_(&[at[d * chunks + 2]]);
 }
 
 /// One lowered instruction on one vector (or scalar) of each operand.
@@ -746,6 +1110,103 @@ mod tests {
             .collect();
         let compiled = native.call(Kind::Step, Layout::Each, &y, &clock, &lane, &h);
         assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
+    }
+
+    /// The step loop takes the steps [`Kind::Step`] takes, from the phases
+    /// `rk4::stage_phases` turns, to the bit, and stops before the step in
+    /// which the step loop's detection (`integrate::steps`) finds a live
+    /// slot meeting the stop; a slot not live is not watched.
+    #[test]
+    fn the_step_loop_is_the_step_function_to_the_bit_and_stops_where_detection_does() {
+        let names = Names {
+            states: vec!["x".into(), "v".into()],
+            parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+            switches: Vec::new(),
+        };
+        let parse = |t: &str| Expr::parse(t, &names).unwrap();
+        let exprs = [parse("v"), parse("-2*zeta*v - x + f*cos(eta*t)")];
+        let tape = Tape::compile(&exprs, 2, Some(parse("eta"))).unwrap();
+        let native =
+            Native::compile_stepping(&tape, Some(&[(0, 1)])).expect("cranelift targets this host");
+        let (eta, steps) = (0.8, 400);
+        let c = tape.lane_values(&[0.05, 1.0, eta]).constants;
+        let h = std::f64::consts::TAU / eta / 200.0;
+        let half = crate::integrate::clock::cos_sin(0.5 * eta * h);
+        // The step loop of `integrate::steps`, one step at a time: the
+        // steps taken before the first that meets the stop in a live slot.
+        fn by_steps<const W: usize>(
+            native: &Native,
+            c: &[f64],
+            (h, half): (f64, Phase),
+            wall: f64,
+            live: u32,
+            steps: usize,
+            y: &mut [[f64; W]; 2],
+            phase: &mut Phase,
+        ) -> usize {
+            for n in 0..steps {
+                let stages = rk4::stage_phases(phase, &half);
+                let y1: [[f64; W]; 2] = native.call(
+                    Kind::Step,
+                    Layout::Shared,
+                    y,
+                    stages.as_flattened(),
+                    c,
+                    &[h],
+                );
+                let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
+                    (y[0][k] == wall && y[1][k] == 0.0)
+                        || y1[0][k] - wall > 0.0
+                        || (y[1][k] > 0.0 && y1[1][k] < 0.0)
+                });
+                if hit {
+                    return n;
+                }
+                *y = y1;
+                *phase = stages[2];
+            }
+            steps
+        }
+        fn check<const W: usize>(native: &Native, c: &[f64], step: (f64, Phase), wall: f64) {
+            // Slots from near rest, a little apart; the last one beyond
+            // the stop and not live.
+            let mut y: [[f64; W]; 2] = [
+                std::array::from_fn(|k| 0.01 * k as f64),
+                std::array::from_fn(|k| -0.003 * k as f64),
+            ];
+            y[0][W - 1] = wall + 3.0;
+            let live = (1u32 << (W - 1)) - 1;
+            let start = [0.3f64.cos(), 0.3f64.sin()];
+            let (mut expected, mut phase) = (y, start);
+            let taken = by_steps(native, c, step, wall, live, 400, &mut expected, &mut phase);
+            let mut walked = start;
+            let walls = [wall, 1.0];
+            let n = native
+                .walk(&mut y, &mut walked, &step.1, c, step.0, &walls, live, 400)
+                .expect("a loop for W");
+            assert_eq!(n, taken, "W = {W}, wall {wall}");
+            assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
+            assert_eq!(walked.map(f64::to_bits), phase.map(f64::to_bits));
+        }
+        // A stop reached within the steps, and one out of reach.
+        for wall in [0.9, 50.0] {
+            check::<4>(&native, &c, (h, half), wall);
+            check::<8>(&native, &c, (h, half), wall);
+        }
+        let mut y = [[0.0; 8]; 2];
+        let mut phase = [1.0, 0.0];
+        let n = by_steps(&native, &c, (h, half), 0.9, 0x7f, steps, &mut y, &mut phase);
+        assert!(n > 0 && n < steps, "the stop is met after {n} steps");
+        // No loop without stops given, nor for other widths.
+        let plain = Native::compile(&tape).unwrap();
+        let mut y = [[0.0; 4]; 2];
+        assert!(plain
+            .walk(&mut y, &mut [1.0, 0.0], &half, &c, h, &[], 1, 1)
+            .is_none());
+        let mut y = [[0.0; 1]; 2];
+        assert!(native
+            .walk(&mut y, &mut [1.0, 0.0], &half, &c, h, &[0.9, 1.0], 1, 1)
+            .is_none());
     }
 
     /// A tape with more outputs than states (a model's surfaces: values,

@@ -464,6 +464,28 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         &self.walls
     }
 
+    /// The equations' native step loop ([`Native::walk`]), compiled for a
+    /// period map without general surfaces, with its stops.
+    #[inline(always)]
+    fn walk_shared<const W: usize>(
+        &self,
+        y: &mut [[f64; W]; D],
+        phase: &mut Phase,
+        half: &Phase,
+        h: f64,
+        live: u32,
+        steps: usize,
+    ) -> Option<usize> {
+        let native = self.code.regions[0].native.as_ref()?;
+        let mut walls = [0.0; 2 * crate::integrate::impact::MAX_WALLS];
+        for (j, wall) in self.walls.iter().enumerate() {
+            walls[2 * j] = wall.position;
+            walls[2 * j + 1] = wall.side;
+        }
+        let constants = &self.constants[0];
+        native.walk(y, phase, half, constants, h, &walls, live, steps)
+    }
+
     #[inline(always)]
     fn step_shared<const W: usize>(
         &self,
