@@ -162,6 +162,26 @@ pub trait Flow<const D: usize>: Sync {
         None
     }
 
+    /// [`walk_shared`](Self::walk_shared) for one trajectory of each of W
+    /// flows (neighbouring lanes of a sweep), each with its own forcing
+    /// phase, turn and step size.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn walk_each<const W: usize>(
+        _flows: &[&Self; W],
+        _y: &mut [[f64; W]; D],
+        _phases: &mut [Phase; W],
+        _half: &[Phase; W],
+        _h: &[f64; W],
+        _live: u32,
+        _steps: usize,
+    ) -> Option<usize>
+    where
+        Self: Sized,
+    {
+        None
+    }
+
     /// The field in region `region` of the switches (bit b set: on the
     /// positive side of switch b); a flow without switches has one.
     #[inline(always)]
@@ -360,14 +380,15 @@ fn part_map_many_lanes<const D: usize, F: Flow<D>>(
     }
 }
 
-/// The time-T map of several flows at once, one trajectory each (the
-/// references of neighbouring lanes of a sweep, in their transient), each
-/// over its own period with the same number of RK4 steps: stepped as one
-/// structure-of-arrays batch, so that a lane's lone reference does not run
-/// as a single latency-bound chain. Each trajectory's arithmetic is exactly
-/// [`time_map`]'s.
+/// The time-T map of several flows at once, one trajectory each
+/// (trajectory k of `flows[k]`: the references of neighbouring lanes of a
+/// sweep in their transient, or their references and copies while they
+/// average), each over its own period with the same number of RK4 steps:
+/// stepped as structure-of-arrays batches across lanes, so that a lane's
+/// few trajectories do not run as latency-bound chains of their own. Each
+/// trajectory's arithmetic is exactly [`time_map`]'s.
 pub fn time_map_lanes<const D: usize, F: Flow<D>>(
-    flows: &[F],
+    flows: &[&F],
     ys: &mut [[f64; D]],
     periods: &[f64],
     settings: &FlowSettings,
@@ -381,7 +402,7 @@ pub fn time_map_lanes<const D: usize, F: Flow<D>>(
 
 #[inline(always)]
 fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
-    flows: &[F],
+    flows: &[&F],
     ys: &mut [[f64; D]],
     periods: &[f64],
     settings: &FlowSettings,
@@ -393,8 +414,18 @@ fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
         .zip(flows.chunks(LANE_BATCH).zip(periods.chunks(LANE_BATCH)));
     for ((chunk, st), (flows, periods)) in chunks {
         let each = Each { flows, periods };
-        let phases = [ZERO_PHASE; LANE_BATCH];
-        steps::<D, LANE_BATCH, _>(&each, chunk, 0.0, settings, Part::WHOLE, phases, st);
+        let (whole, from) = (Part::WHOLE, ZERO_PHASE);
+        match chunk.len() {
+            1 => {
+                steps::<D, 1, _>(&each, chunk, 0.0, settings, whole, [from; 1], st);
+            }
+            2..=4 => {
+                steps::<D, 4, _>(&each, chunk, 0.0, settings, whole, [from; 4], st);
+            }
+            _ => {
+                steps::<D, LANE_BATCH, _>(&each, chunk, 0.0, settings, whole, [from; 8], st);
+            }
+        }
     }
 }
 
@@ -547,7 +578,7 @@ impl<const D: usize, F: Flow<D>> Flows<D> for One<'_, F> {
 
 /// A flow and a period per trajectory (unused slots repeat the first).
 struct Each<'a, F> {
-    flows: &'a [F],
+    flows: &'a [&'a F],
     periods: &'a [f64],
 }
 
@@ -556,7 +587,7 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
     const SHARED: bool = false;
     #[inline(always)]
     fn of(&self, k: usize) -> &F {
-        &self.flows[k.min(self.flows.len() - 1)]
+        self.flows[k.min(self.flows.len() - 1)]
     }
     #[inline(always)]
     fn period(&self, k: usize, _period: f64) -> f64 {
@@ -695,10 +726,15 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let live = (1u32 << n) - 1;
     let mut left = part.steps(steps).len();
     while left > 0 {
-        if S::SHARED && !SURFACES {
-            let walked = flows
-                .of(0)
-                .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left);
+        if !SURFACES {
+            let walked = if S::SHARED {
+                flows
+                    .of(0)
+                    .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left)
+            } else {
+                let each = std::array::from_fn(|k| flows.of(k));
+                S::F::walk_each(&each, &mut y, &mut phases, &half, &h, live, left)
+            };
             left -= walked.unwrap_or(0);
             if left == 0 {
                 break;

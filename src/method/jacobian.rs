@@ -17,18 +17,7 @@ const MAX_TRAJECTORIES: usize = 9;
 
 /// Integrates the reference from x and its perturbed copies together (in
 /// lockstep, see [`crate::integrate::time_map_many`]) and returns U(x) and
-/// the estimated DU(x).
-///
-/// Forward (the paper's eq. 6): column i = (U(x + δe_i) - U(x)) / δ⁺_i.
-/// Central: column i = (U(x + δe_i) - U(x - δe_i)) / (δ⁺_i + δ⁻_i). The steps
-/// actually taken, δ⁺ = (x_i + δ) - x_i and δ⁻ = x_i - (x_i - δ), not δ: the
-/// two differ by the rounding of x_i ± δ, which would otherwise bias every
-/// column by up to ulp(x_i)/δ.
-///
-/// With central differences, a copy that met the wall a different number of
-/// times than the reference crossed a grazing boundary, where the map is not
-/// smooth and its difference is O(1) wrong: that column is then differenced
-/// on the other side, one-sided against the reference image.
+/// the estimated DU(x) ([`Copies`]).
 ///
 /// `part` of the iteration (the whole one, or a sub-map) starts at the
 /// forcing phase `phase`, which is advanced to the part's end.
@@ -43,79 +32,135 @@ pub fn estimate<const D: usize, S: System<D>>(
     difference: Difference,
     stats: &mut IterationStats,
 ) -> ([f64; D], SMatrix<f64, D, D>) {
-    let copies = difference.copies(D);
-    assert!(
-        copies < MAX_TRAJECTORIES,
-        "dimension {D} is above the supported 4"
-    );
-    let mut ys = [*x; MAX_TRAJECTORIES];
-    let mut steps = [0.0; MAX_TRAJECTORIES];
-    for c in 0..copies {
-        let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
-        let y = &mut ys[1 + c];
-        y[i] += sign * delta;
-        steps[1 + c] = sign * (y[i] - x[i]);
-    }
-    // A copy that would start behind the wall (the reference is within δ
-    // of it) is no perturbation of the reference's motion: the wall throws
-    // it back at once, and its column would be O(1) wrong. Like a copy that
-    // crossed a grazing boundary, it is differenced on the other side.
-    let admitted: [bool; MAX_TRAJECTORIES] = std::array::from_fn(|t| system.admits(&ys[t]));
+    let mut copies = Copies::new(system, x, delta, difference);
     let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
-    system.part_many(
-        &mut ys[..1 + copies],
-        flow,
-        part,
-        phase,
-        &mut st[..1 + copies],
-    );
-    stats.impacts += st[0].impacts;
-    stats.time += st[0].time;
-    stats.log_flux += st[0].log_flux;
-    for (c, r) in stats.crossings.iter_mut().zip(st[0].crossings) {
-        *c += r;
-    }
-    stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
-    stats.sliding_phases += st[0].sliding_phases;
-    stats.chattering |= st[..1 + copies].iter().any(|s| s.chattering);
-    stats.sliding |= st[..1 + copies].iter().any(|s| s.sliding);
+    let n = copies.count();
+    system.part_many(copies.trajectories(), flow, part, phase, &mut st[..n]);
+    copies.difference(&st[..n], stats)
+}
 
-    let image = ys[0];
-    let same = |t: usize| admitted[t] && st[t].crossings == st[0].crossings;
-    // How far a copy's impacts moved, relative to the reference's: near
-    // grazing, an impact at speed v moves by δ·a/v² of itself (a the
-    // acceleration at the wall), and so does the difference quotient.
-    let departure = |t: usize| {
-        if t == 0 {
-            0.0
-        } else if !admitted[t] {
-            f64::INFINITY
-        } else if st[0].slowest_impact == f64::INFINITY {
-            // No impact (nor section crossing) to move.
-            0.0
-        } else if !same(t) {
-            f64::INFINITY
-        } else {
-            (st[t].slowest_impact - st[0].slowest_impact).abs() / st[0].slowest_impact
+/// The trajectories of one Jacobian estimate: the reference from x and its
+/// perturbed copies. [`new`](Self::new) starts them, whoever integrates
+/// them ([`estimate`], or a batch across lanes, `method::lane::run_lanes`),
+/// and [`difference`](Self::difference) takes U(x) and DU(x) from their
+/// ends.
+///
+/// Forward (the paper's eq. 6): column i = (U(x + δe_i) - U(x)) / δ⁺_i.
+/// Central: column i = (U(x + δe_i) - U(x - δe_i)) / (δ⁺_i + δ⁻_i). The steps
+/// actually taken, δ⁺ = (x_i + δ) - x_i and δ⁻ = x_i - (x_i - δ), not δ: the
+/// two differ by the rounding of x_i ± δ, which would otherwise bias every
+/// column by up to ulp(x_i)/δ.
+///
+/// With central differences, a copy that met the wall a different number of
+/// times than the reference crossed a grazing boundary, where the map is not
+/// smooth and its difference is O(1) wrong: that column is then differenced
+/// on the other side, one-sided against the reference image.
+#[derive(Clone, Copy, Debug)]
+pub struct Copies<const D: usize> {
+    ys: [[f64; D]; MAX_TRAJECTORIES],
+    steps: [f64; MAX_TRAJECTORIES],
+    admitted: [bool; MAX_TRAJECTORIES],
+    difference: Difference,
+}
+
+impl<const D: usize> Copies<D> {
+    /// The reference at x and its copies at δ from it.
+    pub fn new<S: System<D>>(system: &S, x: &[f64; D], delta: f64, difference: Difference) -> Self {
+        let copies = difference.copies(D);
+        assert!(
+            copies < MAX_TRAJECTORIES,
+            "dimension {D} is above the supported 4"
+        );
+        let mut ys = [*x; MAX_TRAJECTORIES];
+        let mut steps = [0.0; MAX_TRAJECTORIES];
+        for c in 0..copies {
+            let (i, sign) = if c < D { (c, 1.0) } else { (c - D, -1.0) };
+            let y = &mut ys[1 + c];
+            y[i] += sign * delta;
+            steps[1 + c] = sign * (y[i] - x[i]);
         }
-    };
-    let mut jacobian = SMatrix::<f64, D, D>::zeros();
-    stats.nonlinearity = 0.0;
-    for i in 0..D {
-        let (plus, minus) = (1 + i, 1 + D + i);
-        let (a, b, step) = match difference {
-            Difference::Forward => (plus, 0, steps[plus]),
-            Difference::Central => match (same(plus), same(minus)) {
-                (false, true) => (0, minus, steps[minus]),
-                (true, false) => (plus, 0, steps[plus]),
-                _ => (plus, minus, steps[plus] + steps[minus]),
-            },
-        };
-        stats.nonlinearity = stats.nonlinearity.max(departure(a)).max(departure(b));
-        for k in 0..D {
-            jacobian[(k, i)] = (ys[a][k] - ys[b][k]) / step;
+        // A copy that would start behind the wall (the reference is within δ
+        // of it) is no perturbation of the reference's motion: the wall throws
+        // it back at once, and its column would be O(1) wrong. Like a copy that
+        // crossed a grazing boundary, it is differenced on the other side.
+        let admitted = std::array::from_fn(|t| system.admits(&ys[t]));
+        Copies {
+            ys,
+            steps,
+            admitted,
+            difference,
         }
     }
-    stats.slowest_impact = stats.slowest_impact.min(st[0].slowest_impact);
-    (image, jacobian)
+
+    /// How many trajectories: the reference and its copies.
+    pub fn count(&self) -> usize {
+        1 + self.difference.copies(D)
+    }
+
+    /// The trajectories, the reference first, to be integrated over the
+    /// iteration (or part) in place.
+    pub fn trajectories(&mut self) -> &mut [[f64; D]] {
+        let n = self.count();
+        &mut self.ys[..n]
+    }
+
+    /// U(x) and the estimated DU(x) from the integrated trajectories and
+    /// their statistics `st` (the reference's first); the reference's
+    /// counts are added to `stats`.
+    pub fn difference(
+        &self,
+        st: &[IterationStats],
+        stats: &mut IterationStats,
+    ) -> ([f64; D], SMatrix<f64, D, D>) {
+        let (ys, steps, admitted) = (&self.ys, &self.steps, &self.admitted);
+        stats.impacts += st[0].impacts;
+        stats.time += st[0].time;
+        stats.log_flux += st[0].log_flux;
+        for (c, r) in stats.crossings.iter_mut().zip(st[0].crossings) {
+            *c += r;
+        }
+        stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
+        stats.sliding_phases += st[0].sliding_phases;
+        stats.chattering |= st.iter().any(|s| s.chattering);
+        stats.sliding |= st.iter().any(|s| s.sliding);
+
+        let image = ys[0];
+        let same = |t: usize| admitted[t] && st[t].crossings == st[0].crossings;
+        // How far a copy's impacts moved, relative to the reference's: near
+        // grazing, an impact at speed v moves by δ·a/v² of itself (a the
+        // acceleration at the wall), and so does the difference quotient.
+        let departure = |t: usize| {
+            if t == 0 {
+                0.0
+            } else if !admitted[t] {
+                f64::INFINITY
+            } else if st[0].slowest_impact == f64::INFINITY {
+                // No impact (nor section crossing) to move.
+                0.0
+            } else if !same(t) {
+                f64::INFINITY
+            } else {
+                (st[t].slowest_impact - st[0].slowest_impact).abs() / st[0].slowest_impact
+            }
+        };
+        let mut jacobian = SMatrix::<f64, D, D>::zeros();
+        stats.nonlinearity = 0.0;
+        for i in 0..D {
+            let (plus, minus) = (1 + i, 1 + D + i);
+            let (a, b, step) = match self.difference {
+                Difference::Forward => (plus, 0, steps[plus]),
+                Difference::Central => match (same(plus), same(minus)) {
+                    (false, true) => (0, minus, steps[minus]),
+                    (true, false) => (plus, 0, steps[plus]),
+                    _ => (plus, minus, steps[plus] + steps[minus]),
+                },
+            };
+            stats.nonlinearity = stats.nonlinearity.max(departure(a)).max(departure(b));
+            for k in 0..D {
+                jacobian[(k, i)] = (ys[a][k] - ys[b][k]) / step;
+            }
+        }
+        stats.slowest_impact = stats.slowest_impact.min(st[0].slowest_impact);
+        (image, jacobian)
+    }
 }

@@ -427,9 +427,10 @@ where
 
 /// [`run_lane`] for neighbouring lanes of a sweep: where they share their
 /// plan's steps (and use finite differences), their transients run as one
-/// batch, the references stepped together
-/// ([`System::iterate_lanes`]); then each lane averages on its own. Every
-/// lane's numbers are those of [`run_lane`], to the last bit.
+/// batch, the references stepped together ([`System::iterate_lanes`]);
+/// where the system allows it ([`System::averages_across_lanes`]) they
+/// then average in lockstep ([`average_lanes`]), else each on its own.
+/// Every lane's numbers are those of [`run_lane`], to the last bit.
 pub fn run_lanes<const D: usize, S: System<D>>(lanes: &[Lane]) -> Vec<LaneResult>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
@@ -457,11 +458,14 @@ where
         .iter()
         .map(|s| s.start(&settings.initial_state, flow))
         .collect();
+    let each: Vec<&S> = systems.iter().collect();
+    let mut discard = vec![IterationStats::default(); lanes.len()];
     // A lane that fails goes on being stepped with the others (its
     // numbers touch no other lane's) but is reported at its first failure.
     let mut failed: Vec<Option<usize>> = vec![None; lanes.len()];
     for n in 0..settings.transient {
-        S::iterate_lanes(&systems, &mut xs, flow);
+        discard.fill(IterationStats::default());
+        S::iterate_lanes(&each, &mut xs, flow, &mut discard);
         for (system, x) in systems.iter().zip(xs.iter_mut()) {
             system.wrap(x);
         }
@@ -471,14 +475,109 @@ where
             }
         }
     }
+    let lockstep = settings.lyapunov
+        && plans.iter().all(|p| p.parts == 1)
+        && systems.iter().all(|s| s.averages_across_lanes());
+    let accumulators = systems
+        .iter()
+        .zip(&plans)
+        .zip(&failed)
+        .map(|((system, &plan), failed)| {
+            let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
+            if let Some(n) = *failed {
+                acc.fail(n);
+            }
+            acc
+        })
+        .collect();
+    if lockstep {
+        return average_lanes(&systems, settings, flow, accumulators, xs);
+    }
     systems
         .iter()
         .zip(plans)
-        .zip(xs.into_iter().zip(failed))
-        .map(|((system, plan), (x, failed))| match failed {
-            Some(n) => LaneAccumulator::<D>::new(settings, system.period(), plan).failed(n),
+        .zip(xs.into_iter().zip(accumulators))
+        .map(|((system, plan), (x, acc))| match acc.failed_at {
+            Some(_) => acc.finish(),
             None => average(system, settings, plan, x),
         })
+        .collect()
+}
+
+/// The averaging iterations of neighbouring lanes in lockstep, from their
+/// transients' ends `xs` (for lanes of one whole part per iteration, with
+/// exponents): each iteration integrates every lane's reference and copies
+/// as batches across lanes, so a lane's three or five trajectories no
+/// longer wait on their own chains' latencies, then takes each lane's
+/// Jacobian and accumulates it as [`average`] does. A grazing iteration is
+/// re-estimated by that lane alone ([`resolve_grazing`]), and a lane that
+/// fails stops being stepped. Every lane's numbers are [`average`]'s.
+fn average_lanes<const D: usize, S: System<D>>(
+    systems: &[S],
+    settings: &MethodSettings,
+    flow: &FlowSettings,
+    mut accumulators: Vec<LaneAccumulator<D>>,
+    mut xs: Vec<[f64; D]>,
+) -> Vec<LaneResult>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let mut live: Vec<usize> = (0..systems.len())
+        .filter(|&k| accumulators[k].failed_at.is_none())
+        .collect();
+    let (mut owners, mut ys, mut st) = (Vec::new(), Vec::new(), Vec::new());
+    let mut copies = Vec::with_capacity(live.len());
+    for _ in 0..settings.iterations {
+        if live.is_empty() {
+            break;
+        }
+        copies.clear();
+        owners.clear();
+        ys.clear();
+        for &k in &live {
+            let delta = perturbation_at(settings.perturbation, &xs[k]);
+            let mut c = jacobian::Copies::new(&systems[k], &xs[k], delta, settings.difference);
+            ys.extend_from_slice(c.trajectories());
+            owners.extend(std::iter::repeat_n(&systems[k], c.count()));
+            copies.push(c);
+        }
+        st.clear();
+        st.resize(ys.len(), IterationStats::default());
+        S::iterate_lanes(&owners, &mut ys, flow, &mut st);
+        let mut from = 0;
+        let mut lane = copies.iter_mut();
+        live.retain(|&k| {
+            let c = lane.next().expect("a lane's copies");
+            let (system, x) = (&systems[k], xs[k]);
+            let to = from + c.count();
+            c.trajectories().copy_from_slice(&ys[from..to]);
+            // As `step` takes a whole-part iteration: the part's statistics
+            // from zero, merged into the iteration's.
+            let mut part_stats = IterationStats::default();
+            let mut first = part_stats;
+            let estimate = c.difference(&st[from..to], &mut first);
+            from = to;
+            let (mut next, j) = resolve_grazing(
+                system,
+                flow,
+                settings,
+                Part::WHOLE,
+                ZERO_PHASE,
+                &x,
+                &mut part_stats,
+                first,
+                estimate,
+            );
+            let mut stats = IterationStats::default();
+            stats.merge(&part_stats);
+            system.wrap(&mut next);
+            xs[k] = next;
+            accumulators[k].push(&next, &[j], &stats)
+        });
+    }
+    accumulators
+        .into_iter()
+        .map(LaneAccumulator::finish)
         .collect()
 }
 
@@ -959,7 +1058,7 @@ where
     let delta = perturbation_at(settings.perturbation, x);
     let start = *phase;
     let mut first = *stats;
-    let (image, j0) = jacobian::estimate(
+    let estimate = jacobian::estimate(
         system,
         flow,
         part,
@@ -969,6 +1068,32 @@ where
         settings.difference,
         &mut first,
     );
+    resolve_grazing(
+        system, flow, settings, part, start, x, stats, first, estimate,
+    )
+}
+
+/// The rest of [`estimate_resolving_grazing`] once the first estimate
+/// (U(x), DU(x) at the scene's δ, with its statistics `first`) is taken:
+/// kept unless the iteration grazes, else the δ ladder from `start`, the
+/// forcing phase at the part's start. `stats` are those before the
+/// estimate, and after it on return.
+#[allow(clippy::too_many_arguments)]
+fn resolve_grazing<const D: usize, S: System<D>>(
+    system: &S,
+    flow: &FlowSettings,
+    settings: &MethodSettings,
+    part: Part,
+    start: Phase,
+    x: &[f64; D],
+    stats: &mut IterationStats,
+    first: IterationStats,
+    (image, j0): ([f64; D], SMatrix<f64, D, D>),
+) -> ([f64; D], SMatrix<f64, D, D>)
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let delta = perturbation_at(settings.perturbation, x);
     // A collapsed iteration's Jacobian is singular by nature, not by error.
     if first.rank_loss > 0 || !is_grazing(settings.difference, first.nonlinearity, &j0) {
         *stats = first;

@@ -92,7 +92,7 @@ pub const WIDTHS: [usize; 3] = [1, 4, 8];
 /// [`Kind::Step`] for a tape whose outputs are not a field's derivatives).
 pub struct Native {
     functions: [[[Option<Function>; 2]; WIDTHS.len()]; 2],
-    walks: [Option<Walk>; WALK_WIDTHS.len()],
+    walks: [[Option<Walk>; 2]; WALK_WIDTHS.len()],
     stops: usize,
     states: usize,
     outputs: usize,
@@ -146,38 +146,48 @@ impl Native {
         }
     }
 
-    /// Up to `steps` RK4 steps of a lane's W trajectories `y`, from the
-    /// forcing phase `phase` turned by `half` per half step, in one loop
-    /// of native code that stops before the first step in which a live
-    /// slot (bit k of `live`) meets a stop: the step the step loop would
-    /// hand to the impact code (`integrate::steps`'s detection, the same
-    /// comparisons of the same values). Returns the steps taken, `y` and
-    /// `phase` advanced by them, each step's arithmetic
-    /// [`Kind::Step`]'s and `rk4::stage_phases`'s; `None` where there is
-    /// no loop for W. `walls` holds `[position, side]` per stop.
+    /// Up to `steps` RK4 steps of W trajectories `y` in one loop of native
+    /// code that stops before the first step in which a live slot (bit k
+    /// of `live`) meets a stop: the step the step loop would hand to the
+    /// impact code (`integrate::steps`'s detection, the same comparisons
+    /// of the same values). Returns the steps taken, `y` and the phases in
+    /// `clock` advanced by them, each step's arithmetic [`Kind::Step`]'s
+    /// and `rk4::stage_phases`'s; `None` where there is no loop for W.
+    ///
+    /// By `layout`, one value for every slot (`Shared`, a lane's
+    /// trajectories) or a row of W (`Each`, trajectories of W lanes):
+    /// `clock` holds cos and sin of the forcing phase (written back) and
+    /// of its turn per half step, `lane` the tape's constants, `h` the step
+    /// size, and `walls` each stop's position and side.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn walk<const W: usize, const D: usize>(
         &self,
+        layout: Layout,
         y: &mut [[f64; W]; D],
-        phase: &mut [f64; 2],
-        half: &[f64; 2],
+        clock: &mut [f64],
         lane: &[f64],
-        h: f64,
+        h: &[f64],
         walls: &[f64],
         live: u32,
         steps: usize,
     ) -> Option<usize> {
         let w = WALK_WIDTHS.iter().position(|&w| w == W)?;
-        let f = self.walks[w]?;
-        assert!(D == self.states && lane.len() >= self.constants && walls.len() >= 2 * self.stops);
-        let mut clock = [phase[0], phase[1], half[0], half[1]];
+        let f = self.walks[w][layout as usize]?;
+        let per_slot = if layout == Layout::Shared { 1 } else { W };
+        assert!(
+            D == self.states
+                && clock.len() >= 4 * per_slot
+                && lane.len() >= self.constants * per_slot
+                && h.len() >= per_slot
+                && walls.len() >= 2 * self.stops * per_slot
+        );
         let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
-        let h = [h];
-        // SAFETY: the loop reads and writes D·W states in `y` and the four
-        // values of `clock`, reads the tape's constants, one step size,
-        // two values per stop and W masks (checked above); it was
-        // compiled for W and this tape's D states.
+        // SAFETY: the loop reads and writes D·W states in `y` and the
+        // phases in `clock`, reads the tape's constants, the step sizes,
+        // two rows per stop and W masks, as `layout` lays them out
+        // (checked above); it was compiled for W, `layout` and this tape's
+        // D states.
         let taken = unsafe {
             f(
                 y.as_mut_ptr().cast(),
@@ -189,7 +199,6 @@ impl Native {
                 steps as u64,
             )
         };
-        *phase = [clock[0], clock[1]];
         rewrite_as_read(y);
         Some(taken as usize)
     }
@@ -465,16 +474,27 @@ fn build(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Result<Native, String
     if let Some(stops) = stepping {
         for &w in &WALK_WIDTHS {
             let name = format!("Walk{w}");
-            walk_ids.push(define(&mut module, tape, What::Walk(stops), w, &name)?);
+            for layout in [Layout::Shared, Layout::Each] {
+                let name = format!("{name}{layout:?}");
+                walk_ids.push(define(
+                    &mut module,
+                    tape,
+                    What::Walk(stops, layout),
+                    w,
+                    &name,
+                )?);
+            }
         }
     }
     module.finalize_definitions().map_err(|e| e.to_string())?;
     let mut walk_ids = walk_ids.into_iter();
     let walks = [(); WALK_WIDTHS.len()].map(|_| {
-        let code = module.get_finalized_function(walk_ids.next()?);
-        // SAFETY: the code at this address was defined with the `Walk`
-        // signature in the host's default (C) calling convention.
-        Some(unsafe { std::mem::transmute::<*const u8, Walk>(code) })
+        [(); 2].map(|_| {
+            let code = module.get_finalized_function(walk_ids.next()?);
+            // SAFETY: the code at this address was defined with the `Walk`
+            // signature in the host's default (C) calling convention.
+            Some(unsafe { std::mem::transmute::<*const u8, Walk>(code) })
+        })
     });
     let mut ids = ids.into_iter();
     let functions = [Kind::Rhs, Kind::Step].map(|kind| {
@@ -510,7 +530,7 @@ enum What<'a> {
     Function(Kind, Layout),
     /// A step loop ([`Walk`]) detecting these stops (coordinate,
     /// velocity).
-    Walk(&'a [(usize, usize)]),
+    Walk(&'a [(usize, usize)], Layout),
 }
 
 /// Defines the tape's function for batches of `w`.
@@ -531,10 +551,10 @@ fn define(
     let mut ctx = module.make_context();
     let layout = match what {
         What::Function(_, layout) => layout,
-        What::Walk(_) => Layout::Shared,
+        What::Walk(_, layout) => layout,
     };
     ctx.func.signature.params = vec![AbiParam::new(pointer); 5];
-    if let What::Walk(_) = what {
+    if let What::Walk(..) = what {
         ctx.func.signature.params.push(AbiParam::new(pointer));
         ctx.func.signature.params.push(AbiParam::new(types::I64));
         ctx.func.signature.returns.push(AbiParam::new(types::I64));
@@ -695,7 +715,7 @@ fn define(
             let clocks = [0, 1, 2].map(|s| load_clock(&mut b, s));
             rk4(&mut b, &state, &sizes, clocks)
         }
-        What::Walk(stops) => {
+        What::Walk(stops, layout) => {
             // The fifth pointer is the stops', then the masks and count.
             let [live, steps] = <[Value; 2]>::try_from(&params[5..]).expect("7 params");
             walk(
@@ -708,13 +728,12 @@ fn define(
                     live,
                     steps,
                     stops,
+                    layout,
                     chunks,
-                    ty,
                     flags,
                 },
                 |b| step_sizes(b),
                 |b, state, sizes, clocks| rk4(b, state, sizes, clocks),
-                &splat,
             );
             b.finalize();
             return declare(module, &mut ctx, name);
@@ -760,8 +779,9 @@ struct Walker<'a> {
     live: cranelift_codegen::ir::Value,
     steps: cranelift_codegen::ir::Value,
     stops: &'a [(usize, usize)],
+    /// One phase for every slot, or one per slot.
+    layout: Layout,
     chunks: usize,
-    ty: cranelift_codegen::ir::Type,
     flags: cranelift_codegen::ir::MemFlags,
 }
 
@@ -770,16 +790,18 @@ struct Walker<'a> {
 /// the stops as `integrate::steps` does, and an exit that stores the
 /// states and phase where the loop stopped. The states and phase live in
 /// the loop's block parameters (registers), never in memory.
+///
+/// Pointers, by layout: the clock holds cos, sin, and the half step's
+/// cos and sin, each one value (`Shared`) or a row of W (`Each`); the
+/// stops' positions and sides likewise, stop after stop. Every slot works
+/// in `F64X2` vectors; a shared phase is turned in one vector (the same
+/// IEEE operations in both lanes as on a scalar).
 #[cfg(target_arch = "x86_64")]
 fn walk<S, K>(
     b: &mut cranelift_frontend::FunctionBuilder,
     walker: Walker,
     step_sizes: impl Fn(&mut cranelift_frontend::FunctionBuilder) -> S,
     rk4: K,
-    splat: impl Fn(
-        &mut cranelift_frontend::FunctionBuilder,
-        cranelift_codegen::ir::Value,
-    ) -> Vec<cranelift_codegen::ir::Value>,
 ) where
     K: Fn(
         &mut cranelift_frontend::FunctionBuilder,
@@ -791,6 +813,7 @@ fn walk<S, K>(
     use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
     use cranelift_codegen::ir::immediates::Ieee64;
     use cranelift_codegen::ir::{types, BlockArg, InstBuilder, Value};
+    type Builder<'b> = cranelift_frontend::FunctionBuilder<'b>;
 
     let Walker {
         state,
@@ -800,93 +823,117 @@ fn walk<S, K>(
         live,
         steps,
         stops,
+        layout,
         chunks,
-        ty,
         flags,
     } = walker;
-    let d = state.len();
-    let sizes = step_sizes(b);
-    let scalar = |b: &mut cranelift_frontend::FunctionBuilder, i: usize| {
-        b.ins().load(types::F64, flags, clock, (8 * i) as i32)
+    let (d, ty, w) = (state.len(), types::F64X2, 2 * chunks);
+    // Phase vectors: one (shared) or one per chunk of slots.
+    let pc = if layout == Layout::Shared { 1 } else { chunks };
+    // Row r of the slots' values at `base`: a splat of one value
+    // (shared) or W values (each), as `pc` vectors.
+    let row = |b: &mut Builder, base: Value, r: usize| -> Vec<Value> {
+        match layout {
+            Layout::Shared => {
+                let x = b.ins().load(types::F64, flags, base, (8 * r) as i32);
+                vec![b.ins().splat(ty, x)]
+            }
+            Layout::Each => (0..chunks)
+                .map(|c| b.ins().load(ty, flags, base, (8 * (r * w + 2 * c)) as i32))
+                .collect(),
+        }
     };
-    let (c0, s0, hc, hs) = (scalar(b, 0), scalar(b, 1), scalar(b, 2), scalar(b, 3));
-    let mask_ty = types::I64X2;
+    // A `pc`-vector value for every chunk.
+    let widen = |v: &[Value]| -> Vec<Value> { (0..chunks).map(|c| v[c % v.len()]).collect() };
+    let sizes = step_sizes(b);
+    let (c0, s0, hc, hs) = (
+        row(b, clock, 0),
+        row(b, clock, 1),
+        row(b, clock, 2),
+        row(b, clock, 3),
+    );
     let masks: Vec<Value> = (0..chunks)
-        .map(|c| b.ins().load(mask_ty, flags, live, (16 * c) as i32))
+        .map(|c| b.ins().load(types::I64X2, flags, live, (16 * c) as i32))
         .collect();
     // Each stop's position and side, in every slot.
     let bounds: Vec<(Vec<Value>, Vec<Value>)> = (0..stops.len())
         .map(|j| {
-            let p = b.ins().load(types::F64, flags, walls, (16 * j) as i32);
-            let s = b.ins().load(types::F64, flags, walls, (16 * j + 8) as i32);
-            (splat(b, p), splat(b, s))
+            (
+                widen(&row(b, walls, 2 * j)),
+                widen(&row(b, walls, 2 * j + 1)),
+            )
         })
         .collect();
-    let zero = {
-        let z = b.ins().f64const(Ieee64::with_bits(0));
-        splat(b, z)
+    let vector = |b: &mut Builder, v: f64| {
+        let x = b.ins().f64const(Ieee64::with_bits(v.to_bits()));
+        b.ins().splat(ty, x)
     };
-    let (one_half, three_halves) = (
-        b.ins().f64const(Ieee64::with_bits(0.5f64.to_bits())),
-        b.ins().f64const(Ieee64::with_bits(1.5f64.to_bits())),
-    );
+    let (zero, one_half, three_halves) = (vector(b, 0.0), vector(b, 0.5), vector(b, 1.5));
     let counted = b.ins().iconst(types::I64, 0);
 
-    // Block parameters: the states (d·chunks vectors), cos, sin, the steps
-    // taken.
+    // Block parameters: the states (d·chunks vectors), cos and sin (pc
+    // vectors each), the steps taken.
     let (header, body, exit) = (b.create_block(), b.create_block(), b.create_block());
     for block in [header, exit] {
-        for _ in 0..d * chunks {
+        for _ in 0..d * chunks + 2 * pc {
             b.append_block_param(block, ty);
         }
-        b.append_block_param(block, types::F64);
-        b.append_block_param(block, types::F64);
         b.append_block_param(block, types::I64);
     }
-    let args = |state: &[Vec<Value>], c: Value, s: Value, n: Value| -> Vec<BlockArg> {
+    let args = |state: &[Vec<Value>], c: &[Value], s: &[Value], n: Value| -> Vec<BlockArg> {
         state
             .iter()
             .flatten()
+            .chain(c)
+            .chain(s)
             .copied()
-            .chain([c, s, n])
+            .chain([n])
             .map(BlockArg::Value)
             .collect()
     };
-    b.ins().jump(header, &args(&state, c0, s0, counted));
+    let unpack = |at: &[Value]| -> (Vec<Vec<Value>>, Vec<Value>, Vec<Value>, Value) {
+        let y = at[..d * chunks]
+            .chunks(chunks)
+            .map(<[Value]>::to_vec)
+            .collect();
+        let phase = &at[d * chunks..];
+        (
+            y,
+            phase[..pc].to_vec(),
+            phase[pc..2 * pc].to_vec(),
+            phase[2 * pc],
+        )
+    };
+    b.ins().jump(header, &args(&state, &c0, &s0, counted));
 
     // The header: stop after `steps` steps.
     b.switch_to_block(header);
-    let at: Vec<Value> = b.block_params(header).to_vec();
-    let rows = |flat: &[Value]| -> Vec<Vec<Value>> {
-        flat.chunks(chunks).map(<[Value]>::to_vec).collect()
-    };
-    let (y, c, s, n) = (
-        rows(&at[..d * chunks]),
-        at[d * chunks],
-        at[d * chunks + 1],
-        at[d * chunks + 2],
-    );
+    let (y, c, s, n) = unpack(b.block_params(header));
     let more = b.ins().icmp(IntCC::UnsignedLessThan, n, steps);
-    b.ins().brif(more, body, &[], exit, &args(&y, c, s, n));
+    b.ins().brif(more, body, &[], exit, &args(&y, &c, &s, n));
 
     // The body: `rk4::stage_phases`, then the step, then detection.
     b.switch_to_block(body);
     b.seal_block(body);
     // `clock::rotate`: (c, s)·(hc, hs), renormalised to first order.
-    let rotate = |b: &mut cranelift_frontend::FunctionBuilder, c: Value, s: Value| {
-        let (p, q) = (b.ins().fmul(c, hc), b.ins().fmul(s, hs));
-        let c1 = b.ins().fsub(p, q);
-        let (p, q) = (b.ins().fmul(s, hc), b.ins().fmul(c, hs));
-        let s1 = b.ins().fadd(p, q);
-        let (cc, ss) = (b.ins().fmul(c1, c1), b.ins().fmul(s1, s1));
-        let norm = b.ins().fadd(cc, ss);
-        let half_norm = b.ins().fmul(one_half, norm);
-        let scale = b.ins().fsub(three_halves, half_norm);
-        (b.ins().fmul(c1, scale), b.ins().fmul(s1, scale))
+    let rotate = |b: &mut Builder, c: &[Value], s: &[Value]| -> (Vec<Value>, Vec<Value>) {
+        (0..pc)
+            .map(|k| {
+                let (p, q) = (b.ins().fmul(c[k], hc[k]), b.ins().fmul(s[k], hs[k]));
+                let c1 = b.ins().fsub(p, q);
+                let (p, q) = (b.ins().fmul(s[k], hc[k]), b.ins().fmul(c[k], hs[k]));
+                let s1 = b.ins().fadd(p, q);
+                let (cc, ss) = (b.ins().fmul(c1, c1), b.ins().fmul(s1, s1));
+                let norm = b.ins().fadd(cc, ss);
+                let half_norm = b.ins().fmul(one_half, norm);
+                let scale = b.ins().fsub(three_halves, half_norm);
+                (b.ins().fmul(c1, scale), b.ins().fmul(s1, scale))
+            })
+            .unzip()
     };
-    let (mc, ms) = rotate(b, c, s);
-    let (ec, es) = rotate(b, mc, ms);
-    let clocks = [(c, s), (mc, ms), (ec, es)].map(|(c, s)| [splat(b, c), splat(b, s)]);
+    let (mc, ms) = rotate(b, &c, &s);
+    let (ec, es) = rotate(b, &mc, &ms);
+    let clocks = [(&c, &s), (&mc, &ms), (&ec, &es)].map(|(c, s)| [widen(c), widen(s)]);
     let y1 = rk4(b, &y, &sizes, clocks);
     // As `integrate::steps`: at rest on a stop before the step, beyond it
     // after the step, or turning back inside it.
@@ -894,15 +941,15 @@ fn walk<S, K>(
     for (&(ci, vi), (position, side)) in stops.iter().zip(&bounds) {
         for k in 0..chunks {
             let at_stop = b.ins().fcmp(FloatCC::Equal, y[ci][k], position[k]);
-            let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero[k]);
+            let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero);
             let resting = b.ins().band(at_stop, still);
             let gap = b.ins().fsub(y1[ci][k], position[k]);
             let gap = b.ins().fmul(side[k], gap);
-            let beyond = b.ins().fcmp(FloatCC::GreaterThan, gap, zero[k]);
+            let beyond = b.ins().fcmp(FloatCC::GreaterThan, gap, zero);
             let toward = b.ins().fmul(side[k], y[vi][k]);
-            let toward = b.ins().fcmp(FloatCC::GreaterThan, toward, zero[k]);
+            let toward = b.ins().fcmp(FloatCC::GreaterThan, toward, zero);
             let back = b.ins().fmul(side[k], y1[vi][k]);
-            let back = b.ins().fcmp(FloatCC::LessThan, back, zero[k]);
+            let back = b.ins().fcmp(FloatCC::LessThan, back, zero);
             let turning = b.ins().band(toward, back);
             let any = b.ins().bor(resting, beyond);
             let any = b.ins().bor(any, turning);
@@ -914,19 +961,15 @@ fn walk<S, K>(
         }
     }
     let next = b.ins().iadd_imm(n, 1);
+    let stepped = args(&y1, &ec, &es, next);
     match hit {
         Some(hit) => {
             let met = b.ins().vany_true(hit);
-            b.ins().brif(
-                met,
-                exit,
-                &args(&y, c, s, n),
-                header,
-                &args(&y1, ec, es, next),
-            );
+            b.ins()
+                .brif(met, exit, &args(&y, &c, &s, n), header, &stepped);
         }
         None => {
-            b.ins().jump(header, &args(&y1, ec, es, next));
+            b.ins().jump(header, &stepped);
         }
     }
     b.seal_block(header);
@@ -934,17 +977,27 @@ fn walk<S, K>(
     // The exit: the states and phase where the loop stopped.
     b.switch_to_block(exit);
     b.seal_block(exit);
-    let at: Vec<Value> = b.block_params(exit).to_vec();
-    let per = ty.lane_count() as usize;
-    for (i, row) in rows(&at[..d * chunks]).iter().enumerate() {
+    let (y, c, s, n) = unpack(b.block_params(exit));
+    for (i, row) in y.iter().enumerate() {
         for (k, &v) in row.iter().enumerate() {
-            let offset = 8 * (i * chunks + k) * per;
-            b.ins().store(flags, v, states, offset as i32);
+            b.ins()
+                .store(flags, v, states, (8 * (i * w + 2 * k)) as i32);
         }
     }
-    b.ins().store(flags, at[d * chunks], clock, 0);
-    b.ins().store(flags, at[d * chunks + 1], clock, 8);
-    b.ins().return_(&[at[d * chunks + 2]]);
+    for (r, phase) in [c, s].iter().enumerate() {
+        match layout {
+            Layout::Shared => {
+                let x = b.ins().extractlane(phase[0], 0);
+                b.ins().store(flags, x, clock, (8 * r) as i32);
+            }
+            Layout::Each => {
+                for (k, &v) in phase.iter().enumerate() {
+                    b.ins().store(flags, v, clock, (8 * (r * w + 2 * k)) as i32);
+                }
+            }
+        }
+    }
+    b.ins().return_(&[n]);
 }
 
 /// One lowered instruction on one vector (or scalar) of each operand.
@@ -1134,6 +1187,7 @@ mod tests {
         let half = crate::integrate::clock::cos_sin(0.5 * eta * h);
         // The step loop of `integrate::steps`, one step at a time: the
         // steps taken before the first that meets the stop in a live slot.
+        #[allow(clippy::too_many_arguments)]
         fn by_steps<const W: usize>(
             native: &Native,
             c: &[f64],
@@ -1179,19 +1233,95 @@ mod tests {
             let start = [0.3f64.cos(), 0.3f64.sin()];
             let (mut expected, mut phase) = (y, start);
             let taken = by_steps(native, c, step, wall, live, 400, &mut expected, &mut phase);
-            let mut walked = start;
+            let mut clock = [start[0], start[1], step.1[0], step.1[1]];
             let walls = [wall, 1.0];
             let n = native
-                .walk(&mut y, &mut walked, &step.1, c, step.0, &walls, live, 400)
+                .walk(
+                    Layout::Shared,
+                    &mut y,
+                    &mut clock,
+                    c,
+                    &[step.0],
+                    &walls,
+                    live,
+                    400,
+                )
                 .expect("a loop for W");
             assert_eq!(n, taken, "W = {W}, wall {wall}");
             assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
-            assert_eq!(walked.map(f64::to_bits), phase.map(f64::to_bits));
+            assert_eq!(clock[..2], phase);
         }
         // A stop reached within the steps, and one out of reach.
         for wall in [0.9, 50.0] {
             check::<4>(&native, &c, (h, half), wall);
             check::<8>(&native, &c, (h, half), wall);
+        }
+        // One trajectory of each of 8 lanes: each its own η (so its own
+        // constants, step size and phases) and wall.
+        let etas: [f64; 8] = std::array::from_fn(|k| 0.7 + 0.05 * k as f64);
+        let lanes = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
+        let hs = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
+        let halves: [Phase; 8] =
+            std::array::from_fn(|k| crate::integrate::clock::cos_sin(0.5 * etas[k] * hs[k]));
+        let walls: [f64; 8] = std::array::from_fn(|k| 0.8 + 0.1 * k as f64);
+        let l = tape.lane_constants.len();
+        let lane: Vec<f64> = (0..l)
+            .flat_map(|j| lanes.iter().map(move |c| c[j]))
+            .collect();
+        let live = 0x7f;
+        let start: [[f64; 8]; 2] = [
+            std::array::from_fn(|k| 0.01 * k as f64),
+            std::array::from_fn(|k| if k == 7 { 9.0 } else { 0.0 }),
+        ];
+        let (mut expected, mut phases) = (start, [[1.0, 0.0]; 8]);
+        let mut taken = steps;
+        for n in 0..steps {
+            let stages: [[Phase; 3]; 8] =
+                std::array::from_fn(|k| rk4::stage_phases(&phases[k], &halves[k]));
+            let clock: Vec<f64> = (0..3)
+                .flat_map(|s| (0..2).flat_map(move |i| (0..8).map(move |k| stages[k][s][i])))
+                .collect();
+            let y1: [[f64; 8]; 2] =
+                native.call(Kind::Step, Layout::Each, &expected, &clock, &lane, &hs);
+            let y = &expected;
+            let hit = (0..7).any(|k| {
+                (y[0][k] == walls[k] && y[1][k] == 0.0)
+                    || y1[0][k] - walls[k] > 0.0
+                    || (y[1][k] > 0.0 && y1[1][k] < 0.0)
+            });
+            if hit {
+                taken = n;
+                break;
+            }
+            expected = y1;
+            phases = std::array::from_fn(|k| stages[k][2]);
+        }
+        assert!(
+            taken > 0 && taken < steps,
+            "a stop is met after {taken} steps"
+        );
+        let mut clock: Vec<f64> = (0..2)
+            .flat_map(|i| std::iter::repeat_n([1.0, 0.0][i], 8))
+            .chain((0..2).flat_map(|i| halves.iter().map(move |h| h[i])))
+            .collect();
+        let bounds: Vec<f64> = walls.iter().copied().chain([1.0; 8]).collect();
+        let mut y = start;
+        let n = native
+            .walk(
+                Layout::Each,
+                &mut y,
+                &mut clock,
+                &lane,
+                &hs,
+                &bounds,
+                live,
+                steps,
+            )
+            .expect("a loop for 8");
+        assert_eq!(n, taken);
+        assert_eq!(bits(&y), bits(&expected));
+        for k in 0..8 {
+            assert_eq!([clock[k], clock[8 + k]], phases[k], "slot {k}");
         }
         let mut y = [[0.0; 8]; 2];
         let mut phase = [1.0, 0.0];
@@ -1199,13 +1329,23 @@ mod tests {
         assert!(n > 0 && n < steps, "the stop is met after {n} steps");
         // No loop without stops given, nor for other widths.
         let plain = Native::compile(&tape).unwrap();
+        let mut clock = [1.0, 0.0, half[0], half[1]];
         let mut y = [[0.0; 4]; 2];
         assert!(plain
-            .walk(&mut y, &mut [1.0, 0.0], &half, &c, h, &[], 1, 1)
+            .walk(Layout::Shared, &mut y, &mut clock, &c, &[h], &[], 1, 1)
             .is_none());
         let mut y = [[0.0; 1]; 2];
         assert!(native
-            .walk(&mut y, &mut [1.0, 0.0], &half, &c, h, &[0.9, 1.0], 1, 1)
+            .walk(
+                Layout::Shared,
+                &mut y,
+                &mut clock,
+                &c,
+                &[h],
+                &[0.9, 1.0],
+                1,
+                1
+            )
             .is_none());
     }
 

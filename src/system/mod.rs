@@ -254,14 +254,29 @@ pub trait System<const D: usize>: Sized + Send + Sync {
         }
     }
 
-    /// One map iteration of one trajectory of each of several systems (the
-    /// references of neighbouring lanes of a sweep, in their transient); a
-    /// flow steps them as one batch ([`crate::integrate::time_map_lanes`]).
-    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; D]], flow: &FlowSettings) {
-        let mut discard = IterationStats::default();
-        for (system, x) in systems.iter().zip(xs.iter_mut()) {
-            *x = system.iterate(x, flow, &mut discard);
+    /// One map iteration of trajectory k of `systems[k]`, for every k (the
+    /// references of neighbouring lanes of a sweep in their transient, or
+    /// their references and copies while they average); a flow steps them
+    /// as batches across lanes ([`crate::integrate::time_map_lanes`]).
+    fn iterate_lanes(
+        systems: &[&Self],
+        xs: &mut [[f64; D]],
+        flow: &FlowSettings,
+        stats: &mut [IterationStats],
+    ) {
+        for ((system, x), st) in systems.iter().zip(xs.iter_mut()).zip(stats) {
+            *x = system.iterate(x, flow, st);
         }
+    }
+
+    /// Whether neighbouring lanes may average in lockstep, their references
+    /// and copies stepped together by [`iterate_lanes`](Self::iterate_lanes)
+    /// (`method::lane::run_lanes`): where that gives every trajectory the
+    /// bits and statistics [`part_many`](Self::part_many) gives it over the
+    /// whole iteration, and runs faster. A time map of a flow whose
+    /// divergence is not integrated along the reference does.
+    fn averages_across_lanes(&self) -> bool {
+        false
     }
 
     /// [`iterate_many`](Self::iterate_many) for one part of the iteration,
@@ -349,13 +364,13 @@ pub trait System<const D: usize>: Sized + Send + Sync {
 
 /// [`System::iterate_lanes`] of a flow: its time-T maps stepped as one batch.
 pub fn time_map_lanes<const D: usize, S: System<D> + crate::integrate::Flow<D>>(
-    systems: &[S],
+    systems: &[&S],
     xs: &mut [[f64; D]],
     flow: &FlowSettings,
+    stats: &mut [IterationStats],
 ) {
     let periods: Vec<f64> = systems.iter().map(|s| s.period()).collect();
-    let mut discard = vec![IterationStats::default(); systems.len()];
-    crate::integrate::time_map_lanes(systems, xs, &periods, flow, &mut discard);
+    crate::integrate::time_map_lanes(systems, xs, &periods, flow, stats);
 }
 
 /// [`SystemInfo::period`] from the system's own [`System::period`].

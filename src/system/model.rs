@@ -482,8 +482,69 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
             walls[2 * j] = wall.position;
             walls[2 * j + 1] = wall.side;
         }
+        let mut clock = [phase[0], phase[1], half[0], half[1]];
         let constants = &self.constants[0];
-        native.walk(y, phase, half, constants, h, &walls, live, steps)
+        let taken = native.walk(
+            Layout::Shared,
+            y,
+            &mut clock,
+            constants,
+            &[h],
+            &walls,
+            live,
+            steps,
+        );
+        *phase = [clock[0], clock[1]];
+        taken
+    }
+
+    #[inline(always)]
+    fn walk_each<const W: usize>(
+        flows: &[&Self; W],
+        y: &mut [[f64; W]; D],
+        phases: &mut [Phase; W],
+        half: &[Phase; W],
+        h: &[f64; W],
+        live: u32,
+        steps: usize,
+    ) -> Option<usize> {
+        let native = flows[0].code.regions[0].native.as_ref()?;
+        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[0].as_slice());
+        if slots[0].len() > EACH_CONSTANTS {
+            return None;
+        }
+        let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
+        let lane = side_by_side(&slots, &mut scratch);
+        // Rows of W: cos and sin of the phases and of their turns; each
+        // wall's position and side.
+        let mut clock = [[0.0; W]; 4];
+        for k in 0..W {
+            clock[0][k] = phases[k][0];
+            clock[1][k] = phases[k][1];
+            clock[2][k] = half[k][0];
+            clock[3][k] = half[k][1];
+        }
+        let mut walls = [[0.0; W]; 2 * crate::integrate::impact::MAX_WALLS];
+        for (k, flow) in flows.iter().enumerate() {
+            for (j, wall) in flow.walls.iter().enumerate() {
+                walls[2 * j][k] = wall.position;
+                walls[2 * j + 1][k] = wall.side;
+            }
+        }
+        let taken = native.walk(
+            Layout::Each,
+            y,
+            clock.as_flattened_mut(),
+            lane.as_flattened(),
+            h,
+            walls.as_flattened(),
+            live,
+            steps,
+        );
+        for (k, phase) in phases.iter_mut().enumerate() {
+            *phase = [clock[0][k], clock[1][k]];
+        }
+        taken
     }
 
     #[inline(always)]
@@ -793,8 +854,19 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())))
     }
 
-    fn iterate_lanes(systems: &[Self], xs: &mut [[f64; D]], flow: &FlowSettings) {
-        super::time_map_lanes(systems, xs, flow)
+    fn iterate_lanes(
+        systems: &[&Self],
+        xs: &mut [[f64; D]],
+        flow: &FlowSettings,
+        stats: &mut [IterationStats],
+    ) {
+        super::time_map_lanes(systems, xs, flow, stats)
+    }
+
+    /// Not where [`part_many`](System::part_many) integrates a
+    /// state-dependent divergence along the reference.
+    fn averages_across_lanes(&self) -> bool {
+        self.code.equations_divergence().is_none()
     }
 
     fn iterate_many(&self, ys: &mut [[f64; D]], flow: &FlowSettings, stats: &mut [IterationStats]) {

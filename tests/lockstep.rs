@@ -1,0 +1,74 @@
+//! Neighbouring lanes of a CPU sweep are stepped together (their transients'
+//! references, and while they average their references and copies, as
+//! batches across lanes, in the models' native step loop): each lane's
+//! numbers must be those of the lane run alone, to the bit.
+
+mod common;
+
+use lyapsweep::backend::method_settings;
+use lyapsweep::method::{runner, Lane};
+use lyapsweep::scene::{Backend, Precision};
+
+/// Every lane of `scene` run alone and with its neighbours; the results'
+/// every field (exponents, counts, status) compared to the bit (through
+/// their debug forms, which print each f64 exactly, NaN included).
+fn assert_lanes_together_are_lanes_alone(name: &str, overrides: &[&str]) {
+    let scene = common::committed_scene(name, overrides);
+    let settings = method_settings(&scene, Backend::Cpu, Precision::F64);
+    let lanes: Vec<Lane> = (0..scene.lane_count())
+        .map(|k| Lane {
+            params: scene.lane_params(k),
+            settings: &settings,
+        })
+        .collect();
+    let run = runner(scene.system);
+    let together: Vec<String> = lanes
+        .chunks(8)
+        .flat_map(|chunk| (run.run_lanes)(chunk))
+        .map(|r| format!("{r:?}"))
+        .collect();
+    for (k, lane) in lanes.iter().enumerate() {
+        let alone = format!("{:?}", (run.run_lane)(lane));
+        assert_eq!(together[k], alone, "{name}, lane {k}");
+    }
+}
+
+/// The seed's oscillator over the η of the paper's figure: impacts,
+/// grazing iterations re-estimated by a lane alone, lanes with a period of
+/// their own; eleven lanes, so a batch of 8 and one of 3.
+#[test]
+fn the_seed_s_lanes_together_are_its_lanes_alone() {
+    assert_lanes_together_are_lanes_alone(
+        "seed-fig3.toml",
+        &[
+            "sweep.count=11",
+            "integration.transient=30",
+            "integration.iterations=40",
+            "integration.steps_per_period=400",
+            "output.bifurcation_points=10",
+        ],
+    );
+}
+
+/// Models without stops (Duffing), with two (the impact pair), in four
+/// dimensions (the chain), with a divergence integrated along the
+/// reference (van der Pol, which averages alone), and with a general
+/// surface (the vibrating table, which steps in the step loop alone).
+#[test]
+fn models_lanes_together_are_their_lanes_alone() {
+    let short = [
+        "sweep.count=10",
+        "integration.transient=20",
+        "integration.iterations=20",
+        "output.bifurcation_points=10",
+    ];
+    for name in [
+        "duffing.toml",
+        "impact-pair.toml",
+        "two-mass-chain.toml",
+        "van-der-pol.toml",
+        "vibrating-table.toml",
+    ] {
+        assert_lanes_together_are_lanes_alone(name, &short);
+    }
+}
