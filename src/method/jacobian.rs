@@ -32,11 +32,13 @@ pub fn estimate<const D: usize, S: System<D>>(
     difference: Difference,
     stats: &mut IterationStats,
 ) -> ([f64; D], SMatrix<f64, D, D>) {
-    let mut copies = Copies::new(system, x, delta, difference);
-    let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
+    let copies = Copies::new(system, x, delta, difference);
     let n = copies.count();
-    system.part_many(copies.trajectories(), flow, part, phase, &mut st[..n]);
-    copies.difference(&st[..n], stats)
+    let mut ys = [[0.0; D]; MAX_TRAJECTORIES];
+    ys[..n].copy_from_slice(copies.starts());
+    let mut st = [IterationStats::default(); MAX_TRAJECTORIES];
+    system.part_many(&mut ys[..n], flow, part, phase, &mut st[..n]);
+    copies.difference(&ys[..n], &st[..n], stats)
 }
 
 /// The trajectories of one Jacobian estimate: the reference from x and its
@@ -57,7 +59,7 @@ pub fn estimate<const D: usize, S: System<D>>(
 /// on the other side, one-sided against the reference image.
 #[derive(Clone, Copy, Debug)]
 pub struct Copies<const D: usize> {
-    ys: [[f64; D]; MAX_TRAJECTORIES],
+    starts: [[f64; D]; MAX_TRAJECTORIES],
     steps: [f64; MAX_TRAJECTORIES],
     admitted: [bool; MAX_TRAJECTORIES],
     difference: Difference,
@@ -85,7 +87,7 @@ impl<const D: usize> Copies<D> {
         // crossed a grazing boundary, it is differenced on the other side.
         let admitted = std::array::from_fn(|t| system.admits(&ys[t]));
         Copies {
-            ys,
+            starts: ys,
             steps,
             admitted,
             difference,
@@ -97,22 +99,22 @@ impl<const D: usize> Copies<D> {
         1 + self.difference.copies(D)
     }
 
-    /// The trajectories, the reference first, to be integrated over the
-    /// iteration (or part) in place.
-    pub fn trajectories(&mut self) -> &mut [[f64; D]] {
-        let n = self.count();
-        &mut self.ys[..n]
+    /// The trajectories' starts, the reference first, to be integrated
+    /// over the iteration (or part).
+    pub fn starts(&self) -> &[[f64; D]] {
+        &self.starts[..self.count()]
     }
 
-    /// U(x) and the estimated DU(x) from the integrated trajectories and
+    /// U(x) and the estimated DU(x) from the trajectories' ends `ys` and
     /// their statistics `st` (the reference's first); the reference's
     /// counts are added to `stats`.
     pub fn difference(
         &self,
+        ys: &[[f64; D]],
         st: &[IterationStats],
         stats: &mut IterationStats,
     ) -> ([f64; D], SMatrix<f64, D, D>) {
-        let (ys, steps, admitted) = (&self.ys, &self.steps, &self.admitted);
+        let (steps, admitted) = (&self.steps, &self.admitted);
         stats.impacts += st[0].impacts;
         stats.time += st[0].time;
         stats.log_flux += st[0].log_flux;

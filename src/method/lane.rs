@@ -536,8 +536,8 @@ where
         ys.clear();
         for &k in &live {
             let delta = perturbation_at(settings.perturbation, &xs[k]);
-            let mut c = jacobian::Copies::new(&systems[k], &xs[k], delta, settings.difference);
-            ys.extend_from_slice(c.trajectories());
+            let c = jacobian::Copies::new(&systems[k], &xs[k], delta, settings.difference);
+            ys.extend_from_slice(c.starts());
             owners.extend(std::iter::repeat_n(&systems[k], c.count()));
             copies.push(c);
         }
@@ -545,17 +545,16 @@ where
         st.resize(ys.len(), IterationStats::default());
         S::iterate_lanes(&owners, &mut ys, flow, &mut st);
         let mut from = 0;
-        let mut lane = copies.iter_mut();
+        let mut lane = copies.iter();
         live.retain(|&k| {
             let c = lane.next().expect("a lane's copies");
             let (system, x) = (&systems[k], xs[k]);
             let to = from + c.count();
-            c.trajectories().copy_from_slice(&ys[from..to]);
             // As `step` takes a whole-part iteration: the part's statistics
             // from zero, merged into the iteration's.
             let mut part_stats = IterationStats::default();
             let mut first = part_stats;
-            let estimate = c.difference(&st[from..to], &mut first);
+            let estimate = c.difference(&ys[from..to], &st[from..to], &mut first);
             from = to;
             let (mut next, j) = resolve_grazing(
                 system,

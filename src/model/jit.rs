@@ -433,7 +433,7 @@ fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
 use cranelift_jit::JITModule as Module;
 
 #[cfg(target_arch = "x86_64")]
-fn build(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Result<Native, String> {
+fn build<'s>(tape: &Tape, stops: Option<&'s [(usize, usize)]>) -> Result<Native, String> {
     use cranelift_codegen::settings::{self, Configurable};
     use cranelift_jit::JITBuilder;
 
@@ -454,38 +454,28 @@ fn build(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Result<Native, String
     } else {
         &[Kind::Rhs]
     };
+    let stepping = stops.filter(|_| kinds.contains(&Kind::Step));
+    // `what` for every width and layout, in the order they are read back
+    // below.
+    let mut define_all = |what: &dyn Fn(Layout) -> What<'s>, widths: &[usize], prefix: &str| {
+        let mut ids = Vec::new();
+        for &w in widths {
+            for layout in [Layout::Shared, Layout::Each] {
+                let name = format!("{prefix}{w}{layout:?}");
+                ids.push(define(&mut module, tape, what(layout), w, &name)?);
+            }
+        }
+        Ok::<_, String>(ids)
+    };
     let mut ids = Vec::new();
     for &kind in kinds {
-        for &w in &WIDTHS {
-            for layout in [Layout::Shared, Layout::Each] {
-                let name = format!("{kind:?}{w}{layout:?}");
-                ids.push(define(
-                    &mut module,
-                    tape,
-                    What::Function(kind, layout),
-                    w,
-                    &name,
-                )?);
-            }
-        }
+        let what = |layout| What::Function(kind, layout);
+        ids.extend(define_all(&what, &WIDTHS, &format!("{kind:?}"))?);
     }
-    let stepping = stops.filter(|_| kinds.contains(&Kind::Step));
-    let mut walk_ids = Vec::new();
-    if let Some(stops) = stepping {
-        for &w in &WALK_WIDTHS {
-            let name = format!("Walk{w}");
-            for layout in [Layout::Shared, Layout::Each] {
-                let name = format!("{name}{layout:?}");
-                walk_ids.push(define(
-                    &mut module,
-                    tape,
-                    What::Walk(stops, layout),
-                    w,
-                    &name,
-                )?);
-            }
-        }
-    }
+    let walk_ids = match stepping {
+        Some(stops) => define_all(&|layout| What::Walk(stops, layout), &WALK_WIDTHS, "Walk")?,
+        None => Vec::new(),
+    };
     module.finalize_definitions().map_err(|e| e.to_string())?;
     let mut walk_ids = walk_ids.into_iter();
     let walks = [(); WALK_WIDTHS.len()].map(|_| {
