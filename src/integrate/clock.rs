@@ -14,6 +14,24 @@ pub type Phase = [f64; 2];
 /// The phase at t = 0.
 pub const ZERO_PHASE: Phase = [1.0, 0.0];
 
+/// The rotation through ωh/2 of a grid of `steps` steps of h per map
+/// period. Where the period is a whole number m of forcing cycles (a
+/// stroboscopic map, ω·steps·h = 2πm to rounding), the angle is taken as
+/// exactly πm/steps: ω·h/2 rounds differently for every ω of a sweep, and
+/// with this every lane turns its phase through the same bits, so lanes
+/// stepped together in lockstep share one phase (`jit::Native::walk`)
+/// instead of each turning its own.
+pub fn half_turn(omega: f64, h: f64, steps: usize) -> Phase {
+    let steps = steps as f64;
+    let cycles = omega * h * steps / std::f64::consts::TAU;
+    let whole = cycles.round();
+    if whole >= 1.0 && (cycles - whole).abs() <= 1e-12 * whole {
+        cos_sin(std::f64::consts::PI * whole / steps)
+    } else {
+        cos_sin(0.5 * omega * h)
+    }
+}
+
 /// The phase rotated by the angle whose (cos, sin) is `by`, renormalised to
 /// the unit circle (one Newton step for 1/√(c² + s²)) so rounding cannot make
 /// the forcing amplitude drift over thousands of rotations.
@@ -95,6 +113,23 @@ mod tests {
             assert!((c - phi.cos()).abs() <= 2.0 * f64::EPSILON);
             assert!((s - phi.sin()).abs() <= 2.0 * f64::EPSILON * phi.max(1e-300) + 1e-300);
         }
+    }
+
+    #[test]
+    fn a_whole_number_of_cycles_turns_every_frequency_by_the_same_bits() {
+        let steps = 1800;
+        let first = half_turn(0.5, std::f64::consts::TAU / 0.5 / steps as f64, steps);
+        for k in 0..=1000 {
+            let omega = 0.5 + k as f64 * 1e-3;
+            let h = std::f64::consts::TAU / omega / steps as f64;
+            assert_eq!(half_turn(omega, h, steps), first, "ω = {omega}");
+            // Two forcing cycles per period: the half turn of 2π·2/steps.
+            let twice = half_turn(omega, 2.0 * h, steps);
+            assert_eq!(twice, cos_sin(std::f64::consts::TAU / steps as f64));
+        }
+        // A period that is not a whole number of cycles keeps ωh/2.
+        assert_eq!(half_turn(0.7, 0.01, 100), cos_sin(0.5 * 0.7 * 0.01));
+        assert_eq!(half_turn(0.0, 0.01, 100), ZERO_PHASE);
     }
 
     #[test]

@@ -37,7 +37,7 @@ pub struct EventHoldValues<const D: usize> {
 /// surfaces' (the output's event columns).
 pub const MAX_EVENTS: usize = impact::MAX_WALLS + surface::MAX_SURFACES;
 
-use clock::{cos_sin, Phase, ZERO_PHASE};
+use clock::{half_turn, Phase, ZERO_PHASE};
 
 /// A flow y' = F(t, y) in D dimensions, possibly forced, possibly with a wall.
 ///
@@ -163,8 +163,8 @@ pub trait Flow<const D: usize>: Sync {
     }
 
     /// [`walk_shared`](Self::walk_shared) for one trajectory of each of W
-    /// flows (neighbouring lanes of a sweep), each with its own forcing
-    /// phase, turn and step size.
+    /// flows (neighbouring lanes of a sweep), each with its own step size
+    /// and constants; `None` unless they share the forcing phase and turn.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn walk_each<const W: usize>(
@@ -364,7 +364,7 @@ fn part_map_many_lanes<const D: usize, F: Flow<D>>(
         // No trajectory: only the forcing phase goes through the part's
         // steps, as it would with trajectories (see `reestimate_of`).
         let h = period / settings.steps_per_period as f64;
-        let half = cos_sin(0.5 * flow.forcing_frequency() * h);
+        let half = half_turn(flow.forcing_frequency(), h, settings.steps_per_period);
         for _ in part.steps(settings.steps_per_period) {
             *phase = rk4::stage_phases(phase, &half)[2];
         }
@@ -434,17 +434,17 @@ fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
 /// (the same stage phases and operations, so the same end), and integrates
 /// `density` along it by the same RK4: a quadrature state q' = density
 /// riding along, evaluated at the stage states. Returns the end and ∫
-/// density dt. For a flow without walls.
+/// density dt. For a flow without walls; `half` is the grid's half-step
+/// turn of the phase ([`half_turn`]).
 pub fn advance_integrating<const D: usize, F: Flow<D>>(
     flow: &F,
     y: &[f64; D],
     mut phase: Phase,
-    h: f64,
+    (h, half): (f64, Phase),
     steps: usize,
     density: impl Fn(&Phase, &[f64; D]) -> f64,
 ) -> ([f64; D], f64) {
     debug_assert!(flow.walls().is_empty());
-    let half = cos_sin(0.5 * flow.forcing_frequency() * h);
     let sixth = h / 6.0;
     let (mut y, mut integral) = (*y, 0.0);
     for _ in 0..steps {
@@ -666,7 +666,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let location = settings.impact_location;
     let h: [f64; W] = std::array::from_fn(|k| flows.period(k, period) / steps as f64);
     let omega: [f64; W] = std::array::from_fn(|k| flows.of(k).forcing_frequency());
-    let half: [Phase; W] = std::array::from_fn(|k| cos_sin(0.5 * omega[k] * h[k]));
+    let half: [Phase; W] = std::array::from_fn(|k| half_turn(omega[k], h[k], steps));
     let walls: [&[Wall]; W] = std::array::from_fn(|k| flows.of(k).walls());
     let count = walls[0].len();
     debug_assert!(walls.iter().all(|w| w.len() == count));

@@ -18,7 +18,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::expr::{Expr, Var, Written};
-use super::jit::Native;
+use super::jit::{Native, StopCode};
 pub(crate) use super::tape::reads_state_or_time;
 use super::tape::Tape;
 use super::{Map, Model};
@@ -338,11 +338,15 @@ impl Code {
         let kinds: Vec<Surface> = surfaces.iter().map(|s| s.kind).collect();
         // A period map without general surfaces steps in a loop of native
         // code between the steps that meet a stop (`Flow::walk_shared`).
-        let stepping: Option<Vec<(usize, usize)>> = (section.is_none() && surfaces.is_empty())
-            .then(|| {
+        let stepping: Option<Vec<StopCode>> =
+            (section.is_none() && surfaces.is_empty()).then(|| {
                 walls
                     .iter()
-                    .map(|w: &Stop| (w.coordinate, w.velocity))
+                    .map(|w: &Stop| StopCode {
+                        coordinate: w.coordinate,
+                        velocity: w.velocity,
+                        side: w.side,
+                    })
                     .collect()
             });
         let regions = (0..1u32 << model.switches.len())
@@ -716,7 +720,7 @@ fn field(
     surfaces: &[GeneralSurface],
     region: u32,
     frequency: Option<Expr>,
-    stops: Option<&[(usize, usize)]>,
+    stops: Option<&[StopCode]>,
     key: &str,
 ) -> Result<Field> {
     let n = model.names.states.len();

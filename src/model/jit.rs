@@ -42,8 +42,8 @@ pub type Function = unsafe extern "C" fn(
 /// where the loop stopped), with the lane constants at `lane` and the step
 /// size `h[0]`; stops before the first step in which a slot whose mask in
 /// `live` (W `i64`, all ones or zero) is set meets one of the stops
-/// compiled in (positions and sides at `walls`, `[position, side]` per
-/// stop). Returns the steps taken.
+/// compiled in (their positions at `walls`, stop after stop). Returns the
+/// steps taken.
 pub type Walk = unsafe extern "C" fn(
     y: *mut f64,
     phase: *mut f64,
@@ -53,6 +53,16 @@ pub type Walk = unsafe extern "C" fn(
     live: *const i64,
     steps: u64,
 ) -> u64;
+
+/// A stop as the step loop detects it (`model::code::Stop`): the
+/// coordinate it bounds, that coordinate's velocity, and the side (±1) the
+/// coordinate is kept on, compiled into the loop's comparisons.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopCode {
+    pub coordinate: usize,
+    pub velocity: usize,
+    pub side: f64,
+}
 
 /// The widths a step loop is compiled for ([`Native::walk`]): a lane's
 /// reference and copies (3 to 9 trajectories) in batches of 4 or 8.
@@ -132,9 +142,9 @@ impl Native {
 
     /// [`compile`](Self::compile) for a field's equations, with its step
     /// loop ([`walk`](Self::walk)) where `stops` are given: each stop's
-    /// coordinate and velocity (`model::code::Stop`), detected in the loop
-    /// as the step loop of `integrate` detects them.
-    pub fn compile_stepping(tape: &Tape, stops: Option<&[(usize, usize)]>) -> Option<Native> {
+    /// coordinate, velocity and side (±1, `model::code::Stop`), detected in
+    /// the loop as the step loop of `integrate` detects them.
+    pub fn compile_stepping(tape: &Tape, stops: Option<&[StopCode]>) -> Option<Native> {
         #[cfg(target_arch = "x86_64")]
         {
             build(tape, stops).ok()
@@ -154,11 +164,14 @@ impl Native {
     /// `clock` advanced by them, each step's arithmetic [`Kind::Step`]'s
     /// and `rk4::stage_phases`'s; `None` where there is no loop for W.
     ///
-    /// By `layout`, one value for every slot (`Shared`, a lane's
-    /// trajectories) or a row of W (`Each`, trajectories of W lanes):
     /// `clock` holds cos and sin of the forcing phase (written back) and
-    /// of its turn per half step, `lane` the tape's constants, `h` the step
-    /// size, and `walls` each stop's position and side.
+    /// of its turn per half step, one phase for every slot: lanes stepped
+    /// in lockstep share it (`clock::half_turn`), and each slot turning a
+    /// copy of its own was two fifths of the loop's arithmetic. By
+    /// `layout`, one value for every slot (`Shared`, a lane's
+    /// trajectories) or a row of W (`Each`, trajectories of W lanes):
+    /// `lane` holds the tape's constants, `h` the step size, and `walls`
+    /// each stop's position.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn walk<const W: usize, const D: usize>(
@@ -177,14 +190,14 @@ impl Native {
         let per_slot = if layout == Layout::Shared { 1 } else { W };
         assert!(
             D == self.states
-                && clock.len() >= 4 * per_slot
+                && clock.len() >= 4
                 && lane.len() >= self.constants * per_slot
                 && h.len() >= per_slot
-                && walls.len() >= 2 * self.stops * per_slot
+                && walls.len() >= self.stops * per_slot
         );
         let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
         // SAFETY: the loop reads and writes D·W states in `y` and the
-        // phases in `clock`, reads the tape's constants, the step sizes,
+        // phase in `clock`, reads the tape's constants, the step sizes,
         // two rows per stop and W masks, as `layout` lays them out
         // (checked above); it was compiled for W, `layout` and this tape's
         // D states.
@@ -433,7 +446,7 @@ fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
 use cranelift_jit::JITModule as Module;
 
 #[cfg(target_arch = "x86_64")]
-fn build<'s>(tape: &Tape, stops: Option<&'s [(usize, usize)]>) -> Result<Native, String> {
+fn build<'s>(tape: &Tape, stops: Option<&'s [StopCode]>) -> Result<Native, String> {
     use cranelift_codegen::settings::{self, Configurable};
     use cranelift_jit::JITBuilder;
 
@@ -518,9 +531,8 @@ fn build<'s>(tape: &Tape, stops: Option<&'s [(usize, usize)]>) -> Result<Native,
 enum What<'a> {
     /// A [`Function`] of this kind and layout.
     Function(Kind, Layout),
-    /// A step loop ([`Walk`]) detecting these stops (coordinate,
-    /// velocity).
-    Walk(&'a [(usize, usize)], Layout),
+    /// A step loop ([`Walk`]) detecting these stops.
+    Walk(&'a [StopCode], Layout),
 }
 
 /// Defines the tape's function for batches of `w`.
@@ -760,7 +772,7 @@ fn declare(
 struct Walker<'a> {
     /// The states at the loop's start, a vector per `chunks` slots.
     state: Vec<Vec<cranelift_codegen::ir::Value>>,
-    /// Pointers to the states, the phase and half-step turn, the stops'
+    /// Pointers to the states, the (shared) phase and half-step turn, the stops'
     /// positions and sides, the slots' live masks; and the most steps to
     /// take.
     y: cranelift_codegen::ir::Value,
@@ -768,8 +780,8 @@ struct Walker<'a> {
     walls: cranelift_codegen::ir::Value,
     live: cranelift_codegen::ir::Value,
     steps: cranelift_codegen::ir::Value,
-    stops: &'a [(usize, usize)],
-    /// One phase for every slot, or one per slot.
+    stops: &'a [StopCode],
+    /// The layout of the lane constants, step sizes and stops.
     layout: Layout,
     chunks: usize,
     flags: cranelift_codegen::ir::MemFlags,
@@ -781,11 +793,11 @@ struct Walker<'a> {
 /// states and phase where the loop stopped. The states and phase live in
 /// the loop's block parameters (registers), never in memory.
 ///
-/// Pointers, by layout: the clock holds cos, sin, and the half step's
-/// cos and sin, each one value (`Shared`) or a row of W (`Each`); the
-/// stops' positions and sides likewise, stop after stop. Every slot works
-/// in `F64X2` vectors; a shared phase is turned in one vector (the same
-/// IEEE operations in both lanes as on a scalar).
+/// Pointers: the clock holds cos, sin, and the half step's cos and sin,
+/// one phase for every slot; by layout, the stops' positions are each
+/// one value (`Shared`) or a row of W (`Each`), stop after stop.
+/// Every slot works in `F64X2` vectors; the phase is turned in one vector
+/// (the same IEEE operations in both lanes as on a scalar).
 #[cfg(target_arch = "x86_64")]
 fn walk<S, K>(
     b: &mut cranelift_frontend::FunctionBuilder,
@@ -818,8 +830,8 @@ fn walk<S, K>(
         flags,
     } = walker;
     let (d, ty, w) = (state.len(), types::F64X2, 2 * chunks);
-    // Phase vectors: one (shared) or one per chunk of slots.
-    let pc = if layout == Layout::Shared { 1 } else { chunks };
+    // Phase vectors: one, shared by every chunk of slots.
+    let pc = 1;
     // Row r of the slots' values at `base`: a splat of one value
     // (shared) or W values (each), as `pc` vectors.
     let row = |b: &mut Builder, base: Value, r: usize| -> Vec<Value> {
@@ -836,24 +848,16 @@ fn walk<S, K>(
     // A `pc`-vector value for every chunk.
     let widen = |v: &[Value]| -> Vec<Value> { (0..chunks).map(|c| v[c % v.len()]).collect() };
     let sizes = step_sizes(b);
-    let (c0, s0, hc, hs) = (
-        row(b, clock, 0),
-        row(b, clock, 1),
-        row(b, clock, 2),
-        row(b, clock, 3),
-    );
+    let shared = |b: &mut Builder, r: usize| -> Vec<Value> {
+        let x = b.ins().load(types::F64, flags, clock, (8 * r) as i32);
+        vec![b.ins().splat(ty, x)]
+    };
+    let (c0, s0, hc, hs) = (shared(b, 0), shared(b, 1), shared(b, 2), shared(b, 3));
     let masks: Vec<Value> = (0..chunks)
         .map(|c| b.ins().load(types::I64X2, flags, live, (16 * c) as i32))
         .collect();
     // Each stop's position and side, in every slot.
-    let bounds: Vec<(Vec<Value>, Vec<Value>)> = (0..stops.len())
-        .map(|j| {
-            (
-                widen(&row(b, walls, 2 * j)),
-                widen(&row(b, walls, 2 * j + 1)),
-            )
-        })
-        .collect();
+    let positions: Vec<Vec<Value>> = (0..stops.len()).map(|j| widen(&row(b, walls, j))).collect();
     let vector = |b: &mut Builder, v: f64| {
         let x = b.ins().f64const(Ieee64::with_bits(v.to_bits()));
         b.ins().splat(ty, x)
@@ -926,20 +930,25 @@ fn walk<S, K>(
     let clocks = [(&c, &s), (&mc, &ms), (&ec, &es)].map(|(c, s)| [widen(c), widen(s)]);
     let y1 = rk4(b, &y, &sizes, clocks);
     // As `integrate::steps`: at rest on a stop before the step, beyond it
-    // after the step, or turning back inside it.
+    // after the step, or turning back inside it. Its `side·a > 0` is a
+    // comparison of `a` with zero here: side is ±1, so the product is
+    // exact and only its sign counts (±0 and NaN compare false either way).
     let mut hit: Option<Value> = None;
-    for (&(ci, vi), (position, side)) in stops.iter().zip(&bounds) {
+    for (stop, position) in stops.iter().zip(&positions) {
+        let (ci, vi) = (stop.coordinate, stop.velocity);
+        let (out, into) = if stop.side > 0.0 {
+            (FloatCC::GreaterThan, FloatCC::LessThan)
+        } else {
+            (FloatCC::LessThan, FloatCC::GreaterThan)
+        };
         for k in 0..chunks {
             let at_stop = b.ins().fcmp(FloatCC::Equal, y[ci][k], position[k]);
             let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero);
             let resting = b.ins().band(at_stop, still);
             let gap = b.ins().fsub(y1[ci][k], position[k]);
-            let gap = b.ins().fmul(side[k], gap);
-            let beyond = b.ins().fcmp(FloatCC::GreaterThan, gap, zero);
-            let toward = b.ins().fmul(side[k], y[vi][k]);
-            let toward = b.ins().fcmp(FloatCC::GreaterThan, toward, zero);
-            let back = b.ins().fmul(side[k], y1[vi][k]);
-            let back = b.ins().fcmp(FloatCC::LessThan, back, zero);
+            let beyond = b.ins().fcmp(out, gap, zero);
+            let toward = b.ins().fcmp(out, y[vi][k], zero);
+            let back = b.ins().fcmp(into, y1[vi][k], zero);
             let turning = b.ins().band(toward, back);
             let any = b.ins().bor(resting, beyond);
             let any = b.ins().bor(any, turning);
@@ -975,17 +984,8 @@ fn walk<S, K>(
         }
     }
     for (r, phase) in [c, s].iter().enumerate() {
-        match layout {
-            Layout::Shared => {
-                let x = b.ins().extractlane(phase[0], 0);
-                b.ins().store(flags, x, clock, (8 * r) as i32);
-            }
-            Layout::Each => {
-                for (k, &v) in phase.iter().enumerate() {
-                    b.ins().store(flags, v, clock, (8 * (r * w + 2 * k)) as i32);
-                }
-            }
-        }
+        let x = b.ins().extractlane(phase[0], 0);
+        b.ins().store(flags, x, clock, (8 * r) as i32);
     }
     b.ins().return_(&[n]);
 }
@@ -1169,8 +1169,13 @@ mod tests {
         let parse = |t: &str| Expr::parse(t, &names).unwrap();
         let exprs = [parse("v"), parse("-2*zeta*v - x + f*cos(eta*t)")];
         let tape = Tape::compile(&exprs, 2, Some(parse("eta"))).unwrap();
-        let native =
-            Native::compile_stepping(&tape, Some(&[(0, 1)])).expect("cranelift targets this host");
+        let stop = |side| StopCode {
+            coordinate: 0,
+            velocity: 1,
+            side,
+        };
+        let native = Native::compile_stepping(&tape, Some(&[stop(1.0)]))
+            .expect("cranelift targets this host");
         let (eta, steps) = (0.8, 400);
         let c = tape.lane_values(&[0.05, 1.0, eta]).constants;
         let h = std::f64::consts::TAU / eta / 200.0;
@@ -1182,7 +1187,7 @@ mod tests {
             native: &Native,
             c: &[f64],
             (h, half): (f64, Phase),
-            wall: f64,
+            (wall, side): (f64, f64),
             live: u32,
             steps: usize,
             y: &mut [[f64; W]; 2],
@@ -1200,8 +1205,8 @@ mod tests {
                 );
                 let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
                     (y[0][k] == wall && y[1][k] == 0.0)
-                        || y1[0][k] - wall > 0.0
-                        || (y[1][k] > 0.0 && y1[1][k] < 0.0)
+                        || side * (y1[0][k] - wall) > 0.0
+                        || (side * y[1][k] > 0.0 && side * y1[1][k] < 0.0)
                 });
                 if hit {
                     return n;
@@ -1211,20 +1216,26 @@ mod tests {
             }
             steps
         }
-        fn check<const W: usize>(native: &Native, c: &[f64], step: (f64, Phase), wall: f64) {
+        fn check<const W: usize>(
+            native: &Native,
+            c: &[f64],
+            step: (f64, Phase),
+            (wall, side): (f64, f64),
+        ) {
             // Slots from near rest, a little apart; the last one beyond
             // the stop and not live.
             let mut y: [[f64; W]; 2] = [
                 std::array::from_fn(|k| 0.01 * k as f64),
                 std::array::from_fn(|k| -0.003 * k as f64),
             ];
-            y[0][W - 1] = wall + 3.0;
+            y[0][W - 1] = wall + 3.0 * side;
             let live = (1u32 << (W - 1)) - 1;
             let start = [0.3f64.cos(), 0.3f64.sin()];
             let (mut expected, mut phase) = (y, start);
-            let taken = by_steps(native, c, step, wall, live, 400, &mut expected, &mut phase);
+            let stop = (wall, side);
+            let taken = by_steps(native, c, step, stop, live, 400, &mut expected, &mut phase);
             let mut clock = [start[0], start[1], step.1[0], step.1[1]];
-            let walls = [wall, 1.0];
+            let walls = [wall];
             let n = native
                 .walk(
                     Layout::Shared,
@@ -1237,22 +1248,28 @@ mod tests {
                     400,
                 )
                 .expect("a loop for W");
-            assert_eq!(n, taken, "W = {W}, wall {wall}");
+            assert_eq!(n, taken, "W = {W}, wall {wall}, side {side}");
             assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
             assert_eq!(clock[..2], phase);
         }
-        // A stop reached within the steps, and one out of reach.
+        // A stop reached within the steps, and one out of reach, from
+        // either side.
+        let below = Native::compile_stepping(&tape, Some(&[stop(-1.0)]))
+            .expect("cranelift targets this host");
         for wall in [0.9, 50.0] {
-            check::<4>(&native, &c, (h, half), wall);
-            check::<8>(&native, &c, (h, half), wall);
+            check::<4>(&native, &c, (h, half), (wall, 1.0));
+            check::<8>(&native, &c, (h, half), (wall, 1.0));
+            check::<4>(&below, &c, (h, half), (-wall, -1.0));
+            check::<8>(&below, &c, (h, half), (-wall, -1.0));
         }
         // One trajectory of each of 8 lanes: each its own η (so its own
-        // constants, step size and phases) and wall.
+        // constants and step size) and wall, all with the grid's phase.
         let etas: [f64; 8] = std::array::from_fn(|k| 0.7 + 0.05 * k as f64);
         let lanes = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
         let hs = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
         let halves: [Phase; 8] =
-            std::array::from_fn(|k| crate::integrate::clock::cos_sin(0.5 * etas[k] * hs[k]));
+            std::array::from_fn(|k| crate::integrate::clock::half_turn(etas[k], hs[k], 200));
+        assert!(halves.iter().all(|h| *h == halves[0]), "one grid turn");
         let walls: [f64; 8] = std::array::from_fn(|k| 0.8 + 0.1 * k as f64);
         let l = tape.lane_constants.len();
         let lane: Vec<f64> = (0..l)
@@ -1290,11 +1307,8 @@ mod tests {
             taken > 0 && taken < steps,
             "a stop is met after {taken} steps"
         );
-        let mut clock: Vec<f64> = (0..2)
-            .flat_map(|i| std::iter::repeat_n([1.0, 0.0][i], 8))
-            .chain((0..2).flat_map(|i| halves.iter().map(move |h| h[i])))
-            .collect();
-        let bounds: Vec<f64> = walls.iter().copied().chain([1.0; 8]).collect();
+        let mut clock = [1.0, 0.0, halves[0][0], halves[0][1]];
+        let bounds = walls;
         let mut y = start;
         let n = native
             .walk(
@@ -1310,12 +1324,21 @@ mod tests {
             .expect("a loop for 8");
         assert_eq!(n, taken);
         assert_eq!(bits(&y), bits(&expected));
-        for k in 0..8 {
-            assert_eq!([clock[k], clock[8 + k]], phases[k], "slot {k}");
+        for (k, phase) in phases.iter().enumerate() {
+            assert_eq!(clock[..2], *phase, "slot {k}");
         }
         let mut y = [[0.0; 8]; 2];
         let mut phase = [1.0, 0.0];
-        let n = by_steps(&native, &c, (h, half), 0.9, 0x7f, steps, &mut y, &mut phase);
+        let n = by_steps(
+            &native,
+            &c,
+            (h, half),
+            (0.9, 1.0),
+            0x7f,
+            steps,
+            &mut y,
+            &mut phase,
+        );
         assert!(n > 0 && n < steps, "the stop is met after {n} steps");
         // No loop without stops given, nor for other widths.
         let plain = Native::compile(&tape).unwrap();
@@ -1326,16 +1349,7 @@ mod tests {
             .is_none());
         let mut y = [[0.0; 1]; 2];
         assert!(native
-            .walk(
-                Layout::Shared,
-                &mut y,
-                &mut clock,
-                &c,
-                &[h],
-                &[0.9, 1.0],
-                1,
-                1
-            )
+            .walk(Layout::Shared, &mut y, &mut clock, &c, &[h], &[0.9], 1, 1)
             .is_none());
     }
 

@@ -477,10 +477,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         steps: usize,
     ) -> Option<usize> {
         let native = self.code.regions[0].native.as_ref()?;
-        let mut walls = [0.0; 2 * crate::integrate::impact::MAX_WALLS];
+        let mut walls = [0.0; crate::integrate::impact::MAX_WALLS];
         for (j, wall) in self.walls.iter().enumerate() {
-            walls[2 * j] = wall.position;
-            walls[2 * j + 1] = wall.side;
+            walls[j] = wall.position;
         }
         let mut clock = [phase[0], phase[1], half[0], half[1]];
         let constants = &self.constants[0];
@@ -510,40 +509,36 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     ) -> Option<usize> {
         let native = flows[0].code.regions[0].native.as_ref()?;
         let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[0].as_slice());
-        if slots[0].len() > EACH_CONSTANTS {
+        // The loop turns one phase for every slot: lanes on the same grid
+        // share it to the bit (`clock::half_turn`); others step one step
+        // at a time.
+        let bits = |p: &Phase| p.map(f64::to_bits);
+        let one_phase = (1..W)
+            .all(|k| bits(&phases[k]) == bits(&phases[0]) && bits(&half[k]) == bits(&half[0]));
+        if slots[0].len() > EACH_CONSTANTS || !one_phase {
             return None;
         }
         let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
         let lane = side_by_side(&slots, &mut scratch);
-        // Rows of W: cos and sin of the phases and of their turns; each
-        // wall's position and side.
-        let mut clock = [[0.0; W]; 4];
-        for k in 0..W {
-            clock[0][k] = phases[k][0];
-            clock[1][k] = phases[k][1];
-            clock[2][k] = half[k][0];
-            clock[3][k] = half[k][1];
-        }
-        let mut walls = [[0.0; W]; 2 * crate::integrate::impact::MAX_WALLS];
+        let mut clock = [phases[0][0], phases[0][1], half[0][0], half[0][1]];
+        // Rows of W: each wall's position (its side is compiled in).
+        let mut walls = [[0.0; W]; crate::integrate::impact::MAX_WALLS];
         for (k, flow) in flows.iter().enumerate() {
             for (j, wall) in flow.walls.iter().enumerate() {
-                walls[2 * j][k] = wall.position;
-                walls[2 * j + 1][k] = wall.side;
+                walls[j][k] = wall.position;
             }
         }
         let taken = native.walk(
             Layout::Each,
             y,
-            clock.as_flattened_mut(),
+            &mut clock,
             lane.as_flattened(),
             h,
             walls.as_flattened(),
             live,
             steps,
         );
-        for (k, phase) in phases.iter_mut().enumerate() {
-            *phase = [clock[0][k], clock[1][k]];
-        }
+        *phases = [[clock[0], clock[1]]; W];
         taken
     }
 
@@ -887,6 +882,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         // reference (the same steps again, alone), for the sum rule.
         if let (Some(tape), Some(start)) = (&self.code.equations_divergence(), start) {
             let h = self.period / flow.steps_per_period as f64;
+            let half = crate::integrate::clock::half_turn(self.frequency, h, flow.steps_per_period);
             let steps = part.steps(flow.steps_per_period).len();
             let constants = tape.lane_values(&self.params).constants;
             let density = |phase: &Phase, y: &[f64; D]| -> f64 {
@@ -894,8 +890,14 @@ impl<const D: usize> System<D> for ModelFlow<D> {
                 let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[*phase], &y);
                 out[0][0]
             };
-            let (end, integral) =
-                crate::integrate::advance_integrating(self, &start, start_phase, h, steps, density);
+            let (end, integral) = crate::integrate::advance_integrating(
+                self,
+                &start,
+                start_phase,
+                (h, half),
+                steps,
+                density,
+            );
             debug_assert_eq!(end, ys[0]);
             stats[0].log_flux += integral;
         }

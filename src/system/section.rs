@@ -191,7 +191,13 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
             out[0][0]
         };
         let (_, integral) = crate::integrate::advance_integrating(
-            &self.flow, &part.y, ZERO_PHASE, part.h, part.steps, density,
+            &self.flow,
+            &part.y,
+            ZERO_PHASE,
+            // A section's flow is autonomous: its steps' phases are all zero.
+            (part.h, ZERO_PHASE),
+            part.steps,
+            density,
         );
         Some(integral)
     }

@@ -21,7 +21,7 @@ use super::shader::{Kernel, Variant};
 use super::stopwatch::{self, Stopwatch};
 use crate::backend::{Progress, RunOptions};
 use crate::error::{Error, Result};
-use crate::integrate::clock::cos_sin;
+use crate::integrate::clock::half_turn;
 use crate::method::lane::{is_grazing, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
@@ -518,7 +518,7 @@ where
             let period = (info.period)(&params);
             let omega = (info.forcing_frequency)(&params);
             let h = period / steps as f64;
-            let half = cos_sin(0.5 * omega * h);
+            let half = half_turn(omega, h, steps);
             lane_data.extend_from_slice(&params.values);
             lane_data.extend_from_slice(&[h, half[0], half[1], omega, settings.perturbation]);
             periods.push(period);
