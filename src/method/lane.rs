@@ -429,7 +429,7 @@ where
 /// plan's steps (and use finite differences), their transients run as one
 /// batch, the references stepped together ([`System::iterate_lanes`]);
 /// where the system allows it ([`System::averages_across_lanes`]) they
-/// then average in lockstep ([`average_lanes`]), else each on its own.
+/// then average in lockstep (`average_lanes`), else each on its own.
 /// Every lane's numbers are those of [`run_lane`], to the last bit.
 pub fn run_lanes<const D: usize, S: System<D>>(lanes: &[Lane]) -> Vec<LaneResult>
 where
