@@ -175,12 +175,20 @@ fn held_for(p: Params, w: Stop, omega: real, phase: vec2<real>, rest: State, s: 
 fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {
     let w = stop(walls, j);
     let rest = on_stop(w, y, real(0.0));
-    if (pressing(p, w, phase, rest) <= real(0.0)) {
-        let free = sub_step(p, omega, phase, rest, h);
-        return WallStep(clamp_to_stops(walls, free.y), 0u, vec4<u32>(), false, 0u, NO_IMPACT, WALLS, h, phase);
-    }
-    var out = held_for(p, w, omega, phase, rest, h);
-    if (pressing(p, w, rotate(phase, cos_sin(omega * h)), out) <= real(0.0)) {
+    // The plain RK4 step that ends the step, from `start` at `start_phase`
+    // for `left`: of the whole step on a free departure, of its rest after
+    // a release. One call site (see locate_newton).
+    var start = rest;
+    var start_phase = phase;
+    var left = h;
+    var rank_loss = 0u;
+    // (The comparisons are the CPU's, negated: NaN takes the same branch.)
+    if (!(pressing(p, w, phase, rest) <= real(0.0))) {
+        rank_loss = min(2u, DIM);
+        let held = held_for(p, w, omega, phase, rest, h);
+        if (!(pressing(p, w, rotate(phase, cos_sin(omega * h)), held) <= real(0.0))) {
+            return WallStep(held, 0u, vec4<u32>(), false, rank_loss, NO_IMPACT, WALLS, h, phase);
+        }
         var lo = real(0.0);
         var hi = h;
         for (var k = 0u; k < 64u; k = k + 1u) {
@@ -195,11 +203,12 @@ fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y
                 break;
             }
         }
-        let release = rotate(phase, cos_sin(omega * hi));
-        let held = held_for(p, w, omega, phase, rest, hi);
-        out = clamp_to_stops(walls, sub_step(p, omega, release, held, h - hi).y);
+        start_phase = rotate(phase, cos_sin(omega * hi));
+        start = held_for(p, w, omega, phase, rest, hi);
+        left = h - hi;
     }
-    return WallStep(out, 0u, vec4<u32>(), false, min(2u, DIM), NO_IMPACT, WALLS, h, phase);
+    let out = clamp_to_stops(walls, sub_step(p, omega, start_phase, start, left).y);
+    return WallStep(out, 0u, vec4<u32>(), false, rank_loss, NO_IMPACT, WALLS, h, phase);
 }
 
 struct Hit {
@@ -478,11 +487,18 @@ fn locate_linear(w: Stop, y0: State, h: real, y1: State) -> Hit {
 #else
 // Re-steps RK4 to the impact (Newton from the Hermite root), so the impact
 // lies on the RK4 solution itself; also finds an excursion past the stop
-// between the step's ends.
+// between the step's ends. The CPU's locate_newton and newton_from, the
+// same steps in the same order, with every re-step in one place: NIR
+// inlines every call, and each call site of sub_step is a copy of the RK4
+// step and its right-hand sides in the compiled kernel (three call sites
+// here cost lavapipe a quarter of the wall kernel's compile time).
 fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
     let herm = hermite_new(gap(w, y0), speed(w, y0), gap(w, y1), speed(w, y1), h);
     var hi: real;
     var guess: real;
+    // Turning back inside the step: the first re-step, to the Hermite
+    // peak, decides whether the excursion passes the stop.
+    var at_peak = false;
     if (gap(w, y1) > real(0.0)) {
         hi = h;
         guess = hermite_first_root(herm, real(0.0), real(1.0));
@@ -491,20 +507,35 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
         if (peak < real(0.0)) {
             return Hit(false, real(0.0), y0);
         }
-        if (gap(w, sub_step(p, omega, phase0, y0, peak * h).y) <= real(0.0)) {
-            return Hit(false, real(0.0), y0);
-        }
+        at_peak = true;
         hi = peak * h;
         guess = hermite_first_root(herm, real(0.0), peak);
     } else {
         return Hit(false, real(0.0), y0);
     }
-    // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in [0, hi].
+    // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in
+    // [0, hi]: the step to s, then (at most 32 times) a Newton update and
+    // the step to the new s.
     let tolerance = real(4.0) * EPSILON * max(abs(w.position), real(1.0));
     var lo = real(0.0);
     var s = guess * h;
-    var y = sub_step(p, omega, phase0, y0, s).y;
-    for (var k = 0u; k < 32u; k = k + 1u) {
+    var to = select(s, hi, at_peak);
+    var y = y0;
+    var updates = 0u;
+    loop {
+        y = sub_step(p, omega, phase0, y0, to).y;
+        if (at_peak) {
+            if (gap(w, y) <= real(0.0)) {
+                return Hit(false, real(0.0), y0);
+            }
+            at_peak = false;
+            to = s;
+            continue;
+        }
+        if (updates == 32u) {
+            break;
+        }
+        updates = updates + 1u;
         let g = gap(w, y);
         if (abs(g) <= tolerance) {
             break;
@@ -521,9 +552,10 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
             s = real(0.5) * (lo + hi);
         }
         if (hi - lo <= EPSILON * abs(hi)) {
+            // As the CPU: s updated, y the last step's.
             break;
         }
-        y = sub_step(p, omega, phase0, y0, s).y;
+        to = s;
     }
     return Hit(true, s, y);
 }
