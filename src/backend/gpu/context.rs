@@ -1,6 +1,8 @@
 //! Adapters and devices: listing, choosing (honouring `WGPU_BACKEND` and
 //! `WGPU_ADAPTER_NAME`), and opening one with the features a sweep needs.
 
+use std::sync::Mutex;
+
 use crate::error::{Error, Result};
 use crate::scene::Precision;
 
@@ -43,13 +45,29 @@ impl AdapterSummary {
     }
 }
 
-/// An instance for `backends` (the descriptor from the environment would
-/// take `WGPU_BACKEND` too, and the f64 message must look past it).
-fn instance(backends: wgpu::Backends) -> wgpu::Instance {
+/// The adapters for `backends` (the descriptor from the environment would
+/// take `WGPU_BACKEND` too, and the f64 message must look past it), found
+/// once per process with one instance: NVIDIA's Vulkan driver on an H100
+/// stopped listing the GPU after a few dozen instances in one process (the
+/// benchmark's runs), where lavapipe never did; and listing them again on
+/// a shared instance from several threads at once makes the GL backend's
+/// context current on two threads, which EGL refuses.
+fn adapters_of(backends: wgpu::Backends) -> Vec<wgpu::Adapter> {
+    type Found = (wgpu::Backends, wgpu::Instance, Vec<wgpu::Adapter>);
+    static FOUND: Mutex<Vec<Found>> = Mutex::new(Vec::new());
+    let mut found = FOUND
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some((.., adapters)) = found.iter().find(|(b, ..)| *b == backends) {
+        return adapters.clone();
+    }
     quiet_mesa();
     let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     descriptor.backends = backends;
-    wgpu::Instance::new(descriptor)
+    let instance = wgpu::Instance::new(descriptor);
+    let adapters = pollster::block_on(instance.enumerate_adapters(backends));
+    found.push((backends, instance, adapters.clone()));
+    adapters
 }
 
 /// Mesa's drivers print "error: XDG_RUNTIME_DIR is invalid or not set" while
@@ -88,10 +106,6 @@ pub fn backends_from_env() -> Result<wgpu::Backends> {
         ));
     }
     Ok(wgpu::Backends::from_comma_list(&text))
-}
-
-fn adapters_of(backends: wgpu::Backends) -> Vec<wgpu::Adapter> {
-    pollster::block_on(instance(backends).enumerate_adapters(backends))
 }
 
 fn all_adapters() -> Vec<wgpu::Adapter> {
@@ -238,8 +252,45 @@ pub fn choose(
     Ok(candidates.into_iter().next())
 }
 
-/// Opens a device on the adapter with the features and limits a sweep needs.
+/// The device on the adapter with the features and limits a sweep needs,
+/// opened once per adapter and precision in a process and shared by every
+/// run after (a benchmark or a test binary makes hundreds; wgpu's device
+/// and queue are shared handles, safe across threads). Opening a device
+/// per run cost setup time on every driver and, on NVIDIA's, ran it out of
+/// devices within one benchmark.
 pub fn open(adapter: wgpu::Adapter, summary: AdapterSummary, precision: Precision) -> Result<Gpu> {
+    type Opened = (String, Precision, wgpu::Device, wgpu::Queue);
+    static OPENED: Mutex<Vec<Opened>> = Mutex::new(Vec::new());
+    // The whole adapter description: identical GPUs differ in their bus id.
+    let key = format!("{:?}", adapter.get_info());
+    let mut opened = OPENED
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let found = opened
+        .iter()
+        .find(|(k, p, ..)| *k == key && *p == precision)
+        .map(|(.., device, queue)| (device.clone(), queue.clone()));
+    let (device, queue) = match found {
+        Some(pair) => pair,
+        None => {
+            let pair = open_new(&adapter, &summary, precision)?;
+            opened.push((key, precision, pair.0.clone(), pair.1.clone()));
+            pair
+        }
+    };
+    Ok(Gpu {
+        device,
+        queue,
+        summary,
+        limits: adapter.limits(),
+    })
+}
+
+fn open_new(
+    adapter: &wgpu::Adapter,
+    summary: &AdapterSummary,
+    precision: Precision,
+) -> Result<(wgpu::Device, wgpu::Queue)> {
     let mut features = wgpu::Features::empty();
     if precision == Precision::F64 {
         features |= wgpu::Features::SHADER_F64;
@@ -256,15 +307,8 @@ pub fn open(adapter: wgpu::Adapter, summary: AdapterSummary, precision: Precisio
         required_limits: limits.clone(),
         ..Default::default()
     };
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| Error::Backend {
-            backend: "gpu".into(),
-            reason: format!("cannot open {}: {e}", summary.name),
-        })?;
-    Ok(Gpu {
-        device,
-        queue,
-        summary,
-        limits,
+    pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| Error::Backend {
+        backend: "gpu".into(),
+        reason: format!("cannot open {}: {e}", summary.name),
     })
 }
