@@ -49,7 +49,9 @@ fn exp64(x: f64) -> f64 {
         return f64(0.0);
     }
     let k = round(x * INV_LN2_64);
-    let r = (x - k * LN2_HI_64) - k * LN2_LO_64;
+    // k·LN2_HI and x - k·LN2_HI are exact; fma keeps a driver from folding
+    // the two constants into one rounded ln 2 (see cos_sin64).
+    let r = fma(-k, LN2_HI_64, x) - k * LN2_LO_64;
     var p = f64(1.0);
     for (var n = 13; n >= 1; n = n - 1) {
         p = f64(1.0) + r * p / f64(n);
@@ -100,7 +102,8 @@ fn log64(x: f64) -> f64 {
         series = f64(1.0) / f64(n) + s2 * series;
     }
     let fe = f64(e);
-    return fe * LN2_HI_64 + (f64(2.0) * s * series + fe * LN2_LO_64);
+    // fe·LN2_HI is exact: as fma, a driver cannot fold it with fe·LN2_LO.
+    return fma(fe, LN2_HI_64, f64(2.0) * s * series + fe * LN2_LO_64);
 }
 
 // π/2 in three parts of 33, 33 and 53 bits (Cody-Waite, as in fdlibm):
@@ -131,11 +134,17 @@ const COS6_64: f64 = -1.13596475577881948265e-11lf;
 // (src/model/math64.rs) makes the same operations in the same order, so
 // that a model's sin θ, which the finite differences amplify by 1/δ, has
 // the same bits on both paths (on lavapipe, tests/math64.rs; a driver
-// that fused a multiply-add of the polynomials would differ by an ulp).
+// that fuses a multiply-add of the polynomials differs by an ulp: NVIDIA's
+// on an H100 did at 1 to 2% of the inputs).
 // Accurate while |x| < 2^20·π/2 (ωt over about 10^5 periods).
 fn cos_sin64(x: f64) -> vec2<f64> {
     let k = round(x * TWO_OVER_PI_64);
-    let r = ((x - k * PIO2_1_64) - k * PIO2_2_64) - k * PIO2_3_64;
+    // The first two steps are exact (Cody-Waite), and written as fma so
+    // that no driver can fold them: NVIDIA's (H100, Vulkan) once turned
+    // (x - k·P1) - k·P2 into x - k·(P1 + P2), π/2 rounded, and sin near π
+    // came out 3304 ulp off. An exact product and one rounded difference
+    // is what fma computes too, so the CPU's twin keeps its plain form.
+    let r = fma(-k, PIO2_2_64, fma(-k, PIO2_1_64, x)) - k * PIO2_3_64;
     let z = r * r;
     let ps = SIN2_64 + z * (SIN3_64 + z * (SIN4_64 + z * (SIN5_64 + z * SIN6_64)));
     let s = r + (z * r) * (SIN1_64 + z * ps);

@@ -43,6 +43,8 @@ const TWO_OVER_PI: f64 = std::f64::consts::FRAC_2_PI;
 /// within a few ulp of the C library's while |x| < 2^20·π/2.
 pub fn cos_sin(x: f64) -> (f64, f64) {
     let k = (x * TWO_OVER_PI).round_ties_even();
+    // math64.wgsl writes the first two (exact) steps as fma, which a
+    // driver cannot fold: the same bits as these.
     let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
     let z = r * r;
     let [s1, s2, s3, s4, s5, s6] = SIN;
