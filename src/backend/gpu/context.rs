@@ -119,6 +119,9 @@ pub fn list() -> Vec<AdapterSummary> {
 
 /// An opened device and what it is.
 pub struct Gpu {
+    /// Which of the process's opened devices this is (compiled pipelines
+    /// are kept per device: see `sweep::Pipelines::cached`).
+    pub id: usize,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
     pub summary: AdapterSummary,
@@ -268,19 +271,20 @@ pub fn open(adapter: wgpu::Adapter, summary: AdapterSummary, precision: Precisio
         .unwrap_or_else(|poisoned| poisoned.into_inner());
     let found = opened
         .iter()
-        .find(|(k, p, ..)| *k == key && *p == precision)
-        .map(|(.., device, queue)| (device.clone(), queue.clone()));
-    let (device, queue) = match found {
-        Some(pair) => pair,
+        .position(|(k, p, ..)| *k == key && *p == precision);
+    let id = match found {
+        Some(id) => id,
         None => {
-            let pair = open_new(&adapter, &summary, precision)?;
-            opened.push((key, precision, pair.0.clone(), pair.1.clone()));
-            pair
+            let (device, queue) = open_new(&adapter, &summary, precision)?;
+            opened.push((key, precision, device, queue));
+            opened.len() - 1
         }
     };
+    let (.., device, queue) = &opened[id];
     Ok(Gpu {
-        device,
-        queue,
+        id,
+        device: device.clone(),
+        queue: queue.clone(),
         summary,
         limits: adapter.limits(),
     })

@@ -31,8 +31,8 @@ use rayon::prelude::*;
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
 use super::sweep::{
-    compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry, uniform_entry,
-    GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
+    uniform_entry, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
 use crate::backend::RunOptions;
 use crate::error::Result;
@@ -193,11 +193,15 @@ impl<'a> Stepper<'a> {
             storage_entry(3, true),
             storage_entry(4, false),
         ];
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("section"),
-            entries: &entries,
-        });
-        let pipeline = compute_pipeline(gpu, &layout, variant, Kernel::Section, workgroup);
+        let (layout, pipeline) =
+            compiled_once(gpu, variant.source(Kernel::Section), workgroup, || {
+                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("section"),
+                    entries: &entries,
+                });
+                let pipeline = compute_pipeline(gpu, &layout, variant, Kernel::Section, workgroup);
+                (layout, pipeline)
+            });
         let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),

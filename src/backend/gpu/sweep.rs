@@ -8,8 +8,9 @@
 //! buffers; the host maps and accumulates QR for one chunk while the GPU
 //! computes the next.
 
+use std::any::Any;
 use std::borrow::Cow;
-use std::sync::mpsc;
+use std::sync::{mpsc, Mutex};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Const, DimMin, SMatrix};
@@ -205,7 +206,7 @@ where
 {
     let start = Instant::now();
     let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
-    let pipelines = Pipelines::new(gpu, variant, workgroup);
+    let pipelines = Pipelines::cached(gpu, variant, workgroup);
     let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant, settings);
     let limits = &gpu.limits;
@@ -289,6 +290,7 @@ where
 }
 
 /// The two compute pipelines of a variant over one bind group layout.
+#[derive(Clone)]
 struct Pipelines {
     layout: wgpu::BindGroupLayout,
     integrate: wgpu::ComputePipeline,
@@ -303,6 +305,13 @@ struct Pipelines {
 }
 
 impl Pipelines {
+    fn cached(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
+        let source = variant.source(Kernel::Integrate) + &variant.source(Kernel::Finish);
+        compiled_once(gpu, source, workgroup, || {
+            Self::new(gpu, variant, workgroup)
+        })
+    }
+
     fn new(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
         let mut entries = vec![
             uniform_entry(0),
@@ -341,6 +350,46 @@ impl Pipelines {
             workgroup,
         }
     }
+}
+
+/// What `make` compiles for kernel `source` at `workgroup` invocations on
+/// `gpu`, compiled once in a process: a benchmark, a test binary or a
+/// program running many sweeps would otherwise compile the same kernels for
+/// every run (lavapipe takes 350 ms for the seed's wall kernel, NVIDIA's
+/// driver on an H100 0.57 s before its disk cache has it). Compiled outside
+/// the lock, so that runs of other kernels on other threads do not wait;
+/// two runs of a new kernel at once both compile it, and the first kept is
+/// used after.
+pub(super) fn compiled_once<T: Clone + Send + 'static>(
+    gpu: &Gpu,
+    source: String,
+    workgroup: u32,
+    make: impl FnOnce() -> T,
+) -> T {
+    type Key = (usize, &'static str, String, u32);
+    static COMPILED: Mutex<Vec<(Key, Box<dyn Any + Send>)>> = Mutex::new(Vec::new());
+    let key = (gpu.id, std::any::type_name::<T>(), source, workgroup);
+    let lock = || {
+        COMPILED
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+    };
+    let kept = |compiled: &[(Key, Box<dyn Any + Send>)]| {
+        compiled
+            .iter()
+            .find(|(k, _)| *k == key)
+            .and_then(|(_, value)| value.downcast_ref::<T>().cloned())
+    };
+    if let Some(value) = kept(&lock()) {
+        return value;
+    }
+    let value = make();
+    let mut compiled = lock();
+    if let Some(first) = kept(&compiled) {
+        return first;
+    }
+    compiled.push((key, Box::new(value.clone())));
+    value
 }
 
 /// A storage buffer of a kernel's bind group.
