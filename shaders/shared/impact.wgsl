@@ -361,7 +361,30 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
     var ending = 2u;
     var stuck = WALLS;
     var rank_loss = 0u;
-    for (var n = 0u; n < MAX_IMPACTS_PER_STEP; n = n + 1u) {
+    // The rest of the step from (phase0, y0) is stepped in one place, at
+    // the top of the next pass: NIR inlines every call, and each call site
+    // of sub_step is a copy of the RK4 step (a kernel with switches had
+    // four here). The extra pass only steps, so that the last event's
+    // rest of the step is taken as before the loop ran out.
+    var restep = false;
+#ifdef SURFACES
+    // A crossing flagged unresolved ends the step once its rest is taken.
+    var unresolved = false;
+    var chattering = false;
+#endif
+    for (var n = 0u; n <= MAX_IMPACTS_PER_STEP; n = n + 1u) {
+        if (restep) {
+            y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            restep = false;
+        }
+#ifdef SURFACES
+        if (unresolved) {
+            return WallStep(y1, impacts, crossings, chattering, rank_loss, slowest, WALLS, h, phase0);
+        }
+#endif
+        if (n == MAX_IMPACTS_PER_STEP) {
+            break;
+        }
 #ifdef SURFACES
         if (is_sliding(p.region)) {
             // On a switch: the rest of the step slides, unless the motion
@@ -376,7 +399,7 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
             y0 = slid.y;
             p.region = slid.region;
             crossed.region = slid.region;
-            y1 = sub_step(p, omega, phase0, y0, h - done).y;
+            restep = true;
             continue;
         }
 #endif
@@ -407,17 +430,19 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
             crossed.sliding = crossed.sliding || crossing.sliding;
             if (!crossing.resolved) {
                 // Flagged: the rest of the step in the field now in force.
-                let rest = sub_step(p, omega, phase_c, hit.y, h - done).y;
-                return WallStep(rest, impacts, crossings, crossing.chattering, rank_loss, slowest, WALLS, h, phase_c);
+                phase0 = phase_c;
+                y0 = hit.y;
+                restep = true;
+                unresolved = true;
+                chattering = crossing.chattering;
+                continue;
             }
             if (crossing.slides) {
                 crossed.sliding_phases = crossed.sliding_phases + 1u;
             }
             phase0 = phase_c;
             y0 = crossing.y;
-            if (!is_sliding(p.region)) {
-                y1 = sub_step(p, omega, phase0, y0, h - done).y;
-            }
+            restep = !is_sliding(p.region);
             continue;
         }
 #endif
@@ -455,7 +480,7 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
         p.region = jumped(p, phase0, hit.y, y0);
         crossed.region = p.region;
 #endif
-        y1 = sub_step(p, omega, phase0, y0, h - done).y;
+        restep = true;
     }
     if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
