@@ -914,6 +914,10 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
     }
     var hi: real;
     var guess: real;
+    // Turning back inside the step: the first re-step, to the Hermite
+    // peak, decides whether the excursion crosses (as locate_newton, every
+    // re-step in one call site).
+    var at_peak = false;
     if (end.x > real(0.0)) {
         hi = h;
         guess = hermite_first_root(herm, real(0.0), real(1.0));
@@ -922,24 +926,37 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
         if (peak < real(0.0)) {
             return Hit(false, real(0.0), y0);
         }
-        // An excursion no deeper than the location's own tolerance is a
-        // touch in rounding, not a crossing.
-        let at_peak = sub_step(p, omega, phase0, y0, peak * h).y;
-        if (surface_at(p, omega, j, phase0, peak * h, at_peak).x <= real(4.0) * EPSILON * scale) {
-            return Hit(false, real(0.0), y0);
-        }
+        at_peak = true;
         hi = peak * h;
         guess = hermite_first_root(herm, real(0.0), peak);
     } else {
         return Hit(false, real(0.0), y0);
     }
     // Safeguarded Newton (newton_in_bracket): g resolved to 4 ulp of the
-    // state's size.
+    // state's size; the step to s, then (at most 32 times) a Newton update
+    // and the step to the new s.
     let tolerance = real(4.0) * EPSILON * max(abs(scale), real(1.0));
     var lo = real(0.0);
     var s = guess * h;
-    var y = sub_step(p, omega, phase0, y0, s).y;
-    for (var k = 0u; k < 32u; k = k + 1u) {
+    var to = select(s, hi, at_peak);
+    var y = y0;
+    var updates = 0u;
+    loop {
+        y = sub_step(p, omega, phase0, y0, to).y;
+        if (at_peak) {
+            // An excursion no deeper than the location's own tolerance is
+            // a touch in rounding, not a crossing.
+            if (surface_at(p, omega, j, phase0, to, y).x <= real(4.0) * EPSILON * scale) {
+                return Hit(false, real(0.0), y0);
+            }
+            at_peak = false;
+            to = s;
+            continue;
+        }
+        if (updates == 32u) {
+            break;
+        }
+        updates = updates + 1u;
         let v = surface_at(p, omega, j, phase0, s, y);
         let g = v.x;
         if (abs(g) <= tolerance) {
@@ -957,9 +974,10 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
             s = real(0.5) * (lo + hi);
         }
         if (hi - lo <= EPSILON * abs(hi)) {
+            // As the CPU: s updated, y the last step's.
             break;
         }
-        y = sub_step(p, omega, phase0, y0, s).y;
+        to = s;
     }
     return Hit(true, s, y);
 #endif
