@@ -573,8 +573,15 @@ fn grazing_iterations_are_re_estimated_on_the_host() {
     // (tests/stability.rs). Without re-estimation the GPU missed the sum
     // rule by 3.7e-2 at δ = 1e-6; the host redoes flagged iterations on the
     // CPU with the δ ladder. Measured: f64 flags the CPU's 3 iterations and
-    // matches it to 7e-14 (1.6e-6 off the sum rule); f32 flags 85 and is
-    // 7.9e-7 off.
+    // matches it to 7e-14 (1.6e-6 off the sum rule).
+    //
+    // f32 (δ = 2e-4) re-estimates only the iterations whose truncation error
+    // is above its own rounding (`is_grazing`): 12 here, 1.04e-5 off the sum
+    // rule. Flagging all 85 above 1e-4 gave 7.9e-7, more accurate than f32
+    // is elsewhere: over a 512-value seed sweep in f32 (transient 100,
+    // iterations 200) ordinary lanes are off by 7.8e-6 in the median and up
+    // to 1.5e-4, and grazing lanes left unflagged by up to 1.9e-3. So f32's
+    // bound is the one its ordinary lanes meet, f64's the method's.
     for precision in [Precision::F64, Precision::F32] {
         let p = precision.name();
         if !gpu_or_skip("grazing_iterations_are_re_estimated_on_the_host", precision) {
@@ -591,7 +598,11 @@ fn grazing_iterations_are_re_estimated_on_the_host() {
         assert_eq!(lane.status, LaneStatus::Ok, "{p}");
         assert!(lane.grazing >= 1, "{p}: no grazing iteration flagged");
         let error = (lane.exponent_sum() - -0.1).abs();
-        assert!(error < 1e-5, "{p}: sum rule off by {error:e}");
+        let bound = match precision {
+            Precision::F64 => 1e-5,
+            Precision::F32 => 1.5e-4,
+        };
+        assert!(error < bound, "{p}: sum rule off by {error:e}");
     }
 }
 

@@ -219,9 +219,19 @@ where
 }
 
 /// Whether an estimate with this nonlinearity and Jacobian is a grazing
-/// iteration (see [`GRAZING_ERROR`]).
+/// iteration worth re-estimating: its truncation error in ln R_ii (the
+/// nonlinearity, or its square for central differences, times the
+/// Jacobian's Hadamard ratio) is above [`GRAZING_ERROR`] and above the
+/// rounding error the same estimate carries anyway (the relative noise of a
+/// column, u·√(steps accumulated)/δ, times the same ratio). Below the
+/// rounding, a smaller δ can only trade truncation for more rounding: in
+/// f64 that never decides (the noise is ~1e-8), but f32's δ = 2e-4 has
+/// noise 6e-4, and the f32 GPU run of the seed's scene re-estimated 8550
+/// iterations on the host (1.45 s of a 2.1 s run on the H100) at a
+/// threshold below its own rounding (docs/BENCHMARKS.md).
 pub fn is_grazing<const D: usize>(
-    difference: jacobian::Difference,
+    settings: &MethodSettings,
+    steps_per_part: usize,
     nonlinearity: f64,
     j: &SMatrix<f64, D, D>,
 ) -> bool
@@ -229,8 +239,15 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let (_, log_hadamard) = log_diagonal(j);
-    let suspect = nonlinearity.powi(difference.order()) * log_hadamard.exp();
-    !suspect.is_nan() && suspect > GRAZING_ERROR
+    let ratio = log_hadamard.exp();
+    let suspect = nonlinearity.powi(settings.difference.order()) * ratio;
+    let accumulated = if settings.rounding_accumulates {
+        steps_per_part as f64
+    } else {
+        1.0
+    };
+    let rounding = settings.rounding_unit * accumulated.sqrt() / settings.perturbation * ratio;
+    !suspect.is_nan() && suspect > GRAZING_ERROR.max(rounding)
 }
 
 /// [`plan_lane`] from parameter values (`dispatch::Runner::plan`).
@@ -1094,7 +1111,8 @@ where
 {
     let delta = perturbation_at(settings.perturbation, x);
     // A collapsed iteration's Jacobian is singular by nature, not by error.
-    if first.rank_loss > 0 || !is_grazing(settings.difference, first.nonlinearity, &j0) {
+    let steps_per_part = flow.steps_per_period / part.count;
+    if first.rank_loss > 0 || !is_grazing(settings, steps_per_part, first.nonlinearity, &j0) {
         *stats = first;
         return (image, j0);
     }
@@ -1154,4 +1172,41 @@ where
 
 fn all_finite(x: &[f64]) -> bool {
     x.iter().all(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{self, Backend, Precision};
+
+    fn settings(precision: &str) -> MethodSettings {
+        let text = format!(
+            "[system]\nkind = \"impact-oscillator\"\n[sweep]\nvalues = [0.7]\n[run]\nprecision = \"{precision}\"\n"
+        );
+        let scene = scene::parse(&text, "test", "test", &[]).expect("scene");
+        let precision = if precision == "f32" {
+            Precision::F32
+        } else {
+            Precision::F64
+        };
+        crate::backend::method_settings(&scene, Backend::Gpu, precision)
+    }
+
+    #[test]
+    fn grazing_is_truncation_above_the_estimate_s_own_rounding() {
+        let (f64s, f32s) = (settings("f64"), settings("f32"));
+        assert_eq!(f32s.perturbation, 2e-4);
+        // Columns (1, 0) and (1, 0.1): Hadamard ratio |c2|/R22 = 10.05.
+        let j = SMatrix::<f64, 2, 2>::new(1.0, 1.0, 0.0, 0.1);
+        // Central differences: truncation nonlinearity²·ratio. At 1e-2 it
+        // is 1e-3: above GRAZING_ERROR and f64's rounding (u·√1800/1e-6
+        // ·ratio ≈ 9e-8), below f32's (u/2e-4·ratio ≈ 6e-3).
+        assert!(is_grazing(&f64s, 1800, 1e-2, &j));
+        assert!(!is_grazing(&f32s, 1800, 1e-2, &j));
+        // At 0.1 (1e-1 of truncation) both re-estimate; at 1e-3 neither.
+        assert!(is_grazing(&f64s, 1800, 0.1, &j));
+        assert!(is_grazing(&f32s, 1800, 0.1, &j));
+        assert!(!is_grazing(&f64s, 1800, 1e-3, &j));
+        assert!(!is_grazing(&f32s, 1800, 1e-3, &j));
+    }
 }

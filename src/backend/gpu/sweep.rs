@@ -1094,6 +1094,7 @@ where
         let has_jac = self.jac.is_some();
         let has_points = self.points.is_some();
         let grazing = self.grazing.as_ref();
+        let steps_per_part = self.part_steps;
         accumulators
             .par_iter_mut()
             .zip(previous.par_iter_mut())
@@ -1154,7 +1155,12 @@ where
                             let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
                             if let (Some(g), Some(x)) = (grazing, x_n.as_ref()) {
                                 if part.rank_loss == 0
-                                    && is_grazing(self.settings.difference, nonlinearity, &jacobian)
+                                    && is_grazing(
+                                        &self.settings,
+                                        steps_per_part,
+                                        nonlinearity,
+                                        &jacobian,
+                                    )
                                 {
                                     let index = Part {
                                         index: p,
