@@ -517,34 +517,67 @@ fn locate_linear(w: Stop, y0: State, h: real, y1: State) -> Hit {
 // inlines every call, and each call site of sub_step is a copy of the RK4
 // step and its right-hand sides in the compiled kernel (three call sites
 // here cost lavapipe a quarter of the wall kernel's compile time).
+// The safeguarded Newton of locate_newton and locate_surface
+// (newton_in_bracket in impact.rs): s in the bracket [lo, hi] of the step,
+// hi at the step's end or the Hermite peak of an excursion that turns back.
+struct Bracket {
+    found: bool,
+    at_peak: bool,
+    lo: real,
+    hi: real,
+    s: real,
+}
+
+// The bracket of a step whose function goes from start to end (value,
+// rate), with the Hermite interpolant's first root as the first guess; not
+// found where the step cannot cross (the interpolant's peak short of 0).
+fn bracket_of(start: vec2<real>, end: vec2<real>, h: real) -> Bracket {
+    let herm = hermite_new(start.x, start.y, end.x, end.y, h);
+    if (end.x > real(0.0)) {
+        return Bracket(true, false, real(0.0), h, hermite_first_root(herm, real(0.0), real(1.0)) * h);
+    }
+    if (start.y > real(0.0) && end.y < real(0.0)) {
+        let peak = hermite_peak(herm);
+        // (Written so that a NaN peak counts as found, as the CPU's does.)
+        if (!(peak < real(0.0))) {
+            return Bracket(true, true, real(0.0), peak * h, hermite_first_root(herm, real(0.0), peak) * h);
+        }
+    }
+    return Bracket(false, false, real(0.0), real(0.0), real(0.0));
+}
+
+// One update from the function's value g and rate at b.s: the bracket
+// shrinks to the side of the root, and s moves by Newton where that stays
+// inside, else to the middle.
+fn newton_update(b: Bracket, g: real, rate: real) -> Bracket {
+    var out = b;
+    if (g > real(0.0)) {
+        out.hi = b.s;
+    } else {
+        out.lo = b.s;
+    }
+    let newton = b.s - g / rate;
+    if (newton > out.lo && newton < out.hi) {
+        out.s = newton;
+    } else {
+        out.s = real(0.5) * (out.lo + out.hi);
+    }
+    return out;
+}
+
 fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
-    let herm = hermite_new(gap(w, y0), speed(w, y0), gap(w, y1), speed(w, y1), h);
-    var hi: real;
-    var guess: real;
     // Turning back inside the step: the first re-step, to the Hermite
     // peak, decides whether the excursion passes the stop.
-    var at_peak = false;
-    if (gap(w, y1) > real(0.0)) {
-        hi = h;
-        guess = hermite_first_root(herm, real(0.0), real(1.0));
-    } else if (speed(w, y0) > real(0.0) && speed(w, y1) < real(0.0)) {
-        let peak = hermite_peak(herm);
-        if (peak < real(0.0)) {
-            return Hit(false, real(0.0), y0);
-        }
-        at_peak = true;
-        hi = peak * h;
-        guess = hermite_first_root(herm, real(0.0), peak);
-    } else {
+    var b = bracket_of(vec2<real>(gap(w, y0), speed(w, y0)), vec2<real>(gap(w, y1), speed(w, y1)), h);
+    if (!b.found) {
         return Hit(false, real(0.0), y0);
     }
+    var at_peak = b.at_peak;
     // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in
     // [0, hi]: the step to s, then (at most 32 times) a Newton update and
     // the step to the new s.
     let tolerance = real(4.0) * EPSILON * max(abs(w.position), real(1.0));
-    var lo = real(0.0);
-    var s = guess * h;
-    var to = select(s, hi, at_peak);
+    var to = select(b.s, b.hi, at_peak);
     var y = y0;
     var updates = 0u;
     loop {
@@ -554,7 +587,7 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
                 return Hit(false, real(0.0), y0);
             }
             at_peak = false;
-            to = s;
+            to = b.s;
             continue;
         }
         if (updates == 32u) {
@@ -565,24 +598,14 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
         if (abs(g) <= tolerance) {
             break;
         }
-        if (g > real(0.0)) {
-            hi = s;
-        } else {
-            lo = s;
-        }
-        let newton = s - g / speed(w, y);
-        if (newton > lo && newton < hi) {
-            s = newton;
-        } else {
-            s = real(0.5) * (lo + hi);
-        }
-        if (hi - lo <= EPSILON * abs(hi)) {
+        b = newton_update(b, g, speed(w, y));
+        if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
             // As the CPU: s updated, y the last step's.
             break;
         }
-        to = s;
+        to = b.s;
     }
-    return Hit(true, s, y);
+    return Hit(true, b.s, y);
 }
 // The cubic Hermite interpolant of g = X - X_w over the step, θ in [0, 1]:
 // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³.
@@ -907,38 +930,23 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
     let theta = clamp(-start.x / (end.x - start.x), real(0.0), real(1.0));
     return Hit(true, theta * h, y0 + theta * (y1 - y0));
 #else
-    let herm = hermite_new(start.x, start.y, end.x, end.y, h);
     var scale = real(1.0);
     for (var i = 0u; i < DIM; i = i + 1u) {
         scale = max(scale, abs(y0[i]));
     }
-    var hi: real;
-    var guess: real;
     // Turning back inside the step: the first re-step, to the Hermite
     // peak, decides whether the excursion crosses (as locate_newton, every
     // re-step in one call site).
-    var at_peak = false;
-    if (end.x > real(0.0)) {
-        hi = h;
-        guess = hermite_first_root(herm, real(0.0), real(1.0));
-    } else if (start.y > real(0.0) && end.y < real(0.0)) {
-        let peak = hermite_peak(herm);
-        if (peak < real(0.0)) {
-            return Hit(false, real(0.0), y0);
-        }
-        at_peak = true;
-        hi = peak * h;
-        guess = hermite_first_root(herm, real(0.0), peak);
-    } else {
+    var b = bracket_of(start, end, h);
+    if (!b.found) {
         return Hit(false, real(0.0), y0);
     }
+    var at_peak = b.at_peak;
     // Safeguarded Newton (newton_in_bracket): g resolved to 4 ulp of the
     // state's size; the step to s, then (at most 32 times) a Newton update
     // and the step to the new s.
     let tolerance = real(4.0) * EPSILON * max(abs(scale), real(1.0));
-    var lo = real(0.0);
-    var s = guess * h;
-    var to = select(s, hi, at_peak);
+    var to = select(b.s, b.hi, at_peak);
     var y = y0;
     var updates = 0u;
     loop {
@@ -950,36 +958,26 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
                 return Hit(false, real(0.0), y0);
             }
             at_peak = false;
-            to = s;
+            to = b.s;
             continue;
         }
         if (updates == 32u) {
             break;
         }
         updates = updates + 1u;
-        let v = surface_at(p, omega, j, phase0, s, y);
+        let v = surface_at(p, omega, j, phase0, b.s, y);
         let g = v.x;
         if (abs(g) <= tolerance) {
             break;
         }
-        if (g > real(0.0)) {
-            hi = s;
-        } else {
-            lo = s;
-        }
-        let newton = s - g / v.y;
-        if (newton > lo && newton < hi) {
-            s = newton;
-        } else {
-            s = real(0.5) * (lo + hi);
-        }
-        if (hi - lo <= EPSILON * abs(hi)) {
+        b = newton_update(b, g, v.y);
+        if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
             // As the CPU: s updated, y the last step's.
             break;
         }
-        to = s;
+        to = b.s;
     }
-    return Hit(true, s, y);
+    return Hit(true, b.s, y);
 #endif
 }
 
