@@ -1156,7 +1156,7 @@ where
                             if let (Some(g), Some(x)) = (grazing, x_n.as_ref()) {
                                 if part.rank_loss == 0
                                     && is_grazing(
-                                        &self.settings,
+                                        self.settings,
                                         steps_per_part,
                                         nonlinearity,
                                         &jacobian,
