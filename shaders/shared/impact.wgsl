@@ -775,59 +775,67 @@ struct Slid {
 // leaves to the side whose margin ran out.
 fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
     let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
-    let end = sub_step(p, omega, phase, y, h).y;
-    let end_phase = rotate(phase, cos_sin(omega * h));
-    let end_margins = equivalent(p, end_phase, end).margins;
-    var sides = p;
-    sides.region = p.region & SIDES;
-    let before = surface_values(sides, phase, y);
-    let after = surface_values(sides, end_phase, end);
-    var flagged = false;
-    for (var k = 0u; k < SURFACES; k = k + 1u) {
-        if (k == j) {
-            continue;
-        }
-        let o = orientation(sides.region, k);
-        if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
-            flagged = true;
-        }
-    }
-    // A stop reached while sliding would need a motion along the switch
-    // and into the stop at once: flagged, as on the CPU.
-    let walls = stops_of(p);
-    if (WALLS > 0u && gap(stop(walls, 0u), end) > real(0.0)) {
-        flagged = true;
-    }
-    if (WALLS > 1u && gap(stop(walls, 1u), end) > real(0.0)) {
-        flagged = true;
-    }
-    if (WALLS > 2u && gap(stop(walls, 2u), end) > real(0.0)) {
-        flagged = true;
-    }
-    if (WALLS > 3u && gap(stop(walls, 3u), end) > real(0.0)) {
-        flagged = true;
-    }
-    if (holds(end_margins)) {
-        return Slid(false, h, end, p.region, flagged);
-    }
+    // One re-step for the whole slide (one call site, as locate_newton):
+    // its first pass to the step's end, then the bisection's midpoints.
     var lo = real(0.0);
     var hi = h;
-    var exit = end;
-    var m = end_margins;
-    for (var k = 0u; k < 128u; k = k + 1u) {
-        if (!(hi - lo > EPSILON * h)) {
+    var exit: State;
+    var m: vec2<real>;
+    var flagged = false;
+    var to = h;
+    var passes = 0u;
+    loop {
+        let y_to = sub_step(p, omega, phase, y, to).y;
+        let phase_to = rotate(phase, cos_sin(omega * to));
+        let m_to = equivalent(p, phase_to, y_to).margins;
+        if (passes == 0u) {
+            var sides = p;
+            sides.region = p.region & SIDES;
+            let before = surface_values(sides, phase, y);
+            let after = surface_values(sides, phase_to, y_to);
+            for (var k = 0u; k < SURFACES; k = k + 1u) {
+                if (k == j) {
+                    continue;
+                }
+                let o = orientation(sides.region, k);
+                if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
+                    flagged = true;
+                }
+            }
+            // A stop reached while sliding would need a motion along the
+            // switch and into the stop at once: flagged, as on the CPU.
+            let walls = stops_of(p);
+            if (WALLS > 0u && gap(stop(walls, 0u), y_to) > real(0.0)) {
+                flagged = true;
+            }
+            if (WALLS > 1u && gap(stop(walls, 1u), y_to) > real(0.0)) {
+                flagged = true;
+            }
+            if (WALLS > 2u && gap(stop(walls, 2u), y_to) > real(0.0)) {
+                flagged = true;
+            }
+            if (WALLS > 3u && gap(stop(walls, 3u), y_to) > real(0.0)) {
+                flagged = true;
+            }
+            if (holds(m_to)) {
+                return Slid(false, h, y_to, p.region, flagged);
+            }
+            exit = y_to;
+            m = m_to;
+        } else if (holds(m_to)) {
+            lo = to;
+        } else {
+            hi = to;
+            exit = y_to;
+            m = m_to;
+        }
+        // A bisection to EPSILON·h takes 53 midpoints; 128 bounds the loop
+        // for lavapipe's iteration cap whatever the margins do.
+        if (passes == 128u || !(hi - lo > EPSILON * h)) {
             break;
         }
-        let mid = real(0.5) * (lo + hi);
-        let y_mid = sub_step(p, omega, phase, y, mid).y;
-        let m_mid = equivalent(p, rotate(phase, cos_sin(omega * mid)), y_mid).margins;
-        if (holds(m_mid)) {
-            lo = mid;
-        } else {
-            hi = mid;
-            exit = y_mid;
-            m = m_mid;
-        }
+        passes = passes + 1u;
+        to = real(0.5) * (lo + hi);
     }
     // Leaves to the side whose margin ran out (surface::leaving).
     let bit = SURFACE_BIT[j];
