@@ -830,10 +830,8 @@ fn walk<S, K>(
         flags,
     } = walker;
     let (d, ty, w) = (state.len(), types::F64X2, 2 * chunks);
-    // Phase vectors: one, shared by every chunk of slots.
-    let pc = 1;
     // Row r of the slots' values at `base`: a splat of one value
-    // (shared) or W values (each), as `pc` vectors.
+    // (shared) or W values (each, a vector per chunk).
     let row = |b: &mut Builder, base: Value, r: usize| -> Vec<Value> {
         match layout {
             Layout::Shared => {
@@ -845,12 +843,14 @@ fn walk<S, K>(
                 .collect(),
         }
     };
-    // A `pc`-vector value for every chunk.
+    // A row's vector for every chunk (a shared row's one, repeated).
     let widen = |v: &[Value]| -> Vec<Value> { (0..chunks).map(|c| v[c % v.len()]).collect() };
     let sizes = step_sizes(b);
-    let shared = |b: &mut Builder, r: usize| -> Vec<Value> {
+    // The clock's values, one vector each: every chunk of slots turns
+    // the same phase.
+    let shared = |b: &mut Builder, r: usize| -> Value {
         let x = b.ins().load(types::F64, flags, clock, (8 * r) as i32);
-        vec![b.ins().splat(ty, x)]
+        b.ins().splat(ty, x)
     };
     let (c0, s0, hc, hs) = (shared(b, 0), shared(b, 1), shared(b, 2), shared(b, 3));
     let masks: Vec<Value> = (0..chunks)
@@ -865,69 +865,58 @@ fn walk<S, K>(
     let (zero, one_half, three_halves) = (vector(b, 0.0), vector(b, 0.5), vector(b, 1.5));
     let counted = b.ins().iconst(types::I64, 0);
 
-    // Block parameters: the states (d·chunks vectors), cos and sin (pc
-    // vectors each), the steps taken.
+    // Block parameters: the states (d·chunks vectors), cos and sin (a
+    // vector each), the steps taken.
     let (header, body, exit) = (b.create_block(), b.create_block(), b.create_block());
     for block in [header, exit] {
-        for _ in 0..d * chunks + 2 * pc {
+        for _ in 0..d * chunks + 2 {
             b.append_block_param(block, ty);
         }
         b.append_block_param(block, types::I64);
     }
-    let args = |state: &[Vec<Value>], c: &[Value], s: &[Value], n: Value| -> Vec<BlockArg> {
+    let args = |state: &[Vec<Value>], c: Value, s: Value, n: Value| -> Vec<BlockArg> {
         state
             .iter()
             .flatten()
-            .chain(c)
-            .chain(s)
             .copied()
-            .chain([n])
+            .chain([c, s, n])
             .map(BlockArg::Value)
             .collect()
     };
-    let unpack = |at: &[Value]| -> (Vec<Vec<Value>>, Vec<Value>, Vec<Value>, Value) {
+    let unpack = |at: &[Value]| -> (Vec<Vec<Value>>, Value, Value, Value) {
         let y = at[..d * chunks]
             .chunks(chunks)
             .map(<[Value]>::to_vec)
             .collect();
         let phase = &at[d * chunks..];
-        (
-            y,
-            phase[..pc].to_vec(),
-            phase[pc..2 * pc].to_vec(),
-            phase[2 * pc],
-        )
+        (y, phase[0], phase[1], phase[2])
     };
-    b.ins().jump(header, &args(&state, &c0, &s0, counted));
+    b.ins().jump(header, &args(&state, c0, s0, counted));
 
     // The header: stop after `steps` steps.
     b.switch_to_block(header);
     let (y, c, s, n) = unpack(b.block_params(header));
     let more = b.ins().icmp(IntCC::UnsignedLessThan, n, steps);
-    b.ins().brif(more, body, &[], exit, &args(&y, &c, &s, n));
+    b.ins().brif(more, body, &[], exit, &args(&y, c, s, n));
 
     // The body: `rk4::stage_phases`, then the step, then detection.
     b.switch_to_block(body);
     b.seal_block(body);
     // `clock::rotate`: (c, s)·(hc, hs), renormalised to first order.
-    let rotate = |b: &mut Builder, c: &[Value], s: &[Value]| -> (Vec<Value>, Vec<Value>) {
-        (0..pc)
-            .map(|k| {
-                let (p, q) = (b.ins().fmul(c[k], hc[k]), b.ins().fmul(s[k], hs[k]));
-                let c1 = b.ins().fsub(p, q);
-                let (p, q) = (b.ins().fmul(s[k], hc[k]), b.ins().fmul(c[k], hs[k]));
-                let s1 = b.ins().fadd(p, q);
-                let (cc, ss) = (b.ins().fmul(c1, c1), b.ins().fmul(s1, s1));
-                let norm = b.ins().fadd(cc, ss);
-                let half_norm = b.ins().fmul(one_half, norm);
-                let scale = b.ins().fsub(three_halves, half_norm);
-                (b.ins().fmul(c1, scale), b.ins().fmul(s1, scale))
-            })
-            .unzip()
+    let rotate = |b: &mut Builder, c: Value, s: Value| -> (Value, Value) {
+        let (p, q) = (b.ins().fmul(c, hc), b.ins().fmul(s, hs));
+        let c1 = b.ins().fsub(p, q);
+        let (p, q) = (b.ins().fmul(s, hc), b.ins().fmul(c, hs));
+        let s1 = b.ins().fadd(p, q);
+        let (cc, ss) = (b.ins().fmul(c1, c1), b.ins().fmul(s1, s1));
+        let norm = b.ins().fadd(cc, ss);
+        let half_norm = b.ins().fmul(one_half, norm);
+        let scale = b.ins().fsub(three_halves, half_norm);
+        (b.ins().fmul(c1, scale), b.ins().fmul(s1, scale))
     };
-    let (mc, ms) = rotate(b, &c, &s);
-    let (ec, es) = rotate(b, &mc, &ms);
-    let clocks = [(&c, &s), (&mc, &ms), (&ec, &es)].map(|(c, s)| [widen(c), widen(s)]);
+    let (mc, ms) = rotate(b, c, s);
+    let (ec, es) = rotate(b, mc, ms);
+    let clocks = [(c, s), (mc, ms), (ec, es)].map(|(c, s)| [vec![c; chunks], vec![s; chunks]]);
     let y1 = rk4(b, &y, &sizes, clocks);
     // As `integrate::steps`: at rest on a stop before the step, beyond it
     // after the step, or turning back inside it. Its `side·a > 0` is a
@@ -960,12 +949,12 @@ fn walk<S, K>(
         }
     }
     let next = b.ins().iadd_imm(n, 1);
-    let stepped = args(&y1, &ec, &es, next);
+    let stepped = args(&y1, ec, es, next);
     match hit {
         Some(hit) => {
             let met = b.ins().vany_true(hit);
             b.ins()
-                .brif(met, exit, &args(&y, &c, &s, n), header, &stepped);
+                .brif(met, exit, &args(&y, c, s, n), header, &stepped);
         }
         None => {
             b.ins().jump(header, &stepped);
@@ -983,8 +972,8 @@ fn walk<S, K>(
                 .store(flags, v, states, (8 * (i * w + 2 * k)) as i32);
         }
     }
-    for (r, phase) in [c, s].iter().enumerate() {
-        let x = b.ins().extractlane(phase[0], 0);
+    for (r, phase) in [c, s].into_iter().enumerate() {
+        let x = b.ins().extractlane(phase, 0);
         b.ins().store(flags, x, clock, (8 * r) as i32);
     }
     b.ins().return_(&[n]);
