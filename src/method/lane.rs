@@ -67,6 +67,16 @@ pub struct MethodSettings {
     pub rounding_unit: f64,
 }
 
+impl MethodSettings {
+    /// The relative rounding noise of a finite-difference column after
+    /// `steps` steps ([`difference_noise`] of an image of size 1): the
+    /// steps count only where rounding accumulates.
+    pub fn column_noise(&self, steps: usize) -> f64 {
+        let steps = if self.rounding_accumulates { steps } else { 1 };
+        difference_noise(self.rounding_unit, 1.0, steps, self.perturbation)
+    }
+}
+
 /// The noise in a finite-difference column: the rounding of an image of
 /// size `scale`, accumulated over the `steps` of one iteration, over δ.
 /// An R_ii near it is mostly rounding.
@@ -165,12 +175,7 @@ pub fn plan_lane<const D: usize, S: System<D>>(system: &S, settings: &MethodSett
     let parts = if let Some(fixed) = settings.submaps {
         fixed.clamp(1, steps_per_period)
     } else if settings.lyapunov && contraction > 0.0 {
-        let accumulated = if settings.rounding_accumulates {
-            steps_per_period as f64
-        } else {
-            1.0
-        };
-        let noise = settings.rounding_unit * accumulated.sqrt() / settings.perturbation;
+        let noise = settings.column_noise(steps_per_period);
         // ln of the contraction one part may have; at least e, so that the
         // parts never outnumber |λ_min|·T.
         let allowed = (PART_NOISE / noise).ln().max(1.0);
@@ -241,12 +246,7 @@ where
     let (_, log_hadamard) = log_diagonal(j);
     let ratio = log_hadamard.exp();
     let suspect = nonlinearity.powi(settings.difference.order()) * ratio;
-    let accumulated = if settings.rounding_accumulates {
-        steps_per_part as f64
-    } else {
-        1.0
-    };
-    let rounding = settings.rounding_unit * accumulated.sqrt() / settings.perturbation * ratio;
+    let rounding = settings.column_noise(steps_per_part) * ratio;
     !suspect.is_nan() && suspect > GRAZING_ERROR.max(rounding)
 }
 
