@@ -626,32 +626,22 @@ fn hermite_slope(c: vec4<real>, th: real) -> real {
 }
 
 // Where the slope turns from positive to negative inside (0, 1), or -1:
-// safeguarded Newton from the midpoint, twin of Hermite::peak.
+// the quadratic slope's one root there in closed form, twin of
+// Hermite::peak (which says why not Newton).
 fn hermite_peak(c: vec4<real>) -> real {
-    var a = real(0.0);
-    var b = real(1.0);
-    if (!(hermite_slope(c, a) > real(0.0) && hermite_slope(c, b) < real(0.0))) {
+    if (!(hermite_slope(c, real(0.0)) > real(0.0) && hermite_slope(c, real(1.0)) < real(0.0))) {
         return real(-1.0);
     }
-    var th = real(0.5);
-    for (var k = 0u; k < 64u; k = k + 1u) {
-        let g = hermite_slope(c, th);
-        if (g > real(0.0)) {
-            a = th;
-        } else {
-            b = th;
-        }
-        let curvature = real(2.0) * c.z + real(6.0) * c.w * th;
-        var next = th - g / curvature;
-        if (!(next > a && next < b)) {
-            next = real(0.5) * (a + b);
-        }
-        if (next == th) {
-            break;
-        }
-        th = next;
+    let a = real(3.0) * c.w;
+    let b = real(2.0) * c.z;
+    let root = sqrt(max(b * b - real(4.0) * a * c.y, real(0.0)));
+    var th: real;
+    if (b >= real(0.0)) {
+        th = real(-0.5) * (b + root) / a;
+    } else {
+        th = c.y / (real(-0.5) * (b - root));
     }
-    return th;
+    return clamp(th, real(0.0), real(1.0));
 }
 
 // The first upward root of the cubic in [a, b]: Newton's starting guess.
