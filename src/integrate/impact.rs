@@ -1257,11 +1257,11 @@ impl Hermite {
     /// exactly one root there, found in closed form with the root formula
     /// that does not cancel (q = -(b + sign(b)·√disc)/2, roots q/a and
     /// c/q). Safeguarded Newton from the midpoint, stopped only when an
-    /// iterate repeated, took 20 iterations on average (up to 64: near the
+    /// iterate repeated, took 25 iterations on average (up to 64: near the
     /// root the slope's rounding moves each step by a few ulps, and the
-    /// bracket closed by bisection), a tenth of the CPU path's time on the
-    /// speed issue's sweep at one call per oscillation and trajectory
-    /// (docs/BENCHMARKS.md). Twin of `hermite_peak`.
+    /// bracket closed by bisection): at one call per oscillation and
+    /// trajectory, 7 percent of the CPU path's time on the speed issue's
+    /// sweep (docs/BENCHMARKS.md). Twin of `hermite_peak`.
     fn peak(&self) -> Option<f64> {
         if !(self.slope(0.0) > 0.0 && self.slope(1.0) < 0.0) {
             return None;
