@@ -22,12 +22,15 @@
 //!    path (and the GPU where it runs them); then the models with several
 //!    stops or a stop on another state (the impact pair, the two-mass
 //!    chain) and the models with a switch (the soft stop, the friction
-//!    belt) on the same sweep.
+//!    belt) on the same sweep;
+//! 8. the CPU path's step loop between stops built by the host's C compiler
+//!    (the default) against cranelift's, whole runs alternated, on the
+//!    impacts section's sweep and on the seed's at 1800 steps.
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
 //! `-- --quick paper cost` (first, paper, scaling, cost, workgroups, impacts,
-//! models).
+//! models, loops).
 
 use std::time::Instant;
 
@@ -413,6 +416,126 @@ fn main() {
     if wanted("models") {
         models(repeats);
     }
+    if wanted("loops") {
+        loops(repeats);
+    }
+}
+
+/// Section 8: the CPU path with its step loop between stops built by the
+/// host's C compiler (`model::c_loop`, the default) and by cranelift
+/// (`LYAPSWEEP_STEP_LOOPS=cranelift`), the seed's model (its loops are
+/// built when the scene is parsed), whole runs alternated; the speed-up is
+/// the median of the rounds' ratios. The spectra are the same to the bit
+/// (tests: `model::c_loop`).
+fn loops(repeats: usize) {
+    println!(
+        "\nStep loops on the CPU path, the seed's model ({} threads; medians of {repeats} alternated rounds after a warm-up)\n",
+        rayon::current_num_threads()
+    );
+    println!("| sweep | cranelift s | C compiler s | speed-up |");
+    println!("|---|---|---|---|");
+    let model = format!(
+        "model = {:?}\n",
+        format!(
+            "{}/models/impact-oscillator.toml",
+            env!("CARGO_MANIFEST_DIR")
+        )
+    );
+    let sweep = |values: usize, steps: usize, transient: usize, iterations: usize| {
+        format!(
+            "{model}[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"cpu\"\nvalidate = 0\n[output]\nbifurcation_points = 0\n"
+        )
+    };
+    let sweeps = [
+        (
+            "the impacts section's (4096 values, 200 steps, transient 20, iterations 20)",
+            sweep(4096, 200, 20, 20),
+        ),
+        (
+            "the seed's at 1800 steps (512 values, transient 50, iterations 100)",
+            sweep(512, 1800, 50, 100),
+        ),
+    ];
+    let options = lyapsweep::RunOptions::default();
+    for (name, text) in sweeps {
+        let scenes = ["cranelift", "c"].map(|loops| {
+            std::env::set_var("LYAPSWEEP_STEP_LOOPS", loops);
+            scene::parse(&text, "bench", "bench", &[]).expect("scene")
+        });
+        std::env::remove_var("LYAPSWEEP_STEP_LOOPS");
+        let (mut seconds, mut ratios) = ([Vec::new(), Vec::new()], Vec::new());
+        for round in 0..=repeats {
+            let [a, b] = [0, 1].map(|i| {
+                let report = lyapsweep::run_with(&scenes[i], &options).expect("runs");
+                report.elapsed.as_secs_f64()
+            });
+            // Round 0 warms up.
+            if round > 0 {
+                seconds[0].push(a);
+                seconds[1].push(b);
+                ratios.push(a / b);
+            }
+        }
+        let [a, b] = seconds.map(median);
+        println!("| {name} | {a:.3} | {b:.3} | {:.2}× |", median(ratios));
+    }
+    loop_alone(repeats);
+}
+
+/// The step loop alone (8 slots, one trajectory of each of 8 lanes, no
+/// stop met), nanoseconds per slot-step of each compiler's.
+fn loop_alone(repeats: usize) {
+    use lyapsweep::model::expr::{Expr, Names};
+    use lyapsweep::model::jit::{Layout, Loops, Native, StopCode};
+    use lyapsweep::model::tape::Tape;
+    const W: usize = 8;
+    let names = Names {
+        states: vec!["x".into(), "v".into()],
+        parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+        switches: Vec::new(),
+    };
+    let parse = |t: &str| Expr::parse(t, &names).expect("parses");
+    let field = [parse("v"), parse("-2*zeta*v - x + f*cos(eta*t)")];
+    let tape = Tape::compile(&field, 2, Some(parse("eta"))).expect("compiles");
+    let stop = [StopCode {
+        coordinate: 0,
+        velocity: 1,
+        side: 1.0,
+    }];
+    let etas: [f64; W] = std::array::from_fn(|k| 0.5 + 0.01 * k as f64);
+    let constants = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
+    let lane: Vec<f64> = (0..constants[0].len())
+        .flat_map(|j| constants.iter().map(move |c| c[j]))
+        .collect();
+    let h = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
+    let walls = [2.0; W];
+    let half = std::f64::consts::PI / 200.0;
+    let natives = [Loops::Cranelift, Loops::CCompiler]
+        .map(|loops| Native::compile_stepping_by(&tape, Some(&stop), loops).expect("native code"));
+    let (steps, calls) = (200, 20_000);
+    let mut ns = [Vec::new(), Vec::new()];
+    for round in 0..=repeats {
+        for (i, native) in natives.iter().enumerate() {
+            let mut y: [[f64; W]; 2] = [std::array::from_fn(|k| 0.1 * k as f64), [0.0; W]];
+            let mut clock = [1.0, 0.0, half.cos(), half.sin()];
+            let start = Instant::now();
+            let mut taken = 0;
+            for _ in 0..calls {
+                taken += native
+                    .walk(Layout::Each, &mut y, &mut clock, &lane, &h, &walls, 0, steps)
+                    .expect("a loop for 8 slots");
+            }
+            if round > 0 {
+                ns[i].push(start.elapsed().as_secs_f64() * 1e9 / (taken * W) as f64);
+            }
+        }
+    }
+    let [a, b] = ns.map(median);
+    println!(
+        "| the loop alone, 8 lanes' slots, ns per slot-step ({}) | {a:.2} | {b:.2} | {:.2}× |",
+        natives[1].loops().map_or("-".into(), |l| format!("{l:?}")),
+        a / b
+    );
 }
 
 /// Section 7: models against the seed's oscillator (the

@@ -7,6 +7,7 @@ use std::fmt::Write;
 
 use super::code::Code;
 use super::expr::{Expr, Op, Var, Written};
+use super::jit::Loops;
 use super::wgsl;
 
 /// The report of a model that compiled.
@@ -210,6 +211,21 @@ pub fn describe(code: &Code) -> String {
         code.equations.instructions.len(),
         code.equations.lane_constants.len()
     );
+    if let Some(native) = code.regions.first().and_then(|r| r.native.as_ref()) {
+        let loops = match (native.loops(), native.c_compiler_failure()) {
+            (Some(Loops::CCompiler), _) => {
+                "built by the C compiler for this machine's vectors".into()
+            }
+            (Some(Loops::Cranelift), Some(why)) => {
+                format!("cranelift's (the C compiler failed: {why})")
+            }
+            (Some(Loops::Cranelift), None) => "cranelift's".into(),
+            (None, _) => String::new(),
+        };
+        if !loops.is_empty() {
+            let _ = writeln!(w, "CPU: the step loop between stops is {loops}");
+        }
+    }
     match wgsl::system_source(code) {
         Ok(source) => {
             let how = if code.section.is_some() {

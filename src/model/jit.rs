@@ -64,9 +64,19 @@ pub struct StopCode {
     pub side: f64,
 }
 
+/// The compiler of a tape's step loops ([`Native::walk`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Loops {
+    /// Cranelift, with the rest of the tape's functions: 128-bit vectors.
+    Cranelift,
+    /// The host's C compiler for the host's vectors ([`super::c_loop`]),
+    /// cranelift where it fails.
+    CCompiler,
+}
+
 /// The widths a step loop is compiled for ([`Native::walk`]): a lane's
 /// reference and copies (3 to 9 trajectories) in batches of 4 or 8.
-const WALK_WIDTHS: [usize; 2] = [4, 8];
+pub(crate) const WALK_WIDTHS: [usize; 2] = [4, 8];
 
 /// What a compiled function computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -110,6 +120,10 @@ pub struct Native {
     /// Owns the code the functions point into; freed on drop.
     #[cfg(target_arch = "x86_64")]
     module: std::mem::ManuallyDrop<Module>,
+    /// Owns the step loops' code where the C compiler built them; why
+    /// not where it was asked and failed.
+    #[cfg(target_arch = "x86_64")]
+    c_loops: Option<Result<super::c_loop::CLoops, String>>,
 }
 
 // SAFETY: once finalised the module is never changed, only its code run
@@ -144,16 +158,58 @@ impl Native {
     /// loop ([`walk`](Self::walk)) where `stops` are given: each stop's
     /// coordinate, velocity and side (±1, `model::code::Stop`), detected in
     /// the loop as the step loop of `integrate` detects them.
+    ///
+    /// The step loops are the host C compiler's where it builds them
+    /// ([`c_loop`](super::c_loop)), cranelift's otherwise, or where
+    /// `LYAPSWEEP_STEP_LOOPS=cranelift` asks for them (the benchmark's
+    /// baseline, and a way round a C compiler that misbehaves).
     pub fn compile_stepping(tape: &Tape, stops: Option<&[StopCode]>) -> Option<Native> {
+        let loops = match std::env::var("LYAPSWEEP_STEP_LOOPS").as_deref() {
+            Ok("cranelift") => Loops::Cranelift,
+            _ => Loops::CCompiler,
+        };
+        Native::compile_stepping_by(tape, stops, loops)
+    }
+
+    /// [`compile_stepping`](Self::compile_stepping) with the step loops
+    /// compiled by `loops` (cranelift's where the C compiler fails).
+    pub fn compile_stepping_by(
+        tape: &Tape,
+        stops: Option<&[StopCode]>,
+        loops: Loops,
+    ) -> Option<Native> {
         #[cfg(target_arch = "x86_64")]
         {
-            build(tape, stops).ok()
+            build(tape, stops, loops).ok()
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
-            let _ = (tape, stops);
+            let _ = (tape, stops, loops);
             None
         }
+    }
+
+    /// Which compiler built the step loops ([`walk`](Self::walk)), if
+    /// there are any.
+    pub fn loops(&self) -> Option<Loops> {
+        if self.walks.iter().flatten().all(Option::is_none) {
+            return None;
+        }
+        #[cfg(target_arch = "x86_64")]
+        if let Some(Ok(_)) = self.c_loops {
+            return Some(Loops::CCompiler);
+        }
+        Some(Loops::Cranelift)
+    }
+
+    /// Why the C compiler did not build the step loops, where it was asked
+    /// to (the loops are then cranelift's).
+    pub fn c_compiler_failure(&self) -> Option<&str> {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(Err(why)) = &self.c_loops {
+            return Some(why);
+        }
+        None
     }
 
     /// Up to `steps` RK4 steps of W trajectories `y` in one loop of native
@@ -426,7 +482,7 @@ unsafe fn rejoined<const W: usize>(out: &mut [[f64; W]]) {
 
 /// [`Func::apply`] behind the C calling convention, one per function, for
 /// the native code to call: the same libm calls, so the same bits.
-fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
+pub(crate) fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
     macro_rules! by_function {
         ($($f:ident)*) => {
             match f {
@@ -446,7 +502,7 @@ fn callback(f: Func) -> extern "C" fn(f64, f64) -> f64 {
 use cranelift_jit::JITModule as Module;
 
 #[cfg(target_arch = "x86_64")]
-fn build<'s>(tape: &Tape, stops: Option<&'s [StopCode]>) -> Result<Native, String> {
+fn build<'s>(tape: &Tape, stops: Option<&'s [StopCode]>, loops: Loops) -> Result<Native, String> {
     use cranelift_codegen::settings::{self, Configurable};
     use cranelift_jit::JITBuilder;
 
@@ -491,7 +547,7 @@ fn build<'s>(tape: &Tape, stops: Option<&'s [StopCode]>) -> Result<Native, Strin
     };
     module.finalize_definitions().map_err(|e| e.to_string())?;
     let mut walk_ids = walk_ids.into_iter();
-    let walks = [(); WALK_WIDTHS.len()].map(|_| {
+    let mut walks = [(); WALK_WIDTHS.len()].map(|_| {
         [(); 2].map(|_| {
             let code = module.get_finalized_function(walk_ids.next()?);
             // SAFETY: the code at this address was defined with the `Walk`
@@ -514,9 +570,19 @@ fn build<'s>(tape: &Tape, stops: Option<&'s [StopCode]>) -> Result<Native, Strin
             })
         })
     });
+    // The C compiler's loops in place of cranelift's, where it builds
+    // them; why not is not an error (cranelift's loops are the same bits).
+    let c_loops = match (stepping, loops) {
+        (Some(stops), Loops::CCompiler) => Some(super::c_loop::CLoops::build(tape, stops)),
+        _ => None,
+    };
+    if let Some(Ok(c)) = &c_loops {
+        walks = c.walks.map(|by_layout| by_layout.map(Some));
+    }
     Ok(Native {
         functions,
         walks,
+        c_loops,
         stops: stepping.map_or(0, <[_]>::len),
         states: tape.states,
         outputs,

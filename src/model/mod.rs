@@ -11,6 +11,8 @@
 //! `system::section` make a compiled model a system like the hand-written
 //! one (Hénon's map).
 
+#[cfg(target_arch = "x86_64")]
+pub mod c_loop;
 pub mod code;
 pub mod describe;
 pub mod expr;
