@@ -522,7 +522,16 @@ fn loop_alone(repeats: usize) {
             let mut taken = 0;
             for _ in 0..calls {
                 taken += native
-                    .walk(Layout::Each, &mut y, &mut clock, &lane, &h, &walls, 0, steps)
+                    .walk(
+                        Layout::Each,
+                        &mut y,
+                        &mut clock,
+                        &lane,
+                        &h,
+                        &walls,
+                        0,
+                        steps,
+                    )
                     .expect("a loop for 8 slots");
             }
             if round > 0 {

@@ -1,19 +1,21 @@
-//! A field's step loop ([`jit::Walk`]) written in C and built by the host's
-//! C compiler for the host's own vector width.
+//! A field's step loop ([`Walk`]) written in C and built by the host's C
+//! compiler for the host's own vector width.
 //!
-//! Cranelift emits 128-bit vectors only: its loop for eight slots ran 9.3
-//! ns per slot-step on the seed's oscillator (AVX-512 Xeon), the same
-//! operations as loops over the slots in C that GCC vectorises for the
-//! host (`-march=native`) ran 3.8 ns. The C here is the cranelift loop's
+//! Cranelift emits 128-bit vectors only: its loop over eight slots ran 9.2
+//! ns per slot-step on the seed's oscillator (an AVX-512 Xeon), the same
+//! operations as C loops over the slots that GCC vectorises for the host
+//! (`-march=native`) 3.8 to 4.5 ns (docs/BENCHMARKS.md, "The step loop
+//! built by the host's C compiler"). The C here is the cranelift loop's
 //! twin, operation for operation: every tape instruction one IEEE operation
 //! in the tape's order, no contraction into fused multiply-adds
 //! (`-ffp-contract=off`) and no reassociation (no `-ffast-math`), so the
-//! bits are those of [`jit::Native::walk`], which the tests check.
+//! bits are those of [`Native::walk`](super::jit::Native::walk), which the
+//! tests check.
 //!
 //! Where there is no C compiler (`cc`, or `$CC`), or it fails, the loop is
-//! cranelift's. The shared objects are cached by the hash of their source
-//! and flags in the temporary directory, so a model is compiled once per
-//! machine, not once per run.
+//! cranelift's. The shared objects are cached by the hash of their source,
+//! compiler and flags in the user's cache directory, so a model is built
+//! once per machine, not once per run.
 
 use super::expr::Func;
 use super::jit::{callback, Layout, StopCode, Walk, WALK_WIDTHS};
@@ -32,7 +34,7 @@ const FLAGS: [&str; 6] = [
     "-shared",
 ];
 
-/// Step loops built by the C compiler, by width ([`WALK_WIDTHS`]) and
+/// Step loops built by the C compiler, by width (4 and 8) and
 /// layout; the library that holds their code.
 pub struct CLoops {
     pub walks: [[Walk; 2]; WALK_WIDTHS.len()],
@@ -49,13 +51,40 @@ impl CLoops {
     /// The step loops of `tape` detecting `stops`, or why not (no C
     /// compiler, or it failed).
     pub fn build(tape: &Tape, stops: &[StopCode]) -> Result<CLoops, String> {
-        let mut source = String::from(PRELUDE);
+        // The functions called back into Rust, by their index in `calls`:
+        // the source holds no address, so one object serves every process.
+        let mut calls: Vec<Func> = Vec::new();
+        for ins in tape.lowered().0 {
+            if let Code::Call(f) = ins.code {
+                if !matches!(f, Func::Sqrt | Func::Abs) && !calls.contains(&f) {
+                    calls.push(f);
+                }
+            }
+        }
+        let mut source = format!(
+            "#include <stdint.h>\ntypedef double (*apply)(double, double);\n\
+             static apply calls[{n}];\n\
+             void set_calls(const apply *t) {{ for (int i = 0; i < {n}; i++) calls[i] = t[i]; }}\n",
+            n = calls.len().max(1)
+        );
         for &w in &WALK_WIDTHS {
             for layout in [Layout::Shared, Layout::Each] {
-                walk(&mut source, tape, stops, w, layout);
+                walk(&mut source, tape, &calls, stops, w, layout);
             }
         }
         let library = compiled(&source)?;
+        let table: Vec<extern "C" fn(f64, f64) -> f64> =
+            calls.iter().map(|&f| callback(f)).collect();
+        // SAFETY: `set_calls` is defined above, reads `calls.len()`
+        // function pointers (C calling convention, two f64 to one) from
+        // the table; objects loaded twice share `calls`, and the same
+        // source sets the same table.
+        unsafe {
+            let set = library
+                .get::<unsafe extern "C" fn(*const extern "C" fn(f64, f64) -> f64)>(b"set_calls")
+                .map_err(|e| e.to_string())?;
+            set(table.as_ptr());
+        }
         let walks = WALK_WIDTHS.map(|w| {
             [Layout::Shared, Layout::Each].map(|layout| {
                 let name = format!("walk{w}{layout:?}");
@@ -71,8 +100,6 @@ impl CLoops {
         })
     }
 }
-
-const PRELUDE: &str = "#include <stdint.h>\ntypedef double (*apply)(double, double);\n";
 
 /// The cached shared object built from `source`, loaded.
 fn compiled(source: &str) -> Result<libloading::Library, String> {
@@ -157,7 +184,14 @@ fn cache_dir() -> Result<PathBuf, String> {
 /// Appends `walk{w}{layout:?}`: `jit::walk`'s loop (the phase turned, the
 /// RK4 step, the stops detected) over `w` slots, a loop over the slots per
 /// step for the compiler to vectorise.
-fn walk(out: &mut String, tape: &Tape, stops: &[StopCode], w: usize, layout: Layout) {
+fn walk(
+    out: &mut String,
+    tape: &Tape,
+    calls: &[Func],
+    stops: &[StopCode],
+    w: usize,
+    layout: Layout,
+) {
     let d = tape.states;
     let each = layout == Layout::Each;
     // A value per slot (`Each`) or one for all (`Shared`), at row `r`.
@@ -208,13 +242,13 @@ fn walk(out: &mut String, tape: &Tape, stops: &[StopCode], w: usize, layout: Lay
         row("h", 0)
     );
     let state: Vec<String> = (0..d).map(|i| format!("y{i}[k]")).collect();
-    let k1 = rhs(out, tape, "a", &state, ("c", "s"), &row);
+    let k1 = rhs(out, tape, calls, "a", &state, ("c", "s"), &row);
     let y2 = axpy(out, "b", &state, "h2", &k1);
-    let k2 = rhs(out, tape, "c", &y2, ("mc", "ms"), &row);
+    let k2 = rhs(out, tape, calls, "c", &y2, ("mc", "ms"), &row);
     let y3 = axpy(out, "d", &state, "h2", &k2);
-    let k3 = rhs(out, tape, "e", &y3, ("mc", "ms"), &row);
+    let k3 = rhs(out, tape, calls, "e", &y3, ("mc", "ms"), &row);
     let y4 = axpy(out, "f", &state, "hh", &k3);
-    let k4 = rhs(out, tape, "g", &y4, ("ec", "es"), &row);
+    let k4 = rhs(out, tape, calls, "g", &y4, ("ec", "es"), &row);
     for i in 0..d {
         // y + h/6·(k1 + 2(k2 + k3) + k4)
         let _ = writeln!(
@@ -279,6 +313,7 @@ fn axpy(out: &mut String, prefix: &str, y: &[String], a: &str, k: &[String]) -> 
 fn rhs(
     out: &mut String,
     tape: &Tape,
+    calls: &[Func],
     prefix: &str,
     state: &[String],
     (cos, sin): (&str, &str),
@@ -307,7 +342,10 @@ fn rhs(
             Code::Call(Func::Sqrt) => format!("__builtin_sqrt({a})"),
             Code::Call(Func::Abs) => format!("__builtin_fabs({a})"),
             // The same Rust functions as the cranelift code calls.
-            Code::Call(f) => format!("((apply){:#x}ul)({a}, {b})", callback(f) as usize),
+            Code::Call(f) => {
+                let i = calls.iter().position(|&g| g == f).expect("listed");
+                format!("calls[{i}]({a}, {b})")
+            }
         };
         let name = format!("{prefix}{}", slots.len());
         let _ = writeln!(out, "      const double {name} = {value};");

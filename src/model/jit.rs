@@ -16,7 +16,9 @@
 //!
 //! The interpreter stays the reference and the fallback: off x86_64, or
 //! where cranelift cannot target the host, [`Native::compile`] gives
-//! `None`.
+//! `None`. The step loops ([`Native::walk`]) are cranelift's only where the
+//! host's C compiler does not build them for wider vectors
+//! ([`super::c_loop`]), the same operations to the bit.
 
 use super::expr::Func;
 use super::tape::Tape;
