@@ -152,6 +152,7 @@ fn compiled(source: &str) -> Result<libloading::Library, String> {
 /// (`$XDG_CACHE_HOME`, else `~/.cache`), else one of the user's in the
 /// temporary directory. The objects are loaded and run, so only a
 /// directory the user owns and no one else can write is used.
+#[cfg(unix)]
 fn cache_dir() -> Result<PathBuf, String> {
     use std::os::unix::fs::{DirBuilderExt, MetadataExt};
     let var = |name| {
@@ -179,6 +180,13 @@ fn cache_dir() -> Result<PathBuf, String> {
         ));
     }
     Ok(dir)
+}
+
+/// Off Unix, no directory is known to be the user's alone: the loops are
+/// cranelift's.
+#[cfg(not(unix))]
+fn cache_dir() -> Result<PathBuf, String> {
+    Err("the C compiler's loops are built on Unix only".into())
 }
 
 /// Appends `walk{w}{layout:?}`: `jit::walk`'s loop (the phase turned, the
@@ -464,6 +472,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(unix)]
     fn the_c_compiler_s_step_loops_are_cranelift_s_to_the_bit() {
         let tape = tape();
         for (wall, side) in [(0.9, 1.0), (-0.7, -1.0)] {
