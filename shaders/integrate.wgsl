@@ -103,7 +103,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #else
             y1 = y + inc.y;
 #endif
-            if (reaches_a_stop(walls, y, y1)) {
+            if (reaches_a_stop(walls, y, h, y1)) {
                 pending = true;
                 break;
             }

@@ -65,10 +65,24 @@ fn on_stop(w: Stop, y: State, v: real) -> State {
     return out;
 }
 
-// Whether a step from y to y1 may meet the stop: it ends behind it, or the
-// velocity turns inside it (an excursion between the ends).
-fn reaches(w: Stop, y: State, y1: State) -> bool {
-    return gap(w, y1) > real(0.0) || (speed(w, y) > real(0.0) && speed(w, y1) < real(0.0));
+// Whether a step of size h from y to y1 may meet the stop: it ends behind
+// it, or the velocity turns inside it within reach of it (an excursion
+// between the ends; twin of reaches_wall).
+fn reaches(w: Stop, y: State, h: real, y1: State) -> bool {
+    let g0 = gap(w, y);
+    let s0 = speed(w, y);
+    let g1 = gap(w, y1);
+    let s1 = speed(w, y1);
+    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
+}
+
+// Whether a step turning back inside (speed s0 > 0 to s1 < 0, gaps g0, g1
+// short of the stop) may pass it in between: not when both ends fall short
+// by twice the most the step's cubic can rise (twin of may_turn_past in
+// impact.rs, which says why that suffices).
+fn may_turn_past(g0: real, s0: real, g1: real, s1: real, h: real) -> bool {
+    let reach = TURN_REACH * h * (s0 - s1);
+    return !(g0 + reach < real(0.0) && g1 + reach < real(0.0));
 }
 
 // At rest on the stop: the sticking state, X = X_w and V = 0.
@@ -80,16 +94,16 @@ fn at_rest(w: Stop, y: State) -> bool {
 // than as a loop: WALLS is a constant, so the branches of absent stops fold
 // away, and a loop inside the step loop would cost every step on lavapipe
 // (docs/BENCHMARKS.md, "Impacts off the hot path").
-fn reaches_a_stop(walls: Stops, y: State, y1: State) -> bool {
-    var hit = reaches(stop(walls, 0u), y, y1);
+fn reaches_a_stop(walls: Stops, y: State, h: real, y1: State) -> bool {
+    var hit = reaches(stop(walls, 0u), y, h, y1);
     if (WALLS > 1u) {
-        hit = hit || reaches(stop(walls, 1u), y, y1);
+        hit = hit || reaches(stop(walls, 1u), y, h, y1);
     }
     if (WALLS > 2u) {
-        hit = hit || reaches(stop(walls, 2u), y, y1);
+        hit = hit || reaches(stop(walls, 2u), y, h, y1);
     }
     if (WALLS > 3u) {
-        hit = hit || reaches(stop(walls, 3u), y, y1);
+        hit = hit || reaches(stop(walls, 3u), y, h, y1);
     }
     return hit;
 }
@@ -568,7 +582,13 @@ fn newton_update(b: Bracket, g: real, rate: real) -> Bracket {
 fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
     // Turning back inside the step: the first re-step, to the Hermite
     // peak, decides whether the excursion passes the stop.
-    var b = bracket_of(vec2<real>(gap(w, y0), speed(w, y0)), vec2<real>(gap(w, y1), speed(w, y1)), h);
+    let start = vec2<real>(gap(w, y0), speed(w, y0));
+    let end = vec2<real>(gap(w, y1), speed(w, y1));
+    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
+        // A turn that cannot reach the stop (as locate_newton's).
+        return Hit(false, real(0.0), y0);
+    }
+    var b = bracket_of(start, end, h);
     if (!b.found) {
         return Hit(false, real(0.0), y0);
     }

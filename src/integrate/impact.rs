@@ -232,18 +232,50 @@ pub fn step<const D: usize, F: Flow<D>>(
 ) -> ([f64; D], Phase) {
     debug_assert!(flow.surfaces().is_empty());
     let (y1, end) = rk4::step(flow, phase, half, y, h);
-    if !flow.walls().iter().any(|w| reaches_wall(w, y, &y1)) {
+    if !flow.walls().iter().any(|w| reaches_wall(w, y, h, &y1)) {
         return (y1, end);
     }
     let y1 = resolve(flow, &mut 0, location, omega, phase, y, h, y1, stats);
     (y1, end)
 }
 
-/// Whether a step from y to y1 may contain an impact: it ends beyond the
-/// wall, or the velocity turns inside it (an excursion between the ends).
+/// Whether a step of size h from y to y1 may contain an impact: it ends
+/// beyond the wall, or the velocity turns inside it within reach of the
+/// wall (an excursion between the ends, [`may_turn_past`]).
 #[inline]
-pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], y1: &[f64; D]) -> bool {
-    wall.gap(y1) > 0.0 || (wall.speed(y) > 0.0 && wall.speed(y1) < 0.0)
+pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], h: f64, y1: &[f64; D]) -> bool {
+    let (g0, s0, g1, s1) = (wall.gap(y), wall.speed(y), wall.gap(y1), wall.speed(y1));
+    g1 > 0.0 || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
+}
+
+/// How far, in units of h·(s0 - s1), the event mechanism lets a step that
+/// turns back rise beyond its higher end before it stops looking: twice
+/// the most its cubic Hermite interpolant can rise (4/27, the peak of the
+/// basis functions θ(1-θ)² and θ²(1-θ)).
+pub const TURN_REACH: f64 = 8.0 / 27.0;
+
+/// Whether a step of size h whose speed towards the wall turns from s0 > 0
+/// to s1 < 0, both ends short of it (gaps g0, g1 <= 0), may pass the wall
+/// in between, and so needs the re-step to its Hermite peak that decides
+/// (`locate_newton`).
+///
+/// The interpolant g0·H00 + g1·H01 + h·s0·H10 + h·s1·H11 (H00 + H01 = 1,
+/// 0 <= H10, -H11 <= 4/27) stays below max(g0, g1) + (4/27)·h·(s0 - s1).
+/// RK4 re-stepped to the peak differs from it by O(h⁴), the step's whole
+/// rise is O(h²): with twice the bound as the reach, a turn ignored here
+/// could pass the wall only if RK4's sub-step overshot the cubic by more
+/// than the step's whole rise, a step that does not resolve the motion.
+/// Most turns happen far from any wall (97% of those on the speed issue's
+/// sweep at 0.1 or more short of it), and each one that passed this test
+/// left the step loop to find nothing.
+///
+/// Written as two comparisons rather than a max, so that every path (the
+/// step loops, the GPU's) computes it with the same operations; a NaN
+/// anywhere fails both and lets the step through.
+#[inline(always)]
+pub fn may_turn_past(g0: f64, s0: f64, g1: f64, s1: f64, h: f64) -> bool {
+    let reach = TURN_REACH * h * (s0 - s1);
+    !((g0 + reach < 0.0) & (g1 + reach < 0.0))
 }
 
 /// Applies every crossing inside the step [0, h] from (phase, y) of a
@@ -1148,12 +1180,21 @@ fn locate_newton<const D: usize, F: Flow<D>>(
     // The bracket [lo, hi] of s: g(lo) <= 0 < g(hi), g(s) = the gap of RK4(y0, s).
     let (hi, guess) = if wall.gap(y1) > 0.0 {
         (h, hermite.first_root(0.0, 1.0))
-    } else if wall.speed(y0) > 0.0 && wall.speed(y1) < 0.0 {
+    } else if wall.speed(y0) > 0.0
+        && wall.speed(y1) < 0.0
+        && may_turn_past(
+            wall.gap(y0),
+            wall.speed(y0),
+            wall.gap(y1),
+            wall.speed(y1),
+            h,
+        )
+    {
         // Both ends short of the wall, but the velocity turns inside the
-        // step: an excursion past the wall in between is a (near-grazing)
-        // impact. The Hermite interpolant locates the peak well (X is flat
-        // there) but its value is off by O(h⁴); RK4 decides whether the peak
-        // is beyond the wall, at the cost of one step per oscillation.
+        // step within reach of it: an excursion past the wall in between is
+        // a (near-grazing) impact. The Hermite interpolant locates the peak
+        // well (X is flat there) but its value is off by O(h⁴); RK4 decides
+        // whether the peak is beyond the wall.
         let peak = hermite.peak()?;
         if wall.gap(&sub.step(phase0, y0, peak * h).0) <= 0.0 {
             return None;
@@ -1465,6 +1506,107 @@ mod tests {
             &mut linear,
         );
         assert_eq!(linear.impacts, 0);
+    }
+
+    /// X'' = -X - k·X³: a stiffening spring, whose turns are not those of
+    /// a harmonic.
+    struct Stiffening {
+        k: f64,
+    }
+
+    impl Flow<2> for Stiffening {
+        fn rhs(&self, _phase: &Phase, y: &[f64; 2]) -> [f64; 2] {
+            [y[1], -y[0] - self.k * y[0] * y[0] * y[0]]
+        }
+    }
+
+    #[test]
+    fn a_step_s_cubic_rises_at_most_half_the_turn_reach_above_its_ends() {
+        // The bound behind `may_turn_past`: any cubic Hermite interpolant
+        // whose slope turns from + to - stays below max(g0, g1) +
+        // (4/27)·h·(s0 - s1), half of TURN_REACH's; tight for ends level
+        // with each other (the peak of g0 = g1 = 0, s0 = -s1 is exactly
+        // h·s0/4 < (8/27)·h·s0).
+        let mut tightest: f64 = 0.0;
+        for i in 0..20_000 {
+            let u = |k: usize| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0;
+            let (g0, g1) = (
+                -u(1) * [1e-3, 0.1, 3.0][i % 3],
+                -u(2) * [1e-3, 0.1, 3.0][i % 3],
+            );
+            let (s0, s1) = (1e-3 + 10.0 * u(3), -1e-3 - 10.0 * u(4));
+            let h = [1e-3, 0.03, 0.3][(i / 3) % 3] * (0.5 + u(5));
+            let hermite = Hermite::new(g0, s0, g1, s1, h);
+            let Some(th) = hermite.peak() else { continue };
+            let rise = hermite.value(th) - g0.max(g1);
+            let bound = 0.5 * TURN_REACH * h * (s0 - s1);
+            assert!(rise <= bound * (1.0 + 1e-12), "{rise:e} > {bound:e}");
+            tightest = tightest.max(rise / bound);
+        }
+        assert!(
+            tightest > 0.5,
+            "the bound is not tested near its edge: {tightest}"
+        );
+    }
+
+    #[test]
+    fn a_turn_out_of_reach_never_passes_the_wall() {
+        // What `may_turn_past` leaves out, the re-step to the Hermite peak
+        // (which decides) never finds beyond the wall: turns of a harmonic
+        // and a stiffening oscillation, 12 to 6000 steps per cycle, with
+        // the wall placed just out of reach, where the step's cubic falls
+        // short by half the reach and RK4 would need to overshoot it by
+        // that much.
+        let mut tested = 0;
+        for i in 0..40_000 {
+            let u = |k: usize| ((i * 7919 + k * 104_729) % 10_007) as f64 / 10_007.0;
+            let amplitude = 0.05 + 5.0 * u(1);
+            let k = [0.0, 0.5, 3.0][i % 3];
+            let per_cycle = [20.0, 50.0, 200.0, 1800.0, 3600.0][i % 5];
+            // Per cycle of the motion: the spring's frequency at this
+            // amplitude, to first order (1 + (3/4)·k·A²)^½.
+            let omega = (1.0 + 0.75 * k * amplitude * amplitude).sqrt();
+            let h = std::f64::consts::TAU / omega / per_cycle * (0.6 + u(2));
+            // A step starting before the peak X = amplitude (V = 0), by up
+            // to one step.
+            let flow = Stiffening { k };
+            let back = h * u(3);
+            let mut y0 = [amplitude, 0.0];
+            // Reached backwards: the state `back` before the peak.
+            let reversed = rk4::step(&Reversed(&flow), &ZERO_PHASE, &ZERO_PHASE, &y0, back).0;
+            y0 = reversed;
+            let y1 = rk4::step(&flow, &ZERO_PHASE, &ZERO_PHASE, &y0, h).0;
+            let (s0, s1) = (y0[1], y1[1]);
+            if !(s0 > 0.0 && s1 < 0.0) {
+                continue;
+            }
+            let reach = TURN_REACH * h * (s0 - s1);
+            let highest = y0[0].max(y1[0]);
+            // Just out of reach, by a thousandth to a tenth of it.
+            let wall = Wall::above(highest + reach * (1.001 + 0.1 * u(4)), 1.0);
+            let (g0, g1) = (wall.gap(&y0), wall.gap(&y1));
+            assert!(!may_turn_past(g0, s0, g1, s1, h), "{i}");
+            let hermite = Hermite::new(g0, s0, g1, s1, h);
+            let peak = hermite.peak().expect("the slope turns");
+            let at_peak = rk4::step(&flow, &ZERO_PHASE, &ZERO_PHASE, &y0, peak * h).0;
+            assert!(
+                wall.gap(&at_peak) <= -0.25 * reach,
+                "{i}: RK4's peak {:e} short of the wall, the reach {reach:e}",
+                -wall.gap(&at_peak)
+            );
+            tested += 1;
+        }
+        assert!(tested > 30_000, "{tested} turns");
+    }
+
+    /// A flow run backwards in time.
+    struct Reversed<'a, F>(&'a F);
+
+    impl<F: Flow<2>> Flow<2> for Reversed<'_, F> {
+        fn rhs(&self, phase: &Phase, y: &[f64; 2]) -> [f64; 2] {
+            let [a, b] = self.0.rhs(phase, y);
+            [-a, -b]
+        }
     }
 
     #[test]

@@ -77,8 +77,10 @@ pub enum Loops {
 }
 
 /// The widths a step loop is compiled for ([`Native::walk`]): a lane's
-/// reference and copies (3 to 9 trajectories) in batches of 4 or 8.
-pub(crate) const WALK_WIDTHS: [usize; 2] = [4, 8];
+/// reference and copies (3 to 9 trajectories) in batches of 4 or 8, the
+/// trajectories of neighbouring lanes in batches of 16
+/// (`integrate::LANE_BATCH`).
+pub(crate) const WALK_WIDTHS: [usize; 3] = [4, 8, 16];
 
 /// What a compiled function computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,7 +110,7 @@ pub enum Layout {
 }
 
 /// The batch widths compiled, those of the integrator (`integrate::steps`).
-pub const WIDTHS: [usize; 3] = [1, 4, 8];
+pub const WIDTHS: [usize; 4] = [1, 4, 8, 16];
 
 /// A tape's native functions, by kind, width and layout (no
 /// [`Kind::Step`] for a tape whose outputs are not a field's derivatives).
@@ -867,19 +869,22 @@ struct Walker<'a> {
 /// Every slot works in `F64X2` vectors; the phase is turned in one vector
 /// (the same IEEE operations in both lanes as on a scalar).
 #[cfg(target_arch = "x86_64")]
-fn walk<S, K>(
+fn walk<K>(
     b: &mut cranelift_frontend::FunctionBuilder,
     walker: Walker,
-    step_sizes: impl Fn(&mut cranelift_frontend::FunctionBuilder) -> S,
+    step_sizes: impl Fn(
+        &mut cranelift_frontend::FunctionBuilder,
+    ) -> [Vec<cranelift_codegen::ir::Value>; 4],
     rk4: K,
 ) where
     K: Fn(
         &mut cranelift_frontend::FunctionBuilder,
         &[Vec<cranelift_codegen::ir::Value>],
-        &S,
+        &[Vec<cranelift_codegen::ir::Value>; 4],
         [[Vec<cranelift_codegen::ir::Value>; 2]; 3],
     ) -> Vec<Vec<cranelift_codegen::ir::Value>>,
 {
+    use crate::integrate::impact::TURN_REACH;
     use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
     use cranelift_codegen::ir::immediates::Ieee64;
     use cranelift_codegen::ir::{types, BlockArg, InstBuilder, Value};
@@ -987,40 +992,73 @@ fn walk<S, K>(
     let clocks = [(c, s), (mc, ms), (ec, es)].map(|(c, s)| [vec![c; chunks], vec![s; chunks]]);
     let y1 = rk4(b, &y, &sizes, clocks);
     // As `integrate::steps`: at rest on a stop before the step, beyond it
-    // after the step, or turning back inside it. Its `side·a > 0` is a
-    // comparison of `a` with zero here: side is ±1, so the product is
-    // exact and only its sign counts (±0 and NaN compare false either way).
-    let mut hit: Option<Value> = None;
-    for (stop, position) in stops.iter().zip(&positions) {
-        let (ci, vi) = (stop.coordinate, stop.velocity);
-        let (out, into) = if stop.side > 0.0 {
-            (FloatCC::GreaterThan, FloatCC::LessThan)
-        } else {
-            (FloatCC::LessThan, FloatCC::GreaterThan)
-        };
-        for k in 0..chunks {
-            let at_stop = b.ins().fcmp(FloatCC::Equal, y[ci][k], position[k]);
-            let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero);
-            let resting = b.ins().band(at_stop, still);
-            let gap = b.ins().fsub(y1[ci][k], position[k]);
-            let beyond = b.ins().fcmp(out, gap, zero);
-            let toward = b.ins().fcmp(out, y[vi][k], zero);
-            let back = b.ins().fcmp(into, y1[vi][k], zero);
-            let turning = b.ins().band(toward, back);
-            let any = b.ins().bor(resting, beyond);
-            let any = b.ins().bor(any, turning);
-            let any = b.ins().band(any, masks[k]);
-            hit = Some(match hit {
-                Some(h) => b.ins().bor(h, any),
-                None => any,
-            });
+    // after the step, or turning back inside it; in two passes, as the C
+    // compiler's loop (`c_loop::walk`, which says why): the plain test,
+    // then where it fires, the turns again, only those within reach of the
+    // stop (`impact::may_turn_past`). The gaps and speeds side·(x - p) and
+    // side·v are a negation or nothing: side is ±1, so the product is
+    // exact.
+    let reach = vector(b, TURN_REACH);
+    let detect = |b: &mut Builder, within_reach: bool| -> Option<Value> {
+        let mut hit: Option<Value> = None;
+        for (stop, position) in stops.iter().zip(&positions) {
+            let (ci, vi) = (stop.coordinate, stop.velocity);
+            let oriented = |b: &mut Builder, v: Value| {
+                if stop.side > 0.0 {
+                    v
+                } else {
+                    b.ins().fneg(v)
+                }
+            };
+            for k in 0..chunks {
+                let at_stop = b.ins().fcmp(FloatCC::Equal, y[ci][k], position[k]);
+                let still = b.ins().fcmp(FloatCC::Equal, y[vi][k], zero);
+                let resting = b.ins().band(at_stop, still);
+                let (x0, x1) = (
+                    b.ins().fsub(y[ci][k], position[k]),
+                    b.ins().fsub(y1[ci][k], position[k]),
+                );
+                let (g0, g1) = (oriented(b, x0), oriented(b, x1));
+                let (s0, s1) = (oriented(b, y[vi][k]), oriented(b, y1[vi][k]));
+                let beyond = b.ins().fcmp(FloatCC::GreaterThan, g1, zero);
+                let toward = b.ins().fcmp(FloatCC::GreaterThan, s0, zero);
+                let back = b.ins().fcmp(FloatCC::LessThan, s1, zero);
+                let mut turning = b.ins().band(toward, back);
+                if within_reach {
+                    // reach·h·(s0 - s1), then whether both ends fall
+                    // short by it.
+                    let rise = b.ins().fmul(reach, sizes[0][k]);
+                    let turn = b.ins().fsub(s0, s1);
+                    let rise = b.ins().fmul(rise, turn);
+                    let (r0, r1) = (b.ins().fadd(g0, rise), b.ins().fadd(g1, rise));
+                    let short0 = b.ins().fcmp(FloatCC::LessThan, r0, zero);
+                    let short1 = b.ins().fcmp(FloatCC::LessThan, r1, zero);
+                    let short = b.ins().band(short0, short1);
+                    let near = b.ins().bnot(short);
+                    turning = b.ins().band(turning, near);
+                }
+                let any = b.ins().bor(resting, beyond);
+                let any = b.ins().bor(any, turning);
+                let any = b.ins().band(any, masks[k]);
+                hit = Some(match hit {
+                    Some(h) => b.ins().bor(h, any),
+                    None => any,
+                });
+            }
         }
-    }
+        hit
+    };
     let next = b.ins().iadd_imm(n, 1);
     let stepped = args(&y1, ec, es, next);
-    match hit {
+    match detect(b, false) {
         Some(hit) => {
+            let recheck = b.create_block();
             let met = b.ins().vany_true(hit);
+            b.ins().brif(met, recheck, &[], header, &stepped);
+            b.switch_to_block(recheck);
+            b.seal_block(recheck);
+            let near = detect(b, true).expect("the same stops");
+            let met = b.ins().vany_true(near);
             b.ins()
                 .brif(met, exit, &args(&y, c, s, n), header, &stepped);
         }
@@ -1111,6 +1149,7 @@ fn operation(
 mod tests {
     use super::*;
     use crate::integrate::clock::Phase;
+    use crate::integrate::impact::may_turn_past;
     use crate::integrate::rk4;
     use crate::model::expr::{Expr, Names, Op};
     use crate::model::tape::Registers;
@@ -1261,9 +1300,11 @@ mod tests {
                     &[h],
                 );
                 let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
+                    let (g0, s0) = (side * (y[0][k] - wall), side * y[1][k]);
+                    let (g1, s1) = (side * (y1[0][k] - wall), side * y1[1][k]);
                     (y[0][k] == wall && y[1][k] == 0.0)
-                        || side * (y1[0][k] - wall) > 0.0
-                        || (side * y[1][k] > 0.0 && side * y1[1][k] < 0.0)
+                        || g1 > 0.0
+                        || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
                 });
                 if hit {
                     return n;
@@ -1308,16 +1349,22 @@ mod tests {
             assert_eq!(n, taken, "W = {W}, wall {wall}, side {side}");
             assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
             assert_eq!(clock[..2], phase);
+            // The motion turns back about every 90 steps: those turns
+            // stop the loop only within reach of the stop.
+            let reached = wall.abs() < 10.0;
+            assert_eq!(n < 400, reached, "W = {W}, wall {wall}: {n} steps");
         }
-        // A stop reached within the steps, and one out of reach, from
-        // either side.
+        // A stop reached within the steps, and one out of reach (whose
+        // turns the loop walks through), from either side.
         let below = Native::compile_stepping(&tape, Some(&[stop(-1.0)]))
             .expect("cranelift targets this host");
         for wall in [0.9, 50.0] {
             check::<4>(&native, &c, (h, half), (wall, 1.0));
             check::<8>(&native, &c, (h, half), (wall, 1.0));
+            check::<16>(&native, &c, (h, half), (wall, 1.0));
             check::<4>(&below, &c, (h, half), (-wall, -1.0));
             check::<8>(&below, &c, (h, half), (-wall, -1.0));
+            check::<16>(&below, &c, (h, half), (-wall, -1.0));
         }
         // One trajectory of each of 8 lanes: each its own η (so its own
         // constants and step size) and wall, all with the grid's phase.
@@ -1349,9 +1396,12 @@ mod tests {
                 native.call(Kind::Step, Layout::Each, &expected, &clock, &lane, &hs);
             let y = &expected;
             let hit = (0..7).any(|k| {
+                let (g0, g1) = (y[0][k] - walls[k], y1[0][k] - walls[k]);
                 (y[0][k] == walls[k] && y[1][k] == 0.0)
-                    || y1[0][k] - walls[k] > 0.0
-                    || (y[1][k] > 0.0 && y1[1][k] < 0.0)
+                    || g1 > 0.0
+                    || (y[1][k] > 0.0
+                        && y1[1][k] < 0.0
+                        && may_turn_past(g0, y[1][k], g1, y1[1][k], hs[k]))
             });
             if hit {
                 taken = n;
