@@ -147,7 +147,9 @@ pub trait Flow<const D: usize>: Sync {
     /// [`part_map_many`]'s loop finds it. Returns the steps taken, with
     /// `y` and `phase` advanced by them to the bits that loop gives;
     /// `None` where the flow has no such loop (the step loop then takes
-    /// every step). Only for flows without general surfaces.
+    /// every step). A flow with general surfaces is given them
+    /// (`switching`): the loop then also stops before a step in which a
+    /// live slot may cross one.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn walk_shared<const W: usize>(
@@ -158,6 +160,7 @@ pub trait Flow<const D: usize>: Sync {
         _h: f64,
         _live: u32,
         _steps: usize,
+        _switching: Option<Switching<'_, W>>,
     ) -> Option<usize> {
         None
     }
@@ -175,6 +178,7 @@ pub trait Flow<const D: usize>: Sync {
         _h: &[f64; W],
         _live: u32,
         _steps: usize,
+        _switching: Option<Switching<'_, W>>,
     ) -> Option<usize>
     where
         Self: Sized,
@@ -266,6 +270,15 @@ pub trait Flow<const D: usize>: Sync {
         }
         out
     }
+}
+
+/// A batch's general surfaces as a step loop of the flow's own takes them
+/// (`Flow::walk_shared`): each slot's region of the switches, none
+/// sliding or held, and the surfaces' values and rates at the slots'
+/// states, which the loop writes back where it stops.
+pub struct Switching<'a, const W: usize> {
+    pub regions: [u32; W],
+    pub values: &'a mut SurfaceBatch<W>,
 }
 
 /// The time-T map of a flow: `steps` RK4 steps of h = T/steps from t = 0,
@@ -738,14 +751,19 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let live = (1u32 << n) - 1;
     let mut left = part.steps(steps).len();
     while left > 0 {
-        if !SURFACES {
+        // A sliding or held trajectory takes the slow path at every step.
+        if !(SURFACES && regions[..n].iter().any(|&r| surface::is_constrained(r))) {
+            let switching = SURFACES.then(|| Switching {
+                regions: std::array::from_fn(|k| regions[k.min(n - 1)]),
+                values: &mut values[at_start],
+            });
             let walked = if S::SHARED {
                 flows
                     .of(0)
-                    .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left)
+                    .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left, switching)
             } else {
                 let each = std::array::from_fn(|k| flows.of(k));
-                S::F::walk_each(&each, &mut y, &mut phases, &half, &h, live, left)
+                S::F::walk_each(&each, &mut y, &mut phases, &half, &h, live, left, switching)
             };
             left -= walked.unwrap_or(0);
             if left == 0 {

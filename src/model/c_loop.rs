@@ -21,6 +21,7 @@ use super::expr::Func;
 use super::jit::{callback, Layout, StopCode, Walk, WALK_WIDTHS};
 use super::tape::{Code, Tape};
 use crate::integrate::impact::TURN_REACH;
+use crate::integrate::surface::Surface;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -54,7 +55,169 @@ impl CLoops {
     pub fn build(tape: &Tape, stops: &[StopCode]) -> Result<CLoops, String> {
         // The functions called back into Rust, by their index in `calls`:
         // the source holds no address, so one object serves every process.
-        let mut calls: Vec<Func> = Vec::new();
+        let fields = [Region {
+            field: tape,
+            surfaces: None,
+        }];
+        let (library, walks) = built::<Walk>(&fields, stops, &[])?;
+        Ok(CLoops {
+            walks,
+            _library: library,
+        })
+    }
+}
+
+/// The step loops of a model with general surfaces (events and switches)
+/// built by the C compiler ([`SwitchWalk`]), by width and layout.
+pub struct SwitchLoops {
+    walks: [[SwitchWalk; 2]; WALK_WIDTHS.len()],
+    /// How many regions, surfaces and stops the loops were built for.
+    regions: usize,
+    surfaces: usize,
+    stops: usize,
+    _library: libloading::Library,
+}
+
+impl std::fmt::Debug for SwitchLoops {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SwitchLoops")
+    }
+}
+
+/// A step loop of a model with general surfaces: [`Walk`]'s, with every
+/// slot in its own region of the switches (`region`, W `i64`) and the
+/// surfaces' values and rates at the states' start (`values`, rows 2j
+/// and 2j + 1 of W for surface j: `surface::SurfaceBatch`'s), read and
+/// written back where the loop stopped. `lanes` holds, region by region,
+/// a pointer to the field's constants and one to its surfaces'. It also
+/// stops before the first step in which a live slot may cross a surface
+/// (`surface::may_cross`); the caller never hands it a slot that slides
+/// or is held.
+pub type SwitchWalk = unsafe extern "C" fn(
+    y: *mut f64,
+    phase: *mut f64,
+    lanes: *const *const f64,
+    h: *const f64,
+    walls: *const f64,
+    live: *const i64,
+    steps: u64,
+    region: *const i64,
+    values: *mut f64,
+) -> u64;
+
+impl SwitchLoops {
+    /// The step loops of a model whose region r has the field `fields[r].0`
+    /// and the surfaces' tape (values and rates) `fields[r].1`, with
+    /// `stops` and general surfaces of `kinds`; or why not.
+    pub fn build(
+        fields: &[(&Tape, &Tape)],
+        stops: &[StopCode],
+        kinds: &[Surface],
+    ) -> Result<SwitchLoops, String> {
+        let regions: Vec<Region> = fields
+            .iter()
+            .map(|&(field, surfaces)| Region {
+                field,
+                surfaces: Some(surfaces),
+            })
+            .collect();
+        let (library, walks) = built::<SwitchWalk>(&regions, stops, kinds)?;
+        Ok(SwitchLoops {
+            walks,
+            regions: fields.len(),
+            surfaces: kinds.len(),
+            stops: stops.len(),
+            _library: library,
+        })
+    }
+}
+
+impl SwitchLoops {
+    /// [`Native::walk`](super::jit::Native::walk) for a model with general
+    /// surfaces: up to `steps` steps of W trajectories, slot k in region
+    /// `regions[k]` (none sliding or held), stopping before the first step
+    /// in which a live slot meets a stop or may cross a surface; `values`
+    /// holds the surfaces' values and rates at the states (read, and
+    /// written back where the loop stopped). `lanes` gives, for each region
+    /// present, its field's constants and its surfaces' (by `layout`, as
+    /// `Native::walk` takes `lane`); the others are never read. `None`
+    /// where there is no loop for W.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn walk<const W: usize, const D: usize>(
+        &self,
+        layout: Layout,
+        y: &mut [[f64; W]; D],
+        clock: &mut [f64],
+        lanes: &[[*const f64; 2]],
+        h: &[f64],
+        walls: &[f64],
+        live: u32,
+        steps: usize,
+        regions: &[u32; W],
+        values: &mut [[f64; W]],
+    ) -> Option<usize> {
+        let w = WALK_WIDTHS.iter().position(|&w| w == W)?;
+        let f = self.walks[w][layout as usize];
+        let per_slot = if layout == Layout::Shared { 1 } else { W };
+        assert!(
+            clock.len() >= 4
+                && lanes.len() == self.regions
+                && regions.iter().all(|&r| (r as usize) < self.regions)
+                && regions
+                    .iter()
+                    .all(|&r| lanes[r as usize].iter().all(|p| !p.is_null()))
+                && h.len() >= per_slot
+                && walls.len() >= self.stops * per_slot
+                && values.len() >= 2 * self.surfaces
+        );
+        let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
+        let region: [i64; W] = regions.map(i64::from);
+        // SAFETY: the loop reads and writes D·W states in `y`, the phase in
+        // `clock` and 2·surfaces rows of W in `values`; reads W regions
+        // (each below `self.regions`, checked), W masks, the step sizes and
+        // the stops' positions as `layout` lays them out, and the
+        // constants of the regions present (non-null, checked) through
+        // `lanes`; it was compiled for W, `layout`, this model's D states,
+        // regions, surfaces and stops.
+        let taken = unsafe {
+            f(
+                y.as_mut_ptr().cast(),
+                clock.as_mut_ptr(),
+                lanes.as_ptr().cast(),
+                h.as_ptr(),
+                walls.as_ptr(),
+                live.as_ptr(),
+                steps as u64,
+                region.as_ptr(),
+                values.as_mut_ptr().cast(),
+            )
+        };
+        Some(taken as usize)
+    }
+}
+
+/// One region's tapes: the field, and where the model has general
+/// surfaces, their values and rates along it.
+struct Region<'a> {
+    field: &'a Tape,
+    surfaces: Option<&'a Tape>,
+}
+
+/// The library of the step loops of `regions` (every width and layout),
+/// loaded with its callbacks set, and the loops, of type `T`.
+fn built<T: Copy>(
+    regions: &[Region],
+    stops: &[StopCode],
+    kinds: &[Surface],
+) -> Result<(libloading::Library, [[T; 2]; WALK_WIDTHS.len()]), String> {
+    // The functions called back into Rust, by their index in `calls`:
+    // the source holds no address, so one object serves every process.
+    let mut calls: Vec<Func> = Vec::new();
+    let tapes = regions
+        .iter()
+        .flat_map(|r| std::iter::once(r.field).chain(r.surfaces));
+    for tape in tapes {
         for ins in tape.lowered().0 {
             if let Code::Call(f) = ins.code {
                 if !matches!(f, Func::Sqrt | Func::Abs) && !calls.contains(&f) {
@@ -62,44 +225,41 @@ impl CLoops {
                 }
             }
         }
-        let mut source = format!(
-            "#include <stdint.h>\ntypedef double (*apply)(double, double);\n\
-             static apply calls[{n}];\n\
-             void set_calls(const apply *t) {{ for (int i = 0; i < {n}; i++) calls[i] = t[i]; }}\n",
-            n = calls.len().max(1)
-        );
-        for &w in &WALK_WIDTHS {
-            for layout in [Layout::Shared, Layout::Each] {
-                walk(&mut source, tape, &calls, stops, w, layout);
-            }
-        }
-        let library = compiled(&source)?;
-        let table: Vec<extern "C" fn(f64, f64) -> f64> =
-            calls.iter().map(|&f| callback(f)).collect();
-        // SAFETY: `set_calls` is defined above, reads `calls.len()`
-        // function pointers (C calling convention, two f64 to one) from
-        // the table; objects loaded twice share `calls`, and the same
-        // source sets the same table.
-        unsafe {
-            let set = library
-                .get::<unsafe extern "C" fn(*const extern "C" fn(f64, f64) -> f64)>(b"set_calls")
-                .map_err(|e| e.to_string())?;
-            set(table.as_ptr());
-        }
-        let walks = WALK_WIDTHS.map(|w| {
-            [Layout::Shared, Layout::Each].map(|layout| {
-                let name = format!("walk{w}{layout:?}");
-                // SAFETY: the source defines `name` with the `Walk`
-                // signature (C calling convention), and the library stays
-                // loaded while `CLoops` lives.
-                unsafe { *library.get::<Walk>(name.as_bytes()).expect("defined above") }
-            })
-        });
-        Ok(CLoops {
-            walks,
-            _library: library,
-        })
     }
+    let mut source = format!(
+        "#include <stdint.h>\ntypedef double (*apply)(double, double);\n\
+         static apply calls[{n}];\n\
+         void set_calls(const apply *t) {{ for (int i = 0; i < {n}; i++) calls[i] = t[i]; }}\n",
+        n = calls.len().max(1)
+    );
+    for &w in &WALK_WIDTHS {
+        for layout in [Layout::Shared, Layout::Each] {
+            walk(&mut source, regions, &calls, stops, kinds, w, layout);
+        }
+    }
+    let library = compiled(&source)?;
+    let table: Vec<extern "C" fn(f64, f64) -> f64> = calls.iter().map(|&f| callback(f)).collect();
+    // SAFETY: `set_calls` is defined above, reads `calls.len()` function
+    // pointers (C calling convention, two f64 to one) from the table;
+    // objects loaded twice share `calls`, and the same source sets the
+    // same table.
+    unsafe {
+        let set = library
+            .get::<unsafe extern "C" fn(*const extern "C" fn(f64, f64) -> f64)>(b"set_calls")
+            .map_err(|e| e.to_string())?;
+        set(table.as_ptr());
+    }
+    let walks = WALK_WIDTHS.map(|w| {
+        [Layout::Shared, Layout::Each].map(|layout| {
+            let name = format!("walk{w}{layout:?}");
+            // SAFETY: the source defines `name` with the signature of `T`
+            // (`Walk`, or `SwitchWalk` where the regions have surfaces;
+            // C calling convention), and the library stays loaded while
+            // the loops' owner lives.
+            unsafe { *library.get::<T>(name.as_bytes()).expect("defined above") }
+        })
+    });
+    Ok((library, walks))
 }
 
 /// The cached shared object built from `source`, loaded.
@@ -192,17 +352,25 @@ fn cache_dir() -> Result<PathBuf, String> {
 
 /// Appends `walk{w}{layout:?}`: `jit::walk`'s loop (the phase turned, the
 /// RK4 step, the stops detected) over `w` slots, a loop over the slots per
-/// step for the compiler to vectorise.
+/// step for the compiler to vectorise. Where the regions have surfaces it
+/// is a [`SwitchWalk`]: each slot steps its own region's field (every
+/// region present computed over the batch, each slot keeping its own's,
+/// as `ModelFlow::step_each_in` does), the surfaces' values and rates are
+/// taken at each step's end as `Flow::surface_values` takes them, and a
+/// step that may cross a surface (`surface::may_cross`) stops the loop.
 fn walk(
     out: &mut String,
-    tape: &Tape,
+    regions: &[Region],
     calls: &[Func],
     stops: &[StopCode],
+    kinds: &[Surface],
     w: usize,
     layout: Layout,
 ) {
-    let d = tape.states;
+    let d = regions[0].field.states;
     let each = layout == Layout::Each;
+    let switching = regions[0].surfaces.is_some();
+    let rows = 2 * kinds.len();
     // A value per slot (`Each`) or one for all (`Shared`), at row `r`.
     let row = |base: &str, r: usize| {
         if each {
@@ -211,11 +379,19 @@ fn walk(
             format!("{base}[{r}]")
         }
     };
+    let (lanes, extra) = if switching {
+        (
+            "const double *const *restrict lanes",
+            ", const int64_t *restrict region, double *restrict values",
+        )
+    } else {
+        ("const double *restrict lane", "")
+    };
     let _ = writeln!(
         out,
         "uint64_t walk{w}{layout:?}(double *restrict y, double *restrict clock, \
-         const double *restrict lane, const double *restrict h, \
-         const double *restrict walls, const int64_t *restrict live, uint64_t steps) {{"
+         {lanes}, const double *restrict h, \
+         const double *restrict walls, const int64_t *restrict live, uint64_t steps{extra}) {{"
     );
     for i in 0..d {
         let _ = writeln!(out, "  double y{i}[{w}];");
@@ -224,6 +400,47 @@ fn walk(
             "  for (int k = 0; k < {w}; k++) y{i}[k] = y[{} + k];",
             i * w
         );
+    }
+    if switching {
+        // Each region's constants: its field's (`lf`) and its surfaces'
+        // (`ls`); the regions present (fixed while the loop runs: a slot
+        // changes region only at a crossing, which stops it); each
+        // surface's orientation in each slot's region
+        // (`Surface::orientation`); the surfaces' values and rates at the
+        // step's start (`sb`) and end (`sa`), and the step's end (`z`).
+        for r in 0..regions.len() {
+            let _ = writeln!(
+                out,
+                "  const double *restrict lf{r} = lanes[{}], *restrict ls{r} = lanes[{}];",
+                2 * r,
+                2 * r + 1
+            );
+        }
+        let _ = writeln!(
+            out,
+            "  int64_t present = 0;\n  for (int k = 0; k < {w}; k++) present |= (int64_t)1 << region[k];"
+        );
+        for (j, kind) in kinds.iter().enumerate() {
+            let o = match kind {
+                Surface::Switch { bit } => format!("((region[k] >> {bit}) & 1) ? -1.0 : 1.0"),
+                Surface::Event => "1.0".into(),
+            };
+            let _ = writeln!(
+                out,
+                "  double so{j}[{w}];\n  for (int k = 0; k < {w}; k++) so{j}[k] = {o};"
+            );
+        }
+        for m in 0..rows {
+            let _ = writeln!(
+                out,
+                "  double sb{m}[{w}], sa{m}[{w}] = {{0}};\n  \
+                 for (int k = 0; k < {w}; k++) sb{m}[k] = values[{} + k];",
+                m * w
+            );
+        }
+        for i in 0..d {
+            let _ = writeln!(out, "  double z{i}[{w}] = {{0}};");
+        }
     }
     out.push_str(
         "  double c = clock[0], s = clock[1];\n  const double hc = clock[2], hs = clock[3];\n  uint64_t n = 0;\n  for (; n < steps; n++) {\n",
@@ -238,36 +455,78 @@ fn walk(
              double {c1} = {c1}_ * {c1}n, {s1} = {s1}_ * {c1}n;"
         );
     }
-    for i in 0..d {
-        let _ = writeln!(out, "    double z{i}[{w}];");
-    }
-    let _ = writeln!(
-        out,
-        "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
-    );
-    let _ = writeln!(
-        out,
-        "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
-        row("h", 0)
-    );
-    let state: Vec<String> = (0..d).map(|i| format!("y{i}[k]")).collect();
-    let k1 = rhs(out, tape, calls, "a", &state, ("c", "s"), &row);
-    let y2 = axpy(out, "b", &state, "h2", &k1);
-    let k2 = rhs(out, tape, calls, "c", &y2, ("mc", "ms"), &row);
-    let y3 = axpy(out, "d", &state, "h2", &k2);
-    let k3 = rhs(out, tape, calls, "e", &y3, ("mc", "ms"), &row);
-    let y4 = axpy(out, "f", &state, "hh", &k3);
-    let k4 = rhs(out, tape, calls, "g", &y4, ("ec", "es"), &row);
-    for i in 0..d {
-        // y + h/6·(k1 + 2(k2 + k3) + k4)
+    let step_sizes = |out: &mut String, indent: &str| {
         let _ = writeln!(
             out,
-            "      z{i}[k] = {y} + sixth * ((({k1} + 2.0 * ({k2} + {k3}))) + {k4});",
-            y = state[i],
-            k1 = k1[i],
-            k2 = k2[i],
-            k3 = k3[i],
-            k4 = k4[i],
+            "{indent}const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
+            row("h", 0)
+        );
+    };
+    let state: Vec<String> = (0..d).map(|i| format!("y{i}[k]")).collect();
+    if !switching {
+        for i in 0..d {
+            let _ = writeln!(out, "    double z{i}[{w}];");
+        }
+        let _ = writeln!(
+            out,
+            "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
+        );
+        step_sizes(out, "      ");
+        let lane = |_: &str, j: usize| row("lane", j);
+        let end = rk4(out, regions[0].field, calls, "", &state, &lane);
+        for (i, end) in end.iter().enumerate() {
+            let _ = writeln!(out, "      z{i}[k] = {end};");
+        }
+    } else {
+        // Every region present steps the whole batch; each slot keeps its
+        // own region's step, then its surfaces' values at the step's end.
+        let several = regions.len() > 1;
+        let guard = |r: usize| {
+            if several {
+                format!("if (present >> {r} & 1) ")
+            } else {
+                String::new()
+            }
+        };
+        let keep = |r: usize, value: &str, into: &str| {
+            if several {
+                format!("{into} = region[k] == {r} ? {value} : {into};")
+            } else {
+                format!("{into} = {value};")
+            }
+        };
+        for (r, region) in regions.iter().enumerate() {
+            let _ = writeln!(out, "    {}for (int k = 0; k < {w}; k++) {{", guard(r));
+            step_sizes(out, "      ");
+            let lane = |_: &str, j: usize| row(&format!("lf{r}"), j);
+            let end = rk4(out, region.field, calls, &format!("r{r}"), &state, &lane);
+            for (i, end) in end.iter().enumerate() {
+                let _ = writeln!(out, "      {}", keep(r, end, &format!("z{i}[k]")));
+            }
+            out.push_str("    }\n");
+        }
+        let at_end: Vec<String> = (0..d).map(|i| format!("z{i}[k]")).collect();
+        for (r, region) in regions.iter().enumerate() {
+            let tape = region.surfaces.expect("regions with surfaces");
+            let _ = writeln!(out, "    {}for (int k = 0; k < {w}; k++) {{", guard(r));
+            let lane = |_: &str, j: usize| row(&format!("ls{r}"), j);
+            let values = rhs(
+                out,
+                tape,
+                calls,
+                &format!("q{r}_"),
+                &at_end,
+                ("ec", "es"),
+                &lane,
+            );
+            for (m, value) in values.iter().enumerate() {
+                let _ = writeln!(out, "      {}", keep(r, value, &format!("sa{m}[k]")));
+            }
+            out.push_str("    }\n");
+        }
+        let _ = writeln!(
+            out,
+            "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
         );
     }
     // As `jit::walk` (and `integrate::steps`), in two passes: the plain
@@ -275,7 +534,15 @@ fn walk(
     // after the step, or turning back inside it), and where that fires
     // (a few steps in a hundred), the turns again, only those within reach
     // of the stop (`impact::may_turn_past`). Its arithmetic in every
-    // step cost the seed's oscillator a fifth of the loop.
+    // step cost the seed's oscillator a fifth of the loop. A surface's
+    // test (`surface::may_cross`) is the same in both passes.
+    let crossing = |j: usize| {
+        let (g, rate) = (2 * j, 2 * j + 1);
+        format!(
+            "(((so{j}[k] * sa{g}[k]) > 0.0) | (((so{j}[k] * sb{rate}[k]) > 0.0) \
+             & ((so{j}[k] * sa{rate}[k]) < 0.0)))"
+        )
+    };
     for (j, stop) in stops.iter().enumerate() {
         let (ci, vi) = (stop.coordinate, stop.velocity);
         let (out_of, into) = if stop.side > 0.0 {
@@ -290,6 +557,9 @@ fn walk(
              | ((y{vi}[k] {out_of} 0.0) & (z{vi}[k] {into} 0.0))) & live[k]; }}",
             p = row("walls", j)
         );
+    }
+    for j in 0..kinds.len() {
+        let _ = writeln!(out, "      hit |= {} & live[k];", crossing(j));
     }
     // The second pass: the gaps and speeds side·(x - p) and side·v are
     // exact for a side of ±1.
@@ -314,9 +584,18 @@ fn walk(
             reach = literal(TURN_REACH),
         );
     }
+    for j in 0..kinds.len() {
+        let _ = writeln!(out, "        near |= {} & live[k];", crossing(j));
+    }
     out.push_str("      }\n      if (near) break;\n    }\n");
     for i in 0..d {
         let _ = writeln!(out, "    for (int k = 0; k < {w}; k++) y{i}[k] = z{i}[k];");
+    }
+    for m in 0..rows {
+        let _ = writeln!(
+            out,
+            "    for (int k = 0; k < {w}; k++) sb{m}[k] = sa{m}[k];"
+        );
     }
     out.push_str("    c = ec;\n    s = es;\n  }\n");
     for i in 0..d {
@@ -326,7 +605,49 @@ fn walk(
             i * w
         );
     }
+    for m in 0..rows {
+        let _ = writeln!(
+            out,
+            "  for (int k = 0; k < {w}; k++) values[{} + k] = sb{m}[k];",
+            m * w
+        );
+    }
     out.push_str("  clock[0] = c;\n  clock[1] = s;\n  return n;\n}\n");
+}
+
+/// `rk4::step_batch`'s step of the slot whose states are `state`, with
+/// the field `tape` (its constants from `row`, its values named after
+/// `prefix`), inside a loop over the slots that has set `hh`, `h2` and
+/// `sixth`; gives each state's value after the step as a C expression.
+fn rk4(
+    out: &mut String,
+    tape: &Tape,
+    calls: &[Func],
+    prefix: &str,
+    state: &[String],
+    row: &dyn Fn(&str, usize) -> String,
+) -> Vec<String> {
+    let name = |p: &str| format!("{prefix}{p}");
+    let k1 = rhs(out, tape, calls, &name("a"), state, ("c", "s"), row);
+    let y2 = axpy(out, &name("b"), state, "h2", &k1);
+    let k2 = rhs(out, tape, calls, &name("c"), &y2, ("mc", "ms"), row);
+    let y3 = axpy(out, &name("d"), state, "h2", &k2);
+    let k3 = rhs(out, tape, calls, &name("e"), &y3, ("mc", "ms"), row);
+    let y4 = axpy(out, &name("f"), state, "hh", &k3);
+    let k4 = rhs(out, tape, calls, &name("g"), &y4, ("ec", "es"), row);
+    // y + h/6·(k1 + 2(k2 + k3) + k4)
+    (0..state.len())
+        .map(|i| {
+            format!(
+                "{y} + sixth * ((({k1} + 2.0 * ({k2} + {k3}))) + {k4})",
+                y = state[i],
+                k1 = k1[i],
+                k2 = k2[i],
+                k3 = k3[i],
+                k4 = k4[i],
+            )
+        })
+        .collect()
 }
 
 /// y + a·k, named `{prefix}{i}`.
@@ -528,6 +849,288 @@ mod tests {
                 same_walks::<8>(&c, &cranelift, layout, (wall, side));
                 same_walks::<16>(&c, &cranelift, layout, (wall, side));
             }
+        }
+    }
+
+    /// Two switches (four regions), a stop and an event on a surface that
+    /// moves with the clock.
+    const SWITCHING: &str = r#"
+name = "switching"
+states = ["x", "v"]
+[parameters]
+zeta = 0.05
+f = 2.5
+eta = 0.8
+ks = 4.0
+mu = 0.1
+[[switches]]
+name = "contact"
+surface = "x - 0.5"
+[[switches]]
+name = "moving"
+surface = "v - 0.3"
+[equations]
+x = "v"
+v = "-2*zeta*v - x - ks*(x - 0.5)*step(contact) - mu*sign(moving) + f*cos(eta*t)"
+[map]
+period = "2*pi/eta"
+[[events]]
+name = "stop"
+surface = "x - 1.5"
+reset = { v = "-0.8*v" }
+[[events]]
+name = "floor"
+surface = "-1.2 - x + 0.1*cos(eta*t)"
+reset = { v = "-0.9*v" }
+"#;
+
+    /// The regions' loop for W slots in `layout`, slot k in its own
+    /// region, against each slot stepped alone by its region's native
+    /// step (cranelift's: `ModelFlow::step_each_in`'s) with its surfaces'
+    /// values at each step's end and the integrator's detection (at rest
+    /// on or reaching a stop, `impact::reaches_wall`; crossing a surface,
+    /// `surface::may_cross`): the steps taken, the states, the phase and
+    /// the surfaces' values where it stopped, to the bit; walked on from
+    /// each stop one plain step at a time, as the integrator does.
+    fn same_as_stepped<const W: usize>(code: &crate::model::code::Code, layout: Layout) {
+        use crate::integrate::{impact, rk4, surface};
+        use crate::model::jit::Kind;
+        let loops = code
+            .switch_loops
+            .as_ref()
+            .expect("a period map with surfaces")
+            .as_ref()
+            .expect("built by the C compiler");
+        let each = layout == Layout::Each;
+        let per_slot = if each { W } else { 1 };
+        let defaults = &code.model.defaults;
+        let params: Vec<Vec<f64>> = (0..per_slot)
+            .map(|k| {
+                let mut p = defaults.clone();
+                p[2] = 0.8 + 0.01 * k as f64;
+                p
+            })
+            .collect();
+        let walls = crate::model::code::walls_at(code, &params[0]);
+        let regions = code.regions.len();
+        // Each region's constants, per slot of the layout; then side by
+        // side (row j: constant j of every slot) for `Each`.
+        let constants = |r: usize, surfaces: bool| -> Vec<Vec<f64>> {
+            let field = &code.regions[r];
+            let tape = if surfaces {
+                &field.surfaces
+            } else {
+                &field.equations
+            };
+            params
+                .iter()
+                .map(|p| tape.lane_values(p).constants)
+                .collect()
+        };
+        let laid_out = |c: &[Vec<f64>]| -> Vec<f64> {
+            (0..c[0].len())
+                .flat_map(|j| c.iter().map(move |slot| slot[j]))
+                .collect()
+        };
+        let field_constants: Vec<Vec<Vec<f64>>> =
+            (0..regions).map(|r| constants(r, false)).collect();
+        let surface_constants: Vec<Vec<Vec<f64>>> =
+            (0..regions).map(|r| constants(r, true)).collect();
+        let laid: Vec<[Vec<f64>; 2]> = (0..regions)
+            .map(|r| {
+                [
+                    laid_out(&field_constants[r]),
+                    laid_out(&surface_constants[r]),
+                ]
+            })
+            .collect();
+        let lanes: Vec<[*const f64; 2]> =
+            laid.iter().map(|[a, b]| [a.as_ptr(), b.as_ptr()]).collect();
+        let h: Vec<f64> = (0..per_slot)
+            .map(|k| std::f64::consts::TAU / params[k][2] / 200.0)
+            .collect();
+        let positions: Vec<f64> = walls
+            .iter()
+            .flat_map(|w| std::iter::repeat_n(w.position, per_slot))
+            .collect();
+        let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
+        let slot = |k: usize| if each { k } else { 0 };
+        // One slot's step and its surfaces' values at the end, alone.
+        let step = |r: usize, k: usize, phase: &[f64; 2], y: &[f64; 2]| {
+            let field = &code.regions[r];
+            let stages = rk4::stage_phases(phase, &half);
+            let y: [[f64; 1]; 2] = [[y[0]], [y[1]]];
+            let z: [[f64; 1]; 2] = field.native.as_ref().unwrap().call(
+                Kind::Step,
+                Layout::Shared,
+                &y,
+                stages.as_flattened(),
+                &field_constants[r][slot(k)],
+                &[h[slot(k)]],
+            );
+            let values: [[f64; 1]; 8] = field.surfaces_native.as_ref().unwrap().call(
+                Kind::Rhs,
+                Layout::Shared,
+                &z,
+                &stages[2],
+                &surface_constants[r][slot(k)],
+                &[],
+            );
+            ([z[0][0], z[1][0]], values.map(|v| v[0]), stages[2])
+        };
+        let values_at = |r: usize, k: usize, phase: &[f64; 2], y: &[f64; 2]| -> [f64; 8] {
+            let field = &code.regions[r];
+            let y: [[f64; 1]; 2] = [[y[0]], [y[1]]];
+            let values: [[f64; 1]; 8] = field.surfaces_native.as_ref().unwrap().call(
+                Kind::Rhs,
+                Layout::Shared,
+                &y,
+                phase,
+                &surface_constants[r][slot(k)],
+                &[],
+            );
+            values.map(|v| v[0])
+        };
+        let mut stopped = 0;
+        for region_of in [
+            |_: usize| 0u32,
+            |k: usize| (k % 4) as u32,
+            |k: usize| 3 - (k % 3) as u32,
+        ] {
+            let region: [u32; W] = std::array::from_fn(region_of);
+            for live in [(1u32 << W) - 1, 0b1010] {
+                let start: [[f64; W]; 2] = [
+                    std::array::from_fn(|k| 0.05 * k as f64 - 0.3),
+                    std::array::from_fn(|k| 0.02 * k as f64 - 0.1),
+                ];
+                let phase0 = [0.3f64.cos(), 0.3f64.sin()];
+                // The walk, from every stop on by one plain step.
+                let (mut y, mut clock) = (start, [phase0[0], phase0[1], half[0], half[1]]);
+                let mut values = [[0.0; W]; 8];
+                for k in 0..W {
+                    let v = values_at(region[k] as usize, k, &phase0, &[y[0][k], y[1][k]]);
+                    for m in 0..8 {
+                        values[m][k] = v[m];
+                    }
+                }
+                // The reference, slot by slot.
+                let mut reference_y = start;
+                let mut reference_phase = phase0;
+                let mut reference_values = values;
+                for _ in 0..6 {
+                    let taken = loops
+                        .walk(
+                            layout,
+                            &mut y,
+                            &mut clock,
+                            &lanes,
+                            &h,
+                            &positions,
+                            live,
+                            400,
+                            &region,
+                            &mut values,
+                        )
+                        .expect("a loop for W");
+                    // The reference to the step where a live slot stops.
+                    let mut steps = 0;
+                    loop {
+                        let mut next_y = reference_y;
+                        let mut next_values = reference_values;
+                        let mut end = reference_phase;
+                        let mut meets = false;
+                        for k in 0..W {
+                            let r = region[k] as usize;
+                            let y0 = [reference_y[0][k], reference_y[1][k]];
+                            let (z, after, e) = step(r, k, &reference_phase, &y0);
+                            end = e;
+                            next_y[0][k] = z[0];
+                            next_y[1][k] = z[1];
+                            for m in 0..8 {
+                                next_values[m][k] = after[m];
+                            }
+                            let hit = impact::resting_on(&walls, &y0).is_some()
+                                || walls
+                                    .iter()
+                                    .any(|w| impact::reaches_wall(w, &y0, h[slot(k)], &z))
+                                || code.kinds.iter().enumerate().any(|(j, &kind)| {
+                                    surface::may_cross(
+                                        kind,
+                                        region[k],
+                                        (
+                                            reference_values[2 * j][k],
+                                            reference_values[2 * j + 1][k],
+                                        ),
+                                        (after[2 * j], after[2 * j + 1]),
+                                    )
+                                });
+                            meets |= hit && live >> k & 1 == 1;
+                        }
+                        if meets || steps == 400 {
+                            break;
+                        }
+                        reference_y = next_y;
+                        reference_values = next_values;
+                        reference_phase = end;
+                        steps += 1;
+                    }
+                    let bits = |y: &[[f64; W]; 2], p: &[f64], v: &[[f64; W]; 8]| -> Vec<u64> {
+                        let mut b: Vec<u64> =
+                            y.as_flattened().iter().map(|v| v.to_bits()).collect();
+                        b.extend(p[..2].iter().map(|v| v.to_bits()));
+                        b.extend(
+                            v[..2 * code.kinds.len()]
+                                .as_flattened()
+                                .iter()
+                                .map(|v| v.to_bits()),
+                        );
+                        b
+                    };
+                    let context = format!("W = {W}, {layout:?}, regions {region:?}, live {live:b}");
+                    assert_eq!(taken, steps, "{context}");
+                    assert_eq!(
+                        bits(&y, &clock, &values),
+                        bits(&reference_y, &reference_phase, &reference_values),
+                        "{context}"
+                    );
+                    if taken == 400 {
+                        break;
+                    }
+                    stopped += 1;
+                    // One plain step past the stop, on both.
+                    for k in 0..W {
+                        let r = region[k] as usize;
+                        let (z, after, end) = step(r, k, &reference_phase, &[y[0][k], y[1][k]]);
+                        y[0][k] = z[0];
+                        y[1][k] = z[1];
+                        for m in 0..8 {
+                            values[m][k] = after[m];
+                        }
+                        clock[0] = end[0];
+                        clock[1] = end[1];
+                    }
+                    reference_y = y;
+                    reference_values = values;
+                    reference_phase = [clock[0], clock[1]];
+                }
+            }
+        }
+        assert!(stopped > 10, "the loop stopped {stopped} times");
+    }
+
+    #[test]
+    #[cfg(all(unix, target_arch = "x86_64"))]
+    fn the_regions_step_loop_is_each_region_s_step_to_the_bit() {
+        let table: toml::Value = toml::from_str(SWITCHING).unwrap();
+        let model = crate::model::Model::parse(&table, "model").unwrap();
+        let code = crate::model::code::Code::compile(model, "model").unwrap();
+        assert_eq!(code.regions.len(), 4);
+        assert_eq!(code.walls.len(), 1);
+        assert_eq!(code.kinds.len(), 3);
+        for layout in [Layout::Shared, Layout::Each] {
+            same_as_stepped::<4>(&code, layout);
+            same_as_stepped::<8>(&code, layout);
+            same_as_stepped::<16>(&code, layout);
         }
     }
 

@@ -17,8 +17,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::c_loop::SwitchLoops;
 use super::expr::{Expr, Var, Written};
-use super::jit::{Native, StopCode};
+use super::jit::{step_loops, Loops, Native, StopCode};
 pub(crate) use super::tape::reads_state_or_time;
 use super::tape::Tape;
 use super::{Map, Model};
@@ -60,6 +61,10 @@ pub struct Code {
     /// The field of every region of the switches (one without switches),
     /// indexed by the region's bits.
     pub regions: Vec<Field>,
+    /// The regions' step loop with the surfaces' detection where the map
+    /// is a period map with general surfaces: the C compiler's, or why it
+    /// did not build it.
+    pub switch_loops: Option<std::result::Result<SwitchLoops, String>>,
     /// ω of the model's forcing clock: the equations' `cos(w*t)`, or else
     /// a moving surface's (a wall vibrating at w).
     pub clock: Option<Expr>,
@@ -338,20 +343,18 @@ impl Code {
         let kinds: Vec<Surface> = surfaces.iter().map(|s| s.kind).collect();
         // A period map without general surfaces steps in a loop of native
         // code between the steps that meet a stop (`Flow::walk_shared`).
-        let stepping: Option<Vec<StopCode>> =
-            (section.is_none() && surfaces.is_empty()).then(|| {
-                walls
-                    .iter()
-                    .map(|w: &Stop| StopCode {
-                        coordinate: w.coordinate,
-                        velocity: w.velocity,
-                        side: w.side,
-                    })
-                    .collect()
-            });
+        let stop_codes: Vec<StopCode> = walls
+            .iter()
+            .map(|w: &Stop| StopCode {
+                coordinate: w.coordinate,
+                velocity: w.velocity,
+                side: w.side,
+            })
+            .collect();
+        let stepping = (section.is_none() && surfaces.is_empty()).then_some(&stop_codes[..]);
         let regions = (0..1u32 << model.switches.len())
             .map(|r| {
-                let stops = stepping.as_deref();
+                let stops = stepping;
                 field(
                     &model,
                     &surfaces,
@@ -411,6 +414,20 @@ impl Code {
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
+        // With general surfaces, the same between the steps that meet a
+        // stop or may cross a surface, in a loop of every region's field
+        // (`Flow::walk_shared`); only the C compiler builds it, and
+        // without it the step loop of `integrate` takes every step.
+        let switch_loops = match (section.is_none() && !surfaces.is_empty(), step_loops()) {
+            (true, Loops::CCompiler) => {
+                let fields: Vec<(&Tape, &Tape)> = regions
+                    .iter()
+                    .map(|f| (&f.equations, &f.surfaces))
+                    .collect();
+                Some(SwitchLoops::build(&fields, &stop_codes, &kinds))
+            }
+            _ => None,
+        };
         let is_piecewise_linear = section_free_linear(&model, &regions, &surfaces);
         let clock = equations
             .frequency
@@ -429,6 +446,7 @@ impl Code {
             surfaces,
             kinds,
             regions,
+            switch_loops,
         })
     }
 

@@ -226,6 +226,22 @@ pub fn describe(code: &Code) -> String {
             let _ = writeln!(w, "CPU: the step loop between stops is {loops}");
         }
     }
+    match &code.switch_loops {
+        Some(Ok(_)) => {
+            let _ = writeln!(
+                w,
+                "CPU: the step loop between stops and crossings is built by the C compiler for \
+                 this machine's vectors"
+            );
+        }
+        Some(Err(why)) => {
+            let _ = writeln!(
+                w,
+                "CPU: the integrator's own loop takes every step (the C compiler failed: {why})"
+            );
+        }
+        None => {}
+    }
     match wgsl::system_source(code) {
         Ok(source) => {
             let how = if code.section.is_some() {

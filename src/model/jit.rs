@@ -82,6 +82,17 @@ pub enum Loops {
 /// (`integrate::LANE_BATCH`).
 pub(crate) const WALK_WIDTHS: [usize; 3] = [4, 8, 16];
 
+/// The compiler asked for the step loops: the C compiler's, unless
+/// `LYAPSWEEP_STEP_LOOPS=cranelift` (the benchmark's baseline, and a way
+/// round a C compiler that misbehaves; a model with general surfaces then
+/// has no step loop of its own).
+pub fn step_loops() -> Loops {
+    match std::env::var("LYAPSWEEP_STEP_LOOPS").as_deref() {
+        Ok("cranelift") => Loops::Cranelift,
+        _ => Loops::CCompiler,
+    }
+}
+
 /// What a compiled function computes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -168,11 +179,7 @@ impl Native {
     /// `LYAPSWEEP_STEP_LOOPS=cranelift` asks for them (the benchmark's
     /// baseline, and a way round a C compiler that misbehaves).
     pub fn compile_stepping(tape: &Tape, stops: Option<&[StopCode]>) -> Option<Native> {
-        let loops = match std::env::var("LYAPSWEEP_STEP_LOOPS").as_deref() {
-            Ok("cranelift") => Loops::Cranelift,
-            _ => Loops::CCompiler,
-        };
-        Native::compile_stepping_by(tape, stops, loops)
+        Native::compile_stepping_by(tape, stops, step_loops())
     }
 
     /// [`compile_stepping`](Self::compile_stepping) with the step loops

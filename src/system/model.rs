@@ -17,7 +17,8 @@ use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
 use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{
-    part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues, Wall,
+    part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues,
+    Switching, Wall,
 };
 use crate::model::code::{piecewise_linear, reads_state_or_time, walls_at, Code};
 use crate::model::expr::{Expr, Var};
@@ -465,7 +466,8 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     }
 
     /// The equations' native step loop ([`Native::walk`]), compiled for a
-    /// period map without general surfaces, with its stops.
+    /// period map without general surfaces, with its stops; with them, the
+    /// regions' loop of the C compiler ([`SwitchLoops::walk`]).
     #[inline(always)]
     fn walk_shared<const W: usize>(
         &self,
@@ -475,24 +477,48 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         h: f64,
         live: u32,
         steps: usize,
+        switching: Option<Switching<'_, W>>,
     ) -> Option<usize> {
-        let native = self.code.regions[0].native.as_ref()?;
         let mut walls = [0.0; crate::integrate::impact::MAX_WALLS];
         for (j, wall) in self.walls.iter().enumerate() {
             walls[j] = wall.position;
         }
         let mut clock = [phase[0], phase[1], half[0], half[1]];
-        let constants = &self.constants[0];
-        let taken = native.walk(
-            Layout::Shared,
-            y,
-            &mut clock,
-            constants,
-            &[h],
-            &walls,
-            live,
-            steps,
-        );
+        let taken = match switching {
+            None => self.code.regions[0].native.as_ref()?.walk(
+                Layout::Shared,
+                y,
+                &mut clock,
+                &self.constants[0],
+                &[h],
+                &walls,
+                live,
+                steps,
+            ),
+            Some(Switching { regions, values }) => {
+                let loops = self.code.switch_loops.as_ref()?.as_ref().ok()?;
+                let mut lanes = [[std::ptr::null(); 2]; 1 << MAX_SURFACES];
+                let count = self.constants.len();
+                for (r, lane) in lanes[..count].iter_mut().enumerate() {
+                    *lane = [
+                        self.constants[r].as_ptr(),
+                        self.surface_constants[r].as_ptr(),
+                    ];
+                }
+                loops.walk(
+                    Layout::Shared,
+                    y,
+                    &mut clock,
+                    &lanes[..count],
+                    &[h],
+                    &walls,
+                    live,
+                    steps,
+                    &regions,
+                    &mut values.rows,
+                )
+            }
+        };
         *phase = [clock[0], clock[1]];
         taken
     }
@@ -506,20 +532,17 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         h: &[f64; W],
         live: u32,
         steps: usize,
+        switching: Option<Switching<'_, W>>,
     ) -> Option<usize> {
-        let native = flows[0].code.regions[0].native.as_ref()?;
-        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[0].as_slice());
         // The loop turns one phase for every slot: lanes on the same grid
         // share it to the bit (`clock::half_turn`); others step one step
         // at a time.
         let bits = |p: &Phase| p.map(f64::to_bits);
         let one_phase = (1..W)
             .all(|k| bits(&phases[k]) == bits(&phases[0]) && bits(&half[k]) == bits(&half[0]));
-        if slots[0].len() > EACH_CONSTANTS || !one_phase {
+        if !one_phase {
             return None;
         }
-        let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
-        let lane = side_by_side(&slots, &mut scratch);
         let mut clock = [phases[0][0], phases[0][1], half[0][0], half[0][1]];
         // Rows of W: each wall's position (its side is compiled in).
         let mut walls = [[0.0; W]; crate::integrate::impact::MAX_WALLS];
@@ -528,16 +551,66 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
                 walls[j][k] = wall.position;
             }
         }
-        let taken = native.walk(
-            Layout::Each,
-            y,
-            &mut clock,
-            lane.as_flattened(),
-            h,
-            walls.as_flattened(),
-            live,
-            steps,
-        );
+        let taken = match switching {
+            None => {
+                let native = flows[0].code.regions[0].native.as_ref()?;
+                let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[0].as_slice());
+                if slots[0].len() > EACH_CONSTANTS {
+                    return None;
+                }
+                let mut scratch = [MaybeUninit::uninit(); EACH_CONSTANTS];
+                let lane = side_by_side(&slots, &mut scratch);
+                native.walk(
+                    Layout::Each,
+                    y,
+                    &mut clock,
+                    lane.as_flattened(),
+                    h,
+                    walls.as_flattened(),
+                    live,
+                    steps,
+                )
+            }
+            Some(Switching { regions, values }) => {
+                let loops = flows[0].code.switch_loops.as_ref()?.as_ref().ok()?;
+                // The constants of the regions present, side by side (the
+                // loop reads no other region's); past a few regions at
+                // once, the step loop of `integrate` takes the steps.
+                let mut scratch = [[MaybeUninit::uninit(); EACH_CONSTANTS]; 2 * PRESENT_REGIONS];
+                let mut free = scratch.iter_mut();
+                let mut lanes = [[std::ptr::null(); 2]; 1 << MAX_SURFACES];
+                let count = flows[0].constants.len();
+                for (r, lane) in lanes[..count].iter_mut().enumerate() {
+                    if !regions.contains(&(r as u32)) {
+                        continue;
+                    }
+                    let field: [&[f64]; W] =
+                        std::array::from_fn(|k| flows[k].constants[r].as_slice());
+                    let surfaces: [&[f64]; W] =
+                        std::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
+                    if field[0].len().max(surfaces[0].len()) > EACH_CONSTANTS {
+                        return None;
+                    }
+                    let (a, b) = (free.next()?, free.next()?);
+                    *lane = [
+                        side_by_side(&field, a).as_ptr().cast(),
+                        side_by_side(&surfaces, b).as_ptr().cast(),
+                    ];
+                }
+                loops.walk(
+                    Layout::Each,
+                    y,
+                    &mut clock,
+                    &lanes[..count],
+                    h,
+                    walls.as_flattened(),
+                    live,
+                    steps,
+                    &regions,
+                    &mut values.rows,
+                )
+            }
+        };
         *phases = [[clock[0], clock[1]]; W];
         taken
     }
@@ -613,6 +686,11 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         out
     }
 }
+
+/// The most regions whose constants [`ModelFlow::walk_each`] gathers for
+/// the regions' step loop at once (on the stack, per call); a batch with
+/// more present steps in the step loop of `integrate`.
+const PRESENT_REGIONS: usize = 4;
 
 /// The most lane constants [`ModelFlow::step_each`] gathers for the native
 /// code (on the stack, per step); a model with more runs the interpreter.
