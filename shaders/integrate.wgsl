@@ -115,7 +115,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             let after = surface_values(p, inc.phase, y1);
-            if (crosses_a_surface(p.region, before, after)) {
+            if (crosses_a_surface(p.region, before, after, h)) {
                 pending = true;
                 break;
             }

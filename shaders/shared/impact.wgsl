@@ -903,26 +903,30 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
     return region;
 }
 
-// Whether a step from values `before` to `after` may cross surface j: its
-// end lies across, or its rate turns from approaching to leaving inside it
-// (surface::may_cross).
-fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues) -> bool {
+// Whether a step of size h from values `before` to `after` may cross
+// surface j: its end lies across, or its rate turns from approaching to
+// leaving inside it within reach of the surface (surface::may_cross).
+fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
     let o = orientation(region, j);
-    return o * after.g[j] > real(0.0) || (o * before.rate[j] > real(0.0) && o * after.rate[j] < real(0.0));
+    let g0 = o * before.g[j];
+    let s0 = o * before.rate[j];
+    let g1 = o * after.g[j];
+    let s1 = o * after.rate[j];
+    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
 }
 
 // The step loop's test over every surface, written out per surface as the
 // stops' is (SURFACES is a constant).
-fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues) -> bool {
-    var hit = may_cross(region, 0u, before, after);
+fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
+    var hit = may_cross(region, 0u, before, after, h);
     if (SURFACES > 1u) {
-        hit = hit || may_cross(region, 1u, before, after);
+        hit = hit || may_cross(region, 1u, before, after, h);
     }
     if (SURFACES > 2u) {
-        hit = hit || may_cross(region, 2u, before, after);
+        hit = hit || may_cross(region, 2u, before, after, h);
     }
     if (SURFACES > 3u) {
-        hit = hit || may_cross(region, 3u, before, after);
+        hit = hit || may_cross(region, 3u, before, after, h);
     }
     return hit;
 }
@@ -951,6 +955,11 @@ fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State,
     var scale = real(1.0);
     for (var i = 0u; i < DIM; i = i + 1u) {
         scale = max(scale, abs(y0[i]));
+    }
+    // A turn out of reach of the surface cannot cross it (as the CPU's
+    // resolve skips it).
+    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
+        return Hit(false, real(0.0), y0);
     }
     // Turning back inside the step: the first re-step, to the Hermite
     // peak, decides whether the excursion crosses (as locate_newton, every

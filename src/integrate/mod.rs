@@ -846,8 +846,13 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 let (g0, rate0) = (before.g(j), before.rate(j));
                 let (g1, rate1) = (after.g(j), after.rate(j));
                 for k in 0..W {
-                    hits[k] |=
-                        surface::may_cross(kind, regions[k], (g0[k], rate0[k]), (g1[k], rate1[k]));
+                    hits[k] |= surface::may_cross(
+                        kind,
+                        regions[k],
+                        (g0[k], rate0[k]),
+                        (g1[k], rate1[k]),
+                        h[k],
+                    );
                 }
             }
             for (k, &hit) in hits.iter().enumerate() {

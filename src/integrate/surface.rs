@@ -629,16 +629,26 @@ impl<const D: usize, F: Flow<D>> Flow<D> for InRegion<'_, F> {
     }
 }
 
-/// Whether a step from values `before` to `after` (oriented by the
-/// trajectory's region) may cross surface j: its end lies across, or its
-/// rate turns from approaching to leaving inside the step.
+/// Whether a step of size h from values `before` to `after` (oriented by
+/// the trajectory's region) may cross surface j: its end lies across, or
+/// its rate turns from approaching to leaving inside the step within reach
+/// of the surface (`impact::may_turn_past`: the rate is g's derivative
+/// along the motion, as a stop's speed is its gap's, so the same bound on
+/// the step's cubic holds).
 ///
 /// (Bitwise `|` and `&`, not `||` and `&&`: the same answer without
 /// branches, so the step loop's test over a batch's slots vectorises.)
 #[inline(always)]
-pub fn may_cross(kind: Surface, region: u32, before: (f64, f64), after: (f64, f64)) -> bool {
+pub fn may_cross(
+    kind: Surface,
+    region: u32,
+    before: (f64, f64),
+    after: (f64, f64),
+    h: f64,
+) -> bool {
     let o = kind.orientation(region);
-    (o * after.0 > 0.0) | ((o * before.1 > 0.0) & (o * after.1 < 0.0))
+    let (g0, r0, g1, r1) = (o * before.0, o * before.1, o * after.0, o * after.1);
+    (g1 > 0.0) | ((r0 > 0.0) & (r1 < 0.0) & super::impact::may_turn_past(g0, r0, g1, r1, h))
 }
 
 /// ln |det S| of an event's crossing: the reset's Jacobian `dr` and rate

@@ -535,7 +535,7 @@ fn walk(
     // (a few steps in a hundred), the turns again, only those within reach
     // of the stop (`impact::may_turn_past`). Its arithmetic in every
     // step cost the seed's oscillator a fifth of the loop. A surface's
-    // test (`surface::may_cross`) is the same in both passes.
+    // test (`surface::may_cross`) is the same: the plain one first.
     let crossing = |j: usize| {
         let (g, rate) = (2 * j, 2 * j + 1);
         format!(
@@ -584,8 +584,20 @@ fn walk(
             reach = literal(TURN_REACH),
         );
     }
+    // A surface's turn counts, as a stop's, only within reach of it
+    // (`surface::may_cross`, the same operations).
     for j in 0..kinds.len() {
-        let _ = writeln!(out, "        near |= {} & live[k];", crossing(j));
+        let (g, rate) = (2 * j, 2 * j + 1);
+        let _ = writeln!(
+            out,
+            "        {{ const double o = so{j}[k];\n          \
+             const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
+             const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];\n          \
+             const double reach = {reach} * hh * (s0 - s1);\n          \
+             near |= ((g1 > 0.0) \
+             | ((s0 > 0.0) & (s1 < 0.0) & !((g0 + reach < 0.0) & (g1 + reach < 0.0)))) & live[k]; }}",
+            reach = literal(TURN_REACH),
+        );
     }
     out.push_str("      }\n      if (near) break;\n    }\n");
     for i in 0..d {
@@ -1062,6 +1074,7 @@ reset = { v = "-0.9*v" }
                                             reference_values[2 * j + 1][k],
                                         ),
                                         (after[2 * j], after[2 * j + 1]),
+                                        h[slot(k)],
                                     )
                                 });
                             meets |= hit && live >> k & 1 == 1;
