@@ -6,7 +6,7 @@
 mod common;
 
 use lyapsweep::backend::method_settings;
-use lyapsweep::method::{runner, Lane};
+use lyapsweep::method::runner;
 use lyapsweep::scene::{Backend, Precision};
 
 /// Every lane of `scene` run alone and with its neighbours; the results'
@@ -15,12 +15,7 @@ use lyapsweep::scene::{Backend, Precision};
 fn assert_lanes_together_are_lanes_alone(name: &str, overrides: &[&str]) {
     let scene = common::committed_scene(name, overrides);
     let settings = method_settings(&scene, Backend::Cpu, Precision::F64);
-    let lanes: Vec<Lane> = (0..scene.lane_count())
-        .map(|k| Lane {
-            params: scene.lane_params(k),
-            settings: &settings,
-        })
-        .collect();
+    let lanes = common::cpu_lanes(&scene, &settings);
     let run = runner(scene.system);
     let together: Vec<String> = lanes
         .chunks(8)

@@ -34,12 +34,7 @@ fn assert_the_regions_loop_changes_nothing(name: &str, overrides: &[&str]) {
     code.switch_loops = None;
     let without = lyapsweep::system::model::info(code);
     let settings = method_settings(&scene, Backend::Cpu, Precision::F64);
-    let lanes: Vec<Lane> = (0..scene.lane_count())
-        .map(|k| Lane {
-            params: scene.lane_params(k),
-            settings: &settings,
-        })
-        .collect();
+    let lanes = common::cpu_lanes(&scene, &settings);
     let lanes_without: Vec<Lane> = lanes
         .iter()
         .map(|lane| Lane {

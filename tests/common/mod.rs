@@ -10,6 +10,20 @@ pub fn scene(text: &str, overrides: &[&str]) -> Scene {
     scene::parse(text, "test scene", "test", &overrides).expect("test scene is valid")
 }
 
+/// Every lane of `scene` with the CPU path's f64 settings `settings`
+/// (`backend::method_settings`), in sweep order.
+pub fn cpu_lanes<'a>(
+    scene: &Scene,
+    settings: &'a lyapsweep::method::MethodSettings,
+) -> Vec<lyapsweep::method::Lane<'a>> {
+    (0..scene.lane_count())
+        .map(|k| lyapsweep::method::Lane {
+            params: scene.lane_params(k),
+            settings,
+        })
+        .collect()
+}
+
 /// Loads a committed scene from scenes/.
 pub fn committed_scene(name: &str, overrides: &[&str]) -> Scene {
     let overrides: Vec<String> = overrides.iter().map(|s| s.to_string()).collect();
