@@ -1,5 +1,7 @@
 //! A field's step loop ([`Walk`]) written in C and built by the host's C
-//! compiler for the host's own vector width.
+//! compiler for the host's own vector width; and for a model with general
+//! surfaces, the loop over its regions that also detects them
+//! ([`SwitchWalk`]).
 //!
 //! Cranelift emits 128-bit vectors only: its loop over eight slots ran 9.2
 //! ns per slot-step on the seed's oscillator (an AVX-512 Xeon), the same
@@ -576,12 +578,10 @@ fn walk(
             "        {{ const double p = {p}, side = {side};\n          \
              const double g0 = side * (y{ci}[k] - p), s0 = side * y{vi}[k];\n          \
              const double g1 = side * (z{ci}[k] - p), s1 = side * z{vi}[k];\n          \
-             const double reach = {reach} * hh * (s0 - s1);\n          \
-             near |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | (g1 > 0.0) \
-             | ((s0 > 0.0) & (s1 < 0.0) & !((g0 + reach < 0.0) & (g1 + reach < 0.0)))) & live[k]; }}",
+             near |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | {crosses}) & live[k]; }}",
             p = row("walls", j),
             side = literal(stop.side),
-            reach = literal(TURN_REACH),
+            crosses = reaches_across(),
         );
     }
     // A surface's turn counts, as a stop's, only within reach of it
@@ -593,10 +593,8 @@ fn walk(
             "        {{ const double o = so{j}[k];\n          \
              const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
              const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];\n          \
-             const double reach = {reach} * hh * (s0 - s1);\n          \
-             near |= ((g1 > 0.0) \
-             | ((s0 > 0.0) & (s1 < 0.0) & !((g0 + reach < 0.0) & (g1 + reach < 0.0)))) & live[k]; }}",
-            reach = literal(TURN_REACH),
+             near |= {crosses} & live[k]; }}",
+            crosses = reaches_across(),
         );
     }
     out.push_str("      }\n      if (near) break;\n    }\n");
@@ -625,6 +623,18 @@ fn walk(
         );
     }
     out.push_str("  clock[0] = c;\n  clock[1] = s;\n  return n;\n}\n");
+}
+
+/// Whether a step whose oriented distance and rate go from `g0`, `s0` to
+/// `g1`, `s1` (C values in scope, as `hh`) ends across, or turns back
+/// within reach (`impact::may_turn_past`): the same operations, a C
+/// expression of 0 or 1.
+fn reaches_across() -> String {
+    format!(
+        "((g1 > 0.0) | ((s0 > 0.0) & (s1 < 0.0) \
+         & !((g0 + {reach} * hh * (s0 - s1) < 0.0) & (g1 + {reach} * hh * (s0 - s1) < 0.0))))",
+        reach = literal(TURN_REACH)
+    )
 }
 
 /// `rk4::step_batch`'s step of the slot whose states are `state`, with
