@@ -193,6 +193,23 @@ pub trait Flow<const D: usize>: Sync {
         self.rhs(phase, y)
     }
 
+    /// One RK4 step ([`rk4::step_at`]) of one trajectory: the impact
+    /// code's re-steps of partial size. A flow whose evaluation has a cost
+    /// per call takes it in one call (`step_one_in`) rather than four.
+    #[inline(always)]
+    fn step_one(&self, stages: &[Phase; 3], y: &[f64; D], h: f64) -> [f64; D] {
+        rk4::step_at(self, stages, y, h)
+    }
+
+    /// [`step_one`](Self::step_one) in region `region` of the switches.
+    #[inline(always)]
+    fn step_one_in(&self, region: u32, stages: &[Phase; 3], y: &[f64; D], h: f64) -> [f64; D]
+    where
+        Self: Sized,
+    {
+        rk4::step_at(&surface::InRegion { flow: self, region }, stages, y, h)
+    }
+
     /// [`step_shared`](Self::step_shared) in region `region`.
     #[inline(always)]
     fn step_shared_in<const W: usize>(

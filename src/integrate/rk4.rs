@@ -8,7 +8,8 @@ use super::Flow;
 /// `half` is the rotation through ωh/2:
 /// k1 = F(t, y), k2 = F(t + h/2, y + h/2·k1), k3 = F(t + h/2, y + h/2·k2),
 /// k4 = F(t + h, y + h·k3), y + h/6·(k1 + 2k2 + 2k3 + k4).
-/// Returns the new state and the phase at t + h.
+/// Returns the new state and the phase at t + h. The flow takes the step
+/// ([`Flow::step_one`]): a compiled model in one native call.
 #[inline]
 pub fn step<const D: usize, F: Flow<D> + ?Sized>(
     flow: &F,
@@ -18,7 +19,7 @@ pub fn step<const D: usize, F: Flow<D> + ?Sized>(
     h: f64,
 ) -> ([f64; D], Phase) {
     let phases = stage_phases(phase, half);
-    (step_at(flow, &phases, y, h), phases[2])
+    (flow.step_one(&phases, y, h), phases[2])
 }
 
 /// The forcing phases at t, t + h/2 and t + h, shared by every trajectory

@@ -620,6 +620,11 @@ impl<const D: usize, F: Flow<D>> Flow<D> for InRegion<'_, F> {
         self.flow.rhs_in(self.region, phase, y)
     }
 
+    #[inline(always)]
+    fn step_one(&self, stages: &[Phase; 3], y: &[f64; D], h: f64) -> [f64; D] {
+        self.flow.step_one_in(self.region, stages, y, h)
+    }
+
     fn forcing_frequency(&self) -> f64 {
         self.flow.forcing_frequency()
     }
