@@ -277,6 +277,13 @@ pub struct ModelFlow<const D: usize> {
     frequency: f64,
     period: f64,
     walls: Vec<Wall>,
+    /// Each surface's gradient where it reads neither state nor time, and
+    /// each switch's stick limit where it does not read the state, at
+    /// these parameters: the sliding of a friction model asks for both at
+    /// every stage of every step, and walking their trees (a `Vec` per
+    /// call of a function) took a twentieth of the friction belt's time.
+    constant_gradients: Vec<Option<Vec<f64>>>,
+    constant_stick_limits: Vec<Option<f64>>,
     /// The exact backend's propagator of the lane, where the model has
     /// one, built when that backend first asks.
     exact: std::sync::OnceLock<Option<Exact>>,
@@ -418,6 +425,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     // load, which waited for them (a store-forward stall).
     #[inline(always)]
     fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
+        if let Some(gradient) = &self.constant_gradients[j] {
+            return std::array::from_fn(|i| gradient[i]);
+        }
         let s = &self.code.surfaces[j];
         // (A gradient that does not read t is the same at any t.)
         let t = if s.gradient_reads_time {
@@ -429,6 +439,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     }
 
     fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
+        if let Some(limit) = self.constant_stick_limits[j] {
+            return Some(limit);
+        }
         self.code.surfaces[j]
             .stick_limit
             .as_ref()
@@ -860,6 +873,26 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             frequency: code.frequency(&p.values),
             period: code.period(&p.values),
             walls: walls_at(code, &p.values),
+            constant_gradients: code
+                .surfaces
+                .iter()
+                .map(|s| {
+                    s.gradient.iter().all(|e| !reads_state_or_time(e)).then(|| {
+                        s.gradient
+                            .iter()
+                            .map(|e| e.eval(&[], &p.values, 0.0))
+                            .collect()
+                    })
+                })
+                .collect(),
+            constant_stick_limits: code
+                .surfaces
+                .iter()
+                .map(|s| match &s.stick_limit {
+                    Some(l) if !reads_state_or_time(l) => Some(l.eval(&[], &p.values, 0.0)),
+                    _ => None,
+                })
+                .collect(),
             exact: std::sync::OnceLock::new(),
             info: p.info,
         }
