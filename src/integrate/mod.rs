@@ -210,6 +210,19 @@ pub trait Flow<const D: usize>: Sync {
         rk4::step_at(&surface::InRegion { flow: self, region }, stages, y, h)
     }
 
+    /// One RK4 step of one trajectory sliding on the switches of `set`
+    /// (`rk4::step_at` of [`surface::Sliding`]), where the flow has it
+    /// compiled: the same bits, or `None`.
+    fn slide_step(
+        &self,
+        _set: &surface::SlidingSet,
+        _stages: &[Phase; 3],
+        _y: &[f64; D],
+        _h: f64,
+    ) -> Option<[f64; D]> {
+        None
+    }
+
     /// [`step_shared`](Self::step_shared) in region `region`.
     #[inline(always)]
     fn step_shared_in<const W: usize>(

@@ -186,6 +186,12 @@ pub struct SlidingSet {
 }
 
 impl SlidingSet {
+    /// The switch slid on, where it is one: (its surface, its bit, the
+    /// base region).
+    pub fn one_switch(&self) -> Option<(usize, u32, u32)> {
+        (self.n == 1).then(|| (self.members[0].0, self.members[0].1, self.base))
+    }
+
     pub fn of<const D: usize, F: Flow<D>>(flow: &F, region: u32) -> Self {
         let set = sliding_set(region);
         let mut members = [(0, 0); MAX_SLIDING];
@@ -397,6 +403,13 @@ impl<'a, F> Sliding<'a, F> {
 impl<const D: usize, F: Flow<D>> Flow<D> for Sliding<'_, F> {
     fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         equivalent_on(self.flow, &self.set, phase, y, false).map_or([f64::NAN; D], |e| e.field)
+    }
+
+    #[inline(always)]
+    fn step_one(&self, stages: &[Phase; 3], y: &[f64; D], h: f64) -> [f64; D] {
+        self.flow
+            .slide_step(&self.set, stages, y, h)
+            .unwrap_or_else(|| super::rk4::step_at(self, stages, y, h))
     }
 
     fn forcing_frequency(&self) -> f64 {

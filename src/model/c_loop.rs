@@ -77,8 +77,28 @@ pub struct SwitchLoops {
     regions: usize,
     surfaces: usize,
     stops: usize,
+    /// One RK4 step sliding on one switch, by base region and bit
+    /// (`slides`), with each region's count of field constants.
+    slides: Vec<((usize, usize), SlideStep)>,
+    constants: Vec<usize>,
+    states: usize,
     _library: libloading::Library,
 }
+
+/// One RK4 step of one trajectory sliding on a single switch (see
+/// `slide_step`): from `y` (D values) with the three stages' phases in
+/// `clock` (6 values) and step `h`, the constants of the fields on the
+/// switch's two sides (`lo`, `hi`) and its constant gradient (`grad`, D
+/// values), into `out` (D values).
+pub type SlideStep = unsafe extern "C" fn(
+    y: *const f64,
+    clock: *const f64,
+    h: f64,
+    lo: *const f64,
+    hi: *const f64,
+    grad: *const f64,
+    out: *mut f64,
+);
 
 impl std::fmt::Debug for SwitchLoops {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -124,17 +144,74 @@ impl SwitchLoops {
             })
             .collect();
         let (library, walks) = built::<SwitchWalk>(&regions, stops, kinds)?;
+        let slides = slides(fields.len(), kinds)
+            .map(|(base, bit)| {
+                let name = format!("slide{base}_{bit}");
+                // SAFETY: `built` defined `name` with `SlideStep`'s
+                // signature (C calling convention); the library is kept
+                // with the function.
+                let f = unsafe { *library.get::<SlideStep>(name.as_bytes()).expect("defined") };
+                ((base, bit), f)
+            })
+            .collect();
         Ok(SwitchLoops {
             walks,
             regions: fields.len(),
             surfaces: kinds.len(),
             stops: stops.len(),
+            slides,
+            constants: fields.iter().map(|f| f.0.lane_constants.len()).collect(),
+            states: fields[0].0.states,
             _library: library,
         })
     }
 }
 
 impl SwitchLoops {
+    /// One RK4 step (`rk4::step_at`) of a trajectory sliding on the switch
+    /// of bit `bit` alone, from region `base` (the bit clear), at the
+    /// stage phases `stages`: the field is the equivalent control's,
+    /// `surface::equivalent_on`'s to the bit, from the constants `lo` and
+    /// `hi` of the regions on the switch's two sides and its constant
+    /// gradient `grad`. `None` where the library has no such step.
+    #[allow(clippy::too_many_arguments)]
+    pub fn slide_step<const D: usize>(
+        &self,
+        base: u32,
+        bit: u32,
+        stages: &[[f64; 2]; 3],
+        y: &[f64; D],
+        h: f64,
+        lo: &[f64],
+        hi: &[f64],
+        grad: &[f64],
+    ) -> Option<[f64; D]> {
+        let (base, bit) = (base as usize, bit as usize);
+        let &(_, f) = self.slides.iter().find(|(key, _)| *key == (base, bit))?;
+        assert!(
+            D == self.states
+                && lo.len() >= self.constants[base]
+                && hi.len() >= self.constants[base | 1 << bit]
+                && grad.len() >= D
+        );
+        let mut out = [0.0; D];
+        // SAFETY: the step reads D states, 6 clock values, D gradient
+        // values and the two regions' constants (lengths checked), and
+        // writes D values; it was compiled for this model's D states.
+        unsafe {
+            f(
+                y.as_ptr(),
+                stages.as_flattened().as_ptr(),
+                h,
+                lo.as_ptr(),
+                hi.as_ptr(),
+                grad.as_ptr(),
+                out.as_mut_ptr(),
+            )
+        };
+        Some(out)
+    }
+
     /// [`Native::walk`](super::jit::Native::walk) for a model with general
     /// surfaces: up to `steps` steps of W trajectories, slot k in region
     /// `regions[k]` (none sliding or held), stopping before the first step
@@ -239,6 +316,11 @@ fn built<T: Copy>(
             walk(&mut source, regions, &calls, stops, kinds, w, layout);
         }
     }
+    for (base, bit) in slides(regions.len(), kinds) {
+        let hi = base | 1 << bit;
+        let (lo, hi) = (regions[base].field, regions[hi].field);
+        slide_step(&mut source, &calls, base, bit, lo, hi, sum_start());
+    }
     let library = compiled(&source)?;
     let table: Vec<extern "C" fn(f64, f64) -> f64> = calls.iter().map(|&f| callback(f)).collect();
     // SAFETY: `set_calls` is defined above, reads `calls.len()` function
@@ -262,6 +344,28 @@ fn built<T: Copy>(
         })
     });
     Ok((library, walks))
+}
+
+/// The one-switch slides a model's library has a step for: (base region,
+/// the switch's bit), base without the bit.
+fn slides(regions: usize, kinds: &[Surface]) -> impl Iterator<Item = (usize, usize)> + '_ {
+    kinds
+        .iter()
+        .filter_map(|k| match *k {
+            Surface::Switch { bit } => Some(bit as usize),
+            _ => None,
+        })
+        .flat_map(move |bit| {
+            (0..regions)
+                .filter(move |base| base >> bit & 1 == 0)
+                .map(move |base| (base, bit))
+        })
+}
+
+/// The value Rust's `f64` sum starts from (-0.0 in recent releases, 0.0
+/// before), which a sum of terms that are all -0.0 shows.
+fn sum_start() -> f64 {
+    std::iter::once(-0.0_f64).sum()
 }
 
 /// The cached shared object built from `source`, loaded.
@@ -649,14 +753,25 @@ fn rk4(
     state: &[String],
     row: &dyn Fn(&str, usize) -> String,
 ) -> Vec<String> {
+    rk4_of(out, prefix, state, &mut |out, prefix, state, clock| {
+        rhs(out, tape, calls, prefix, state, clock, row)
+    })
+}
+
+/// A field's values at a state and clock, written as C values named after
+/// a prefix (`rhs`, or the sliding field of `slide_step`).
+type FieldCode<'a> = dyn FnMut(&mut String, &str, &[String], (&str, &str)) -> Vec<String> + 'a;
+
+/// [`rk4`] with the field given as code.
+fn rk4_of(out: &mut String, prefix: &str, state: &[String], field: &mut FieldCode) -> Vec<String> {
     let name = |p: &str| format!("{prefix}{p}");
-    let k1 = rhs(out, tape, calls, &name("a"), state, ("c", "s"), row);
+    let k1 = field(out, &name("a"), state, ("c", "s"));
     let y2 = axpy(out, &name("b"), state, "h2", &k1);
-    let k2 = rhs(out, tape, calls, &name("c"), &y2, ("mc", "ms"), row);
+    let k2 = field(out, &name("c"), &y2, ("mc", "ms"));
     let y3 = axpy(out, &name("d"), state, "h2", &k2);
-    let k3 = rhs(out, tape, calls, &name("e"), &y3, ("mc", "ms"), row);
+    let k3 = field(out, &name("e"), &y3, ("mc", "ms"));
     let y4 = axpy(out, &name("f"), state, "hh", &k3);
-    let k4 = rhs(out, tape, calls, &name("g"), &y4, ("ec", "es"), row);
+    let k4 = field(out, &name("g"), &y4, ("ec", "es"));
     // y + h/6·(k1 + 2(k2 + k3) + k4)
     (0..state.len())
         .map(|i| {
@@ -670,6 +785,73 @@ fn rk4(
             )
         })
         .collect()
+}
+
+/// One RK4 step of one trajectory sliding on switch `bit` alone, from
+/// the region `base` (`bit` clear) whose field is `lo`, the other side's
+/// `hi`: `rk4::step_at` of `surface::Sliding`, whose field is
+/// `surface::equivalent_on`'s for one switch, operation for operation
+/// (a = ∇g·F⁻ and b = ∇g·F⁺ summed as Rust's `sum` does, from `zero`;
+/// α = a/(a - b); F⁻ + α(F⁺ - F⁻), or NaN where α is not finite). The
+/// gradient is the lane's constant one (`grad`), the fields' constants
+/// `lo` and `hi`, the clock the three stages' phases.
+fn slide_step(
+    out: &mut String,
+    calls: &[Func],
+    base: usize,
+    bit: usize,
+    lo: &Tape,
+    hi: &Tape,
+    zero: f64,
+) {
+    let d = lo.states;
+    let _ = writeln!(
+        out,
+        "void slide{base}_{bit}(const double *restrict y, const double *restrict clock, double hh, \
+         const double *restrict lo, const double *restrict hi, const double *restrict grad, \
+         double *restrict out) {{\n  \
+         const double c = clock[0], s = clock[1], mc = clock[2], ms = clock[3], \
+         ec = clock[4], es = clock[5];\n  \
+         const double h2 = 0.5 * hh, sixth = hh / 6.0;"
+    );
+    let state: Vec<String> = (0..d).map(|i| format!("y[{i}]")).collect();
+    let dot = |f: &[String]| {
+        (0..d).fold(literal(zero), |sum, i| {
+            format!("({sum} + grad[{i}] * {})", f[i])
+        })
+    };
+    let end = rk4_of(out, "", &state, &mut |out, prefix, state, clock| {
+        let lo_row = |_: &str, j: usize| format!("lo[{j}]");
+        let hi_row = |_: &str, j: usize| format!("hi[{j}]");
+        let f0 = rhs(out, lo, calls, &format!("{prefix}l"), state, clock, &lo_row);
+        let f1 = rhs(out, hi, calls, &format!("{prefix}u"), state, clock, &hi_row);
+        let _ = writeln!(
+            out,
+            "      const double {prefix}p = {};\n      const double {prefix}q = {};\n      \
+             const double {prefix}al = {prefix}p / ({prefix}p - {prefix}q);\n      \
+             const int {prefix}ok = __builtin_isfinite({prefix}al);",
+            dot(&f0),
+            dot(&f1)
+        );
+        (0..d)
+            .map(|i| {
+                let name = format!("{prefix}v{i}");
+                let _ = writeln!(
+                    out,
+                    "      const double {name} = {prefix}ok ? {} + {prefix}al * ({} - {}) : {};",
+                    f0[i],
+                    f1[i],
+                    f0[i],
+                    literal(f64::NAN)
+                );
+                name
+            })
+            .collect()
+    });
+    for (i, v) in end.iter().enumerate() {
+        let _ = writeln!(out, "  out[{i}] = {v};");
+    }
+    let _ = writeln!(out, "}}");
 }
 
 /// y + a·k, named `{prefix}{i}`.
@@ -1155,6 +1337,115 @@ reset = { v = "-0.9*v" }
             same_as_stepped::<8>(&code, layout);
             same_as_stepped::<16>(&code, layout);
         }
+    }
+
+    /// The regions' native fields with the switches' constant gradients:
+    /// what `surface::Sliding` reads of `ModelFlow`.
+    struct Fields<'a> {
+        code: &'a crate::model::code::Code,
+        constants: Vec<Vec<f64>>,
+        gradients: Vec<Vec<f64>>,
+    }
+
+    impl crate::integrate::Flow<2> for Fields<'_> {
+        fn rhs(&self, phase: &[f64; 2], y: &[f64; 2]) -> [f64; 2] {
+            self.rhs_in(0, phase, y)
+        }
+
+        fn rhs_in(&self, region: u32, phase: &[f64; 2], y: &[f64; 2]) -> [f64; 2] {
+            use crate::model::jit::Kind;
+            let native = self.code.regions[region as usize].native.as_ref().unwrap();
+            let c = &self.constants[region as usize];
+            let out: [[f64; 1]; 2] =
+                native.call(Kind::Rhs, Layout::Shared, &[[y[0]], [y[1]]], phase, c, &[]);
+            [out[0][0], out[1][0]]
+        }
+
+        fn surfaces(&self) -> &[Surface] {
+            &self.code.kinds
+        }
+
+        fn surface_gradient(&self, j: usize, _phase: &[f64; 2], _y: &[f64; 2]) -> [f64; 2] {
+            [self.gradients[j][0], self.gradients[j][1]]
+        }
+    }
+
+    /// The C compiler's step of a slide on one switch (`slide_step`)
+    /// against `rk4::step_at` of `surface::Sliding` (the equivalent
+    /// control of `equivalent_on`) on the regions' native fields: every
+    /// switch, from every base region, over states on and off the
+    /// surfaces, forcing phases and step sizes, to the bit; a state where
+    /// the control is singular (both sides' rates equal) gives NaN in
+    /// both.
+    #[test]
+    #[cfg(all(unix, target_arch = "x86_64"))]
+    fn a_slide_on_one_switch_is_the_sliding_flow_s_step_to_the_bit() {
+        use crate::integrate::clock::cos_sin;
+        use crate::integrate::{rk4, surface};
+        let table: toml::Value = toml::from_str(SWITCHING).unwrap();
+        let model = crate::model::Model::parse(&table, "model").unwrap();
+        let code = crate::model::code::Code::compile(model, "model").unwrap();
+        let loops = code.switch_loops.as_ref().unwrap().as_ref().unwrap();
+        let params = &code.model.defaults;
+        let flow = Fields {
+            code: &code,
+            constants: (code.regions.iter())
+                .map(|f| f.equations.lane_values(params).constants)
+                .collect(),
+            gradients: (code.surfaces.iter())
+                .map(|s| {
+                    s.gradient
+                        .iter()
+                        .map(|e| e.eval(&[], params, 0.0))
+                        .collect()
+                })
+                .collect(),
+        };
+        let (mut finite, mut singular) = (0, 0);
+        for (j, kind) in code.kinds.iter().enumerate() {
+            let Surface::Switch { bit } = *kind else {
+                continue;
+            };
+            for base in (0..code.regions.len() as u32).filter(|r| r >> bit & 1 == 0) {
+                let sliding = surface::Sliding::new(&flow, surface::sliding_on(base, j));
+                assert_eq!(sliding.set.one_switch(), Some((j, bit, base)));
+                for k in 0..200 {
+                    let x = -1.0 + 0.013 * k as f64;
+                    let v = 0.3 + 0.7 * (0.37 * k as f64).sin();
+                    let h = 0.002 + 0.0007 * (k % 11) as f64;
+                    let phase = cos_sin(0.1 * k as f64);
+                    let stages = rk4::stage_phases(&phase, &cos_sin(0.4 * h));
+                    let expected = rk4::step_at(&sliding, &stages, &[x, v], h);
+                    let hi = (base | 1 << bit) as usize;
+                    let got = loops
+                        .slide_step::<2>(
+                            base,
+                            bit,
+                            &stages,
+                            &[x, v],
+                            h,
+                            &flow.constants[base as usize],
+                            &flow.constants[hi],
+                            &flow.gradients[j],
+                        )
+                        .expect("a step for every one-switch slide");
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        expected.map(f64::to_bits),
+                        "switch {j}, base {base}, k {k}: {got:?} against {expected:?}"
+                    );
+                    if got.iter().all(|v| v.is_nan()) {
+                        singular += 1;
+                    } else {
+                        assert!(got.iter().all(|v| v.is_finite()));
+                        finite += 1;
+                    }
+                }
+            }
+        }
+        // The contact (x - 0.5) is crossed at the rate v on both sides: its
+        // control is singular everywhere; the moving belt's never is.
+        assert_eq!((finite, singular), (2 * 200, 2 * 200));
     }
 
     #[test]

@@ -15,7 +15,7 @@ use super::{
 use crate::integrate::clock::Phase;
 use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
-use crate::integrate::surface::MAX_SURFACES;
+use crate::integrate::surface::{SlidingSet, MAX_SURFACES};
 use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues,
     Switching, Wall,
@@ -352,6 +352,31 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
         let out = self.step_shared_in::<1>(region, stages, &y, h);
         std::array::from_fn(|i| out[i][0])
+    }
+
+    fn slide_step(
+        &self,
+        set: &SlidingSet,
+        stages: &[Phase; 3],
+        y: &[f64; D],
+        h: f64,
+    ) -> Option<[f64; D]> {
+        // The C compiler's step of a slide on one switch with a constant
+        // gradient: the stages' eight field calls and the equivalent
+        // control's arithmetic in one call (a friction model's sliding).
+        let (j, bit, base) = set.one_switch()?;
+        let grad = self.constant_gradients[j].as_ref()?;
+        let loops = self.code.switch_loops.as_ref()?.as_ref().ok()?;
+        loops.slide_step(
+            base,
+            bit,
+            stages,
+            y,
+            h,
+            &self.constants[base as usize],
+            &self.constants[(base | 1 << bit) as usize],
+            grad,
+        )
     }
 
     fn surfaces(&self) -> &[Surface] {
