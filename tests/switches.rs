@@ -573,6 +573,7 @@ fn model_check_describes_switches_events_and_the_exact_backend() {
         "GPU: runs on the kernels",
         // CI has a C compiler: the regions' loop is built, not skipped.
         "CPU: the step loop between stops and crossings is built by the C compiler",
+        "CPU: a slide on 'slip' alone is stepped by the C compiler too",
     ] {
         assert!(friction.contains(expected), "{expected:?} in:\n{friction}");
     }

@@ -8,7 +8,9 @@ use std::fmt::Write;
 use super::code::Code;
 use super::expr::{Expr, Op, Var, Written};
 use super::jit::Loops;
+use super::tape::reads_state_or_time;
 use super::wgsl;
+use crate::integrate::surface::Surface;
 
 /// The report of a model that compiled.
 pub fn describe(code: &Code) -> String {
@@ -233,6 +235,28 @@ pub fn describe(code: &Code) -> String {
                 "CPU: the step loop between stops and crossings is built by the C compiler for \
                  this machine's vectors"
             );
+            // Slides on one switch whose gradient is constant (the
+            // friction's v - vb) are stepped in C too (`ModelFlow::
+            // slide_step`); others, and slides on several at once, by the
+            // integrator's own evaluation of the equivalent control.
+            let stepped: Vec<&str> = code
+                .surfaces
+                .iter()
+                .filter(|s| matches!(s.kind, Surface::Switch { .. }))
+                .filter(|s| s.gradient.iter().all(|e| !reads_state_or_time(e)))
+                .map(|s| s.name.as_str())
+                .collect();
+            if !stepped.is_empty() {
+                let _ = writeln!(
+                    w,
+                    "CPU: a slide on {} alone is stepped by the C compiler too",
+                    stepped
+                        .iter()
+                        .map(|n| format!("'{n}'"))
+                        .collect::<Vec<_>>()
+                        .join(" or ")
+                );
+            }
         }
         Some(Err(why)) => {
             let _ = writeln!(
