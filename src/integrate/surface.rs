@@ -186,10 +186,14 @@ pub struct SlidingSet {
 }
 
 impl SlidingSet {
-    /// The switch slid on, where it is one: (its surface, its bit, the
-    /// base region).
-    pub fn one_switch(&self) -> Option<(usize, u32, u32)> {
-        (self.n == 1).then(|| (self.members[0].0, self.members[0].1, self.base))
+    /// The switches slid on: (surface, bit), in the surfaces' order.
+    pub fn members(&self) -> &[(usize, u32)] {
+        &self.members[..self.n]
+    }
+
+    /// The region with every sliding switch on its negative side (F₀'s).
+    pub fn base(&self) -> u32 {
+        self.base
     }
 
     pub fn of<const D: usize, F: Flow<D>>(flow: &F, region: u32) -> Self {

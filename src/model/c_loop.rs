@@ -77,26 +77,31 @@ pub struct SwitchLoops {
     regions: usize,
     surfaces: usize,
     stops: usize,
-    /// One RK4 step sliding on one switch, by base region and bit
-    /// (`slides`), with each region's count of field constants.
-    slides: Vec<((usize, usize), SlideStep)>,
+    /// One RK4 step sliding on one switch or two (`slides`), at base
+    /// region · regions + the switches' bits as a mask; each region's
+    /// count of field constants.
+    slides: Vec<Option<SlideStep>>,
     constants: Vec<usize>,
     states: usize,
     _library: libloading::Library,
 }
 
-/// One RK4 step of one trajectory sliding on a single switch (see
+/// One RK4 step of one trajectory sliding on one switch or two (see
 /// `slide_step`): from `y` (D values) with the three stages' phases in
-/// `clock` (6 values) and step `h`, the constants of the fields on the
-/// switch's two sides (`lo`, `hi`) and its constant gradient (`grad`, D
-/// values), into `out` (D values).
+/// `clock` (6 values) and step `h`, the constants of the fields F₀, F₁
+/// (and F₂) (`fields`) and the switches' constant gradients (`grads`, D
+/// values each), into `out` (D values). (The pointers one by one: passed
+/// in an array that Rust had just written, they cost the step a third
+/// more on the friction belt, measured.)
 pub type SlideStep = unsafe extern "C" fn(
     y: *const f64,
     clock: *const f64,
     h: f64,
-    lo: *const f64,
-    hi: *const f64,
-    grad: *const f64,
+    f0: *const f64,
+    f1: *const f64,
+    f2: *const f64,
+    g0: *const f64,
+    g1: *const f64,
     out: *mut f64,
 );
 
@@ -144,22 +149,22 @@ impl SwitchLoops {
             })
             .collect();
         let (library, walks) = built::<SwitchWalk>(&regions, stops, kinds)?;
-        let slides = slides(fields.len(), kinds)
-            .map(|(base, bit)| {
-                let name = format!("slide{base}_{bit}");
-                // SAFETY: `built` defined `name` with `SlideStep`'s
-                // signature (C calling convention); the library is kept
-                // with the function.
-                let f = unsafe { *library.get::<SlideStep>(name.as_bytes()).expect("defined") };
-                ((base, bit), f)
-            })
-            .collect();
+        let regions = fields.len();
+        let mut steps = vec![None; regions * regions];
+        for (base, bits) in slides(regions, kinds) {
+            let name = slide_name(base, &bits);
+            // SAFETY: `built` defined `name` with `SlideStep`'s signature
+            // (C calling convention); the library is kept with the
+            // function.
+            let f = unsafe { *library.get::<SlideStep>(name.as_bytes()).expect("defined") };
+            steps[base * regions + bits.iter().fold(0, |m, &b| m | 1 << b)] = Some(f);
+        }
         Ok(SwitchLoops {
             walks,
             regions: fields.len(),
             surfaces: kinds.len(),
             stops: stops.len(),
-            slides,
+            slides: steps,
             constants: fields.iter().map(|f| f.0.lane_constants.len()).collect(),
             states: fields[0].0.states,
             _library: library,
@@ -168,44 +173,54 @@ impl SwitchLoops {
 }
 
 impl SwitchLoops {
-    /// One RK4 step (`rk4::step_at`) of a trajectory sliding on the switch
-    /// of bit `bit` alone, from region `base` (the bit clear), at the
-    /// stage phases `stages`: the field is the equivalent control's,
-    /// `surface::equivalent_on`'s to the bit, from the constants `lo` and
-    /// `hi` of the regions on the switch's two sides and its constant
-    /// gradient `grad`. `None` where the library has no such step.
+    /// One RK4 step (`rk4::step_at`) of a trajectory sliding on the
+    /// switches of bits `bits` at once (one or two), from region `base`
+    /// (their bits clear), at the stage phases `stages`: the field is the
+    /// equivalent control's, `surface::equivalent_on`'s to the bit, from
+    /// the constants of F₀ (region `base`) and of each F_m (`base` with
+    /// bit m set) in `fields`, and each switch's constant gradient in
+    /// `grads`. `None` where the library has no such step.
     #[allow(clippy::too_many_arguments)]
     pub fn slide_step<const D: usize>(
         &self,
         base: u32,
-        bit: u32,
+        bits: &[u32],
         stages: &[[f64; 2]; 3],
         y: &[f64; D],
         h: f64,
-        lo: &[f64],
-        hi: &[f64],
-        grad: &[f64],
+        fields: &[&[f64]],
+        grads: &[&[f64]],
     ) -> Option<[f64; D]> {
-        let (base, bit) = (base as usize, bit as usize);
-        let &(_, f) = self.slides.iter().find(|(key, _)| *key == (base, bit))?;
+        let base = base as usize;
+        let mask = bits.iter().fold(0, |m, &b| m | 1 << b);
+        let f = (*self.slides.get(base * self.regions + mask)?)?;
+        let regions = std::iter::once(base).chain(bits.iter().map(|&b| base | 1 << b));
         assert!(
             D == self.states
-                && lo.len() >= self.constants[base]
-                && hi.len() >= self.constants[base | 1 << bit]
-                && grad.len() >= D
+                && fields.len() == bits.len() + 1
+                && grads.len() == bits.len()
+                && regions
+                    .zip(fields)
+                    .all(|(r, c)| c.len() >= self.constants[r])
+                && grads.iter().all(|g| g.len() >= D)
         );
+        let field = |m: usize| fields.get(m).map_or(std::ptr::null(), |c| c.as_ptr());
+        let grad = |m: usize| grads.get(m).map_or(std::ptr::null(), |g| g.as_ptr());
         let mut out = [0.0; D];
-        // SAFETY: the step reads D states, 6 clock values, D gradient
-        // values and the two regions' constants (lengths checked), and
-        // writes D values; it was compiled for this model's D states.
+        // SAFETY: the step reads D states, 6 clock values, the regions'
+        // constants and D values of each gradient (counts and lengths
+        // checked), and writes D values; it was compiled for this model's
+        // D states and this set of switches.
         unsafe {
             f(
                 y.as_ptr(),
                 stages.as_flattened().as_ptr(),
                 h,
-                lo.as_ptr(),
-                hi.as_ptr(),
-                grad.as_ptr(),
+                field(0),
+                field(1),
+                field(2),
+                grad(0),
+                grad(1),
                 out.as_mut_ptr(),
             )
         };
@@ -316,10 +331,18 @@ fn built<T: Copy>(
             walk(&mut source, regions, &calls, stops, kinds, w, layout);
         }
     }
-    for (base, bit) in slides(regions.len(), kinds) {
-        let hi = base | 1 << bit;
-        let (lo, hi) = (regions[base].field, regions[hi].field);
-        slide_step(&mut source, &calls, base, bit, lo, hi, sum_start());
+    for (base, bits) in slides(regions.len(), kinds) {
+        let tapes: Vec<&Tape> = std::iter::once(base)
+            .chain(bits.iter().map(|b| base | 1 << b))
+            .map(|r| regions[r].field)
+            .collect();
+        slide_step(
+            &mut source,
+            &calls,
+            &slide_name(base, &bits),
+            &tapes,
+            sum_start(),
+        );
     }
     let library = compiled(&source)?;
     let table: Vec<extern "C" fn(f64, f64) -> f64> = calls.iter().map(|&f| callback(f)).collect();
@@ -346,20 +369,36 @@ fn built<T: Copy>(
     Ok((library, walks))
 }
 
-/// The one-switch slides a model's library has a step for: (base region,
-/// the switch's bit), base without the bit.
-fn slides(regions: usize, kinds: &[Surface]) -> impl Iterator<Item = (usize, usize)> + '_ {
-    kinds
+/// The slides a model's library has a step for: on one switch or two at
+/// once (their bits, in the order of their surfaces, as
+/// `surface::SlidingSet` lists them), from each base region without
+/// their bits.
+fn slides(regions: usize, kinds: &[Surface]) -> Vec<(usize, Vec<usize>)> {
+    let bits: Vec<usize> = kinds
         .iter()
         .filter_map(|k| match *k {
             Surface::Switch { bit } => Some(bit as usize),
             _ => None,
         })
-        .flat_map(move |bit| {
-            (0..regions)
-                .filter(move |base| base >> bit & 1 == 0)
-                .map(move |base| (base, bit))
-        })
+        .collect();
+    let sets = bits.iter().map(|&b| vec![b]).chain(
+        (0..bits.len())
+            .flat_map(|p| (p + 1..bits.len()).map(move |q| (p, q)))
+            .map(|(p, q)| vec![bits[p], bits[q]]),
+    );
+    sets.flat_map(|set| {
+        (0..regions)
+            .filter(|base| set.iter().all(|b| base >> b & 1 == 0))
+            .map(|base| (base, set.clone()))
+            .collect::<Vec<_>>()
+    })
+    .collect()
+}
+
+/// The C name of a slide's step.
+fn slide_name(base: usize, bits: &[usize]) -> String {
+    let bits: Vec<String> = bits.iter().map(|b| b.to_string()).collect();
+    format!("slide{base}_{}", bits.join("_"))
 }
 
 /// The value Rust's `f64` sum starts from (-0.0 in recent releases, 0.0
@@ -787,63 +826,179 @@ fn rk4_of(out: &mut String, prefix: &str, state: &[String], field: &mut FieldCod
         .collect()
 }
 
-/// One RK4 step of one trajectory sliding on switch `bit` alone, from
-/// the region `base` (`bit` clear) whose field is `lo`, the other side's
-/// `hi`: `rk4::step_at` of `surface::Sliding`, whose field is
-/// `surface::equivalent_on`'s for one switch, operation for operation
-/// (a = ∇g·F⁻ and b = ∇g·F⁺ summed as Rust's `sum` does, from `zero`;
-/// α = a/(a - b); F⁻ + α(F⁺ - F⁻), or NaN where α is not finite). The
-/// gradient is the lane's constant one (`grad`), the fields' constants
-/// `lo` and `hi`, the clock the three stages' phases.
-fn slide_step(
-    out: &mut String,
-    calls: &[Func],
-    base: usize,
-    bit: usize,
-    lo: &Tape,
-    hi: &Tape,
-    zero: f64,
-) {
-    let d = lo.states;
+/// One RK4 step of one trajectory sliding on the switches `bits` at
+/// once (one or two), from the region `base` (their bits clear), whose
+/// field is F₀, F_m the field with bit m set: `rk4::step_at` of
+/// `surface::Sliding`, whose field is `surface::equivalent_on`'s,
+/// operation for operation. One switch: a = ∇g·F₀ and b = ∇g·F₁ (summed
+/// as Rust's `sum` does, from `zero`), α = a/(a - b), F₀ + α(F₁ - F₀).
+/// Two: `surface::solve`'s elimination with partial pivoting of
+/// (a_j - c_jk) u = a (a_j = ∇g_j·F₀, c_jk = ∇g_j·F_k), then F₀ +
+/// u₀(F₁ - F₀) + u₁(F₂ - F₀). NaN where the control is singular or not
+/// finite. `lc{m}` points to the constants of F_m, `g{m}` to switch m's
+/// constant gradient (the last ones unused with one switch); the clock
+/// holds the three stages' phases.
+fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zero: f64) {
+    let d = tapes[0].states;
+    let n = tapes.len() - 1;
+    assert!((1..=2).contains(&n));
     let _ = writeln!(
         out,
-        "void slide{base}_{bit}(const double *restrict y, const double *restrict clock, double hh, \
-         const double *restrict lo, const double *restrict hi, const double *restrict grad, \
-         double *restrict out) {{\n  \
+        "void {name}(const double *restrict y, const double *restrict clock, double hh, \
+         const double *restrict lc0, const double *restrict lc1, const double *restrict lc2, \
+         const double *restrict g0, const double *restrict g1, double *restrict out) {{\n  \
          const double c = clock[0], s = clock[1], mc = clock[2], ms = clock[3], \
          ec = clock[4], es = clock[5];\n  \
          const double h2 = 0.5 * hh, sixth = hh / 6.0;"
     );
     let state: Vec<String> = (0..d).map(|i| format!("y[{i}]")).collect();
-    let dot = |f: &[String]| {
+    let dot = |m: usize, f: &[String]| {
         (0..d).fold(literal(zero), |sum, i| {
-            format!("({sum} + grad[{i}] * {})", f[i])
+            format!("({sum} + g{m}[{i}] * {})", f[i])
         })
     };
     let end = rk4_of(out, "", &state, &mut |out, prefix, state, clock| {
-        let lo_row = |_: &str, j: usize| format!("lo[{j}]");
-        let hi_row = |_: &str, j: usize| format!("hi[{j}]");
-        let f0 = rhs(out, lo, calls, &format!("{prefix}l"), state, clock, &lo_row);
-        let f1 = rhs(out, hi, calls, &format!("{prefix}u"), state, clock, &hi_row);
-        let _ = writeln!(
-            out,
-            "      const double {prefix}p = {};\n      const double {prefix}q = {};\n      \
-             const double {prefix}al = {prefix}p / ({prefix}p - {prefix}q);\n      \
-             const int {prefix}ok = __builtin_isfinite({prefix}al);",
-            dot(&f0),
-            dot(&f1)
-        );
+        let f: Vec<Vec<String>> = (0..=n)
+            .map(|m| {
+                let row = move |_: &str, j: usize| format!("lc{m}[{j}]");
+                rhs(
+                    out,
+                    tapes[m],
+                    calls,
+                    &format!("{prefix}f{m}_"),
+                    state,
+                    clock,
+                    &row,
+                )
+            })
+            .collect();
+        let v = |x: &str| format!("{prefix}{x}");
+        let mut line = |text: String| {
+            let _ = writeln!(out, "      {text}");
+        };
+        if n == 1 {
+            line(format!("const double {} = {};", v("p"), dot(0, &f[0])));
+            line(format!("const double {} = {};", v("q"), dot(0, &f[1])));
+            line(format!(
+                "const double {u0} = {p} / ({p} - {q});",
+                u0 = v("u0"),
+                p = v("p"),
+                q = v("q")
+            ));
+            line(format!(
+                "const int {} = __builtin_isfinite({});",
+                v("ok"),
+                v("u0")
+            ));
+        } else {
+            // a_j, c_jk and the matrix M = a_j - c_jk, as equivalent_on.
+            for j in 0..2 {
+                line(format!(
+                    "const double {} = {};",
+                    v(&format!("a{j}")),
+                    dot(j, &f[0])
+                ));
+                for k in 0..2 {
+                    line(format!(
+                        "const double {m} = {a} - {c};",
+                        m = v(&format!("m{j}{k}")),
+                        a = v(&format!("a{j}")),
+                        c = dot(j, &f[k + 1])
+                    ));
+                }
+            }
+            // The pivot of column 0: the row with the larger |M_j0| in
+            // `total_cmp`'s order (NaN above all), the second on a tie
+            // (`max_by` keeps the last maximum).
+            line(format!(
+                "const double {x0} = __builtin_fabs({m00}), {x1} = __builtin_fabs({m10});",
+                x0 = v("x0"),
+                x1 = v("x1"),
+                m00 = v("m00"),
+                m10 = v("m10")
+            ));
+            line(format!(
+                "const int {sw} = __builtin_isnan({x1}) || (!__builtin_isnan({x0}) && {x1} >= {x0});",
+                sw = v("sw"),
+                x0 = v("x0"),
+                x1 = v("x1")
+            ));
+            // The rows after the swap: [p0 p1 | pr] the pivot's, [q0 q1 |
+            // qr] the other's.
+            for (name, first, second) in [("p", "0", "1"), ("q", "1", "0")] {
+                let pick = |col: &str, first: &str, second: &str| {
+                    let (a, b) = if col == "r" {
+                        (v(&format!("a{first}")), v(&format!("a{second}")))
+                    } else {
+                        (v(&format!("m{first}{col}")), v(&format!("m{second}{col}")))
+                    };
+                    format!("{} ? {b} : {a}", v("sw"))
+                };
+                for col in ["0", "1", "r"] {
+                    line(format!(
+                        "const double {} = {};",
+                        v(&format!("{name}{col}")),
+                        pick(col, first, second)
+                    ));
+                }
+            }
+            line(format!(
+                "const double {k} = {q0} / {p0};",
+                k = v("k"),
+                q0 = v("q0"),
+                p0 = v("p0")
+            ));
+            line(format!(
+                "const double {e1} = {q1} - {k} * {p1}, {er} = {qr} - {k} * {pr};",
+                e1 = v("e1"),
+                er = v("er"),
+                q1 = v("q1"),
+                qr = v("qr"),
+                k = v("k"),
+                p1 = v("p1"),
+                pr = v("pr")
+            ));
+            line(format!(
+                "const double {u1} = {er} / {e1};",
+                u1 = v("u1"),
+                er = v("er"),
+                e1 = v("e1")
+            ));
+            line(format!(
+                "const double {u0} = ({pr} - {p1} * {u1}) / {p0};",
+                u0 = v("u0"),
+                pr = v("pr"),
+                p1 = v("p1"),
+                u1 = v("u1"),
+                p0 = v("p0")
+            ));
+            line(format!(
+                "const int {ok} = {p0} != 0.0 && {e1} != 0.0 && __builtin_isfinite({u0}) \
+                 && __builtin_isfinite({u1});",
+                ok = v("ok"),
+                p0 = v("p0"),
+                e1 = v("e1"),
+                u0 = v("u0"),
+                u1 = v("u1")
+            ));
+        }
         (0..d)
             .map(|i| {
-                let name = format!("{prefix}v{i}");
-                let _ = writeln!(
-                    out,
-                    "      const double {name} = {prefix}ok ? {} + {prefix}al * ({} - {}) : {};",
-                    f0[i],
-                    f1[i],
-                    f0[i],
-                    literal(f64::NAN)
-                );
+                let name = v(&format!("v{i}"));
+                let mut field = f[0][i].clone();
+                for m in 0..n {
+                    field = format!(
+                        "({field} + {u} * ({} - {}))",
+                        f[m + 1][i],
+                        f[0][i],
+                        u = v(&format!("u{m}"))
+                    );
+                }
+                line(format!(
+                    "const double {name} = {ok} ? {field} : {nan};",
+                    ok = v("ok"),
+                    nan = literal(f64::NAN)
+                ));
                 name
             })
             .collect()
@@ -1347,48 +1502,42 @@ reset = { v = "-0.9*v" }
         gradients: Vec<Vec<f64>>,
     }
 
-    impl crate::integrate::Flow<2> for Fields<'_> {
-        fn rhs(&self, phase: &[f64; 2], y: &[f64; 2]) -> [f64; 2] {
+    impl<const D: usize> crate::integrate::Flow<D> for Fields<'_> {
+        fn rhs(&self, phase: &[f64; 2], y: &[f64; D]) -> [f64; D] {
             self.rhs_in(0, phase, y)
         }
 
-        fn rhs_in(&self, region: u32, phase: &[f64; 2], y: &[f64; 2]) -> [f64; 2] {
+        fn rhs_in(&self, region: u32, phase: &[f64; 2], y: &[f64; D]) -> [f64; D] {
             use crate::model::jit::Kind;
             let native = self.code.regions[region as usize].native.as_ref().unwrap();
             let c = &self.constants[region as usize];
-            let out: [[f64; 1]; 2] =
-                native.call(Kind::Rhs, Layout::Shared, &[[y[0]], [y[1]]], phase, c, &[]);
-            [out[0][0], out[1][0]]
+            let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+            let out: [[f64; 1]; D] = native.call(Kind::Rhs, Layout::Shared, &y, phase, c, &[]);
+            std::array::from_fn(|i| out[i][0])
         }
 
         fn surfaces(&self) -> &[Surface] {
             &self.code.kinds
         }
 
-        fn surface_gradient(&self, j: usize, _phase: &[f64; 2], _y: &[f64; 2]) -> [f64; 2] {
-            [self.gradients[j][0], self.gradients[j][1]]
+        fn surface_gradient(&self, j: usize, _phase: &[f64; 2], _y: &[f64; D]) -> [f64; D] {
+            std::array::from_fn(|i| self.gradients[j][i])
         }
     }
 
-    /// The C compiler's step of a slide on one switch (`slide_step`)
-    /// against `rk4::step_at` of `surface::Sliding` (the equivalent
-    /// control of `equivalent_on`) on the regions' native fields: every
-    /// switch, from every base region, over states on and off the
-    /// surfaces, forcing phases and step sizes, to the bit; a state where
-    /// the control is singular (both sides' rates equal) gives NaN in
-    /// both.
-    #[test]
-    #[cfg(all(unix, target_arch = "x86_64"))]
-    fn a_slide_on_one_switch_is_the_sliding_flow_s_step_to_the_bit() {
+    /// The C compiler's steps of every slide on one switch or two of
+    /// `code` (`slide_step`) against `rk4::step_at` of `surface::Sliding`
+    /// (the equivalent control of `equivalent_on`) on the regions' native
+    /// fields, over states on and off the surfaces, forcing phases and
+    /// step sizes, to the bit. Gives the steps compared: finite, and NaN
+    /// (the control singular) in both.
+    fn same_slides<const D: usize>(code: &crate::model::code::Code) -> (usize, usize) {
         use crate::integrate::clock::cos_sin;
         use crate::integrate::{rk4, surface};
-        let table: toml::Value = toml::from_str(SWITCHING).unwrap();
-        let model = crate::model::Model::parse(&table, "model").unwrap();
-        let code = crate::model::code::Code::compile(model, "model").unwrap();
         let loops = code.switch_loops.as_ref().unwrap().as_ref().unwrap();
         let params = &code.model.defaults;
         let flow = Fields {
-            code: &code,
+            code,
             constants: (code.regions.iter())
                 .map(|f| f.equations.lane_values(params).constants)
                 .collect(),
@@ -1401,38 +1550,47 @@ reset = { v = "-0.9*v" }
                 })
                 .collect(),
         };
+        let switches: Vec<usize> = (0..code.kinds.len())
+            .filter(|&j| matches!(code.kinds[j], Surface::Switch { .. }))
+            .collect();
+        let sets = switches.iter().map(|&j| vec![j]).chain(
+            (0..switches.len())
+                .flat_map(|p| (p + 1..switches.len()).map(move |q| (p, q)))
+                .map(|(p, q)| vec![switches[p], switches[q]]),
+        );
         let (mut finite, mut singular) = (0, 0);
-        for (j, kind) in code.kinds.iter().enumerate() {
-            let Surface::Switch { bit } = *kind else {
-                continue;
-            };
-            for base in (0..code.regions.len() as u32).filter(|r| r >> bit & 1 == 0) {
-                let sliding = surface::Sliding::new(&flow, surface::sliding_on(base, j));
-                assert_eq!(sliding.set.one_switch(), Some((j, bit, base)));
+        for set in sets {
+            let regions = code.regions.len() as u32;
+            for base in
+                (0..regions).filter(|r| set.iter().all(|&j| code.kinds[j].orientation(*r) > 0.0))
+            {
+                let region = set.iter().fold(base, |r, &j| surface::sliding_on(r, j));
+                let sliding = surface::Sliding::new::<D>(&flow, region);
+                let members = sliding.set.members().to_vec();
+                assert_eq!(members.iter().map(|m| m.0).collect::<Vec<_>>(), set);
+                assert_eq!(sliding.set.base(), base);
+                let bits: Vec<u32> = members.iter().map(|m| m.1).collect();
+                let fields: Vec<&[f64]> = std::iter::once(base)
+                    .chain(bits.iter().map(|b| base | 1 << b))
+                    .map(|r| flow.constants[r as usize].as_slice())
+                    .collect();
+                let grads: Vec<&[f64]> =
+                    set.iter().map(|&j| flow.gradients[j].as_slice()).collect();
                 for k in 0..200 {
-                    let x = -1.0 + 0.013 * k as f64;
-                    let v = 0.3 + 0.7 * (0.37 * k as f64).sin();
+                    let y: [f64; D] = std::array::from_fn(|i| {
+                        0.2 + 0.7 * (0.37 * k as f64 + 1.3 * i as f64).sin()
+                    });
                     let h = 0.002 + 0.0007 * (k % 11) as f64;
                     let phase = cos_sin(0.1 * k as f64);
                     let stages = rk4::stage_phases(&phase, &cos_sin(0.4 * h));
-                    let expected = rk4::step_at(&sliding, &stages, &[x, v], h);
-                    let hi = (base | 1 << bit) as usize;
+                    let expected = rk4::step_at(&sliding, &stages, &y, h);
                     let got = loops
-                        .slide_step::<2>(
-                            base,
-                            bit,
-                            &stages,
-                            &[x, v],
-                            h,
-                            &flow.constants[base as usize],
-                            &flow.constants[hi],
-                            &flow.gradients[j],
-                        )
-                        .expect("a step for every one-switch slide");
+                        .slide_step::<D>(base, &bits, &stages, &y, h, &fields, &grads)
+                        .expect("a step for every slide on one switch or two");
                     assert_eq!(
                         got.map(f64::to_bits),
                         expected.map(f64::to_bits),
-                        "switch {j}, base {base}, k {k}: {got:?} against {expected:?}"
+                        "switches {set:?}, base {base}, k {k}: {got:?} against {expected:?}"
                     );
                     if got.iter().all(|v| v.is_nan()) {
                         singular += 1;
@@ -1443,9 +1601,31 @@ reset = { v = "-0.9*v" }
                 }
             }
         }
+        (finite, singular)
+    }
+
+    /// `same_slides` on a model with two switches and on the two blocks on
+    /// a belt (models/two-block-belt.toml), which slide on both at once
+    /// when they stick together. A perturbed α or u in the generated C
+    /// fails it.
+    #[test]
+    #[cfg(all(unix, target_arch = "x86_64"))]
+    fn a_slide_s_c_step_is_the_sliding_flow_s_step_to_the_bit() {
+        let compile = |text: &str, at: &str| {
+            let table: toml::Value = toml::from_str(text).unwrap();
+            let table = table.get("model").cloned().unwrap_or(table);
+            let model = crate::model::Model::parse(&table, at).unwrap();
+            crate::model::code::Code::compile(model, at).unwrap()
+        };
         // The contact (x - 0.5) is crossed at the rate v on both sides: its
-        // control is singular everywhere; the moving belt's never is.
-        assert_eq!((finite, singular), (2 * 200, 2 * 200));
+        // control is singular everywhere, alone or with the moving belt;
+        // the belt's alone never is. One switch from two bases each, and
+        // both from one.
+        let switching = compile(SWITCHING, "model");
+        assert_eq!(same_slides::<2>(&switching), (2 * 200, 3 * 200));
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/models/two-block-belt.toml");
+        let blocks = compile(&std::fs::read_to_string(path).unwrap(), "two-block-belt");
+        assert_eq!(same_slides::<4>(&blocks), (5 * 200, 0));
     }
 
     #[test]

@@ -361,22 +361,25 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         y: &[f64; D],
         h: f64,
     ) -> Option<[f64; D]> {
-        // The C compiler's step of a slide on one switch with a constant
-        // gradient: the stages' eight field calls and the equivalent
+        // The C compiler's step of a slide on one switch or two with
+        // constant gradients: the stages' field calls and the equivalent
         // control's arithmetic in one call (a friction model's sliding).
-        let (j, bit, base) = set.one_switch()?;
-        let grad = self.constant_gradients[j].as_ref()?;
+        let members = set.members();
+        if members.len() > 2 {
+            return None;
+        }
         let loops = self.code.switch_loops.as_ref()?.as_ref().ok()?;
-        loops.slide_step(
-            base,
-            bit,
-            stages,
-            y,
-            h,
-            &self.constants[base as usize],
-            &self.constants[(base | 1 << bit) as usize],
-            grad,
-        )
+        let base = set.base();
+        let mut bits = [0; 2];
+        let mut grads: [&[f64]; 2] = [&[]; 2];
+        let mut fields: [&[f64]; 3] = [&self.constants[base as usize]; 3];
+        for (m, &(j, bit)) in members.iter().enumerate() {
+            bits[m] = bit;
+            grads[m] = self.constant_gradients[j].as_deref()?;
+            fields[m + 1] = &self.constants[(base | 1 << bit) as usize];
+        }
+        let n = members.len();
+        loops.slide_step(base, &bits[..n], stages, y, h, &fields[..=n], &grads[..n])
     }
 
     fn surfaces(&self) -> &[Surface] {
