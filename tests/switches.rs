@@ -573,10 +573,14 @@ fn model_check_describes_switches_events_and_the_exact_backend() {
         "GPU: runs on the kernels",
         // CI has a C compiler: the regions' loop is built, not skipped.
         "CPU: the step loop between stops and crossings is built by the C compiler",
-        "CPU: a slide on 'slip' alone is stepped by the C compiler too",
+        "CPU: a slide on 'slip' is stepped by the C compiler too",
     ] {
         assert!(friction.contains(expected), "{expected:?} in:\n{friction}");
     }
+    let blocks = check("two-block-belt.toml");
+    let expected =
+        "CPU: slides on 'slip1', 'slip2', one or two at once, are stepped by the C compiler too";
+    assert!(blocks.contains(expected), "{expected:?} in:\n{blocks}");
     let table = check("vibrating-table.toml");
     for expected in [
         "event 'table' (a general surface): fires where a * cos(w * t) - a - 1 - x crosses 0",

@@ -235,10 +235,11 @@ pub fn describe(code: &Code) -> String {
                 "CPU: the step loop between stops and crossings is built by the C compiler for \
                  this machine's vectors"
             );
-            // Slides on one switch whose gradient is constant (the
-            // friction's v - vb) are stepped in C too (`ModelFlow::
-            // slide_step`); others, and slides on several at once, by the
-            // integrator's own evaluation of the equivalent control.
+            // Slides on one or two switches whose gradients are constant
+            // (the friction's v - vb) are stepped in C too (`ModelFlow::
+            // slide_step`); others, and slides on three or more at once,
+            // by the integrator's own evaluation of the equivalent
+            // control.
             let stepped: Vec<&str> = code
                 .surfaces
                 .iter()
@@ -246,16 +247,23 @@ pub fn describe(code: &Code) -> String {
                 .filter(|s| s.gradient.iter().all(|e| !reads_state_or_time(e)))
                 .map(|s| s.name.as_str())
                 .collect();
-            if !stepped.is_empty() {
-                let _ = writeln!(
-                    w,
-                    "CPU: a slide on {} alone is stepped by the C compiler too",
-                    stepped
-                        .iter()
-                        .map(|n| format!("'{n}'"))
-                        .collect::<Vec<_>>()
-                        .join(" or ")
-                );
+            let names: Vec<String> = stepped.iter().map(|n| format!("'{n}'")).collect();
+            match names.len() {
+                0 => {}
+                1 => {
+                    let _ = writeln!(
+                        w,
+                        "CPU: a slide on {} is stepped by the C compiler too",
+                        names[0]
+                    );
+                }
+                _ => {
+                    let _ = writeln!(
+                        w,
+                        "CPU: slides on {}, one or two at once, are stepped by the C compiler too",
+                        names.join(", ")
+                    );
+                }
             }
         }
         Some(Err(why)) => {
