@@ -873,114 +873,43 @@ fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zer
             })
             .collect();
         let v = |x: &str| format!("{prefix}{x}");
-        let mut line = |text: String| {
-            let _ = writeln!(out, "      {text}");
+        // C statements with this stage's names: `$x` is `{prefix}x`.
+        let mut line = |text: &str| {
+            let _ = writeln!(out, "      {}", text.replace('$', prefix));
         };
         if n == 1 {
-            line(format!("const double {} = {};", v("p"), dot(0, &f[0])));
-            line(format!("const double {} = {};", v("q"), dot(0, &f[1])));
-            line(format!(
-                "const double {u0} = {p} / ({p} - {q});",
-                u0 = v("u0"),
-                p = v("p"),
-                q = v("q")
-            ));
-            line(format!(
-                "const int {} = __builtin_isfinite({});",
-                v("ok"),
-                v("u0")
-            ));
+            line(&format!("const double $p = {};", dot(0, &f[0])));
+            line(&format!("const double $q = {};", dot(0, &f[1])));
+            line("const double $u0 = $p / ($p - $q);");
+            line("const int $ok = __builtin_isfinite($u0);");
         } else {
-            // a_j, c_jk and the matrix M = a_j - c_jk, as equivalent_on.
+            // a_j, and the matrix M = a_j - c_jk, as equivalent_on.
             for j in 0..2 {
-                line(format!(
-                    "const double {} = {};",
-                    v(&format!("a{j}")),
-                    dot(j, &f[0])
-                ));
+                line(&format!("const double $a{j} = {};", dot(j, &f[0])));
                 for k in 0..2 {
-                    line(format!(
-                        "const double {m} = {a} - {c};",
-                        m = v(&format!("m{j}{k}")),
-                        a = v(&format!("a{j}")),
-                        c = dot(j, &f[k + 1])
+                    line(&format!(
+                        "const double $m{j}{k} = $a{j} - {};",
+                        dot(j, &f[k + 1])
                     ));
                 }
             }
             // The pivot of column 0: the row with the larger |M_j0| in
             // `total_cmp`'s order (NaN above all), the second on a tie
-            // (`max_by` keeps the last maximum).
-            line(format!(
-                "const double {x0} = __builtin_fabs({m00}), {x1} = __builtin_fabs({m10});",
-                x0 = v("x0"),
-                x1 = v("x1"),
-                m00 = v("m00"),
-                m10 = v("m10")
-            ));
-            line(format!(
-                "const int {sw} = __builtin_isnan({x1}) || (!__builtin_isnan({x0}) && {x1} >= {x0});",
-                sw = v("sw"),
-                x0 = v("x0"),
-                x1 = v("x1")
-            ));
-            // The rows after the swap: [p0 p1 | pr] the pivot's, [q0 q1 |
-            // qr] the other's.
-            for (name, first, second) in [("p", "0", "1"), ("q", "1", "0")] {
-                let pick = |col: &str, first: &str, second: &str| {
-                    let (a, b) = if col == "r" {
-                        (v(&format!("a{first}")), v(&format!("a{second}")))
-                    } else {
-                        (v(&format!("m{first}{col}")), v(&format!("m{second}{col}")))
-                    };
-                    format!("{} ? {b} : {a}", v("sw"))
-                };
-                for col in ["0", "1", "r"] {
-                    line(format!(
-                        "const double {} = {};",
-                        v(&format!("{name}{col}")),
-                        pick(col, first, second)
-                    ));
-                }
-            }
-            line(format!(
-                "const double {k} = {q0} / {p0};",
-                k = v("k"),
-                q0 = v("q0"),
-                p0 = v("p0")
-            ));
-            line(format!(
-                "const double {e1} = {q1} - {k} * {p1}, {er} = {qr} - {k} * {pr};",
-                e1 = v("e1"),
-                er = v("er"),
-                q1 = v("q1"),
-                qr = v("qr"),
-                k = v("k"),
-                p1 = v("p1"),
-                pr = v("pr")
-            ));
-            line(format!(
-                "const double {u1} = {er} / {e1};",
-                u1 = v("u1"),
-                er = v("er"),
-                e1 = v("e1")
-            ));
-            line(format!(
-                "const double {u0} = ({pr} - {p1} * {u1}) / {p0};",
-                u0 = v("u0"),
-                pr = v("pr"),
-                p1 = v("p1"),
-                u1 = v("u1"),
-                p0 = v("p0")
-            ));
-            line(format!(
-                "const int {ok} = {p0} != 0.0 && {e1} != 0.0 && __builtin_isfinite({u0}) \
-                 && __builtin_isfinite({u1});",
-                ok = v("ok"),
-                p0 = v("p0"),
-                e1 = v("e1"),
-                u0 = v("u0"),
-                u1 = v("u1")
-            ));
+            // (`max_by` keeps the last maximum); after the swap the
+            // pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr].
+            line("const double $x0 = __builtin_fabs($m00), $x1 = __builtin_fabs($m10);");
+            line("const int $sw = __builtin_isnan($x1) || (!__builtin_isnan($x0) && $x1 >= $x0);");
+            line("const double $p0 = $sw ? $m10 : $m00, $p1 = $sw ? $m11 : $m01, $pr = $sw ? $a1 : $a0;");
+            line("const double $q0 = $sw ? $m00 : $m10, $q1 = $sw ? $m01 : $m11, $qr = $sw ? $a0 : $a1;");
+            // Elimination, then back-substitution, in solve's order.
+            line("const double $k = $q0 / $p0;");
+            line("const double $e1 = $q1 - $k * $p1, $er = $qr - $k * $pr;");
+            line("const double $u1 = $er / $e1;");
+            line("const double $u0 = ($pr - $p1 * $u1) / $p0;");
+            line(
+                "const int $ok = $p0 != 0.0 && $e1 != 0.0 \
+                 && __builtin_isfinite($u0) && __builtin_isfinite($u1);",
+            );
         }
         (0..d)
             .map(|i| {
@@ -994,10 +923,9 @@ fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zer
                         u = v(&format!("u{m}"))
                     );
                 }
-                line(format!(
-                    "const double {name} = {ok} ? {field} : {nan};",
-                    ok = v("ok"),
-                    nan = literal(f64::NAN)
+                line(&format!(
+                    "const double $v{i} = $ok ? {field} : {};",
+                    literal(f64::NAN)
                 ));
                 name
             })
