@@ -277,9 +277,8 @@ pub struct ModelFlow<const D: usize> {
     frequency: f64,
     period: f64,
     walls: Vec<Wall>,
-    /// Each surface's gradient where it reads neither state nor time, and
-    /// each switch's stick limit where it does not read the state, at
-    /// these parameters: the sliding of a friction model asks for both at
+    /// Each surface's gradient and each switch's stick limit where they
+    /// read neither state nor time, at these parameters: the sliding of a friction model asks for both at
     /// every stage of every step, and walking their trees (a `Vec` per
     /// call of a function) took a twentieth of the friction belt's time.
     constant_gradients: Vec<Option<Vec<f64>>>,
