@@ -181,6 +181,7 @@ impl SwitchLoops {
     /// bit m set) in `fields`, and each switch's constant gradient in
     /// `grads`. `None` where the library has no such step.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     pub fn slide_step<const D: usize>(
         &self,
         base: u32,

@@ -363,22 +363,23 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         // The C compiler's step of a slide on one switch or two with
         // constant gradients: the stages' field calls and the equivalent
         // control's arithmetic in one call (a friction model's sliding).
-        let members = set.members();
-        if members.len() > 2 {
-            return None;
-        }
         let loops = self.code.switch_loops.as_ref()?.as_ref().ok()?;
         let base = set.base();
-        let mut bits = [0; 2];
-        let mut grads: [&[f64]; 2] = [&[]; 2];
-        let mut fields: [&[f64]; 3] = [&self.constants[base as usize]; 3];
-        for (m, &(j, bit)) in members.iter().enumerate() {
-            bits[m] = bit;
-            grads[m] = self.constant_gradients[j].as_deref()?;
-            fields[m + 1] = &self.constants[(base | 1 << bit) as usize];
+        let below = self.constants[base as usize].as_slice();
+        let above = |bit: u32| self.constants[(base | 1 << bit) as usize].as_slice();
+        let gradient = |j: usize| self.constant_gradients[j].as_deref();
+        match *set.members() {
+            [(j, bit)] => {
+                let fields = [below, above(bit)];
+                loops.slide_step(base, &[bit], stages, y, h, &fields, &[gradient(j)?])
+            }
+            [(j, b0), (k, b1)] => {
+                let fields = [below, above(b0), above(b1)];
+                let gradients = [gradient(j)?, gradient(k)?];
+                loops.slide_step(base, &[b0, b1], stages, y, h, &fields, &gradients)
+            }
+            _ => None,
         }
-        let n = members.len();
-        loops.slide_step(base, &bits[..n], stages, y, h, &fields[..=n], &grads[..n])
     }
 
     fn surfaces(&self) -> &[Surface] {
