@@ -89,10 +89,11 @@ pub struct SwitchLoops {
 /// One RK4 step of one trajectory sliding on one switch or two (see
 /// `slide_step`): from `y` (D values) with the three stages' phases in
 /// `clock` (6 values) and step `h`, the constants of the fields F₀, F₁
-/// (and F₂) (`fields`) and the switches' constant gradients (`grads`, D
-/// values each), into `out` (D values). (The pointers one by one: passed
-/// in an array that Rust had just written, they cost the step a third
-/// more on the friction belt, measured.)
+/// (and F₂) (`f0`, `f1`, `f2`) and the switches' constant gradients
+/// (`g0`, `g1`, D values each; the last of each null with one switch),
+/// into `out` (D values). (The pointers one by one: passed in an array
+/// that Rust had just written, they cost the step a third more on the
+/// friction belt, measured.)
 pub type SlideStep = unsafe extern "C" fn(
     y: *const f64,
     clock: *const f64,
