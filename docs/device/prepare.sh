@@ -24,7 +24,7 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable"):
         print(m["executable"])'
 }
-tests=$(built test --release --test gpu --test gpu_models)
+tests=$(built test --release --test gpu --test gpu_models --test math64)
 bench=$(built bench --bench lane_steps)
 rm -rf .devbin && mkdir -p .devbin
 cp target/release/lyapsweep .devbin/lyapsweep
@@ -33,7 +33,15 @@ for f in $tests $bench; do
     cp "$f" ".devbin/$name"
 done
 git rev-parse HEAD >.devbin/commit
-xz -T0 -6 .devbin/lyapsweep .devbin/gpu .devbin/gpu_models .devbin/lane_steps
+# An earlier commit's CLI beside this one's (BEFORE=path to its release
+# binary, COMMIT_BEFORE=its commit), to compare on the same card.
+if [ -n "${BEFORE:-}" ]; then
+    cp "$BEFORE" .devbin/lyapsweep-before
+    echo "${COMMIT_BEFORE:-unknown}" >.devbin/commit-before
+fi
+for f in .devbin/*; do
+    case $f in *commit*) ;; *) xz -T0 -6 "$f" ;; esac
+done
 du -sh .devbin
 
 if [ ! -d .gl ] || ! ls .gl/*.deb >/dev/null 2>&1; then
@@ -42,6 +50,6 @@ if [ ! -d .gl ] || ! ls .gl/*.deb >/dev/null 2>&1; then
     # shellcheck disable=SC2086
     apt-get $o update -qq
     # shellcheck disable=SC2086
-    (cd .gl && apt-get $o download libvulkan1 libglvnd0)
+    (cd .gl && apt-get $o download libvulkan1 libglvnd0 libegl1 libglx0 libgl1 libopengl0 libgles2)
 fi
 du -sh .gl

@@ -1,8 +1,10 @@
 //! Adapters and devices: listing, choosing (honouring `WGPU_BACKEND` and
 //! `WGPU_ADAPTER_NAME`), and opening one with the features a sweep needs.
 
+use std::borrow::Cow;
 use std::sync::Mutex;
 
+use super::spirv;
 use crate::error::{Error, Result};
 use crate::scene::Precision;
 
@@ -14,6 +16,9 @@ pub struct AdapterSummary {
     pub device_type: String,
     pub f64: bool,
     pub timestamps: bool,
+    /// The driver takes SPIR-V as it is (wgpu's passthrough shaders on
+    /// Vulkan), so the kernels run with contraction forbidden (`spirv`).
+    pub exact_rounding: bool,
     pub max_storage_binding: u64,
     pub max_buffer: u64,
     pub max_workgroups: u32,
@@ -30,6 +35,8 @@ impl AdapterSummary {
             device_type: format!("{:?}", info.device_type),
             f64: features.contains(wgpu::Features::SHADER_F64),
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
+            exact_rounding: info.backend == wgpu::Backend::Vulkan
+                && features.contains(wgpu::Features::PASSTHROUGH_SHADERS),
             max_storage_binding: limits.max_storage_buffer_binding_size,
             max_buffer: limits.max_buffer_size,
             max_workgroups: limits.max_compute_workgroups_per_dimension,
@@ -126,6 +133,73 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     pub summary: AdapterSummary,
     pub limits: wgpu::Limits,
+}
+
+impl Gpu {
+    /// Whether the kernels are handed to the driver as SPIR-V with
+    /// contraction forbidden (see `spirv`).
+    pub fn exact_rounding(&self) -> bool {
+        self.device
+            .features()
+            .contains(wgpu::Features::PASSTHROUGH_SHADERS)
+    }
+
+    /// The compute pipeline of WGSL `source`'s entry point `main` over the
+    /// one bind group `layout`, with its overridable `constants` set. Where
+    /// the driver takes SPIR-V as it is, contraction is forbidden (see
+    /// `spirv`); elsewhere wgpu compiles the WGSL and the driver may fuse.
+    pub fn compute_pipeline(
+        &self,
+        label: &str,
+        layout: &wgpu::BindGroupLayout,
+        source: &str,
+        constants: &[(&str, f64)],
+    ) -> wgpu::ComputePipeline {
+        let device = &self.device;
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        });
+        let (module, constants) = if self.exact_rounding() {
+            let words =
+                spirv::compile(source, constants).unwrap_or_else(|e| panic!("kernel {label}: {e}"));
+            let entry = wgpu::PassthroughShaderEntryPoint {
+                name: "main".into(),
+                workgroup_size: (1, 1, 1),
+            };
+            // SAFETY: the SPIR-V is naga's, from WGSL that naga validated,
+            // with decorations added that only restrict how the driver may
+            // compute; the bindings are the layout's (set 0, binding n).
+            let module = unsafe {
+                device.create_shader_module_passthrough(wgpu::ShaderModuleDescriptorPassthrough {
+                    label: Some(label),
+                    entry_points: Cow::Borrowed(std::slice::from_ref(&entry)),
+                    spirv: Some(Cow::Owned(words)),
+                    ..Default::default()
+                })
+            };
+            // The constants are in the SPIR-V already.
+            (module, &[][..])
+        } else {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(Cow::Borrowed(source)),
+            });
+            (module, constants)
+        };
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants,
+                ..Default::default()
+            },
+            cache: None,
+        })
+    }
 }
 
 /// Which adapters a request accepts.
@@ -302,6 +376,9 @@ fn open_new(
     // Device time per pass, reported beside wall time (see `stopwatch`).
     if summary.timestamps {
         features |= wgpu::Features::TIMESTAMP_QUERY;
+    }
+    if summary.exact_rounding {
+        features |= wgpu::Features::PASSTHROUGH_SHADERS;
     }
     // Ask for everything the adapter offers: large sweeps want its largest bindings.
     let limits = adapter.limits();

@@ -8,5 +8,6 @@
 pub mod context;
 pub mod section;
 pub mod shader;
+pub mod spirv;
 pub mod stopwatch;
 pub mod sweep;

@@ -9,7 +9,6 @@
 //! computes the next.
 
 use std::any::Any;
-use std::borrow::Cow;
 use std::sync::{mpsc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -429,27 +428,12 @@ pub(super) fn compute_pipeline(
     kernel: Kernel,
     workgroup: u32,
 ) -> wgpu::ComputePipeline {
-    let device = &gpu.device;
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(&variant.name()),
-        bind_group_layouts: &[Some(layout)],
-        immediate_size: 0,
-    });
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some(&variant.name()),
-        source: wgpu::ShaderSource::Wgsl(Cow::Owned(variant.source(kernel))),
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(&variant.name()),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: wgpu::PipelineCompilationOptions {
-            constants: &[("WORKGROUP_SIZE", f64::from(workgroup))],
-            ..Default::default()
-        },
-        cache: None,
-    })
+    gpu.compute_pipeline(
+        &variant.name(),
+        layout,
+        &variant.source(kernel),
+        &[("WORKGROUP_SIZE", f64::from(workgroup))],
+    )
 }
 
 /// `Control` in shared/bindings.wgsl.
