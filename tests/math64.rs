@@ -74,17 +74,24 @@ fn on_gpu(gpu: &context::Gpu, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
         },
         count: None,
     };
+    let entries = [
+        entry(0, wgpu::BufferBindingType::Storage { read_only: true }),
+        entry(1, wgpu::BufferBindingType::Storage { read_only: false }),
+        entry(2, wgpu::BufferBindingType::Uniform),
+    ];
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("math64"),
-        entries: &[
-            entry(0, wgpu::BufferBindingType::Storage { read_only: true }),
-            entry(1, wgpu::BufferBindingType::Storage { read_only: false }),
-            entry(2, wgpu::BufferBindingType::Uniform),
-        ],
+        entries: &entries,
     });
     // As the kernels are compiled (contraction forbidden where the driver
     // allows it to be).
-    let pipeline = gpu.compute_pipeline("math64", &layout, &format!("{LIBRARY}\n{KERNEL}"), &[]);
+    let pipeline = gpu.compute_pipeline(
+        "math64",
+        &layout,
+        &entries,
+        &format!("{LIBRARY}\n{KERNEL}"),
+        &[],
+    );
     let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: None,
         contents: bytemuck::cast_slice(inputs),

@@ -72,10 +72,11 @@ done
 # runs the same scene in the same call, so that the two compare on one card.
 if [ -x $B/lyapsweep-before ]; then
     log "the seed's scene with the earlier binary ($(cat .devbin/commit-before))"
+    echo "== the earlier binary, $(cat .devbin/commit-before)" >>"$O/seed.txt"
     for p in f32 f64; do
         for i in 1 2; do
             timeout 120 $B/lyapsweep-before run scenes/seed-fig3.toml --backend gpu --precision $p \
-                --out /tmp/seed-before-$p >>"$O/seed-before.txt" 2>&1
+                --out /tmp/seed-before-$p >>"$O/seed.txt" 2>&1
         done
     done
 fi

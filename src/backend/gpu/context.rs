@@ -19,6 +19,9 @@ pub struct AdapterSummary {
     /// The driver takes SPIR-V as it is (wgpu's passthrough shaders on
     /// Vulkan), so the kernels run with contraction forbidden (`spirv`).
     pub exact_rounding: bool,
+    /// The float widths whose infinities and NaN the kernels declare kept
+    /// (`spirv::inf_nan_widths`), where they are compiled here.
+    pub inf_nan_widths: Vec<u32>,
     pub max_storage_binding: u64,
     pub max_buffer: u64,
     pub max_workgroups: u32,
@@ -29,14 +32,20 @@ impl AdapterSummary {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let features = adapter.features();
+        let exact_rounding = info.backend == wgpu::Backend::Vulkan
+            && features.contains(wgpu::Features::PASSTHROUGH_SHADERS);
         AdapterSummary {
             name: info.name,
             backend: format!("{:?}", info.backend).to_lowercase(),
             device_type: format!("{:?}", info.device_type),
             f64: features.contains(wgpu::Features::SHADER_F64),
             timestamps: features.contains(wgpu::Features::TIMESTAMP_QUERY),
-            exact_rounding: info.backend == wgpu::Backend::Vulkan
-                && features.contains(wgpu::Features::PASSTHROUGH_SHADERS),
+            exact_rounding,
+            inf_nan_widths: if exact_rounding {
+                spirv::inf_nan_widths(adapter)
+            } else {
+                Vec::new()
+            },
             max_storage_binding: limits.max_storage_buffer_binding_size,
             max_buffer: limits.max_buffer_size,
             max_workgroups: limits.max_compute_workgroups_per_dimension,
@@ -145,13 +154,15 @@ impl Gpu {
     }
 
     /// The compute pipeline of WGSL `source`'s entry point `main` over the
-    /// one bind group `layout`, with its overridable `constants` set. Where
-    /// the driver takes SPIR-V as it is, contraction is forbidden (see
-    /// `spirv`); elsewhere wgpu compiles the WGSL and the driver may fuse.
+    /// one bind group `layout`, made of `entries`, with its overridable
+    /// `constants` set. Where the driver takes SPIR-V as it is, contraction
+    /// is forbidden (see `spirv`); elsewhere wgpu compiles the WGSL and the
+    /// driver may fuse.
     pub fn compute_pipeline(
         &self,
         label: &str,
         layout: &wgpu::BindGroupLayout,
+        entries: &[wgpu::BindGroupLayoutEntry],
         source: &str,
         constants: &[(&str, f64)],
     ) -> wgpu::ComputePipeline {
@@ -162,8 +173,9 @@ impl Gpu {
             immediate_size: 0,
         });
         let (module, constants) = if self.exact_rounding() {
-            let words =
-                spirv::compile(source, constants).unwrap_or_else(|e| panic!("kernel {label}: {e}"));
+            let bindings: Vec<u32> = entries.iter().map(|e| e.binding).collect();
+            let words = spirv::compile(source, &bindings, constants, &self.summary.inf_nan_widths)
+                .unwrap_or_else(|e| panic!("kernel {label}: {e}"));
             let entry = wgpu::PassthroughShaderEntryPoint {
                 name: "main".into(),
                 workgroup_size: (1, 1, 1),

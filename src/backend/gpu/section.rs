@@ -199,7 +199,8 @@ impl<'a> Stepper<'a> {
                     label: Some("section"),
                     entries: &entries,
                 });
-                let pipeline = compute_pipeline(gpu, &layout, variant, Kernel::Section, workgroup);
+                let pipeline =
+                    compute_pipeline(gpu, &layout, &entries, variant, Kernel::Section, workgroup);
                 (layout, pipeline)
             });
         let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {

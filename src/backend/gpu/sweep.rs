@@ -337,7 +337,8 @@ impl Pipelines {
                 label: Some("sweep"),
                 entries: &entries,
             });
-        let pipeline = |kernel: Kernel| compute_pipeline(gpu, &layout, variant, kernel, workgroup);
+        let pipeline =
+            |kernel: Kernel| compute_pipeline(gpu, &layout, &entries, variant, kernel, workgroup);
         Pipelines {
             integrate: pipeline(Kernel::Integrate),
             finish: pipeline(Kernel::Finish),
@@ -424,6 +425,7 @@ pub(super) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
 pub(super) fn compute_pipeline(
     gpu: &Gpu,
     layout: &wgpu::BindGroupLayout,
+    entries: &[wgpu::BindGroupLayoutEntry],
     variant: &Variant,
     kernel: Kernel,
     workgroup: u32,
@@ -431,6 +433,7 @@ pub(super) fn compute_pipeline(
     gpu.compute_pipeline(
         &variant.name(),
         layout,
+        entries,
         &variant.source(kernel),
         &[("WORKGROUP_SIZE", f64::from(workgroup))],
     )
