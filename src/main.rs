@@ -380,14 +380,13 @@ fn print_devices() -> Result<(), Error> {
     }
     for (n, a) in adapters.iter().enumerate() {
         println!(
-            "{n}: {} [{}] {}: f64 {}, timestamps {}, kernels without contraction {}, keeping inf and NaN of {:?} bits, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
+            "{n}: {} [{}] {}: f64 {}, timestamps {}, kernels without contraction {}, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
             a.name,
             a.backend,
             a.device_type,
             if a.f64 { "yes" } else { "no" },
             if a.timestamps { "yes" } else { "no" },
             if a.exact_rounding { "yes" } else { "no" },
-            a.inf_nan_widths,
             a.max_storage_binding >> 20,
             a.max_buffer >> 20,
             a.max_workgroups

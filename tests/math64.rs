@@ -91,6 +91,7 @@ fn on_gpu(gpu: &context::Gpu, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
         &entries,
         &format!("{LIBRARY}\n{KERNEL}"),
         &[],
+        Precision::F64,
     );
     let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: None,

@@ -645,7 +645,10 @@ impl Summary {
 /// docs/BENCHMARKS.md, "NVIDIA H200".)
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
     let accumulates = scene.system.model.is_some_and(|code| {
-        let switches = code.kinds.iter().any(|k| matches!(k, Surface::Switch { .. }));
+        let switches = code
+            .kinds
+            .iter()
+            .any(|k| matches!(k, Surface::Switch { .. }));
         let events = !code.walls.is_empty() || code.kinds.contains(&Surface::Event);
         code.surfaces.iter().any(|s| s.hold.is_some()) || (switches && events)
     });

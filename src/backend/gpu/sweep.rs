@@ -436,6 +436,7 @@ pub(super) fn compute_pipeline(
         entries,
         &variant.source(kernel),
         &[("WORKGROUP_SIZE", f64::from(workgroup))],
+        variant.precision,
     )
 }
 
