@@ -17,7 +17,7 @@ pub struct AdapterSummary {
     pub f64: bool,
     pub timestamps: bool,
     /// The driver takes SPIR-V as it is (wgpu's passthrough shaders on
-    /// Vulkan), so the kernels run with contraction forbidden (`spirv`).
+    /// Vulkan), so the f64 kernels run with contraction forbidden (`spirv`).
     pub exact_rounding: bool,
     pub max_storage_binding: u64,
     pub max_buffer: u64,
@@ -180,7 +180,8 @@ impl Gpu {
             };
             // SAFETY: the SPIR-V is naga's, from WGSL that naga validated,
             // with decorations added that only restrict how the driver may
-            // compute; the bindings are the layout's (set 0, binding n).
+            // compute; the bindings are where wgpu put the layout's
+            // descriptors (set 0, each at its rank: `spirv::compile`).
             let module = unsafe {
                 device.create_shader_module_passthrough(wgpu::ShaderModuleDescriptorPassthrough {
                     label: Some(label),
