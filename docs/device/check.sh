@@ -81,6 +81,14 @@ if [ -x $B/lyapsweep-before ]; then
     done
 fi
 
+log "the f32 sum rule against the perturbation (tests/gpu.rs's f32 scene)"
+for d in 3e-5 1e-4 3e-4 1e-3; do
+    echo "== f32, perturbation $d" >>"$O/seed.txt"
+    timeout 60 $B/lyapsweep run docs/device/f32-perturbation.toml -q --backend gpu --precision f32 \
+        --set run.validate=0 --set integration.perturbation=$d --out /tmp/f32-$d >>"$O/seed.txt" 2>&1
+    cat /tmp/f32-$d/spectrum.csv >>"$O/seed.txt"
+done
+
 log "the bench: impacts (f32 and f64 with impacts), scaling"
 timeout 240 $B/lane_steps impacts scaling >"$O/bench.txt" 2>&1
 
