@@ -196,6 +196,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         k = k + 1u;
 #ifdef SURFACES
         before = surface_values(p, phase, y);
+        // Flagged sliding, the lane is the CPU's from here on, at once as
+        // at a dispatch's start: stepping on to the dispatch's end through
+        // a motion the kernels cannot follow left the lane wherever the
+        // dispatch ended, so adapters with other dispatch lengths (an
+        // H100's whole periods, lavapipe's 256 steps) ended it apart
+        // (docs/BENCHMARKS.md, "The belt's non-finite lane").
+        if ((c.z & FLAG_SLIDING) != 0u) {
+            k = end;
+        }
 #endif
     }
 #else

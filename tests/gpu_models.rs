@@ -943,21 +943,46 @@ fn a_lane_the_kernels_cannot_slide_is_flagged_and_recomputed_on_the_cpu() {
 /// Runs `model` over η = 0.3, 0.4, 0.6, 0.8, 1.9 (600 steps, transient and
 /// iterations 100) on the CPU and on the GPU, asserts that every lane has
 /// the same status, crossings and exponents (to 1e-9: the kernels' bits, or
-/// the CPU's own where recomputed), and gives the lanes recomputed.
+/// the CPU's own where recomputed), and gives the lanes recomputed. The
+/// GPU runs twice: with the adapter's dispatches (on lavapipe 256 steps),
+/// and with a whole period per dispatch, as a hardware GPU runs.
 fn belt_lanes_agree(model: &str, label: &str) -> Vec<usize> {
     let body = "[sweep]\nparameter = \"eta\"\nvalues = [0.3, 0.4, 0.6, 0.8, 1.9]\n\
                 [integration]\nsteps_per_period = 600\ntransient = 100\niterations = 100\n\
                 [run]\nvalidate = 0\n";
-    let with = |backend: &str| {
-        run(&common::scene(
+    let scene = |backend: &str| {
+        common::scene(
             &format!("{model}\n{body}"),
             &[&format!("run.backend=\"{backend}\"")],
-        ))
+        )
     };
-    let (cpu, gpu) = (with("cpu"), with("gpu"));
+    let cpu = run(&scene("cpu"));
+    let whole_periods = lyapsweep::RunOptions {
+        dispatch_steps: Some(usize::MAX),
+        ..Default::default()
+    };
+    let gpu = run(&scene("gpu"));
     let recomputed = gpu.gpu.as_ref().unwrap().recomputed.clone();
+    let long = lyapsweep::run_with(&scene("gpu"), &whole_periods).expect("runs");
+    assert_eq!(
+        long.gpu.as_ref().unwrap().recomputed,
+        recomputed,
+        "{label}: the lanes recomputed with whole periods per dispatch"
+    );
     eprintln!("{label}: recomputed on the CPU {recomputed:?}");
-    for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
+    for (k, ((c, g), l)) in cpu
+        .lanes
+        .iter()
+        .zip(&gpu.lanes)
+        .zip(&long.lanes)
+        .enumerate()
+    {
+        // Bit for bit (their Debug texts: a NaN field equals a NaN).
+        assert_eq!(
+            format!("{g:?}"),
+            format!("{l:?}"),
+            "{label} lane {k}: whole periods per dispatch"
+        );
         let d = exponent_difference(&c.exponents, &g.exponents);
         eprintln!(
             "{label} lane {k}: {:?} CPU {:?} GPU {:?}, crossings {:?}: {d:e}",

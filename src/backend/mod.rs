@@ -104,6 +104,10 @@ pub struct RunOptions {
     /// Run on adapter number `device` of `lyapsweep devices` (one process
     /// per GPU of a machine, each with its shard).
     pub device: Option<usize>,
+    /// RK4 steps per GPU integrate dispatch at most (default: 256 on a
+    /// software adapter with stops, else a whole period); tests set it to
+    /// run lavapipe as a hardware GPU runs.
+    pub dispatch_steps: Option<usize>,
 }
 
 /// The per-precision tolerance of the GPU's validation against the CPU.
@@ -640,9 +644,10 @@ impl Summary {
 /// mass stuck to a belt, pressed into a stop): the kernels resolve the
 /// bounces until they accumulate, where the finite differences of copies
 /// at rest on the surface can give out before the accumulation is seen;
-/// the CPU path holds the motion, or flags the slide. (On an NVIDIA H200
-/// the belt's lane ended non-finite where lavapipe's kernels flagged it:
-/// docs/BENCHMARKS.md, "NVIDIA H200".)
+/// the CPU path holds the motion, or flags the slide. (The belt's lane
+/// ends non-finite on an H100, an H200 and lavapipe alike, one iteration
+/// after the kernels flag it sliding; where from is not found yet:
+/// docs/BENCHMARKS.md, "The belt's non-finite lane".)
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
     let accumulates = scene.system.model.is_some_and(|code| {
         let switches = code

@@ -233,11 +233,13 @@ where
     let mut chunk_steps = 0;
     // The first try's dispatch length, and how many batches were redone
     // with shorter ones.
-    let mut max_chunk = if variant.wall && !gpu.summary.is_hardware() {
+    let software_stops = variant.wall && !gpu.summary.is_hardware();
+    let default_chunk = if software_stops {
         SOFTWARE_WALL_CHUNK
     } else {
         usize::MAX
     };
+    let mut max_chunk = options.dispatch_steps.unwrap_or(default_chunk);
     let mut retries = 0;
     let mut bytes_per_lane = 0;
     let progress = options.progress.clone().unwrap_or_default();
