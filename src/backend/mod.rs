@@ -8,7 +8,6 @@ pub mod progress;
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
-use crate::integrate::Surface;
 use crate::method::lane::LanePlan;
 use crate::method::{LaneResult, LaneStatus, MethodSettings, Tangent};
 use crate::scene::{Backend, Precision, Scene};
@@ -640,27 +639,18 @@ impl Summary {
 ///
 /// So are the lanes that failed on the GPU in a model whose events can
 /// hold a motion on their surface (a ball locking onto a vibrating
-/// table), or whose switches can carry one into a stop or an event (a
-/// mass stuck to a belt, pressed into a stop): the kernels resolve the
-/// bounces until they accumulate, where the finite differences of copies
-/// at rest on the surface can give out before the accumulation is seen;
-/// the CPU path holds the motion, or flags the slide. (The belt's lane
-/// ends non-finite on an H100, an H200 and lavapipe alike, one iteration
-/// after the kernels flag it sliding; where from is not found yet:
-/// docs/BENCHMARKS.md, "The belt's non-finite lane".)
+/// table): the kernels resolve the bounces until they accumulate, where
+/// the finite differences of copies at rest on the surface can give out
+/// before the accumulation is seen; the CPU path holds the motion.
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
-    let accumulates = scene.system.model.is_some_and(|code| {
-        let switches = code
-            .kinds
-            .iter()
-            .any(|k| matches!(k, Surface::Switch { .. }));
-        let events = !code.walls.is_empty() || code.kinds.contains(&Surface::Event);
-        code.surfaces.iter().any(|s| s.hold.is_some()) || (switches && events)
-    });
+    let holds = scene
+        .system
+        .model
+        .is_some_and(|code| code.surfaces.iter().any(|s| s.hold.is_some()));
     let flagged: Vec<usize> = (0..lanes.len())
         .filter(|&k| match lanes[k].status {
             LaneStatus::Sliding { .. } => true,
-            LaneStatus::NonFinite { .. } => accumulates,
+            LaneStatus::NonFinite { .. } => holds,
             _ => false,
         })
         .collect();

@@ -1137,7 +1137,12 @@ where
                             },
                             ..Default::default()
                         };
-                        if has_jac {
+                        // A flagged part's trajectories stopped at the flag,
+                        // not at the part's end: its columns are no
+                        // derivative of the map (a copy frozen at one state,
+                        // the reference at another gave a singular one,
+                        // which failed the lane as non-finite).
+                        if has_jac && !part.sliding {
                             let mut jacobian =
                                 SMatrix::from_row_slice(&jac[s * D * D..(s + 1) * D * D]);
                             // A grazing part: the host redoes it on the CPU,
