@@ -637,22 +637,14 @@ impl Summary {
 /// once), which they flag rather than step through; the CPU integrates
 /// it. Returns their indices.
 ///
-/// So are the lanes that failed on the GPU in a model whose events can
-/// hold a motion on their surface (a ball locking onto a vibrating
-/// table): the kernels resolve the bounces until they accumulate, where
-/// the finite differences of copies at rest on the surface can give out
-/// before the accumulation is seen; the CPU path holds the motion.
+/// A lane the kernels end non-finite stays non-finite: a flagged part
+/// gives the host no Jacobian, so a motion stopped at its flag no longer
+/// fails the QR. The lanes once recomputed for that (a ball locking onto
+/// a table, a belt's mass pressed into a stop) are flagged ones now
+/// (docs/BENCHMARKS.md, "The belt's non-finite lane").
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
-    let holds = scene
-        .system
-        .model
-        .is_some_and(|code| code.surfaces.iter().any(|s| s.hold.is_some()));
     let flagged: Vec<usize> = (0..lanes.len())
-        .filter(|&k| match lanes[k].status {
-            LaneStatus::Sliding { .. } => true,
-            LaneStatus::NonFinite { .. } => holds,
-            _ => false,
-        })
+        .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))
         .collect();
     if flagged.is_empty() {
         return flagged;
