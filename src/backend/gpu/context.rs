@@ -149,11 +149,14 @@ impl Gpu {
     /// one bind group `layout`, made of `entries`, with its overridable
     /// `constants` set. Where the driver takes SPIR-V as it is, an f64
     /// kernel is compiled with contraction forbidden (see `spirv`), to round
-    /// as the CPU path does; an f32 kernel is left to fuse, which rounds
-    /// less, since no f32 bits are to be matched (the CPU path is f64; on
-    /// lavapipe, which fuses in f32, forbidding it moved an f32 section's
-    /// validation from within 1e-3 to 1.25e-3). Elsewhere wgpu compiles the
-    /// WGSL and the driver may fuse.
+    /// as the CPU path does; an f32 kernel is left as the driver compiles
+    /// it, since no f32 bits are to be matched (the CPU path is f64). Which
+    /// is the more accurate in f32 is not settled: on lavapipe, which does
+    /// not fuse a·b + c but does reassociate, `NoContraction` moved an f32
+    /// section's validation from within 1e-3 to 1.25e-3; on an H100, which
+    /// fuses, it brought an f32 sum-rule error from 3.1e-4 to 8.1e-5
+    /// (docs/BENCHMARKS.md, "NVIDIA H100 at 5b606ac"). Elsewhere wgpu
+    /// compiles the WGSL and the driver may fuse.
     pub fn compute_pipeline(
         &self,
         label: &str,
