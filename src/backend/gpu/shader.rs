@@ -3,7 +3,9 @@
 //! own file and the kernel, through a small preprocessor (`#include`,
 //! `#ifdef`/`#ifndef`/`#else`/`#endif`) in the manner of vello's.
 
+use std::borrow::Cow;
 use std::collections::BTreeSet;
+use std::path::Path;
 
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
@@ -253,30 +255,50 @@ impl Variant {
         // surface code takes ln |det S| (log_r).
         if crate::model::wgsl::calls_wrappers(system) || self.surfaces() {
             if self.precision == Precision::F64 {
-                out.push_str(&preprocess(include("shared/math64.wgsl"), &defines));
+                out.push_str(&preprocess(&include("shared/math64.wgsl"), &defines));
             }
             out.push_str(&preprocess(
-                include("shared/model_functions.wgsl"),
+                &include("shared/model_functions.wgsl"),
                 &defines,
             ));
         }
-        out.push_str(&preprocess(include("shared/clock.wgsl"), &defines));
+        out.push_str(&preprocess(&include("shared/clock.wgsl"), &defines));
         if self.system.is_flow {
-            out.push_str(&preprocess(include("shared/rk4.wgsl"), &defines));
+            out.push_str(&preprocess(&include("shared/rk4.wgsl"), &defines));
         }
         if self.wall {
-            out.push_str(&preprocess(include("shared/impact.wgsl"), &defines));
+            out.push_str(&preprocess(&include("shared/impact.wgsl"), &defines));
         }
-        out.push_str(&preprocess(include(kernel.file()), &defines));
+        out.push_str(&preprocess(&include(kernel.file()), &defines));
         out
     }
 }
 
-fn include(path: &str) -> &'static str {
+/// A kernel source by its path under `shaders/`. Where `LYAPSWEEP_SHADER_DIR`
+/// names a folder laid out as `shaders/`, its files replace the sources
+/// compiled in: a kernel experiment then needs no rebuild (a release build
+/// takes minutes on 2 cores; docs/lavapipe/masked-code.sh is one).
+fn include(path: &str) -> Cow<'static, str> {
+    source_in(
+        std::env::var_os("LYAPSWEEP_SHADER_DIR")
+            .as_deref()
+            .map(Path::new),
+        path,
+    )
+}
+
+fn source_in(dir: Option<&Path>, path: &str) -> Cow<'static, str> {
+    if let Some(dir) = dir {
+        let file = dir.join(path);
+        return Cow::Owned(
+            std::fs::read_to_string(&file)
+                .unwrap_or_else(|e| panic!("LYAPSWEEP_SHADER_DIR: {}: {e}", file.display())),
+        );
+    }
     SOURCES
         .iter()
         .find(|(p, _)| *p == path)
-        .map(|(_, s)| *s)
+        .map(|(_, s)| Cow::Borrowed(*s))
         .unwrap_or_else(|| panic!("no shader source {path}"))
 }
 
@@ -302,7 +324,10 @@ pub fn preprocess(source: &str, defines: &BTreeSet<&str>) -> String {
             stack.pop().expect("#endif without #ifdef");
         } else if let Some(path) = trimmed.strip_prefix("#include ") {
             if active(&stack) {
-                out.push_str(&preprocess(include(path.trim().trim_matches('"')), defines));
+                out.push_str(&preprocess(
+                    &include(path.trim().trim_matches('"')),
+                    defines,
+                ));
             }
         } else if active(&stack) {
             out.push_str(line);
@@ -311,4 +336,19 @@ pub fn preprocess(source: &str, defines: &BTreeSet<&str>) -> String {
     }
     assert!(stack.is_empty(), "unterminated #ifdef");
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `LYAPSWEEP_SHADER_DIR` pointed at `shaders/` composes the kernels
+    /// compiled in: every source's path is its path there.
+    #[test]
+    fn a_shader_folder_laid_out_as_shaders_gives_the_sources_compiled_in() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        for (path, text) in SOURCES {
+            assert_eq!(source_in(Some(&dir), path), *text, "{path}");
+        }
+    }
 }

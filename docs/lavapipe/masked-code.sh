@@ -1,0 +1,115 @@
+#!/bin/bash
+# Does lavapipe pay for kernel code that no invocation runs?
+#
+# 1. Four builds of the integrate kernel without impact code, run on the
+# speed issue's sweep with the wall out of reach (4096 values, 200 steps per
+# period, transient 20, iterations 20, f64), interleaved, median device time:
+#   base     the kernel as it is
+#   never    plus LINES lines of arithmetic per invocation, under an `if`
+#            whose condition is false for every invocation (a uniform zero)
+#   no-trip  the same lines in a loop of zero passes
+#   always   the same lines run by every invocation (the result kept)
+# If masked-off code were skipped, `never` and `no-trip` would cost what
+# `base` costs.
+# 2. Three builds of the impact kernel on the same sweep with the wall at 2:
+#   impacts      the kernel as it is
+#   unentered    the step loop's tests guarded by a uniform zero: no step
+#                leaves the loop, the resolution path is compiled in but
+#                never entered (the orbits pass through the wall: the
+#                numbers are wrong, the time is the kernel's shape)
+#   unresolved   the same without the resolution path
+#   no-wall      the kernel without impact code (wall at 100), for scale
+# docs/BENCHMARKS.md ("What lavapipe runs") has the figures.
+#
+# Usage, from the repository root, after `cargo build --release`:
+#   bash docs/lavapipe/masked-code.sh [runs (default 9)] [lines (default 2000)]
+set -euo pipefail
+runs=${1:-9}
+lines=${2:-2000}
+bin=target/release/lyapsweep
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+cat >"$work/scene.toml" <<TOML
+name = "masked-code"
+[system]
+kind = "impact-oscillator"
+wall = WALL
+[sweep]
+from = 0.5
+to = 1.5
+count = 4096
+[integration]
+steps_per_period = 200
+transient = 20
+iterations = 20
+[run]
+backend = "gpu"
+precision = "f64"
+validate = 0
+TOML
+sed s/WALL/100.0/ "$work/scene.toml" >"$work/no-wall.toml"
+sed s/WALL/2.0/ "$work/scene.toml" >"$work/wall.toml"
+
+# A chain of dependent multiply-adds that stays finite.
+chain="var q = y[0];"
+for ((i = 0; i < lines; i++)); do chain+=" q = q * real(0.5) + real($i.25);"; done
+anchor='    for (var k = c.x; k < end; k = k + 1u) {'
+# variant NAME FROM TO ...: shaders/ with integrate.wgsl's text FROM
+# replaced by TO (each once), under $work/NAME.
+variant() {
+    local name=$1
+    shift
+    mkdir -p "$work/$name"
+    cp -r shaders/. "$work/$name"
+    python3 - "$work/$name/integrate.wgsl" "$@" <<'PY'
+import sys
+path, *edits = sys.argv[1:]
+text = open(path).read()
+for old, new in zip(edits[::2], edits[1::2]):
+    assert text.count(old) == 1, f"integrate.wgsl changed: {old!r}"
+    text = text.replace(old, new)
+open(path, "w").write(text)
+PY
+}
+variant base
+variant never "$anchor" "    if (control.opaque_zero != 0u) { $chain y[0] = q; }
+$anchor"
+variant no-trip "$anchor" "    for (var i = 0u; i < control.opaque_zero; i = i + 1u) { $chain y[0] = q; }
+$anchor"
+variant always "$anchor" "    { $chain y[0] = select(y[0], q, control.opaque_zero != 0u); }
+$anchor"
+
+rest='            if (resting_on(walls, y) < WALLS) {'
+meets='            if (reaches_a_stop(walls, y, h, y1)) {'
+never_rests='            if (control.opaque_zero != 0u && resting_on(walls, y) < WALLS) {'
+never_meets='            if (control.opaque_zero != 0u && reaches_a_stop(walls, y, h, y1)) {'
+variant unentered "$rest" "$never_rests" "$meets" "$never_meets"
+variant unresolved "$rest" "$never_rests" "$meets" "$never_meets" \
+    '        // Step k meets a stop (or starts at rest on one).' \
+    '        y = y1;
+        phase = rotate(rotate(phase, half), half);
+        k = k + 1u;
+        continue;
+        // Step k meets a stop (or starts at rest on one).'
+
+# run NAME SCENE...: median device seconds of interleaved runs.
+declare -A times
+measure() {
+    for ((r = 0; r < runs; r++)); do
+        for entry in "$@"; do
+            t=$(LYAPSWEEP_SHADER_DIR="$work/${entry%@*}" "$bin" run "$work/${entry#*@}.toml" \
+                --out "$work/out" --quiet 2>&1 | sed -n 's/.*(timestamp queries) \([0-9.]*\) s.*/\1/p')
+            times[$entry]+="$t "
+        done
+    done
+    for entry in "$@"; do
+        printf '  %-22s %s\n' "$entry" "$(tr ' ' '\n' <<<"${times[$entry]}" | grep . | sort -n |
+            awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}')"
+    done
+}
+echo "lavapipe device seconds, medians of $runs interleaved runs"
+echo "1. code no invocation runs ($lines lines):"
+measure base@no-wall never@no-wall no-trip@no-wall always@no-wall
+echo "2. the impact kernel's resolution path:"
+measure base@wall unentered@wall unresolved@wall base@no-wall
