@@ -78,9 +78,14 @@ pub const DEFAULT_PERTURBATION_F64: f64 = 1e-6;
 /// Default δ in f32 (on the GPU, with central differences), relative to
 /// max(1, ‖x‖∞) like every δ: the compensated f32 images carry about 1e-7
 /// relative error, so δ must be large, and the O(δ²) error of central
-/// differences allows it. Measured on lavapipe over 101 η in [0.5, 1.5] of the
-/// seed's oscillator, the largest sum-rule error is 6.9e-4, 2.1e-4 and 2.3e-4 at
-/// δ = 3e-4, 2e-4 and 1e-4 (grazing chaos limits large δ, rounding small δ).
+/// differences allows it. Measured on lavapipe over 512 η in [0.5, 1.5] of the
+/// seed's scene, the largest sum-rule error is 1.5e-4, 6.3e-5, 4.8e-4 and
+/// 7.9e-4 at δ = 2e-4, 5e-4, 1e-3 and 2e-3: rounding limits small δ; above
+/// 5e-4 a lane of the chaotic window, whose copies graze where the
+/// reference does not, limits large δ, and the host re-estimates ever more
+/// grazing iterations (93, 381, 813 and 7455). 5e-4 was not better enough
+/// to trade for four times the re-estimations (docs/BENCHMARKS.md, "f32's
+/// perturbation, measured again").
 pub const DEFAULT_PERTURBATION_F32: f64 = 2e-4;
 /// Default number of sweep values a GPU run recomputes on the CPU.
 pub const DEFAULT_VALIDATE: usize = 4;
