@@ -237,6 +237,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
                 gpu.adapter, gpu.adapter_backend
             );
             println!("  kernels      {}", gpu.variant);
+            if let Some(dir) = &gpu.kernel_sources {
+                println!(
+                    "               composed from {} (LYAPSWEEP_SHADER_DIR), not the binary's",
+                    dir.display()
+                );
+            }
         }
         None => println!(
             "  backend      {} ({precision}, {} threads)",

@@ -1,8 +1,12 @@
 //! The `lyapsweep` binary: bad input is refused with exit code 2, a message
 //! naming the key, and nothing written; good input writes whole CSV files.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
+
+use lyapsweep::scene::Precision;
 
 const BASE: &str = r#"
 [system]
@@ -349,4 +353,83 @@ fn devices_lists_each_adapter_with_its_f64_support_and_limits() {
         );
         assert!(line.contains("max storage binding"), "{line}");
     }
+}
+
+/// Copies the folder `from` into `to`, recursively.
+fn copy_folder(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        let target = to.join(entry.file_name());
+        if entry.file_type().unwrap().is_dir() {
+            copy_folder(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), target).unwrap();
+        }
+    }
+}
+
+/// `LYAPSWEEP_SHADER_DIR` composes the kernels from a copy of `shaders/`
+/// (for kernel experiments without a rebuild): an unchanged copy gives the
+/// binary's bits, an edited one other numbers, and the summary says where
+/// the kernels came from.
+#[test]
+fn kernels_from_a_shader_folder_are_used_and_said() {
+    if !common::gpu_or_skip(
+        "kernels_from_a_shader_folder_are_used_and_said",
+        Precision::F32,
+    ) {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let shaders = dir.path().join("shaders");
+    copy_folder(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders"),
+        &shaders,
+    );
+    let scene = dir.path().join("scene.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let run = |name: &str, folder: Option<&Path>| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_lyapsweep"));
+        command
+            .arg("run")
+            .arg(&scene)
+            .args([
+                "--backend",
+                "gpu",
+                "--precision",
+                "f32",
+                "--set",
+                "run.validate=0",
+            ])
+            .arg("--out")
+            .arg(dir.path().join(name))
+            .env_remove("LYAPSWEEP_SHADER_DIR");
+        if let Some(folder) = folder {
+            command.env("LYAPSWEEP_SHADER_DIR", folder);
+        }
+        let out = command.output().unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "{stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let spectrum = std::fs::read(dir.path().join(name).join("spectrum.csv")).unwrap();
+        (stdout, spectrum)
+    };
+    let said = format!("composed from {} (LYAPSWEEP_SHADER_DIR)", shaders.display());
+    let (stdout, binary) = run("binary", None);
+    assert!(!stdout.contains("LYAPSWEEP_SHADER_DIR"), "{stdout}");
+    let (stdout, copied) = run("copy", Some(&shaders));
+    assert!(stdout.contains(&said), "{stdout}");
+    assert_eq!(copied, binary, "the same sources, other bits");
+    // RK4's weights off by a part in 60 000: other numbers.
+    let rk4 = shaders.join("shared/rk4.wgsl");
+    let text = std::fs::read_to_string(&rk4).unwrap();
+    assert_eq!(text.matches("h / real(6.0)").count(), 1);
+    std::fs::write(&rk4, text.replace("h / real(6.0)", "h / real(6.0001)")).unwrap();
+    let (stdout, edited) = run("edited", Some(&shaders));
+    assert!(stdout.contains(&said), "{stdout}");
+    assert_ne!(edited, binary, "the edited kernels were not used");
 }

@@ -42,6 +42,9 @@ pub struct GpuReport {
     pub adapter_backend: String,
     /// The kernel variant (what was compiled in).
     pub variant: String,
+    /// Where the kernels' sources came from when not from the binary
+    /// (`LYAPSWEEP_SHADER_DIR`, for kernel experiments): a run says so.
+    pub kernel_sources: Option<std::path::PathBuf>,
     pub timings: gpu::sweep::Timings,
     pub batches: usize,
     pub chunk_steps: usize,
@@ -480,6 +483,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
                 adapter: gpu.summary.name.clone(),
                 adapter_backend: gpu.summary.backend.clone(),
                 variant: variant.name(),
+                kernel_sources: gpu::shader::source_dir(),
                 timings: run.timings,
                 batches: run.batches,
                 chunk_steps: run.chunk_steps,

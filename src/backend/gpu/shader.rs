@@ -5,7 +5,7 @@
 
 use std::borrow::Cow;
 use std::collections::BTreeSet;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
@@ -279,12 +279,12 @@ impl Variant {
 /// compiled in: a kernel experiment then needs no rebuild (a release build
 /// takes minutes on 2 cores; docs/lavapipe/masked-code.sh is one).
 fn include(path: &str) -> Cow<'static, str> {
-    source_in(
-        std::env::var_os("LYAPSWEEP_SHADER_DIR")
-            .as_deref()
-            .map(Path::new),
-        path,
-    )
+    source_in(source_dir().as_deref(), path)
+}
+
+/// The folder `LYAPSWEEP_SHADER_DIR` names, if any (see [`include`]).
+pub fn source_dir() -> Option<PathBuf> {
+    std::env::var_os("LYAPSWEEP_SHADER_DIR").map(PathBuf::from)
 }
 
 fn source_in(dir: Option<&Path>, path: &str) -> Cow<'static, str> {
