@@ -89,6 +89,13 @@ for d in 3e-5 1e-4 3e-4 1e-3; do
     cat /tmp/f32-$d/spectrum.csv >>"$O/seed.txt"
 done
 
+# lavapipe runs code that no invocation takes at full cost; a card should
+# skip a branch no thread of a warp takes (docs/BENCHMARKS.md, "What
+# lavapipe runs"). Into seed.txt: the tool brings back at most 8 files.
+log "code no invocation runs, and the impact kernel's resolution path"
+echo "== docs/lavapipe/masked-code.sh 5 2000" >>"$O/seed.txt"
+BIN=$B/lyapsweep timeout 150 bash docs/lavapipe/masked-code.sh 5 2000 >>"$O/seed.txt" 2>&1
+
 log "the bench: impacts (f32 and f64 with impacts), scaling"
 timeout 240 $B/lane_steps impacts scaling >"$O/bench.txt" 2>&1
 

@@ -21,12 +21,15 @@
 #   no-wall      the kernel without impact code (wall at 100), for scale
 # docs/BENCHMARKS.md ("What lavapipe runs") has the figures.
 #
-# Usage, from the repository root, after `cargo build --release`:
+# Usage, from the repository root, after `cargo build --release` (or with
+# BIN naming another build of lyapsweep):
 #   bash docs/lavapipe/masked-code.sh [runs (default 9)] [lines (default 2000)]
+# On a hardware GPU the same builds show what a GPU does with code no
+# thread of a warp takes (docs/device/check.sh runs it).
 set -euo pipefail
 runs=${1:-9}
 lines=${2:-2000}
-bin=target/release/lyapsweep
+bin=${BIN:-target/release/lyapsweep}
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
@@ -56,21 +59,26 @@ chain="var q = y[0];"
 for ((i = 0; i < lines; i++)); do chain+=" q = q * real(0.5) + real($i.25);"; done
 anchor='    for (var k = c.x; k < end; k = k + 1u) {'
 # variant NAME FROM TO ...: shaders/ with integrate.wgsl's text FROM
-# replaced by TO (each once), under $work/NAME.
+# replaced by TO (each exactly once), under $work/NAME. Plain bash: the
+# device machines may lack python.
 variant() {
-    local name=$1
+    local name=$1 file text old new rest
     shift
     mkdir -p "$work/$name"
     cp -r shaders/. "$work/$name"
-    python3 - "$work/$name/integrate.wgsl" "$@" <<'PY'
-import sys
-path, *edits = sys.argv[1:]
-text = open(path).read()
-for old, new in zip(edits[::2], edits[1::2]):
-    assert text.count(old) == 1, f"integrate.wgsl changed: {old!r}"
-    text = text.replace(old, new)
-open(path, "w").write(text)
-PY
+    file="$work/$name/integrate.wgsl"
+    text=$(<"$file")
+    while (($#)); do
+        old=$1 new=$2
+        shift 2
+        rest=${text#*"$old"}
+        if [[ $rest == "$text" || $rest == *"$old"* ]]; then
+            echo "integrate.wgsl changed: not once: $old" >&2
+            exit 1
+        fi
+        text=${text/"$old"/"$new"}
+    done
+    printf '%s\n' "$text" >"$file"
 }
 variant base
 variant never "$anchor" "    if (control.opaque_zero != 0u) { $chain y[0] = q; }
@@ -108,7 +116,9 @@ measure() {
             awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}')"
     done
 }
-echo "lavapipe device seconds, medians of $runs interleaved runs"
+adapter=$(LYAPSWEEP_SHADER_DIR="$work/base" "$bin" run "$work/no-wall.toml" --out "$work/out" 2>&1 |
+    sed -n 's/^  backend *gpu ([a-z0-9]*) on \(.*\)$/\1/p')
+echo "device seconds on ${adapter:-(no adapter?)}, medians of $runs interleaved runs"
 echo "1. code no invocation runs ($lines lines):"
 measure base@no-wall never@no-wall no-trip@no-wall always@no-wall
 echo "2. the impact kernel's resolution path:"
