@@ -433,3 +433,26 @@ fn kernels_from_a_shader_folder_are_used_and_said() {
     assert!(stdout.contains(&said), "{stdout}");
     assert_ne!(edited, binary, "the edited kernels were not used");
 }
+
+#[test]
+fn a_shader_folder_without_the_kernels_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, BASE).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(["run", path.to_str().unwrap(), "--backend", "gpu", "--out"])
+        .arg(dir.path().join("out"))
+        .env("LYAPSWEEP_SHADER_DIR", &empty)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("LYAPSWEEP_SHADER_DIR") && stderr.contains("integrate.wgsl"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!dir.path().join("out").exists());
+}

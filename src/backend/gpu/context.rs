@@ -233,6 +233,7 @@ pub fn choose(
     precision: Precision,
     device: Option<usize>,
 ) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
+    super::shader::check_source_dir()?;
     let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = adapters_of(backends_from_env()?)
         .into_iter()
         .map(|a| {

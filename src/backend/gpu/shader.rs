@@ -287,6 +287,31 @@ pub fn source_dir() -> Option<PathBuf> {
     std::env::var_os("LYAPSWEEP_SHADER_DIR").map(PathBuf::from)
 }
 
+/// That the folder `LYAPSWEEP_SHADER_DIR` names, if any, holds every
+/// kernel source, checked before a GPU run starts (`include` reads them
+/// only when a kernel is composed, and can then only panic).
+pub fn check_source_dir() -> Result<(), crate::Error> {
+    let Some(dir) = source_dir() else {
+        return Ok(());
+    };
+    let missing: Vec<&str> = SOURCES
+        .iter()
+        .map(|(path, _)| *path)
+        .filter(|path| !dir.join(path).is_file())
+        .collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    Err(crate::Error::Backend {
+        backend: "gpu".into(),
+        reason: format!(
+            "LYAPSWEEP_SHADER_DIR={}: no {} there (the folder must be laid out as shaders/)",
+            dir.display(),
+            missing.join(", ")
+        ),
+    })
+}
+
 fn source_in(dir: Option<&Path>, path: &str) -> Cow<'static, str> {
     if let Some(dir) = dir {
         let file = dir.join(path);
