@@ -83,8 +83,8 @@ pub const DEFAULT_PERTURBATION_F64: f64 = 1e-6;
 /// 7.9e-4 at δ = 2e-4, 5e-4, 1e-3 and 2e-3: rounding limits small δ; above
 /// 5e-4 a lane of the chaotic window, whose copies graze where the
 /// reference does not, limits large δ, and the host re-estimates ever more
-/// grazing iterations (93, 381, 813 and 7455). 5e-4 was not better enough
-/// to trade for four times the re-estimations (docs/BENCHMARKS.md, "f32's
+/// grazing iterations (93, 381, 813 and 7455). 5e-4's gain did not pay
+/// for four times the re-estimations (docs/BENCHMARKS.md, "f32's
 /// perturbation, measured again").
 pub const DEFAULT_PERTURBATION_F32: f64 = 2e-4;
 /// Default number of sweep values a GPU run recomputes on the CPU.
