@@ -51,12 +51,22 @@ pub enum Error {
     },
 }
 
+/// `text` cut to at most `most` characters (and an ellipsis): messages name
+/// what the user wrote, which may be a megabyte long.
+pub fn shortened(text: &str, most: usize) -> String {
+    match text.char_indices().nth(most) {
+        None => text.to_owned(),
+        Some((end, _)) => format!("{}…", &text[..end]),
+    }
+}
+
 impl Error {
-    /// An impossible value for `key`.
+    /// An impossible value for `key`. Both are cut to a length a message
+    /// can show: either may quote the input.
     pub fn invalid(key: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::Invalid {
-            key: key.into(),
-            reason: reason.into(),
+            key: shortened(&key.into(), 200),
+            reason: shortened(&reason.into(), 1000),
         }
     }
 

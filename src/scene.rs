@@ -57,8 +57,9 @@ use crate::system::{self, Params, SystemInfo};
 /// scale needs more get more (`method::lane::plan_lane`).
 pub const DEFAULT_STEPS_PER_PERIOD: usize = 450;
 pub const DEFAULT_TRANSIENT: usize = 500;
-/// Default `align`: the transient's last tenth. The frame Q starts at I,
-/// and I's projection onto the directions of growth stays in the sums of
+/// Default `align`: the transient's last tenth. The frame Q starts from a
+/// fixed frame (`method::qr::generic_frame`), and its projection onto the
+/// directions of growth stays in the sums of
 /// ln R_ii, a bias of O(1/N) over N averaged iterations (3e-4 per unit time
 /// on the friction belt at η = 0.6, N = 300); turned by the Jacobians of
 /// the transient's last iterations first, the frame starts the window

@@ -120,6 +120,38 @@ pub fn validation_tolerance(precision: Precision) -> f64 {
     }
 }
 
+/// The sum rule's tolerance for a lane: the precision's own accuracy, as
+/// the GPU's validation holds it, relative to the exponents' scale
+/// max(1, Σ|λ_i|), plus the error the row already states (`grazing_bound`,
+/// its near-grazing iterations' estimate).
+pub fn sum_rule_tolerance(precision: Precision, lane: &LaneResult) -> f64 {
+    let scale = lane.exponents.iter().map(|e| e.abs()).sum::<f64>().max(1.0);
+    let stated = if lane.grazing_bound.is_finite() {
+        lane.grazing_bound
+    } else {
+        0.0
+    };
+    validation_tolerance(precision) * scale + stated
+}
+
+/// Marks `ok` lanes whose exponents miss the sum rule (the tool's built-in
+/// accuracy check) by more than [`sum_rule_tolerance`]: an error the lane's
+/// other checks did not catch (copies carried out of the linear regime by a
+/// burst of expansion, the paper's linear impact location), which its
+/// numbers carry.
+fn flag_sum_rule(lanes: &mut [LaneResult], expected_sums: &[f64], precision: Precision) {
+    for (lane, &expected) in lanes.iter_mut().zip(expected_sums) {
+        let finite = lane.exponents.iter().all(|e| e.is_finite());
+        if lane.status != LaneStatus::Ok || lane.exponents.is_empty() || !finite {
+            continue;
+        }
+        let miss = (lane.exponent_sum() - expected).abs();
+        if miss > sum_rule_tolerance(precision, lane) {
+            lane.status = LaneStatus::SumRule { miss };
+        }
+    }
+}
+
 /// How far a GPU lane is from its CPU recomputation: the largest exponent
 /// difference on a regular lane; on a chaotic one (λ1 > 0), where rounding
 /// differences decorrelate the two trajectories within tens of iterations
@@ -510,7 +542,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
             .system
             .model
             .is_some_and(|code| code.divergence_along.is_some() && code.section.is_none());
-    let expected_sums = lanes
+    let expected_sums: Vec<f64> = lanes
         .iter()
         .enumerate()
         .map(|(k, lane)| {
@@ -521,6 +553,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
             (scene.system.expected_sum)(&scene.lane_params(k), &rates) + lane.orbit_term
         })
         .collect();
+    flag_sum_rule(&mut lanes, &expected_sums, precision);
     Ok(Report {
         backend: prepared.backend,
         precision,

@@ -8,12 +8,14 @@
 use nalgebra::SMatrix;
 
 use crate::integrate::clock::Phase;
+use crate::model::code::MAX_STATES;
 pub use crate::perturbation::Difference;
 use crate::system::{FlowSettings, IterationStats, Part, System};
 
 /// Trajectories an estimate integrates at most: the reference and 2D copies
-/// for central differences, D ≤ 4.
-const MAX_TRAJECTORIES: usize = 9;
+/// for central differences, D up to a model's most states (a period map's
+/// dimension is its states').
+const MAX_TRAJECTORIES: usize = 1 + 2 * MAX_STATES;
 
 /// Integrates the reference from x and its perturbed copies together (in
 /// lockstep, see [`crate::integrate::time_map_many`]) and returns U(x) and
@@ -71,7 +73,7 @@ impl<const D: usize> Copies<D> {
         let copies = difference.copies(D);
         assert!(
             copies < MAX_TRAJECTORIES,
-            "dimension {D} is above the supported 4"
+            "dimension {D} is above the supported {MAX_STATES}"
         );
         let mut ys = [*x; MAX_TRAJECTORIES];
         let mut steps = [0.0; MAX_TRAJECTORIES];

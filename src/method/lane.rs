@@ -312,10 +312,22 @@ pub enum LaneStatus {
     Mismatch {
         difference: f64,
     },
+    /// A Poincaré map's trajectory did not come back to its section within
+    /// the return bound at `iteration` (from the start of the transient):
+    /// the lane stopped, with no exponents.
+    NoReturn {
+        iteration: usize,
+    },
     /// The lane's fastest time scale needs more RK4 steps per period than
     /// [`MAX_STEPS_PER_PERIOD`]: it was not run.
     TooManySteps {
         needed: usize,
+    },
+    /// The exponents' sum misses the sum rule by `miss` per unit time, more
+    /// than the precision's tolerance (`backend::sum_rule_tolerance`): an
+    /// error no other check caught, which every exponent may carry.
+    SumRule {
+        miss: f64,
     },
 }
 
@@ -332,6 +344,8 @@ impl LaneStatus {
             LaneStatus::Grazing { .. } => "grazing",
             LaneStatus::Mismatch { .. } => "gpu-mismatch",
             LaneStatus::TooManySteps { .. } => "too-many-steps",
+            LaneStatus::NoReturn { .. } => "no-return",
+            LaneStatus::SumRule { .. } => "sum-rule",
         }
     }
 
@@ -340,7 +354,9 @@ impl LaneStatus {
     pub fn is_failure(&self) -> bool {
         matches!(
             self,
-            LaneStatus::NonFinite { .. } | LaneStatus::TooManySteps { .. }
+            LaneStatus::NonFinite { .. }
+                | LaneStatus::NoReturn { .. }
+                | LaneStatus::TooManySteps { .. }
         )
     }
 }
@@ -364,6 +380,8 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::TooManySteps { needed } => {
                 write!(f, "too-many-steps(needed={:.1e})", *needed as f64)
             }
+            LaneStatus::SumRule { miss } => write!(f, "sum-rule(miss={miss:.1e})"),
+            LaneStatus::NoReturn { iteration } => write!(f, "no-return(iteration={iteration})"),
         }
     }
 }
@@ -422,6 +440,11 @@ where
         ..settings.flow
     };
     let mut x = system.start(&settings.initial_state, flow);
+    if !all_finite(&x) {
+        let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
+        acc.fail_at(0, &x);
+        return acc.finish();
+    }
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
         // The exact backend's transient is exact too: it is the ground truth.
@@ -436,7 +459,9 @@ where
         };
         system.wrap(&mut x);
         if !all_finite(&x) {
-            return LaneAccumulator::<D>::new(settings, system.period(), plan).failed(n);
+            let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
+            acc.fail_at(n, &x);
+            return acc.finish();
         }
     }
     average(&system, settings, plan, x)
@@ -479,7 +504,10 @@ where
     let mut discard = vec![IterationStats::default(); lanes.len()];
     // A lane that fails goes on being stepped with the others (its
     // numbers touch no other lane's) but is reported at its first failure.
-    let mut failed: Vec<Option<usize>> = vec![None; lanes.len()];
+    let mut failed: Vec<Option<(usize, bool)>> = xs
+        .iter()
+        .map(|x| (!all_finite(x)).then(|| (0, crate::system::is_no_return(x))))
+        .collect();
     for n in 0..settings.transient {
         discard.fill(IterationStats::default());
         S::iterate_lanes(&each, &mut xs, flow, &mut discard);
@@ -488,7 +516,7 @@ where
         }
         for (k, x) in xs.iter().enumerate() {
             if failed[k].is_none() && !all_finite(x) {
-                failed[k] = Some(n);
+                failed[k] = Some((n, crate::system::is_no_return(x)));
             }
         }
     }
@@ -501,8 +529,9 @@ where
         .zip(&failed)
         .map(|((system, &plan), failed)| {
             let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
-            if let Some(n) = *failed {
+            if let Some((n, no_return)) = *failed {
                 acc.fail(n);
+                acc.no_return = no_return;
             }
             acc
         })
@@ -672,6 +701,9 @@ pub struct LaneAccumulator<const D: usize> {
     bifurcation: Vec<f64>,
     jacobians: Option<Vec<f64>>,
     failed_at: Option<usize>,
+    /// Whether the failure was a Poincaré map's trajectory not coming back
+    /// (`NoReturn`), not a point that blew up.
+    no_return: bool,
 }
 
 impl<const D: usize> LaneAccumulator<D>
@@ -718,6 +750,7 @@ where
             bifurcation: Vec::with_capacity(kept * D),
             jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
+            no_return: false,
         }
     }
 
@@ -732,7 +765,7 @@ where
         stats: &IterationStats,
     ) -> bool {
         if !all_finite(next) {
-            self.fail(self.taken());
+            self.fail_at(self.taken(), next);
             return false;
         }
         let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -838,9 +871,14 @@ where
         self.failed_at.get_or_insert(iteration);
     }
 
-    fn failed(mut self, iteration: usize) -> LaneResult {
+    /// Marks the lane failed at `iteration` on the non-finite point `x`:
+    /// [`LaneStatus::NoReturn`] where `x` is a Poincaré map's image of no
+    /// return, else [`LaneStatus::NonFinite`].
+    pub fn fail_at(&mut self, iteration: usize, x: &[f64]) {
+        if self.failed_at.is_none() {
+            self.no_return = crate::system::is_no_return(x);
+        }
         self.fail(iteration);
-        self.finish()
     }
 
     /// The lane's result after all its iterations.
@@ -871,7 +909,11 @@ where
                 grazing: self.grazing,
                 grazing_bound: f64::NAN,
                 plan: self.plan,
-                status: LaneStatus::NonFinite { iteration },
+                status: if self.no_return {
+                    LaneStatus::NoReturn { iteration }
+                } else {
+                    LaneStatus::NonFinite { iteration }
+                },
             };
         }
         // With relative noise ε_n in the smallest R_ii, ln R_ii is biased by

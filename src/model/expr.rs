@@ -17,8 +17,27 @@
 //! Names are the model's states and parameters, `t` (time) and `pi`;
 //! functions are `sin cos tan exp log sqrt abs tanh atan2 min max pow`,
 //! and `step(s)`, `sign(s)` of a switch s (1 or 0, ±1 by its side).
+//!
+//! An expression is at most [`MAX_CHARS`] characters and its tree at most
+//! [`MAX_DEPTH`] levels deep (a flat sum of n terms is n levels): every pass
+//! over the tree (derivatives, regions, code generation) recurses, and a
+//! deeper tree would overflow the stack. Both are refused in linear time,
+//! before any of those passes runs.
 
 use std::fmt;
+
+/// The most characters an expression may have.
+pub const MAX_CHARS: usize = 20_000;
+
+/// The deepest an expression's tree may be: nested parentheses, calls,
+/// powers and minus signs, and the terms of a sum or factors of a product,
+/// each count one level.
+pub const MAX_DEPTH: usize = 1_000;
+
+/// A name or number of `text` cut to a length a message can show.
+pub fn shortened(text: &str) -> String {
+    crate::error::shortened(text, 60)
+}
 
 /// What a name in an expression stands for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -245,8 +264,18 @@ fn tokenize(text: &str) -> Result<Vec<(Token, usize)>, ParseError> {
             let literal: String = chars[start..i].iter().collect();
             let value = literal.parse::<f64>().map_err(|_| ParseError {
                 column,
-                message: format!("'{literal}' is not a number"),
+                message: format!("'{}' is not a number", shortened(&literal)),
             })?;
+            if value.is_infinite() {
+                return Err(ParseError {
+                    column,
+                    message: format!(
+                        "'{}' is beyond the largest number ({:e})",
+                        shortened(&literal),
+                        f64::MAX
+                    ),
+                });
+            }
             tokens.push((Token::Num(value), column));
         } else if c.is_alphabetic() || c == '_' {
             let start = i;
@@ -272,6 +301,9 @@ struct Parser<'a> {
     tokens: Vec<(Token, usize)>,
     at: usize,
     names: &'a Names,
+    /// How deep the parser has recursed: bounded by [`MAX_DEPTH`], so that
+    /// deeply nested text is refused before it overflows the stack.
+    nesting: usize,
 }
 
 impl Parser<'_> {
@@ -308,7 +340,23 @@ impl Parser<'_> {
         }
     }
 
+    /// Enters one more level of nesting, or refuses it.
+    fn deeper(&mut self) -> Result<(), ParseError> {
+        self.nesting += 1;
+        if self.nesting > MAX_DEPTH {
+            return self.error(format!("nested more than {MAX_DEPTH} levels deep"));
+        }
+        Ok(())
+    }
+
     fn sum(&mut self) -> Result<Expr, ParseError> {
+        self.deeper()?;
+        let sum = self.terms();
+        self.nesting -= 1;
+        sum
+    }
+
+    fn terms(&mut self) -> Result<Expr, ParseError> {
         let mut left = self.product()?;
         loop {
             let op = match self.peek() {
@@ -336,7 +384,10 @@ impl Parser<'_> {
 
     fn unary(&mut self) -> Result<Expr, ParseError> {
         if self.eat('-') {
-            return Ok(Expr::Neg(Box::new(self.unary()?)));
+            self.deeper()?;
+            let operand = self.unary();
+            self.nesting -= 1;
+            return Ok(Expr::Neg(Box::new(operand?)));
         }
         self.power()
     }
@@ -344,7 +395,10 @@ impl Parser<'_> {
     fn power(&mut self) -> Result<Expr, ParseError> {
         let base = self.atom()?;
         if self.eat('^') {
-            return Ok(Expr::Bin(Op::Pow, Box::new(base), Box::new(self.unary()?)));
+            self.deeper()?;
+            let exponent = self.unary();
+            self.nesting -= 1;
+            return Ok(Expr::Bin(Op::Pow, Box::new(base), Box::new(exponent?)));
         }
         Ok(base)
     }
@@ -371,7 +425,7 @@ impl Parser<'_> {
                     let Some(func) = Func::by_name(&name) else {
                         return Err(ParseError {
                             column,
-                            message: format!("unknown function '{name}'"),
+                            message: format!("unknown function '{}'", shortened(&name)),
                         });
                     };
                     self.at += 1;
@@ -398,7 +452,7 @@ impl Parser<'_> {
                 }
                 let message = match Func::by_name(&name) {
                     Some(_) => format!("'{name}' is a function: write {name}(...)"),
-                    None => format!("unknown name '{name}'"),
+                    None => format!("unknown name '{}'", shortened(&name)),
                 };
                 Err(ParseError { column, message })
             }
@@ -449,7 +503,7 @@ impl Parser<'_> {
 fn describe(token: &Token) -> String {
     match token {
         Token::Num(v) => format!("the number {v}"),
-        Token::Name(n) => format!("'{n}'"),
+        Token::Name(n) => format!("'{}'", shortened(n)),
         Token::Sym(c) => format!("'{c}'"),
         Token::End => "the end".to_owned(),
     }
@@ -458,10 +512,20 @@ fn describe(token: &Token) -> String {
 impl Expr {
     /// Parses `text`, resolving its names against `names`.
     pub fn parse(text: &str, names: &Names) -> Result<Expr, ParseError> {
+        if text.len() > MAX_CHARS && text.chars().count() > MAX_CHARS {
+            return Err(ParseError {
+                column: MAX_CHARS + 1,
+                message: format!(
+                    "longer than {MAX_CHARS} characters ({})",
+                    text.chars().count()
+                ),
+            });
+        }
         let mut parser = Parser {
             tokens: tokenize(text)?,
             at: 0,
             names,
+            nesting: 0,
         };
         if *parser.peek() == Token::End {
             return parser.error("empty expression");
@@ -471,7 +535,34 @@ impl Expr {
             let found = describe(parser.peek());
             return parser.error(format!("unexpected {found}"));
         }
+        let depth = expr.depth();
+        if depth > MAX_DEPTH {
+            return Err(ParseError {
+                column: 1,
+                message: format!(
+                    "{depth} levels deep, more than {MAX_DEPTH} (a sum of n terms is n levels): \
+                     group its terms in parentheses"
+                ),
+            });
+        }
         Ok(expr)
+    }
+
+    /// The number of levels of the tree, counted without recursion (the
+    /// tree may be too deep for it).
+    pub fn depth(&self) -> usize {
+        let mut deepest = 0;
+        let mut stack = vec![(self, 1)];
+        while let Some((e, level)) = stack.pop() {
+            deepest = deepest.max(level);
+            match e {
+                Expr::Num(_) | Expr::Var(_) => {}
+                Expr::Neg(a) => stack.push((a, level + 1)),
+                Expr::Bin(_, a, b) => stack.extend([(&**a, level + 1), (&**b, level + 1)]),
+                Expr::Call(_, args) => stack.extend(args.iter().map(|a| (a, level + 1))),
+            }
+        }
+        deepest
     }
 
     /// The value at the given states, parameters and time.

@@ -121,6 +121,14 @@ fn expression(
 ) -> Result<Expr> {
     let text = string(text, key)?;
     let expr = Expr::parse(text, names).map_err(|e| invalid(key, e.to_string()))?;
+    for (j, switch) in names.switches.iter().enumerate() {
+        if let (true, Some(why)) = (expr.uses(Var::Side(j)), allowed(Var::Side(j))) {
+            return Err(invalid(
+                key,
+                format!("may not read the switch '{switch}' (step or sign): {why}"),
+            ));
+        }
+    }
     for (i, state) in names.states.iter().enumerate() {
         if let (true, Some(why)) = (expr.uses(Var::State(i)), allowed(Var::State(i))) {
             return Err(invalid(
@@ -194,6 +202,7 @@ fn parameter(v: &toml::Value, key: &str) -> Result<(f64, (f64, f64))> {
     Ok((value, (min, max)))
 }
 
+/// The equations: anything.
 fn any(_: Var) -> Option<&'static str> {
     None
 }
@@ -201,6 +210,57 @@ fn any(_: Var) -> Option<&'static str> {
 fn parameters_only(_: Var) -> Option<&'static str> {
     Some("it must be a function of the parameters alone")
 }
+
+/// An event's surface or reset: anything but a switch's side, which is
+/// substituted per region of the switches in the equations alone.
+fn no_sides(v: Var) -> Option<&'static str> {
+    match v {
+        Var::Side(_) => Some("only the equations may read the switches' sides"),
+        _ => None,
+    }
+}
+
+/// A switch's surface or stick limit: the state, not the time, nor a side
+/// (the surface decides the side).
+fn switch_state(v: Var) -> Option<&'static str> {
+    match v {
+        Var::Time => Some("a switching surface and its stick limit are functions of the state"),
+        Var::Side(_) => Some("only the equations may read the switches' sides"),
+        _ => None,
+    }
+}
+
+/// Refuses a surface that no motion can cross: one constant in the states
+/// and the time (`"0"`, `"x - x"`), whose derivatives all fold to 0.
+fn crossable(surface: &Expr, names: &Names, key: &str) -> Result<()> {
+    let varies = (0..names.states.len())
+        .map(Var::State)
+        .chain([Var::Time])
+        .any(|v| surface.derivative(v) != Expr::Num(0.0));
+    if varies {
+        Ok(())
+    } else {
+        Err(invalid(
+            key,
+            "does not depend on the state or the time, so nothing ever crosses it: \
+             write the surface whose zero the event or switch is",
+        ))
+    }
+}
+
+/// The value of a stick limit at `params` where it is a function of the
+/// parameters alone and negative or not a number: the motion sticks while
+/// the rates' mean is below the limit in size, so such a limit means
+/// nothing. `None` where it is fine, or depends on the state.
+pub fn bad_stick_limit(limit: &Expr, params: &[f64]) -> Option<f64> {
+    if super::tape::reads_state_or_time(limit) {
+        return None;
+    }
+    let value = limit.eval(&[], params, 0.0);
+    (!(value >= 0.0 && value.is_finite())).then_some(value)
+}
+
+pub const STICK_LIMIT_RULE: &str = "must be a finite number ≥ 0 (the size of the force that holds)";
 
 impl Model {
     /// Parses the `[model]` table; `key` names it in messages ("model").
@@ -280,6 +340,14 @@ impl Model {
             let items = value
                 .as_array()
                 .ok_or_else(|| invalid(&switches_key, "expected [[model.switches]] tables"))?;
+            // Known before any surface is read, so that a surface or stick
+            // limit naming a switch is told why it may not, not that the
+            // switch does not exist.
+            names.switches = items
+                .iter()
+                .filter_map(|i| i.get("name").and_then(toml::Value::as_str))
+                .map(str::to_owned)
+                .collect();
             for (n, item) in items.iter().enumerate() {
                 let key = format!("{switches_key}[{n}]");
                 let switch = table(item, &key)?;
@@ -317,22 +385,22 @@ impl Model {
                     })?,
                     &surface_key,
                     &names,
-                    |v| match v {
-                        Var::Time => Some("a switching surface is a function of the state"),
-                        _ => None,
-                    },
+                    switch_state,
                 )?;
+                crossable(&surface, &names, &surface_key)?;
                 let stick_limit = match switch.get("stick_limit") {
                     None => None,
-                    Some(text) => Some(expression(
-                        text,
-                        &format!("{key}.stick_limit"),
-                        &names,
-                        |v| match v {
-                            Var::Time => Some("a stick limit is a function of the state"),
-                            _ => None,
-                        },
-                    )?),
+                    Some(text) => {
+                        let limit_key = format!("{key}.stick_limit");
+                        let limit = expression(text, &limit_key, &names, switch_state)?;
+                        if let Some(value) = bad_stick_limit(&limit, &defaults) {
+                            return Err(invalid(
+                                &limit_key,
+                                format!("{STICK_LIMIT_RULE}, got {value} at the defaults"),
+                            ));
+                        }
+                        Some(limit)
+                    }
                 };
                 switches.push(Switch {
                     name,
@@ -473,7 +541,21 @@ impl Model {
                 let event = table(item, &key)?;
                 known_keys(event, &key, "an event", &["name", "surface", "reset"])?;
                 let name = match event.get("name") {
-                    Some(v) => string(v, &format!("{key}.name"))?.to_owned(),
+                    Some(v) => {
+                        let name_key = format!("{key}.name");
+                        let name = string(v, &name_key)?;
+                        // The name heads the event's column of spectrum.csv.
+                        if !name.chars().any(char::is_alphanumeric) {
+                            return Err(invalid(
+                                &name_key,
+                                format!(
+                                    "{:?} has no letter or digit to name the event's column by",
+                                    super::expr::shortened(name)
+                                ),
+                            ));
+                        }
+                        name.to_owned()
+                    }
                     None => format!("event {n}"),
                 };
                 let surface_key = format!("{key}.surface");
@@ -486,8 +568,9 @@ impl Model {
                     })?,
                     &surface_key,
                     &names,
-                    any,
+                    no_sides,
                 )?;
+                crossable(&surface, &names, &surface_key)?;
                 let mut reset = Vec::new();
                 if let Some(r) = event.get("reset") {
                     let reset_key = format!("{key}.reset");
@@ -500,7 +583,7 @@ impl Model {
                         })?;
                         reset.push((
                             state,
-                            expression(text, &format!("{reset_key}.{s}"), &names, any)?,
+                            expression(text, &format!("{reset_key}.{s}"), &names, no_sides)?,
                         ));
                     }
                 }

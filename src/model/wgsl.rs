@@ -107,7 +107,14 @@ pub enum Unsupported {
     /// A switch with a stick limit in a model with several switches, made
     /// to be slid on several at once: the kernels slide on one.
     Sliding(String),
+    /// An expression nested deeper than the WGSL compiler takes.
+    Depth(usize),
 }
+
+/// The deepest expression tree the kernels emit: every level is one
+/// parenthesised operation or call in the WGSL, and naga's parser stops at
+/// 200 levels of recursion, the function around the expression included.
+pub const MAX_DEPTH: usize = 150;
 
 impl fmt::Display for Unsupported {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -128,6 +135,11 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
+            Unsupported::Depth(depth) => write!(
+                f,
+                "an expression (or its derivative) is {depth} levels deep: the GPU kernels' \
+                 WGSL compiler takes {MAX_DEPTH} (group a long sum's terms in parentheses)"
+            ),
         }
     }
 }
@@ -192,6 +204,10 @@ pub fn check(code: &Code) -> Result<(), Unsupported> {
     }
     for e in trees {
         emittable(e)?;
+        let depth = e.depth();
+        if depth > MAX_DEPTH {
+            return Err(Unsupported::Depth(depth));
+        }
     }
     Ok(())
 }

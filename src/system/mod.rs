@@ -22,6 +22,19 @@ use crate::integrate::clock::Phase;
 
 pub use crate::integrate::{FlowSettings, IterationStats, Part};
 
+
+/// Every coordinate of a map image that does not exist: a Poincaré map's
+/// trajectory that never came back to its section within the return bound.
+/// Not finite, so the lane fails as on any non-finite point, and
+/// [`is_no_return`] tells the two apart for its status.
+pub const NO_RETURN: f64 = f64::INFINITY;
+
+/// Whether `x` is the image of no return ([`NO_RETURN`]) rather than a
+/// point that blew up.
+pub fn is_no_return(x: &[f64]) -> bool {
+    !x.is_empty() && x.iter().all(|&v| v == NO_RETURN)
+}
+
 /// The systems written here by hand, by their scene `kind`.
 pub static SYSTEMS: &[&SystemInfo] = &[&henon::INFO];
 

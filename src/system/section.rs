@@ -27,7 +27,8 @@ use crate::perturbation::{perturbation_at, Difference};
 const PART_CONTRACTION: f64 = 4.0;
 
 /// A return that takes longer than this many time units is no return:
-/// the trajectory does not come back to the section (NaN, a failed lane).
+/// the trajectory does not come back to the section (the lane fails with
+/// `no-return`, see [`crate::system::NO_RETURN`]).
 const MAX_RETURN_TIME: f64 = 1e4;
 
 /// The Poincaré map of a model's flow in N = D + 1 states.
@@ -109,7 +110,8 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
         )
     }
 
-    /// The return from `start` that ended in `crossing` (none: NaN).
+    /// The return from `start` that ended in `crossing` (none: an image of
+    /// [`crate::system::NO_RETURN`], the time and flux NaN).
     pub fn return_from(&self, start: &[f64; N], crossing: Crossing<N>) -> Return<D> {
         let velocity = |y: &[f64; N]| self.flow.rhs(&ZERO_PHASE, y)[self.section.state];
         match crossing {
@@ -120,7 +122,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
                 speed: velocity(&y).abs(),
             },
             None => Return {
-                image: [f64::NAN; D],
+                image: [crate::system::NO_RETURN; D],
                 time: f64::NAN,
                 log_flux: f64::NAN,
                 speed: f64::NAN,

@@ -537,6 +537,11 @@ where
     returns(&mut stepper, &mut lanes, |_| initial)?;
     for lane in lanes.iter_mut().filter(|l| l.active()) {
         lane.x = lane.back.take().expect("a return").image;
+        if !lane.x.iter().all(|v| v.is_finite()) {
+            let mut accumulator = lane.accumulator.clone();
+            accumulator.fail_at(0, &lane.x);
+            lane.result = Some(accumulator.finish());
+        }
     }
     for n in 0..settings.transient {
         returns(&mut stepper, &mut lanes, |lane| lane.system.lift(&lane.x))?;
@@ -545,7 +550,7 @@ where
             lane.system.wrap(&mut lane.x);
             if !lane.x.iter().all(|v| v.is_finite()) {
                 let mut accumulator = lane.accumulator.clone();
-                accumulator.fail(n);
+                accumulator.fail_at(n, &lane.x);
                 lane.result = Some(accumulator.finish());
             }
         }
