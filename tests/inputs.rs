@@ -1,0 +1,107 @@
+//! What the command does with the user's own input: it never writes over
+//! the scene or model file it reads, indexes arrays in `--set` paths, gives
+//! advice it would accept, tells a scene from a model, echoes a huge name
+//! clipped, and lets a quick look lower the iterations. Every refusal is
+//! exit code 2 with a message naming the key or path and why, and leaves
+//! the user's files as they were.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// A three-value sweep of the seed's oscillator on the CPU, small enough to
+/// run in milliseconds; its comments are what a rewritten scene would lose.
+const BASE: &str = r#"# My sweep: comments that only this file holds.
+[system]
+kind = "impact-oscillator"   # the seed's oscillator
+[sweep]
+parameter = "eta"
+from = 0.8
+to = 1.2
+count = 3
+[integration]
+steps_per_period = 100
+transient = 5
+iterations = 20
+[run]
+backend = "cpu"
+"#;
+
+fn lyapsweep(args: &[&str], cwd: Option<&Path>) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_lyapsweep"));
+    command.args(args);
+    if let Some(cwd) = cwd {
+        command.current_dir(cwd);
+    }
+    command.output().expect("the binary runs")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn ok(output: Output) -> Output {
+    assert_eq!(output.status.code(), Some(0), "stderr: {}", stderr(&output));
+    output
+}
+
+/// Exit code 2 and a one-line message holding every needle; returns it.
+fn refused(output: &Output, needles: &[&str]) -> String {
+    let text = stderr(output);
+    assert_eq!(output.status.code(), Some(2), "stderr: {text}");
+    for needle in needles {
+        assert!(text.contains(needle), "{needle:?} not in: {text}");
+    }
+    assert_eq!(text.trim().lines().count(), 1, "one message: {text}");
+    text
+}
+
+/// Every file below `dir` (hidden ones too), by path, with its bytes.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if entry.file_type().unwrap().is_dir() {
+            files.insert(format!("{name}/"), Vec::new());
+            for (inner, bytes) in snapshot(&entry.path()) {
+                files.insert(format!("{name}/{inner}"), bytes);
+            }
+        } else {
+            files.insert(name, std::fs::read(entry.path()).unwrap());
+        }
+    }
+    files
+}
+
+#[test]
+fn plot_onto_a_file_is_refused() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    ok(lyapsweep(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        None,
+    ));
+    let file = root.path().join("figure.png");
+    std::fs::write(&file, "my own figure").unwrap();
+    let before = snapshot(root.path());
+    let output = lyapsweep(
+        &[
+            "plot",
+            out.to_str().unwrap(),
+            "--out",
+            file.to_str().unwrap(),
+        ],
+        None,
+    );
+    refused(&output, &["figure.png", "exists and is not a folder"]);
+    assert_eq!(snapshot(root.path()), before);
+}
