@@ -74,6 +74,74 @@ fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     files
 }
 
+/// The shard count the work-limit refusal advises (`--shard i/N`).
+fn advised_shards(message: &str) -> usize {
+    let at = message.find("--shard i/").expect("advice given") + "--shard i/".len();
+    message[at..]
+        .split(|c: char| !c.is_ascii_digit())
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn the_work_limit_advises_a_shard_count_it_accepts() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    // A file where the output folder goes: a run that passes the size
+    // checks is refused there, before it computes anything.
+    let file = root.path().join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let run = |iterations: &str, shard: Option<String>| {
+        let mut args = vec![
+            "run".to_owned(),
+            scene.to_str().unwrap().to_owned(),
+            "--out".into(),
+            file.to_str().unwrap().to_owned(),
+            "-q".into(),
+            "--set".into(),
+            "sweep.count=5".into(),
+            "--set".into(),
+            format!("integration.iterations={iterations}"),
+        ];
+        if let Some(shard) = shard {
+            args.extend(["--shard".to_owned(), shard]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        lyapsweep(&args, None)
+    };
+    // Five values of about 0.4e15 lane-steps each: two shards would give
+    // one of them three values, over the limit.
+    let iterations = "800000000000";
+    let message = refused(
+        &run(iterations, None),
+        &["sweep.count", "lane-steps", "--shard i/"],
+    );
+    let shards = advised_shards(&message);
+    assert!(
+        (2..=5).contains(&shards),
+        "advised {shards} shards: {message}"
+    );
+    for index in [0, shards - 1] {
+        let output = run(iterations, Some(format!("{index}/{shards}")));
+        refused(&output, &["a-file", "exists and is not a folder"]);
+    }
+    // The advice is the fewest shards that pass.
+    let output = run(iterations, Some(format!("0/{}", shards - 1)));
+    refused(&output, &["lane-steps"]);
+
+    // One value alone past the limit: no shard count helps, and the
+    // message says what does.
+    let message = refused(
+        &run("10000000000000", None),
+        &["one sweep value alone", "integration.iterations", "lower"],
+    );
+    assert!(!message.contains("--shard i/"), "{message}");
+    assert_eq!(std::fs::read(&file).unwrap(), b"");
+}
+
 #[test]
 fn plot_onto_a_file_is_refused() {
     let root = tempfile::tempdir().unwrap();
