@@ -40,7 +40,7 @@
 //!
 //! Unknown keys, wrong types and impossible values are errors that name the key.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
@@ -866,15 +866,22 @@ fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
 
 /// A scene's `model = "file.toml"` replaced by the file's model table (its
 /// `[model]`, or the whole file), read relative to `base`, so that
-/// overrides and the written scene see the model itself.
-fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()> {
+/// overrides and the written scene see the model itself; returns the
+/// file's path.
+fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<Option<PathBuf>> {
     let Some(toml::Value::String(file)) = table.get("model") else {
-        return Ok(());
+        return Ok(None);
     };
-    let path = base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file));
+    let path = model_path(file, base);
     let model = crate::model::read_table(&path)?;
     table.insert("model".into(), model);
-    Ok(())
+    Ok(Some(path))
+}
+
+/// The model file a scene's `model = "file"` names, relative to the
+/// scene's folder `base` (the working directory when `None`).
+pub fn model_path(file: &str, base: Option<&Path>) -> PathBuf {
+    base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file))
 }
 
 /// `--set model.parameters.NAME=...` must name a parameter the model has:

@@ -27,6 +27,45 @@ iterations = 20
 backend = "cpu"
 "#;
 
+/// The models issue's impact pair, as a model file: two events, so that
+/// `model.events[i]` has something to index.
+const PAIR_MODEL: &str = r#"# An impact pair (two rigid stops).
+[model]
+name = "impact-pair"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 1.0
+eta = 1.0
+gap = 1.0
+e = 0.8
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v" }
+"#;
+
+/// The rest of a scene of the impact pair: one value, a few iterations.
+const PAIR_RUN: &str = r#"
+[sweep]
+parameter = "eta"
+values = [1.0]
+[integration]
+transient = 5
+iterations = 10
+[run]
+backend = "cpu"
+"#;
+
 fn lyapsweep(args: &[&str], cwd: Option<&Path>) -> Output {
     let mut command = Command::new(env!("CARGO_BIN_EXE_lyapsweep"));
     command.args(args);
@@ -38,6 +77,10 @@ fn lyapsweep(args: &[&str], cwd: Option<&Path>) -> Output {
 
 fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn stdout(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 fn ok(output: Output) -> Output {
@@ -72,6 +115,20 @@ fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
         }
     }
     files
+}
+
+/// `dir/scenes/pair.toml` naming `../models/pair.toml`; returns the scene's path.
+fn pair_in_files(dir: &Path) -> String {
+    std::fs::create_dir_all(dir.join("models")).unwrap();
+    std::fs::create_dir_all(dir.join("scenes")).unwrap();
+    std::fs::write(dir.join("models/pair.toml"), PAIR_MODEL).unwrap();
+    let scene = dir.join("scenes/pair.toml");
+    std::fs::write(
+        &scene,
+        format!("model = \"../models/pair.toml\"\n{PAIR_RUN}"),
+    )
+    .unwrap();
+    scene.to_str().unwrap().to_owned()
 }
 
 /// The shard count the work-limit refusal advises (`--shard i/N`).
@@ -140,6 +197,45 @@ fn the_work_limit_advises_a_shard_count_it_accepts() {
     );
     assert!(!message.contains("--shard i/"), "{message}");
     assert_eq!(std::fs::read(&file).unwrap(), b"");
+}
+
+#[test]
+fn model_check_tells_a_scene_from_a_model() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = pair_in_files(root.path());
+    let model = root.path().join("models/pair.toml");
+    let direct = ok(lyapsweep(
+        &["model", "check", model.to_str().unwrap()],
+        None,
+    ));
+    // A scene naming its model file: that file is checked, and stderr says so.
+    let through = ok(lyapsweep(&["model", "check", &scene], None));
+    assert_eq!(stdout(&through), stdout(&direct));
+    let note = stderr(&through);
+    assert!(
+        note.contains("is a scene file") && note.contains("models/pair.toml"),
+        "{note}"
+    );
+    // A scene with a built-in system has no model file to check.
+    let system = root.path().join("system.toml");
+    std::fs::write(&system, BASE).unwrap();
+    let output = lyapsweep(&["model", "check", system.to_str().unwrap()], None);
+    refused(
+        &output,
+        &[
+            "system.toml",
+            "is a scene file",
+            "built into lyapsweep",
+            "impact-oscillator",
+            "no model file",
+        ],
+    );
+    assert!(stdout(&output).is_empty());
+    // A scene with neither.
+    let neither = root.path().join("neither.toml");
+    std::fs::write(&neither, PAIR_RUN).unwrap();
+    let output = lyapsweep(&["model", "check", neither.to_str().unwrap()], None);
+    refused(&output, &["neither.toml", "is a scene file", "no [model]"]);
 }
 
 #[test]
