@@ -30,8 +30,9 @@ pub enum Error {
     #[error("{path}: {reason}")]
     Results { path: PathBuf, reason: String },
     /// The output folder cannot take the run's files (found before any
-    /// computation): it is a file, holds files lyapsweep does not write, is
-    /// an input, or cannot be created.
+    /// computation): it is a file, holds files lyapsweep does not write (or
+    /// data files without a manifest), is or holds an input, or cannot be
+    /// created.
     #[error("cannot write {path}: {reason}")]
     Output { path: PathBuf, reason: String },
     /// The run is larger than this machine can hold (or than one process

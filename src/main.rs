@@ -201,7 +201,7 @@ fn run(
     // Everything that can refuse the run does so before the first step:
     // its size, then the output folder.
     let large = lyapsweep::budget::large_run(&scene);
-    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &[])?)?;
+    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &scene.files)?)?;
     if let Some(line) = large.filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
     }
@@ -322,6 +322,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
+    if let Some(asked) = scene.bifurcation_points_asked {
+        println!(
+            "  points       output.bifurcation_points lowered from {asked} to {}: a lane keeps at most one point per averaged iteration (integration.iterations = {})",
+            scene.bifurcation_points, i.iterations
+        );
+    }
     let unused = scene.unused_keys(report.backend);
     if !unused.is_empty() {
         println!(
