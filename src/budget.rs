@@ -76,11 +76,24 @@ pub fn check_sweep(
     let run_lanes = shard.map_or(lanes, |s| (lanes / s.count as f64).ceil());
     let work = run_lanes * lane_steps_per_lane;
     if work > MAX_LANE_STEPS {
-        let shards = (lanes * lane_steps_per_lane / MAX_LANE_STEPS).ceil();
+        // Shards split the lanes, never a lane: past the limit for one
+        // value, no shard count helps.
+        if lane_steps_per_lane > MAX_LANE_STEPS {
+            return Err(Error::TooLarge {
+                keys: "integration.iterations, integration.transient, integration.steps_per_period".into(),
+                reason: format!(
+                    "one sweep value alone is about {lane_steps_per_lane:.1e} RK4 lane-steps, more than one process takes on ({MAX_LANE_STEPS:.0e}), and --shard splits the values, not a value's work: lower integration.iterations or integration.transient (or integration.steps_per_period, for a flow)"
+                ),
+            });
+        }
+        // A shard takes up to ⌈lanes / n⌉ values: n must leave each shard
+        // at most the values one process takes on.
+        let per_process = (MAX_LANE_STEPS / lane_steps_per_lane).floor().max(1.0);
+        let shards = (lanes / per_process).ceil();
         return Err(Error::TooLarge {
             keys: format!("{}, integration.iterations, integration.steps_per_period", keys()),
             reason: format!(
-                "about {work:.1e} RK4 lane-steps, more than one process takes on ({MAX_LANE_STEPS:.0e}): split the run with --shard i/{shards} (or more shards), one process each, and `lyapsweep merge` the results"
+                "about {work:.1e} RK4 lane-steps, more than one process takes on ({MAX_LANE_STEPS:.0e}): split the run with --shard i/{shards} (or more, up to {lanes}: one value each), one process each, and `lyapsweep merge` the results"
             ),
         });
     }

@@ -30,8 +30,9 @@ pub enum Error {
     #[error("{path}: {reason}")]
     Results { path: PathBuf, reason: String },
     /// The output folder cannot take the run's files (found before any
-    /// computation): it is a file, holds files lyapsweep does not write, is
-    /// an input, or cannot be created.
+    /// computation): it is a file, holds files lyapsweep does not write (or
+    /// data files without a manifest), is or holds an input, or cannot be
+    /// created.
     #[error("cannot write {path}: {reason}")]
     Output { path: PathBuf, reason: String },
     /// The run is larger than this machine can hold (or than one process
@@ -39,6 +40,10 @@ pub enum Error {
     /// split it.
     #[error("{keys}: {reason}")]
     TooLarge { keys: String, reason: String },
+    /// The file given to `model check` is not a model file: a scene with a
+    /// built-in system, or with no model at all.
+    #[error("{path}: {reason}")]
+    NotAModel { path: PathBuf, reason: String },
     /// Every lane failed (no exponents from any): the files were written,
     /// with each lane's status, but the run is not a result.
     #[error("every lane failed ({reasons}): see the status column of the output")]
@@ -77,3 +82,41 @@ impl Error {
 }
 
 pub type Result<T> = std::result::Result<T, Error>;
+
+/// Characters of the user's text (a key, a name, an assignment) a message
+/// echoes: enough to recognise it, where a mistyped 1 MB key echoed whole
+/// would bury the message.
+pub const ECHO_CHARS: usize = 60;
+
+/// `text` as a message echoes it: its first [`ECHO_CHARS`] characters, and
+/// "…" when there were more.
+pub fn clip(text: &str) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(ECHO_CHARS) {
+        Some((end, _)) => format!("{}…", &text[..end]).into(),
+        None => text.into(),
+    }
+}
+
+/// A message of serde's or toml's, its quoted parts (`name`, "name")
+/// clipped, as they quote the user's text, and the whole cut at twenty
+/// times that.
+pub fn clip_quoted(message: &str) -> String {
+    let mut out = String::new();
+    let mut rest = message;
+    while let Some(start) = rest.find(['`', '"']) {
+        let quote = rest[start..].chars().next().expect("found");
+        let inner = &rest[start + 1..];
+        let Some(len) = inner.find(quote) else {
+            break;
+        };
+        out.push_str(&rest[..=start]);
+        out.push_str(&clip(&inner[..len]));
+        out.push(quote);
+        rest = &inner[len + 1..];
+    }
+    out.push_str(rest);
+    match out.char_indices().nth(20 * ECHO_CHARS) {
+        Some((end, _)) => format!("{}…", &out[..end]),
+        None => out,
+    }
+}

@@ -128,9 +128,38 @@ fn main() -> ExitCode {
     }
 }
 
-/// `lyapsweep model check FILE`.
+/// `lyapsweep model check FILE`. A scene file given instead is told
+/// apart: one naming its model file (`model = "file.toml"`) has that file
+/// checked, saying so on stderr; one with a built-in `[system]` has no
+/// model to check, and is refused saying so.
 fn check_model(file: &std::path::Path) -> Result<(), Error> {
-    let table = lyapsweep::model::read_table(file)?;
+    let mut table = lyapsweep::model::read_table(file)?;
+    if let toml::Value::String(named) = &table {
+        let path = scene::model_path(named, file.parent());
+        eprintln!(
+            "lyapsweep: {} is a scene file (model = {named:?}): checking the model file it names, {}",
+            file.display(),
+            path.display()
+        );
+        table = lyapsweep::model::read_table(&path)?;
+    }
+    // Keys a scene has and a model does not.
+    let scene_keys = ["system", "sweep", "integration", "run", "output"];
+    if let Some(key) = scene_keys.iter().find(|k| table.get(k).is_some()) {
+        let reason = match table.get("system").and_then(|s| s.get("kind")) {
+            Some(kind) => format!(
+                "is a scene file whose [system] is built into lyapsweep (kind = {}), not a model: it names no model file to check; `model check` reads a model file (a [model] table, or the whole file as one), or a scene with model = \"file.toml\"",
+                lyapsweep::error::clip(&kind.to_string())
+            ),
+            None => format!(
+                "is a scene file (it has [{key}]) with no [model] and no model = \"file.toml\": there is no model in it to check; `model check` reads a model file (a [model] table, or the whole file as one)"
+            ),
+        };
+        return Err(Error::NotAModel {
+            path: file.to_owned(),
+            reason,
+        });
+    }
     let model = lyapsweep::model::Model::parse(&table, "model")?;
     let code = lyapsweep::model::code::Code::compile(model, "model")?;
     print!("{}", lyapsweep::model::describe::describe(&code));
@@ -172,7 +201,7 @@ fn run(
     // Everything that can refuse the run does so before the first step:
     // its size, then the output folder.
     let large = lyapsweep::budget::large_run(&scene);
-    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &[])?)?;
+    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &scene.files)?)?;
     if let Some(line) = large.filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
     }
@@ -293,6 +322,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
+    if let Some(asked) = scene.bifurcation_points_asked {
+        println!(
+            "  points       output.bifurcation_points lowered from {asked} to {}: a lane keeps at most one point per averaged iteration (integration.iterations = {})",
+            scene.bifurcation_points, i.iterations
+        );
+    }
     let unused = scene.unused_keys(report.backend);
     if !unused.is_empty() {
         println!(

@@ -40,11 +40,11 @@
 //!
 //! Unknown keys, wrong types and impossible values are errors that name the key.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use crate::error::{Error, Result};
+use crate::error::{clip, clip_quoted, Error, Result};
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
 use crate::system::{self, Params, SystemInfo};
@@ -165,6 +165,11 @@ pub struct Scene {
     pub validate: usize,
     pub lyapunov: bool,
     pub bifurcation_points: usize,
+    /// The points the scene file asked for, when `--set
+    /// integration.iterations` lowered the iterations below them: a lane
+    /// keeps at most one point per iteration, so `bifurcation_points` is
+    /// lowered to the iterations (and the summary says so).
+    pub bifurcation_points_asked: Option<usize>,
     /// Draw the figures next to the CSV files.
     pub plot: bool,
     /// The part of the sweep this run computes (`--shard i/n`), if not all.
@@ -175,6 +180,10 @@ pub struct Scene {
     /// The scene as TOML after overrides (keys sorted), written next to the
     /// results so that `plot` and `merge` know what produced them.
     pub source: String,
+    /// The files the scene was read from: the scene file and the model
+    /// file it names (none for a scene given as text). Its output folder
+    /// must not hold them.
+    pub files: Vec<PathBuf>,
 }
 
 /// One swept parameter and its values.
@@ -227,7 +236,7 @@ pub struct Shard {
 impl Shard {
     /// `i/n` as the command line gives it.
     pub fn parse(text: &str) -> Result<Shard> {
-        let bad = |reason: &str| Error::invalid("--shard", format!("{text:?}: {reason}"));
+        let bad = |reason: &str| Error::invalid("--shard", format!("{:?}: {reason}", clip(text)));
         let (i, n) = text
             .split_once('/')
             .ok_or_else(|| bad("expected i/n, e.g. 0/4"))?;
@@ -502,14 +511,16 @@ pub fn load_shard(path: &Path, overrides: &[String], shard: Option<Shard>) -> Re
         source,
     })?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("scene");
-    parse_in(
+    let mut scene = parse_in(
         &text,
         &path.display().to_string(),
         stem,
         overrides,
         shard,
         path.parent(),
-    )
+    )?;
+    scene.files.insert(0, path.to_owned());
+    Ok(scene)
 }
 
 /// Parses scene text; `origin` names it in messages, `default_name` is the
@@ -546,15 +557,34 @@ fn parse_in(
         });
         Error::Syntax {
             path: origin.to_owned(),
-            message: format!("{}{}", at.unwrap_or_default(), e.message().trim()),
+            message: format!(
+                "{}{}",
+                at.unwrap_or_default(),
+                clip_quoted(e.message().trim())
+            ),
         }
     })?;
-    inline_model_file(&mut table, base)?;
+    let model_file = inline_model_file(&mut table, base)?;
     let mut overridden = Vec::new();
     for o in overrides {
         check_model_override(&table, o)?;
-        overridden.push((apply_override(&mut table, o)?, o));
+        overridden.push((apply_override(&mut table, o, model_file.as_deref())?, o));
     }
+    let overrides_set = |key: &str| {
+        overridden
+            .iter()
+            .any(|(o, _)| key == o || key.starts_with(&format!("{o}.")))
+    };
+    // A quick look (`--set integration.iterations=10`) keeps the points the
+    // scene asked for up to the iterations there are, rather than refusing
+    // every scene that keeps points; points given by `--set`, or a scene
+    // that asks for more points than its own iterations, are still refused.
+    let bifurcation_points_asked =
+        if overrides_set("integration.iterations") && !overrides_set("output.bifurcation_points") {
+            lower_bifurcation_points(&mut table)
+        } else {
+            None
+        };
     // The name goes into the written scene, so that it reads back the same
     // wherever the file lies.
     table
@@ -567,12 +597,12 @@ fn parse_in(
             let key = if path == "." {
                 String::new()
             } else {
-                format!("{path}: ")
+                format!("{}: ", clip(&path))
             };
             // The value deserializer appends "in `path`" on a second line;
             // the path is already in front.
             let inner = e.inner().to_string();
-            let first_line = inner.lines().next().unwrap_or_default().trim();
+            let first_line = clip_quoted(inner.lines().next().unwrap_or_default().trim());
             // A value an override gave is the override's fault, not the file's.
             let from = |key: &str| {
                 path == key
@@ -581,7 +611,7 @@ fn parse_in(
             };
             match overridden.iter().rev().find(|(key, _)| from(key)) {
                 Some((_, assignment)) => {
-                    Error::invalid(format!("--set {assignment}"), format!("{key}{first_line}"))
+                    Error::invalid(set_key(assignment), format!("{key}{first_line}"))
                 }
                 None => Error::Syntax {
                     path: origin.to_owned(),
@@ -589,7 +619,10 @@ fn parse_in(
                 },
             }
         })?;
-    let scene = resolve(raw, default_name, source, shard)?;
+    let mut scene = resolve(raw, default_name, source, shard)
+        .map_err(|e| model_error(e, model_file.as_deref(), &overridden))?;
+    scene.bifurcation_points_asked = bifurcation_points_asked;
+    scene.files.extend(model_file);
     match shard {
         Some(shard) => scene.sharded(shard),
         None => Ok(scene),
@@ -598,9 +631,15 @@ fn parse_in(
 
 /// `--set integration.iterations=2000`: the value is read as TOML, or as a
 /// string when it is a bare word (so `--set run.backend=cpu` works); returns
-/// the key's path ("integration.iterations").
-fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<String> {
-    let bad = |reason: &str| Error::invalid(format!("--set {assignment}"), reason);
+/// the key's path ("integration.iterations"). A key of the path may index
+/// an array (`model.events[0].surface`), which must hold that element;
+/// `model_file` is where the scene's model came from, for messages.
+fn apply_override(
+    table: &mut toml::Table,
+    assignment: &str,
+    model_file: Option<&Path>,
+) -> Result<String> {
+    let bad = |reason: &str| Error::invalid(set_key(assignment), reason);
     let (path, value) = assignment
         .split_once('=')
         .ok_or_else(|| bad("expected key.path=value"))?;
@@ -615,37 +654,207 @@ fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<String> {
         Err(e) => {
             return Err(bad(&format!(
                 "the value is not TOML ({}); quote a string: key='\"text\"'",
-                e.message().split_whitespace().collect::<Vec<_>>().join(" ")
+                clip_quoted(&e.message().split_whitespace().collect::<Vec<_>>().join(" "))
             )))
         }
     };
-    let keys: Vec<&str> = path.trim().split('.').collect();
-    if keys.iter().any(|k| k.is_empty()) {
-        return Err(bad("empty key in the path"));
-    }
-    let (last, parents) = keys.split_last().expect("split yields at least one key");
-    let mut node = table;
-    for key in parents {
-        let entry = node
-            .entry(key.to_string())
-            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-        node = entry
-            .as_table_mut()
-            .ok_or_else(|| bad(&format!("`{key}` is not a table")))?;
-    }
-    match node.get_mut(*last) {
-        // A model parameter given with its range ({ value, min, max }):
-        // the override sets its value and keeps the range.
-        Some(toml::Value::Table(parameter))
-            if parameter.contains_key("value") && !value.is_table() =>
-        {
-            parameter.insert("value".into(), value);
+    let steps = override_path(path.trim()).map_err(|reason| bad(&reason))?;
+    // Where a key of the model is looked for, when the model is a file's.
+    let of_model = |shown: &str| match model_file {
+        Some(file) if shown == "model" || shown.starts_with("model.") => {
+            format!(" (the scene's model is {})", file.display())
         }
-        _ => {
-            node.insert(last.to_string(), value);
+        _ => String::new(),
+    };
+    let (last, parents) = steps.split_last().expect("a path has at least one key");
+    // The root is taken out of `table` to be walked as a value, and put back
+    // whatever the outcome.
+    let mut root = toml::Value::Table(std::mem::take(table));
+    let result = (|| {
+        let mut node = &mut root;
+        let mut shown = String::new();
+        for (k, step) in parents.iter().enumerate() {
+            let next_indexes = matches!(steps[k + 1], Step::Index(_));
+            node = match step {
+                Step::Key(key) => {
+                    let map = node.as_table_mut().ok_or_else(|| {
+                        format!("`{}` is not a table{}", clip(&shown), of_model(&shown))
+                    })?;
+                    let path = step.after(&shown);
+                    if next_indexes && !map.contains_key(key) {
+                        return Err(format!(
+                            "`{}` is not in the scene: there is no array to index{}",
+                            clip(&path),
+                            of_model(&path)
+                        ));
+                    }
+                    shown = path;
+                    map.entry(key.clone())
+                        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+                }
+                Step::Index(i) => {
+                    let element = element(node, *i, &shown).map_err(|e| e + &of_model(&shown))?;
+                    shown = step.after(&shown);
+                    element
+                }
+            };
+        }
+        match last {
+            Step::Key(key) => {
+                let map = node.as_table_mut().ok_or_else(|| {
+                    format!("`{}` is not a table{}", clip(&shown), of_model(&shown))
+                })?;
+                match map.get_mut(key) {
+                    // A model parameter given with its range ({ value, min, max }):
+                    // the override sets its value and keeps the range.
+                    Some(toml::Value::Table(parameter))
+                        if parameter.contains_key("value") && !value.is_table() =>
+                    {
+                        parameter.insert("value".into(), value);
+                    }
+                    _ => {
+                        map.insert(key.clone(), value);
+                    }
+                }
+            }
+            Step::Index(i) => {
+                *element(node, *i, &shown).map_err(|e| e + &of_model(&shown))? = value;
+            }
+        }
+        Ok(())
+    })();
+    let toml::Value::Table(root) = root else {
+        unreachable!("the root stays a table")
+    };
+    *table = root;
+    result.map_err(|reason| bad(&reason))?;
+    Ok(steps
+        .iter()
+        .fold(String::new(), |shown, step| step.after(&shown)))
+}
+
+/// One step of an override's path: a key of a table, or an element of an
+/// array.
+#[derive(Debug, PartialEq)]
+enum Step {
+    Key(String),
+    Index(usize),
+}
+
+impl Step {
+    /// The path `shown` followed by this step, as messages and serde's
+    /// paths spell it ("model.events[0].surface").
+    fn after(&self, shown: &str) -> String {
+        match self {
+            Step::Key(key) if shown.is_empty() => key.clone(),
+            Step::Key(key) => format!("{shown}.{key}"),
+            Step::Index(i) => format!("{shown}[{i}]"),
         }
     }
-    Ok(keys.join("."))
+}
+
+/// `model.events[0].surface` as steps: dotted keys, each followed by any
+/// number of `[i]`.
+fn override_path(path: &str) -> std::result::Result<Vec<Step>, String> {
+    let mut steps = Vec::new();
+    for part in path.split('.') {
+        let (key, mut indexes) = part.split_at(part.find('[').unwrap_or(part.len()));
+        if key.is_empty() {
+            return Err("empty key in the path".into());
+        }
+        if key.contains(']') {
+            return Err(format!("`{}`: a `]` without its `[`", clip(part)));
+        }
+        steps.push(Step::Key(key.to_owned()));
+        while !indexes.is_empty() {
+            let index = indexes
+                .strip_prefix('[')
+                .and_then(|rest| rest.split_once(']'))
+                .and_then(|(number, rest)| Some((number.trim().parse::<usize>().ok()?, rest)));
+            let Some((i, rest)) = index else {
+                return Err(format!(
+                    "`{}`: an index is written [n], n a whole number from 0",
+                    clip(part)
+                ));
+            };
+            steps.push(Step::Index(i));
+            indexes = rest;
+        }
+    }
+    Ok(steps)
+}
+
+/// Element `i` of the array `node` (at `shown`), or why there is none.
+fn element<'a>(
+    node: &'a mut toml::Value,
+    i: usize,
+    shown: &str,
+) -> std::result::Result<&'a mut toml::Value, String> {
+    let Some(array) = node.as_array_mut() else {
+        return Err(format!(
+            "`{}` is not an array, so it has no element [{i}]",
+            clip(shown)
+        ));
+    };
+    let len = array.len();
+    array.get_mut(i).ok_or_else(|| match len {
+        0 => format!("`{}` is empty: there is no element [{i}]", clip(shown)),
+        _ => format!(
+            "`{}` has {len} element{}, [0] to [{}]: there is no [{i}]",
+            clip(shown),
+            if len == 1 { "" } else { "s" },
+            len - 1
+        ),
+    })
+}
+
+/// The key of an error in `--set ASSIGNMENT`, the assignment clipped.
+fn set_key(assignment: &str) -> String {
+    format!("--set {}", clip(assignment))
+}
+
+/// Lowers `output.bifurcation_points` to `integration.iterations` where it
+/// exceeds them; returns the points it asked for, when lowered. Values of
+/// the wrong type are left for the scene's checks to name.
+fn lower_bifurcation_points(table: &mut toml::Table) -> Option<usize> {
+    let iterations = table
+        .get("integration")
+        .and_then(|i| i.get("iterations"))
+        .and_then(|i| i.as_integer())
+        .filter(|&i| i >= 1)?;
+    let points = table
+        .get_mut("output")
+        .and_then(|o| o.as_table_mut())
+        .and_then(|o| o.get_mut("bifurcation_points"))?;
+    let asked = points.as_integer().filter(|&p| p > iterations)?;
+    *points = toml::Value::Integer(iterations);
+    usize::try_from(asked).ok()
+}
+
+/// An error about a key of `[model]`, its key clipped, and said to be an
+/// override's when `--set` gave the key (a value of the user's command
+/// line, not of a file), or else, when the model is another file's (`model
+/// = "file.toml"`), that file's: the key is written there, not in the
+/// scene.
+fn model_error(e: Error, file: Option<&Path>, overridden: &[(String, &String)]) -> Error {
+    let Error::Invalid { key, reason } = e else {
+        return e;
+    };
+    if !key.starts_with("model.") {
+        return Error::Invalid { key, reason };
+    }
+    let from = |o: &str| {
+        key == o || key.starts_with(&format!("{o}.")) || key.starts_with(&format!("{o}["))
+    };
+    match (overridden.iter().rev().find(|(o, _)| from(o)), file) {
+        (Some((_, assignment)), _) => {
+            Error::invalid(set_key(assignment), format!("{}: {reason}", clip(&key)))
+        }
+        (None, Some(file)) => {
+            Error::invalid(format!("{} in {}", clip(&key), file.display()), reason)
+        }
+        (None, None) => Error::invalid(clip(&key), reason),
+    }
 }
 
 fn resolve(
@@ -803,7 +1012,7 @@ fn resolve(
     if name.is_empty() || name.contains(['/', '\\']) || name == "." || name == ".." {
         return Err(Error::invalid(
             "name",
-            format!("must be a plain folder name, got {name:?}"),
+            format!("must be a plain folder name, got {:?}", clip(&name)),
         ));
     }
     let precision = raw.run.precision.unwrap_or_default();
@@ -836,6 +1045,8 @@ fn resolve(
         shard: None,
         batch: None,
         source,
+        bifurcation_points_asked: None,
+        files: Vec::new(),
     })
 }
 
@@ -867,15 +1078,22 @@ fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
 
 /// A scene's `model = "file.toml"` replaced by the file's model table (its
 /// `[model]`, or the whole file), read relative to `base`, so that
-/// overrides and the written scene see the model itself.
-fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<()> {
+/// overrides and the written scene see the model itself; returns the
+/// file's path.
+fn inline_model_file(table: &mut toml::Table, base: Option<&Path>) -> Result<Option<PathBuf>> {
     let Some(toml::Value::String(file)) = table.get("model") else {
-        return Ok(());
+        return Ok(None);
     };
-    let path = base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file));
+    let path = model_path(file, base);
     let model = crate::model::read_table(&path)?;
     table.insert("model".into(), model);
-    Ok(())
+    Ok(Some(path))
+}
+
+/// The model file a scene's `model = "file"` names, relative to the
+/// scene's folder `base` (the working directory when `None`).
+pub fn model_path(file: &str, base: Option<&Path>) -> PathBuf {
+    base.map_or_else(|| Path::new(file).to_owned(), |b| b.join(file))
 }
 
 /// `--set model.parameters.NAME=...` must name a parameter the model has:
@@ -894,9 +1112,10 @@ fn check_model_override(table: &toml::Table, assignment: &str) -> Result<()> {
         .and_then(|p| p.as_table());
     match parameters {
         Some(p) if !p.contains_key(name) => Err(Error::invalid(
-            format!("--set {assignment}"),
+            set_key(assignment),
             format!(
-                "the model has no parameter `{name}` (its parameters: {})",
+                "the model has no parameter `{}` (its parameters: {})",
+                clip(name),
                 p.keys().cloned().collect::<Vec<_>>().join(", ")
             ),
         )),
@@ -929,7 +1148,7 @@ fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> 
     let info = system::by_kind(kind).ok_or_else(|| {
         Error::invalid(
             "system.kind",
-            format!("unknown system \"{kind}\" (known: {})", kinds()),
+            format!("unknown system \"{}\" (known: {})", clip(kind), kinds()),
         )
     })?;
     let mut params = Params::defaults(info);
@@ -939,9 +1158,10 @@ fn resolve_system(table: &toml::Table) -> Result<(&'static SystemInfo, Params)> 
         }
         let index = info.parameter_index(key).ok_or_else(|| {
             Error::invalid(
-                format!("system.{key}"),
+                format!("system.{}", clip(key)),
                 format!(
-                    "{kind} has no parameter `{key}` (its parameters: {})",
+                    "{kind} has no parameter `{}` (its parameters: {})",
+                    clip(key),
                     info.parameter_names()
                 ),
             )
@@ -1022,8 +1242,9 @@ fn resolve_axis(
         Error::invalid(
             key("parameter"),
             format!(
-                "{} has no parameter `{parameter}` (its parameters: {})",
+                "{} has no parameter `{}` (its parameters: {})",
                 info.kind,
+                clip(&parameter),
                 info.parameter_names()
             ),
         )

@@ -201,7 +201,7 @@ impl SetWriter {
 /// Writes the whole set of one report into `dir` (a run in one batch; the
 /// command streams batches through [`SetWriter`] itself); returns the paths.
 pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut writer = SetWriter::new(scene, Staging::prepare(dir, &[])?)?;
+    let mut writer = SetWriter::new(scene, Staging::prepare(dir, &scene.files)?)?;
     writer.append(scene, report)?;
     writer.finish()
 }

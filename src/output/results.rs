@@ -60,6 +60,14 @@ fn column(path: &Path, records: &[csv::StringRecord], k: usize) -> Result<Vec<f6
 /// call created is removed again when drawing fails.
 pub fn redraw(dir: &Path, into: &Path) -> Result<Vec<PathBuf>> {
     super::set::verify(dir)?;
+    // The user's mistake, found before drawing (creating the folder would
+    // fail only after the figures were drawn, as a failed write).
+    if std::fs::metadata(into).is_ok_and(|m| !m.is_dir()) {
+        return Err(Error::Output {
+            path: into.to_owned(),
+            reason: "exists and is not a folder: --out names the folder the figures go into".into(),
+        });
+    }
     let created = !into.exists();
     let result = draw(dir, into);
     if result.is_err() && created {

@@ -4,11 +4,13 @@
 //!
 //! A run (or a merge) first [`prepare`](Staging::prepare)s its output folder,
 //! before any computation: the folder must be new, empty, or a lyapsweep
-//! output folder (nothing else in it is ever replaced), and its parent must
-//! be writable. The files go into `.NAME.lyapsweep-PID.partial` beside it;
-//! [`commit`](Staging::commit) writes `manifest.toml` (every data file's size
-//! and SHA-256) and exchanges the two folders in one `renameat2(2)` call
-//! (`RENAME_EXCHANGE`, Linux), then removes the previous set. Where the
+//! output folder (one with its manifest; nothing else in it is ever
+//! replaced), it must not hold the run's inputs (its scene file, say), and
+//! its parent must be writable. The files go into
+//! `.NAME.lyapsweep-PID.partial` beside it; [`commit`](Staging::commit)
+//! writes `manifest.toml` (every data file's size and SHA-256) and
+//! exchanges the two folders in one `renameat2(2)` call (`RENAME_EXCHANGE`,
+//! Linux), then removes the previous set. Where the
 //! exchange is not available the previous set is renamed aside first, which
 //! leaves a moment with no folder at all, never a mixed one. A killed run
 //! leaves only its hidden sibling, which the next run into the same folder
@@ -83,6 +85,27 @@ fn is_ours(name: &str) -> bool {
         || (name.starts_with('.') && name.contains(".partial"))
 }
 
+/// Whether `input` lies in the folder `canonical` (itself canonical):
+/// the input as named (a link would be replaced, not what it points to)
+/// or as resolved.
+fn within(input: &Path, canonical: &Path) -> bool {
+    let named = match (input.parent(), input.file_name()) {
+        (Some(parent), Some(name)) => {
+            let parent = if parent.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                parent
+            };
+            fs::canonicalize(parent).ok().map(|p| p.join(name))
+        }
+        _ => None,
+    };
+    [named, fs::canonicalize(input).ok()]
+        .into_iter()
+        .flatten()
+        .any(|path| path.starts_with(canonical))
+}
+
 /// The staging folders of `target` are named `.NAME.lyapsweep-PID.partial`.
 fn staging_prefix(target: &Path) -> String {
     let name = target
@@ -94,8 +117,10 @@ fn staging_prefix(target: &Path) -> String {
 
 impl Staging {
     /// Checks that `target` can take a new set and creates the staging
-    /// folder beside it. `inputs` are folders the set is made from (merge's
-    /// shards): the target must not be one of them.
+    /// folder beside it. `inputs` are what the set is made from (merge's
+    /// shard folders; a run's scene file and the model file it names): the
+    /// target must not be one of them nor hold one, since the swap replaces
+    /// the whole folder.
     pub fn prepare(target: &Path, inputs: &[PathBuf]) -> Result<Staging> {
         // A link to a folder (scratch space on a cluster) is followed: the
         // set is staged beside, and swapped into, the folder it names. So
@@ -125,11 +150,27 @@ impl Staging {
                     ),
                 ));
             }
+            if let Some(input) = canonical
+                .as_ref()
+                .and_then(|c| inputs.iter().find(|i| within(i, c)))
+            {
+                return Err(unwritable(
+                    target,
+                    format!(
+                        "holds {}, which this command reads and a new set would replace: write the output to another folder",
+                        input.display()
+                    ),
+                ));
+            }
             let entries = fs::read_dir(target).map_err(|e| unwritable(target, e.to_string()))?;
-            let mut foreign: Vec<String> = entries
+            let names: Vec<String> = entries
                 .filter_map(|e| e.ok())
                 .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            let mut foreign: Vec<String> = names
+                .iter()
                 .filter(|name| !is_ours(name))
+                .cloned()
                 .collect();
             if !foreign.is_empty() {
                 foreign.sort();
@@ -139,6 +180,23 @@ impl Staging {
                     format!(
                         "holds files lyapsweep does not write ({}), which a new set would replace: give a new or empty folder",
                         foreign.join(", ")
+                    ),
+                ));
+            }
+            // Every set has its manifest (written last, before the swap):
+            // data files without one are someone's files of the same
+            // names (a scene.toml kept with its results, say), not a set.
+            let mut data: Vec<&str> = DATA_FILES
+                .into_iter()
+                .filter(|name| names.iter().any(|n| n == name))
+                .collect();
+            if !data.is_empty() && !names.iter().any(|n| n == MANIFEST_FILE) {
+                data.sort();
+                return Err(unwritable(
+                    target,
+                    format!(
+                        "holds {} but no {MANIFEST_FILE}, so it is not a lyapsweep output set, and a new set would replace them: give a new or empty folder",
+                        data.join(", ")
                     ),
                 ));
             }

@@ -1,0 +1,634 @@
+//! What the command does with the user's own input: it never writes over
+//! the scene or model file it reads, indexes arrays in `--set` paths, gives
+//! advice it would accept, tells a scene from a model, echoes a huge name
+//! clipped, and lets a quick look lower the iterations. Every refusal is
+//! exit code 2 with a message naming the key or path and why, and leaves
+//! the user's files as they were.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// A three-value sweep of the seed's oscillator on the CPU, small enough to
+/// run in milliseconds; its comments are what a rewritten scene would lose.
+const BASE: &str = r#"# My sweep: comments that only this file holds.
+[system]
+kind = "impact-oscillator"   # the seed's oscillator
+[sweep]
+parameter = "eta"
+from = 0.8
+to = 1.2
+count = 3
+[integration]
+steps_per_period = 100
+transient = 5
+iterations = 20
+[run]
+backend = "cpu"
+"#;
+
+/// The models issue's impact pair, as a model file: two events, so that
+/// `model.events[i]` has something to index.
+const PAIR_MODEL: &str = r#"# An impact pair (two rigid stops).
+[model]
+name = "impact-pair"
+states = ["x", "v"]
+[model.parameters]
+zeta = 0.05
+f = 1.0
+eta = 1.0
+gap = 1.0
+e = 0.8
+[model.equations]
+x = "v"
+v = "-2*zeta*v - x + f*cos(eta*t)"
+[model.map]
+period = "2*pi/eta"
+[[model.events]]
+name = "right stop"
+surface = "x - gap"
+reset = { v = "-e*v" }
+[[model.events]]
+name = "left stop"
+surface = "-gap - x"
+reset = { v = "-e*v" }
+"#;
+
+/// The rest of a scene of the impact pair: one value, a few iterations.
+const PAIR_RUN: &str = r#"
+[sweep]
+parameter = "eta"
+values = [1.0]
+[integration]
+transient = 5
+iterations = 10
+[run]
+backend = "cpu"
+"#;
+
+fn lyapsweep(args: &[&str], cwd: Option<&Path>) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_lyapsweep"));
+    command.args(args);
+    if let Some(cwd) = cwd {
+        command.current_dir(cwd);
+    }
+    command.output().expect("the binary runs")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+fn stdout(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+fn ok(output: Output) -> Output {
+    assert_eq!(output.status.code(), Some(0), "stderr: {}", stderr(&output));
+    output
+}
+
+/// Exit code 2 and a one-line message holding every needle; returns it.
+fn refused(output: &Output, needles: &[&str]) -> String {
+    let text = stderr(output);
+    assert_eq!(output.status.code(), Some(2), "stderr: {text}");
+    for needle in needles {
+        assert!(text.contains(needle), "{needle:?} not in: {text}");
+    }
+    assert_eq!(text.trim().lines().count(), 1, "one message: {text}");
+    text
+}
+
+/// Every file below `dir` (hidden ones too), by path, with its bytes.
+fn snapshot(dir: &Path) -> BTreeMap<String, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if entry.file_type().unwrap().is_dir() {
+            files.insert(format!("{name}/"), Vec::new());
+            for (inner, bytes) in snapshot(&entry.path()) {
+                files.insert(format!("{name}/{inner}"), bytes);
+            }
+        } else {
+            files.insert(name, std::fs::read(entry.path()).unwrap());
+        }
+    }
+    files
+}
+
+/// `dir/scenes/pair.toml` naming `../models/pair.toml`; returns the scene's path.
+fn pair_in_files(dir: &Path) -> String {
+    std::fs::create_dir_all(dir.join("models")).unwrap();
+    std::fs::create_dir_all(dir.join("scenes")).unwrap();
+    std::fs::write(dir.join("models/pair.toml"), PAIR_MODEL).unwrap();
+    let scene = dir.join("scenes/pair.toml");
+    std::fs::write(
+        &scene,
+        format!("model = \"../models/pair.toml\"\n{PAIR_RUN}"),
+    )
+    .unwrap();
+    scene.to_str().unwrap().to_owned()
+}
+
+/// `dir/inline.toml`: the impact pair's `[model]` in the scene itself.
+fn pair_inline(dir: &Path) -> String {
+    let scene = dir.join("inline.toml");
+    std::fs::write(&scene, format!("{PAIR_MODEL}{PAIR_RUN}")).unwrap();
+    scene.to_str().unwrap().to_owned()
+}
+
+#[test]
+fn the_scene_file_is_never_written_over() {
+    let root = tempfile::tempdir().unwrap();
+    let work = root.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    std::fs::write(work.join("scene.toml"), BASE).unwrap();
+    let before = snapshot(root.path());
+    // `--out .` in the scene's folder: a file of the name the set writes.
+    let output = lyapsweep(&["run", "scene.toml", "--out", ".", "-q"], Some(&work));
+    refused(
+        &output,
+        &["scene.toml", "which this command reads", "another folder"],
+    );
+    assert_eq!(
+        snapshot(root.path()),
+        before,
+        "a file was written or changed"
+    );
+    // The same folder named by its path, and the scene by its own.
+    let scene = work.join("scene.toml");
+    let output = lyapsweep(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            work.to_str().unwrap(),
+            "-q",
+        ],
+        None,
+    );
+    refused(&output, &["which this command reads"]);
+    assert_eq!(snapshot(root.path()), before);
+}
+
+#[test]
+fn the_model_file_is_never_written_over() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = pair_in_files(root.path());
+    let before = snapshot(root.path());
+    let models = root.path().join("models");
+    let output = lyapsweep(
+        &["run", &scene, "--out", models.to_str().unwrap(), "-q"],
+        None,
+    );
+    refused(&output, &["models/pair.toml", "which this command reads"]);
+    assert_eq!(snapshot(root.path()), before);
+    // The model file is read relative to the scene: from the scenes
+    // folder, `--out ../models` is the same folder.
+    let output = lyapsweep(
+        &["run", "pair.toml", "--out", "../models", "-q"],
+        Some(&root.path().join("scenes")),
+    );
+    refused(&output, &["pair.toml", "which this command reads"]);
+    assert_eq!(snapshot(root.path()), before);
+}
+
+#[test]
+fn data_files_without_a_manifest_are_not_an_output_set() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let theirs = root.path().join("theirs");
+    std::fs::create_dir(&theirs).unwrap();
+    std::fs::write(theirs.join("spectrum.csv"), "eta,lambda_1\n0.8,-0.05\n").unwrap();
+    std::fs::write(theirs.join("scene.toml"), "# someone's notes\n").unwrap();
+    let before = snapshot(root.path());
+    let output = lyapsweep(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            theirs.to_str().unwrap(),
+            "-q",
+        ],
+        None,
+    );
+    refused(
+        &output,
+        &[
+            "theirs",
+            "scene.toml, spectrum.csv but no manifest.toml",
+            "not a lyapsweep output set",
+        ],
+    );
+    assert_eq!(snapshot(root.path()), before);
+    // A set the tool wrote (it has its manifest) is still replaced.
+    let out = root.path().join("out");
+    let run = |extra: &[&str]| {
+        let args = [
+            &[
+                "run",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "-q",
+            ][..],
+            extra,
+        ]
+        .concat();
+        ok(lyapsweep(&args, None))
+    };
+    run(&[]);
+    run(&["--set", "sweep.count=2"]);
+    let spectrum = std::fs::read_to_string(out.join("spectrum.csv")).unwrap();
+    assert_eq!(spectrum.lines().count(), 3, "header and two values");
+}
+
+#[test]
+fn override_paths_index_arrays() {
+    let root = tempfile::tempdir().unwrap();
+    let in_files = pair_in_files(root.path());
+    let inline = pair_inline(root.path());
+    let model_before = std::fs::read(root.path().join("models/pair.toml")).unwrap();
+    for scene in [&in_files, &inline] {
+        let out = root.path().join("out");
+        ok(lyapsweep(
+            &[
+                "run",
+                scene,
+                "--out",
+                out.to_str().unwrap(),
+                "-q",
+                "--set",
+                "model.events[1].surface=\"-1.5 - x\"",
+            ],
+            None,
+        ));
+        // The scene as run holds the overridden element, the other as it was.
+        let ran: toml::Table = std::fs::read_to_string(out.join("scene.toml"))
+            .unwrap()
+            .parse()
+            .unwrap();
+        let events = ran["model"]["events"].as_array().unwrap();
+        assert_eq!(events[0]["surface"].as_str(), Some("x - gap"));
+        assert_eq!(events[1]["surface"].as_str(), Some("-1.5 - x"));
+        assert_eq!(events[1]["name"].as_str(), Some("left stop"));
+    }
+    assert_eq!(
+        std::fs::read(root.path().join("models/pair.toml")).unwrap(),
+        model_before,
+        "the model file changed"
+    );
+
+    let refused_set = |scene: &str, assignment: &str, needles: &[&str]| {
+        let out = root.path().join("refused");
+        let output = lyapsweep(
+            &[
+                "run",
+                scene,
+                "--out",
+                out.to_str().unwrap(),
+                "-q",
+                "--set",
+                assignment,
+            ],
+            None,
+        );
+        refused(&output, needles);
+        assert!(!out.exists(), "output written for {assignment}");
+    };
+    // Out of range: the key and the array's length.
+    refused_set(
+        &inline,
+        "model.events[2].surface=\"x\"",
+        &[
+            "--set model.events[2].surface",
+            "`model.events` has 2 elements",
+        ],
+    );
+    // A model in another file: the message says so.
+    refused_set(
+        &in_files,
+        "model.events[7].name=\"far\"",
+        &[
+            "--set model.events[7].name",
+            "has 2 elements",
+            "the scene's model is",
+            "models/pair.toml",
+        ],
+    );
+    refused_set(
+        &in_files,
+        "model.parameters[0]=1",
+        &["`model.parameters` is not an array", "models/pair.toml"],
+    );
+    refused_set(
+        &inline,
+        "model.events[x].surface=1",
+        &["`events[x]`", "an index is written [n]"],
+    );
+    // A bad value given by --set is the override's, not the file's.
+    refused_set(
+        &in_files,
+        "model.events[0].surface=\"x +\"",
+        &["--set model.events[0].surface", "model.events[0].surface: "],
+    );
+    refused_set(
+        &in_files,
+        "model.speed=1",
+        &["--set model.speed=1", "unknown key"],
+    );
+    // A bad key written in the model file is named as that file's.
+    std::fs::write(
+        root.path().join("models/pair.toml"),
+        PAIR_MODEL.replace(
+            "name = \"impact-pair\"",
+            "name = \"impact-pair\"\nspeed = 1",
+        ),
+    )
+    .unwrap();
+    let out = root.path().join("after");
+    let output = lyapsweep(
+        &["run", &in_files, "--out", out.to_str().unwrap(), "-q"],
+        None,
+    );
+    refused(
+        &output,
+        &["model.speed in", "models/pair.toml", "unknown key"],
+    );
+    assert!(!out.exists());
+}
+
+/// The shard count the work-limit refusal advises (`--shard i/N`).
+fn advised_shards(message: &str) -> usize {
+    let at = message.find("--shard i/").expect("advice given") + "--shard i/".len();
+    message[at..]
+        .split(|c: char| !c.is_ascii_digit())
+        .next()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn the_work_limit_advises_a_shard_count_it_accepts() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    // A file where the output folder goes: a run that passes the size
+    // checks is refused there, before it computes anything.
+    let file = root.path().join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let run = |iterations: &str, shard: Option<String>| {
+        let mut args = vec![
+            "run".to_owned(),
+            scene.to_str().unwrap().to_owned(),
+            "--out".into(),
+            file.to_str().unwrap().to_owned(),
+            "-q".into(),
+            "--set".into(),
+            "sweep.count=5".into(),
+            "--set".into(),
+            format!("integration.iterations={iterations}"),
+        ];
+        if let Some(shard) = shard {
+            args.extend(["--shard".to_owned(), shard]);
+        }
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        lyapsweep(&args, None)
+    };
+    // Five values of about 0.4e15 lane-steps each: two shards would give
+    // one of them three values, over the limit.
+    let iterations = "800000000000";
+    let message = refused(
+        &run(iterations, None),
+        &["sweep.count", "lane-steps", "--shard i/"],
+    );
+    let shards = advised_shards(&message);
+    assert!(
+        (2..=5).contains(&shards),
+        "advised {shards} shards: {message}"
+    );
+    for index in [0, shards - 1] {
+        let output = run(iterations, Some(format!("{index}/{shards}")));
+        refused(&output, &["a-file", "exists and is not a folder"]);
+    }
+    // The advice is the fewest shards that pass.
+    let output = run(iterations, Some(format!("0/{}", shards - 1)));
+    refused(&output, &["lane-steps"]);
+
+    // One value alone past the limit: no shard count helps, and the
+    // message says what does.
+    let message = refused(
+        &run("10000000000000", None),
+        &["one sweep value alone", "integration.iterations", "lower"],
+    );
+    assert!(!message.contains("--shard i/"), "{message}");
+    assert_eq!(std::fs::read(&file).unwrap(), b"");
+}
+
+#[test]
+fn model_check_tells_a_scene_from_a_model() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = pair_in_files(root.path());
+    let model = root.path().join("models/pair.toml");
+    let direct = ok(lyapsweep(
+        &["model", "check", model.to_str().unwrap()],
+        None,
+    ));
+    // A scene naming its model file: that file is checked, and stderr says so.
+    let through = ok(lyapsweep(&["model", "check", &scene], None));
+    assert_eq!(stdout(&through), stdout(&direct));
+    let note = stderr(&through);
+    assert!(
+        note.contains("is a scene file") && note.contains("models/pair.toml"),
+        "{note}"
+    );
+    // A scene with a built-in system has no model file to check.
+    let system = root.path().join("system.toml");
+    std::fs::write(&system, BASE).unwrap();
+    let output = lyapsweep(&["model", "check", system.to_str().unwrap()], None);
+    refused(
+        &output,
+        &[
+            "system.toml",
+            "is a scene file",
+            "built into lyapsweep",
+            "impact-oscillator",
+            "no model file",
+        ],
+    );
+    assert!(stdout(&output).is_empty());
+    // A scene with neither.
+    let neither = root.path().join("neither.toml");
+    std::fs::write(&neither, PAIR_RUN).unwrap();
+    let output = lyapsweep(&["model", "check", neither.to_str().unwrap()], None);
+    refused(&output, &["neither.toml", "is a scene file", "no [model]"]);
+}
+
+#[test]
+fn a_huge_name_is_echoed_clipped() {
+    let root = tempfile::tempdir().unwrap();
+    let huge = "k".repeat(1 << 20);
+    let out = root.path().join("out");
+    let check = |output: Output, needles: &[&str]| {
+        let text = refused(&output, needles);
+        assert!(text.len() < 1000, "{} bytes of message", text.len());
+        assert!(text.contains("k…"), "{text}");
+        assert!(!text.contains(&"k".repeat(61)), "{text}");
+        assert!(!out.exists());
+    };
+    let scene_with = |name: &str, text: String| {
+        let path = root.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path.to_str().unwrap().to_owned()
+    };
+    let run = |scene: &str, extra: &[&str]| {
+        let args = [
+            &["run", scene, "--out", out.to_str().unwrap(), "-q"][..],
+            extra,
+        ]
+        .concat();
+        lyapsweep(&args, None)
+    };
+    // Unknown keys of the scene file: at the top, in a section, in [system].
+    let top = scene_with("top.toml", format!("{huge} = 1\n{BASE}"));
+    check(run(&top, &[]), &["top.toml", "unknown field"]);
+    let section = scene_with(
+        "section.toml",
+        BASE.replace("count = 3", &format!("{huge} = 3")),
+    );
+    check(run(&section, &[]), &["sweep", "unknown field"]);
+    let system = scene_with(
+        "system.toml",
+        BASE.replace("[sweep]", &format!("{huge} = 1.0\n[sweep]")),
+    );
+    check(run(&system, &[]), &["system.kkk", "has no parameter"]);
+    let name = scene_with("name.toml", format!("name = \"{huge}/\"\n{BASE}"));
+    check(run(&name, &[]), &["name", "plain folder name"]);
+    // Unknown `--set` keys. One argument holds at most 128 KiB on Linux.
+    let base = scene_with("base.toml", BASE.to_owned());
+    let key = &huge[..100_000];
+    check(
+        run(&base, &["--set", &format!("integration.{key}=1")]),
+        &["--set integration.kkk", "unknown field"],
+    );
+    check(
+        run(&base, &["--set", &format!("system.{key}=1")]),
+        &["system.kkk", "has no parameter"],
+    );
+    check(
+        run(&base, &["--set", &format!("sweep.parameter={key}")]),
+        &["sweep.parameter", "has no parameter"],
+    );
+    check(
+        run(&base, &["--set", &format!("run.backend={key}")]),
+        &["--set run.backend=kkk", "unknown variant"],
+    );
+    let inline = pair_inline(root.path());
+    check(
+        run(&inline, &["--set", &format!("model.{key}=1")]),
+        &["--set model.kkk", "unknown key"],
+    );
+    check(
+        run(&inline, &["--set", &format!("model.parameters.{key}=1")]),
+        &["--set model.parameters.kkk", "has no parameter"],
+    );
+}
+
+#[test]
+fn plot_onto_a_file_is_refused() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    ok(lyapsweep(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ],
+        None,
+    ));
+    let file = root.path().join("figure.png");
+    std::fs::write(&file, "my own figure").unwrap();
+    let before = snapshot(root.path());
+    let output = lyapsweep(
+        &[
+            "plot",
+            out.to_str().unwrap(),
+            "--out",
+            file.to_str().unwrap(),
+        ],
+        None,
+    );
+    refused(&output, &["figure.png", "exists and is not a folder"]);
+    assert_eq!(snapshot(root.path()), before);
+}
+
+#[test]
+fn a_quick_look_lowers_the_points_to_the_iterations() {
+    let root = tempfile::tempdir().unwrap();
+    let seed = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/seed-fig3.toml");
+    let out = root.path().join("quick");
+    let output = ok(lyapsweep(
+        &[
+            "run",
+            seed.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+            "--set",
+            "sweep.count=2",
+            "--set",
+            "integration.iterations=10",
+            "--backend",
+            "cpu",
+        ],
+        None,
+    ));
+    let summary = stdout(&output);
+    assert!(
+        summary.contains("output.bifurcation_points lowered from 100 to 10"),
+        "{summary}"
+    );
+    // min(100, 10) points of each of the two values.
+    let text = std::fs::read_to_string(out.join("bifurcation.csv")).unwrap();
+    let mut rows: BTreeMap<String, usize> = BTreeMap::new();
+    for line in text.lines().skip(1) {
+        *rows
+            .entry(line.split(',').next().unwrap().to_owned())
+            .or_default() += 1;
+    }
+    assert_eq!(rows.len(), 2, "{rows:?}");
+    assert!(rows.values().all(|&n| n == 10), "{rows:?}");
+    // The scene as written is the scene as run.
+    let ran: toml::Table = std::fs::read_to_string(out.join("scene.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(ran["output"]["bifurcation_points"].as_integer(), Some(10));
+    assert_eq!(ran["integration"]["iterations"].as_integer(), Some(10));
+    // Points asked for on the command line past the iterations are still
+    // refused: that is the user's own contradiction.
+    let refused_out = root.path().join("refused");
+    let output = lyapsweep(
+        &[
+            "run",
+            seed.to_str().unwrap(),
+            "--out",
+            refused_out.to_str().unwrap(),
+            "-q",
+            "--set",
+            "integration.iterations=10",
+            "--set",
+            "output.bifurcation_points=50",
+        ],
+        None,
+    );
+    refused(&output, &["output.bifurcation_points", "must not exceed"]);
+    assert!(!refused_out.exists());
+}
