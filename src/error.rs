@@ -19,8 +19,10 @@ pub enum Error {
     /// The scene is not valid TOML, or a key has the wrong type or is unknown.
     #[error("scene {path}: {message}")]
     Syntax { path: String, message: String },
-    /// A key is present and well typed but its value is impossible.
-    #[error("{key}: {reason}")]
+    /// A key is present and well typed but its value is impossible. Both
+    /// are cut to a length a message can show when written (either may
+    /// quote the input), and kept whole for code that matches keys.
+    #[error("{}: {}", clip_to(.key, 200), clip_to(.reason, 1000))]
     Invalid { key: String, reason: String },
     /// The requested backend cannot run this scene.
     #[error("run.backend = \"{backend}\": {reason}")]
@@ -56,22 +58,12 @@ pub enum Error {
     },
 }
 
-/// `text` cut to at most `most` characters (and an ellipsis): messages name
-/// what the user wrote, which may be a megabyte long.
-pub fn shortened(text: &str, most: usize) -> String {
-    match text.char_indices().nth(most) {
-        None => text.to_owned(),
-        Some((end, _)) => format!("{}…", &text[..end]),
-    }
-}
-
 impl Error {
-    /// An impossible value for `key`. Both are cut to a length a message
-    /// can show: either may quote the input.
+    /// An impossible value for `key`.
     pub fn invalid(key: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::Invalid {
-            key: shortened(&key.into(), 200),
-            reason: shortened(&reason.into(), 1000),
+            key: key.into(),
+            reason: reason.into(),
         }
     }
 
@@ -91,7 +83,12 @@ pub const ECHO_CHARS: usize = 60;
 /// `text` as a message echoes it: its first [`ECHO_CHARS`] characters, and
 /// "…" when there were more.
 pub fn clip(text: &str) -> std::borrow::Cow<'_, str> {
-    match text.char_indices().nth(ECHO_CHARS) {
+    clip_to(text, ECHO_CHARS)
+}
+
+/// `text` cut to its first `most` characters, and "…" when there were more.
+pub fn clip_to(text: &str, most: usize) -> std::borrow::Cow<'_, str> {
+    match text.char_indices().nth(most) {
         Some((end, _)) => format!("{}…", &text[..end]).into(),
         None => text.into(),
     }
@@ -115,8 +112,5 @@ pub fn clip_quoted(message: &str) -> String {
         rest = &inner[len + 1..];
     }
     out.push_str(rest);
-    match out.char_indices().nth(20 * ECHO_CHARS) {
-        Some((end, _)) => format!("{}…", &out[..end]),
-        None => out,
-    }
+    clip_to(&out, 20 * ECHO_CHARS).into_owned()
 }

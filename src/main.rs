@@ -161,6 +161,8 @@ fn check_model(file: &std::path::Path) -> Result<(), Error> {
         });
     }
     let model = lyapsweep::model::Model::parse(&table, "model")?;
+    // A run checks the period at every swept value; at the defaults, here.
+    model.check_period(&model.defaults, "model", "the model's defaults")?;
     let code = lyapsweep::model::code::Code::compile(model, "model")?;
     print!("{}", lyapsweep::model::describe::describe(&code));
     Ok(())

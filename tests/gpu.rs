@@ -47,7 +47,13 @@ fn f64_matches_the_cpu_per_iteration_and_in_exponents() {
         assert_eq!(gpu.precision, Precision::F64);
         for (k, eta) in PERIODIC_ETAS.iter().enumerate() {
             let (c, g) = (&cpu.lanes[k], &gpu.lanes[k]);
-            assert_eq!(g.status, LaneStatus::Ok, "{location} η = {eta}");
+            // The paper's linear location misses the sum rule by 1.3e-3 at
+            // η = 0.8 (the impact time off by the interpolation's error), and
+            // both paths say so.
+            assert_eq!(g.status, c.status, "{location} η = {eta}");
+            if location == "newton" {
+                assert_eq!(g.status, LaneStatus::Ok, "{location} η = {eta}");
+            }
             assert_eq!(c.jacobians.len(), 1000 * 4);
             assert_eq!(g.jacobians.len(), c.jacobians.len());
             // Rounding differences (a fused multiply-add here, an operation
@@ -249,9 +255,13 @@ fn large_sweeps_split_into_batches_and_match_the_cpu() {
             "{count} values: GPU vs CPU {:e}",
             v.max_difference
         );
-        assert!(report.lanes.iter().all(
-            |l| l.status == LaneStatus::Ok || matches!(l.status, LaneStatus::Unresolved { .. })
-        ));
+        // A lane of the chaotic window may miss the sum rule by a little more
+        // than 1e-6 (the seed sweep's worst, 1.2e-6) and say so.
+        assert!(report.lanes.iter().all(|l| l.status == LaneStatus::Ok
+            || matches!(
+                l.status,
+                LaneStatus::Unresolved { .. } | LaneStatus::SumRule { .. }
+            )));
         assert!(report
             .lanes
             .iter()
@@ -699,7 +709,14 @@ fn stiff_lanes_are_cut_into_sub_maps_on_the_gpu() {
             let closed = [-zeta + kappa, -zeta - kappa];
             for (k, eta) in [0.1, 0.2].into_iter().enumerate() {
                 let (g, c) = (&gpu.lanes[k], &cpu.lanes[k]);
-                assert_eq!(c.status, LaneStatus::Ok, "cpu ζ = {zeta}, η = {eta}");
+                // RK4 planned at h·ρ = 0.1 has a relative error near 1e-6 in
+                // the fast exponent: the sum rule may say so (ζ = 2: 4.7e-6
+                // against 4.0e-6).
+                assert!(
+                    matches!(c.status, LaneStatus::Ok | LaneStatus::SumRule { .. }),
+                    "cpu ζ = {zeta}, η = {eta}: {:?}",
+                    c.status
+                );
                 assert_eq!(g.plan, plan);
                 assert_eq!(c.plan, plan);
                 let period = std::f64::consts::TAU / eta;
@@ -710,7 +727,7 @@ fn stiff_lanes_are_cut_into_sub_maps_on_the_gpu() {
                 // off): the lane's own resolution bound must cover its
                 // error, and a lane past 1e-3 says `unresolved`.
                 let bound = match g.status {
-                    LaneStatus::Ok => RESOLUTION_BOUND,
+                    LaneStatus::Ok | LaneStatus::SumRule { .. } => RESOLUTION_BOUND,
                     LaneStatus::Unresolved { bound } if precision == Precision::F32 => bound,
                     ref other => panic!("{p} ζ = {zeta}, η = {eta}: {other:?}"),
                 };

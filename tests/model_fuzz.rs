@@ -62,7 +62,10 @@ fn through_the_checker(text: &str) -> Result<(), String> {
             let message = e.to_string();
             assert!(e.is_input_error(), "not an input error: {message}");
             assert!(message.starts_with("model"), "no key named: {message}");
-            assert!(message.len() < 2_000, "the message echoes the input: {message}");
+            assert!(
+                message.len() < 2_000,
+                "the message echoes the input: {message}"
+            );
             Err(message)
         }
     }
@@ -81,7 +84,10 @@ enum Edit {
 fn edit() -> impl Strategy<Value = Edit> {
     let byte = proptest::sample::select(ALPHABET);
     prop_oneof![
-        (any::<usize>(), proptest::collection::vec(byte.clone(), 1..8))
+        (
+            any::<usize>(),
+            proptest::collection::vec(byte.clone(), 1..8)
+        )
             .prop_map(|(at, bytes)| Edit::Insert(at, bytes)),
         (any::<usize>(), 1usize..6).prop_map(|(at, n)| Edit::Delete(at, n)),
         (any::<usize>(), byte).prop_map(|(at, b)| Edit::Replace(at, b)),
@@ -113,7 +119,12 @@ fn apply(text: &str, edits: &[Edit]) -> String {
                 let at = at % len;
                 let end = (at + n).min(bytes.len());
                 let stretch = bytes[at..end].to_vec();
-                let repeated: Vec<u8> = stretch.iter().copied().cycle().take(stretch.len() * k).collect();
+                let repeated: Vec<u8> = stretch
+                    .iter()
+                    .copied()
+                    .cycle()
+                    .take(stretch.len() * k)
+                    .collect();
                 bytes.splice(at..end, repeated);
             }
         }
@@ -124,8 +135,8 @@ fn apply(text: &str, edits: &[Edit]) -> String {
 /// An expression-like string: random tokens of the language.
 fn expression() -> impl Strategy<Value = String> {
     let token = proptest::sample::select(vec![
-        "x", "v", "t", "pi", "zeta", "mu", "slip", "wall", "1", "0", "2.5", "1e999", "1e-320",
-        "+", "-", "*", "/", "^", "(", ")", ",", "sin(", "cos(", "exp(", "log(", "sqrt(", "abs(",
+        "x", "v", "t", "pi", "zeta", "mu", "slip", "wall", "1", "0", "2.5", "1e999", "1e-320", "+",
+        "-", "*", "/", "^", "(", ")", ",", "sin(", "cos(", "exp(", "log(", "sqrt(", "abs(",
         "atan2(", "min(", "max(", "pow(", "step(", "sign(", "tanh(", "nope(", "",
     ]);
     proptest::collection::vec(token, 0..40).prop_map(|t| t.concat())

@@ -69,24 +69,36 @@ fn lyapsweep(dir: &Path, args: &[&str]) -> Output {
 fn refused(model: &str, key: &str, reason: &str) {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("model.toml"), model).unwrap();
-    std::fs::write(
-        dir.path().join("scene.toml"),
-        scene("eta", "[0.8]", SHORT),
-    )
-    .unwrap();
+    std::fs::write(dir.path().join("scene.toml"), scene("eta", "[0.8]", SHORT)).unwrap();
     for args in [
         &["model", "check", "model.toml"][..],
-        &["run", "scene.toml", "--out", "out", "--backend", "cpu", "-q"][..],
+        &[
+            "run",
+            "scene.toml",
+            "--out",
+            "out",
+            "--backend",
+            "cpu",
+            "-q",
+        ][..],
     ] {
         let out = lyapsweep(dir.path(), args);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        // A run names the model's file too.
+        let named = [
+            format!("error: {key}: "),
+            format!("error: {key} in model.toml: "),
+        ];
         assert!(
-            stderr.starts_with(&format!("error: {key}: ")) && stderr.contains(reason),
+            named.iter().any(|n| stderr.starts_with(n)) && stderr.contains(reason),
             "{args:?} should name {key} and say {reason:?}: {stderr}"
         );
         assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
-        assert!(stderr.len() < 1000, "the message echoes the input: {stderr}");
+        assert!(
+            stderr.len() < 1000,
+            "the message echoes the input: {stderr}"
+        );
     }
     assert!(!dir.path().join("out").exists(), "output written for {key}");
 }
@@ -125,20 +137,61 @@ fn deep_and_long_expressions_are_refused_in_linear_time() {
     let cases = [
         // Nested past the depth at which the stack overflowed (8 000) and
         // within the length limit.
-        ("9 000 parentheses", deep("(", ")", 9_000), "nested more than 1000"),
-        ("sin 3 000 deep", deep("sin(", ")", 3_000), "nested more than 1000"),
-        ("10 000 minus signs", deep("-", "", 10_000), "nested more than 1000"),
-        ("a tower of powers", format!("x{}", "^x".repeat(9_000)), "nested more than 1000"),
-        ("sin 10 000 deep", deep("sin(", ")", 10_000), "longer than 20000"),
-        ("a flat sum of 1 MB", format!("{PLAIN_V}{}", " + x".repeat(250_000)), "longer than 20000"),
-        ("30 000 terms", format!("{PLAIN_V}{}", "+x".repeat(30_000)), "longer than 20000"),
-        ("a sum 2 000 levels deep", format!("{PLAIN_V}{}", "+x".repeat(2_000)), "levels deep"),
+        (
+            "9 000 parentheses",
+            deep("(", ")", 9_000),
+            "nested more than 1000",
+        ),
+        (
+            "sin 3 000 deep",
+            deep("sin(", ")", 3_000),
+            "nested more than 1000",
+        ),
+        (
+            "10 000 minus signs",
+            deep("-", "", 10_000),
+            "nested more than 1000",
+        ),
+        (
+            "a tower of powers",
+            format!("x{}", "^x".repeat(9_000)),
+            "nested more than 1000",
+        ),
+        (
+            "sin 10 000 deep",
+            deep("sin(", ")", 10_000),
+            "longer than 20000",
+        ),
+        (
+            "a flat sum of 1 MB",
+            format!("{PLAIN_V}{}", " + x".repeat(250_000)),
+            "longer than 20000",
+        ),
+        (
+            "30 000 terms",
+            format!("{PLAIN_V}{}", "+x".repeat(30_000)),
+            "longer than 20000",
+        ),
+        (
+            "a sum 2 000 levels deep",
+            format!("{PLAIN_V}{}", "+x".repeat(2_000)),
+            "levels deep",
+        ),
     ];
     for (what, text, reason) in &cases {
         let places = [
-            ("model.equations.v", oscillator(text, "x - 2", "-v", "2*pi/eta")),
-            ("model.events[0].surface", oscillator(PLAIN_V, text, "-v", "2*pi/eta")),
-            ("model.events[0].reset.v", oscillator(PLAIN_V, "x - 2", text, "2*pi/eta")),
+            (
+                "model.equations.v",
+                oscillator(text, "x - 2", "-v", "2*pi/eta"),
+            ),
+            (
+                "model.events[0].surface",
+                oscillator(PLAIN_V, text, "-v", "2*pi/eta"),
+            ),
+            (
+                "model.events[0].reset.v",
+                oscillator(PLAIN_V, "x - 2", text, "2*pi/eta"),
+            ),
         ];
         for (key, model) in &places {
             let start = Instant::now();
@@ -152,7 +205,12 @@ fn deep_and_long_expressions_are_refused_in_linear_time() {
             );
         }
     }
-    let period = oscillator(PLAIN_V, "x - 2", "-v", &deep("(", ")", 9_000).replace(PLAIN_V, "2*pi/eta"));
+    let period = oscillator(
+        PLAIN_V,
+        "x - 2",
+        "-v",
+        &deep("(", ")", 9_000).replace(PLAIN_V, "2*pi/eta"),
+    );
     refused(&period, "model.map.period", "nested more than 1000");
 }
 
@@ -219,12 +277,36 @@ fn switched(place: &str, text: &str) -> String {
 #[test]
 fn only_the_equations_read_a_switch_s_side() {
     let reason = "may not read the switch 'c' (step or sign)";
-    refused(&switched("reset", "-v*step(c)"), "model.events[0].reset.v", reason);
-    refused(&switched("reset", "-v*sign(c)"), "model.events[0].reset.v", reason);
-    refused(&switched("surface", "x - 2*step(c)"), "model.events[0].surface", reason);
-    refused(&switched("switch", "v*sign(c)"), "model.switches[0].surface", reason);
-    refused(&switched("limit", "step(c)"), "model.switches[0].stick_limit", reason);
-    refused(&switched("period", "2*pi/eta*step(c)"), "model.map.period", reason);
+    refused(
+        &switched("reset", "-v*step(c)"),
+        "model.events[0].reset.v",
+        reason,
+    );
+    refused(
+        &switched("reset", "-v*sign(c)"),
+        "model.events[0].reset.v",
+        reason,
+    );
+    refused(
+        &switched("surface", "x - 2*step(c)"),
+        "model.events[0].surface",
+        reason,
+    );
+    refused(
+        &switched("switch", "v*sign(c)"),
+        "model.switches[0].surface",
+        reason,
+    );
+    refused(
+        &switched("limit", "step(c)"),
+        "model.switches[0].stick_limit",
+        reason,
+    );
+    refused(
+        &switched("period", "2*pi/eta*step(c)"),
+        "model.map.period",
+        reason,
+    );
     // The equations may: the model runs.
     let model = switched("", "").replace(PLAIN_V, "-2*zeta*v - x + f*cos(eta*t) + 0.01*sign(c)");
     let (code, stderr, rows) = run(&model, &scene("eta", "[0.8]", SHORT), &["--backend", "cpu"]);
@@ -265,7 +347,11 @@ fn five_and_six_state_period_maps_run() {
             let exponents = numbers(&rows[0], 1..1 + n);
             for (i, l) in exponents.iter().enumerate() {
                 let exact = -(0.1 * (i + 1) as f64);
-                assert!((l - exact).abs() < 1e-9, "{n} states: λ{} = {l}, not {exact}", i + 1);
+                assert!(
+                    (l - exact).abs() < 1e-9,
+                    "{n} states: λ{} = {l}, not {exact}",
+                    i + 1
+                );
             }
             assert_eq!(rows[0].last().unwrap(), "ok");
         }
@@ -308,9 +394,16 @@ fn a_state_the_rest_barely_feeds_gets_its_own_exponent() {
     let decoupled = spectrum("0.0");
     for r in ["1.0", "1e-300"] {
         let with_r = spectrum(r);
-        assert!((with_r[1] + 5.0).abs() < 1e-6, "r(0) = {r}: λ2 = {}", with_r[1]);
+        assert!(
+            (with_r[1] + 5.0).abs() < 1e-6,
+            "r(0) = {r}: λ2 = {}",
+            with_r[1]
+        );
         for (a, b) in with_r.iter().zip(&decoupled) {
-            assert!((a - b).abs() < 1e-6, "r(0) = {r}: {with_r:?} against {decoupled:?}");
+            assert!(
+                (a - b).abs() < 1e-6,
+                "r(0) = {r}: {with_r:?} against {decoupled:?}"
+            );
         }
     }
     assert!((decoupled[0] - 0.877).abs() < 1e-3 && (decoupled[2] + 14.543).abs() < 1e-3);
@@ -353,10 +446,20 @@ fn a_row_that_misses_its_sum_rule_does_not_say_ok() {
     assert_eq!(code, Some(0), "{stderr}");
     let miss = sum_error(&rows[0]);
     let scale: f64 = numbers(&rows[0], 1..4).iter().map(|l| l.abs()).sum();
-    assert!(miss > 1e-6 * scale, "the default run now meets the rule ({miss:e}): drop the flag's case");
-    assert_eq!(rows[0].last().unwrap(), &format!("sum-rule(miss={miss:.1e})"));
+    assert!(
+        miss > 1e-6 * scale,
+        "the default run now meets the rule ({miss:e}): drop the flag's case"
+    );
+    assert_eq!(
+        rows[0].last().unwrap(),
+        &format!("sum-rule(miss={miss:.1e})")
+    );
     // Two sub-maps per period keep the copies linear: within the rule, ok.
-    let (code, stderr, rows) = run(DADRAS, &scene, &["--backend", "cpu", "--set", "integration.submaps=2"]);
+    let (code, stderr, rows) = run(
+        DADRAS,
+        &scene,
+        &["--backend", "cpu", "--set", "integration.submaps=2"],
+    );
     assert_eq!(code, Some(0), "{stderr}");
     assert!(sum_error(&rows[0]) < 1e-7, "{:e}", sum_error(&rows[0]));
     assert_eq!(rows[0].last().unwrap(), "ok");
@@ -369,9 +472,16 @@ fn a_section_never_reached_says_no_return() {
     let integration = "transient = 5\niterations = 10\ninitial_state = [0.5, 0.5]";
     let gpu = common::gpu_or_skip("a_section_never_reached", Precision::F64);
     for backend in ["cpu", "gpu"].into_iter().filter(|&b| b == "cpu" || gpu) {
-        let (code, stderr, rows) = run(model, &scene("a", "[1.0, 2.0]", integration), &["--backend", backend]);
+        let (code, stderr, rows) = run(
+            model,
+            &scene("a", "[1.0, 2.0]", integration),
+            &["--backend", backend],
+        );
         assert_eq!(code, Some(1), "{stderr}");
-        assert!(stderr.contains("every lane failed (2 no-return)"), "{stderr}");
+        assert!(
+            stderr.contains("every lane failed (2 no-return)"),
+            "{stderr}"
+        );
         for row in &rows {
             assert_eq!(row.last().unwrap(), "no-return(iteration=0)", "{backend}");
         }
@@ -381,7 +491,12 @@ fn a_section_never_reached_says_no_return() {
 #[test]
 fn numbers_surfaces_names_and_limits_that_mean_nothing_are_refused() {
     refused(
-        &oscillator("-2*zeta*v - x + 1e999*cos(eta*t)", "x - 2", "-v", "2*pi/eta"),
+        &oscillator(
+            "-2*zeta*v - x + 1e999*cos(eta*t)",
+            "x - 2",
+            "-v",
+            "2*pi/eta",
+        ),
         "model.equations.v",
         "'1e999' is beyond the largest number",
     );
@@ -391,7 +506,11 @@ fn numbers_surfaces_names_and_limits_that_mean_nothing_are_refused() {
             "model.events[0].surface",
             "does not depend on the state or the time",
         );
-        refused(&switched("switch", surface), "model.switches[0].surface", "does not depend on the state");
+        refused(
+            &switched("switch", surface),
+            "model.switches[0].surface",
+            "does not depend on the state",
+        );
     }
     for name in ["", " ", "--"] {
         refused(
@@ -418,6 +537,77 @@ fn numbers_surfaces_names_and_limits_that_mean_nothing_are_refused() {
         &["--backend", "cpu"],
     );
     assert_eq!(code, Some(2), "{stderr}");
-    assert!(stderr.contains("zeta") && stderr.contains("stick limit"), "{stderr}");
+    assert!(
+        stderr.contains("zeta") && stderr.contains("stick limit"),
+        "{stderr}"
+    );
     assert!(rows.is_empty());
+}
+
+#[test]
+fn model_check_refuses_a_period_that_is_not_positive_at_the_defaults() {
+    let model = oscillator(PLAIN_V, "x - 2", "-v", "2*pi/eta").replace("eta = 0.8", "eta = -0.8");
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("model.toml"), model).unwrap();
+    let out = lyapsweep(dir.path(), &["model", "check", "model.toml"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("model.map.period: must be a finite number > 0, got -7.85")
+            && stderr.contains("(at the model's defaults)"),
+        "{stderr}"
+    );
+    assert!(out.stdout.is_empty());
+}
+
+#[test]
+fn a_lane_that_fails_in_the_transient_is_dated_alike_on_both_paths() {
+    // x' = x² from x = 1 reaches infinity at t = 1, in the first period.
+    let model = "[model]\nname = \"blow-up\"\nstates = [\"x\", \"v\"]\n[model.parameters]\nw = 1.0\n\
+                 [model.equations]\nx = \"x*x\"\nv = \"-v + cos(w*t)\"\n[model.map]\nperiod = \"2*pi/w\"\n";
+    let integration = "transient = 18\niterations = 10\ninitial_state = [1.0, 0.0]";
+    let gpu = common::gpu_or_skip("a_lane_that_fails_in_the_transient", Precision::F64);
+    for backend in ["cpu", "gpu"].into_iter().filter(|&b| b == "cpu" || gpu) {
+        let (code, stderr, rows) = run(
+            model,
+            &scene("w", "[1.0]", integration),
+            &["--backend", backend],
+        );
+        assert_eq!(code, Some(1), "{stderr}");
+        assert_eq!(
+            rows[0].last().unwrap(),
+            "non-finite(iteration=0)",
+            "{backend}"
+        );
+    }
+}
+
+#[test]
+fn a_reset_that_leaves_the_state_past_its_surface_says_chattering() {
+    // Started on the surface x = 2, moving out: the event fires at once, and
+    // each reset leaves the state where the surface is not crossed from
+    // below again (x put back on it; v doubled with the surface reading v).
+    let integration = "transient = 20\niterations = 50\ninitial_state = [2.0, 1.0]";
+    let models = [
+        oscillator(PLAIN_V, "x - 2", "-v", "2*pi/eta").replace("{ v = \"-v\" }", "{ x = \"2\" }"),
+        oscillator(PLAIN_V, "x - 2 + 0*v*v", "2*v", "2*pi/eta"),
+    ];
+    let gpu = common::gpu_or_skip("a_reset_that_leaves_the_state_past", Precision::F64);
+    for model in &models {
+        for backend in ["cpu", "gpu"].into_iter().filter(|&b| b == "cpu" || gpu) {
+            let (code, stderr, rows) = run(
+                model,
+                &scene("eta", "[0.8, 0.9]", integration),
+                &["--backend", backend],
+            );
+            assert_eq!(code, Some(0), "{stderr}");
+            for row in &rows {
+                assert_eq!(
+                    row.last().unwrap(),
+                    "chattering(iterations=50)",
+                    "{backend}"
+                );
+            }
+        }
+    }
 }

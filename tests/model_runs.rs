@@ -53,7 +53,10 @@ fn reference_exponents<const N: usize>(
     stops: &[RefStop],
     transient: usize,
     iterations: usize,
-) -> (Vec<f64>, Vec<f64>) {
+) -> (Vec<f64>, Vec<f64>)
+where
+    nalgebra::Const<N>: nalgebra::DimMin<nalgebra::Const<N>, Output = nalgebra::Const<N>>,
+{
     let period = std::f64::consts::TAU / eta;
     let steps = 40_000;
     let h = period / steps as f64;
@@ -76,7 +79,9 @@ fn reference_exponents<const N: usize>(
     let gap =
         |stop: &RefStop, y: &SVector<f64, N>| stop.side * (y[stop.coordinate] - stop.position);
     let mut y = SVector::<f64, N>::zeros();
-    let mut q = SMatrix::<f64, N, N>::identity();
+    // The frame the tool starts from: a complex pair's split over a finite
+    // window depends on it.
+    let mut q = lyapsweep::method::qr::generic_frame::<N>();
     let mut logs = [0.0; N];
     let mut crossings = vec![0usize; stops.len()];
     let full_step = flow_matrix(h);

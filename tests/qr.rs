@@ -55,6 +55,12 @@ proptest! {
 fn exponents_of_a_constant_diagonal_map_are_its_log_moduli() {
     let mut acc = QrAccumulator::<3>::new();
     let j = SMatrix::<f64, 3, 3>::from_diagonal(&nalgebra::Vector3::new(2.0, -0.5, 0.1));
+    // The start frame's projection onto the axes stays in the sums until
+    // the frame is aligned (gaps of ln 4 and ln 5 a step: e^-55 in 40).
+    for _ in 0..40 {
+        acc.push(&j);
+    }
+    acc.restart_sums();
     for _ in 0..10 {
         acc.push(&j);
     }

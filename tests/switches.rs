@@ -305,7 +305,8 @@ fn sliding_collapses_a_direction_on_both_paths() {
     let scene = |backend: &str| {
         format!(
             "{}\n[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[integration]\n\
-             steps_per_period = 200\ntransient = 5\niterations = 5\ninitial_state = [0.1, 0.0]\n\
+             steps_per_period = 200\ntransient = 5\nalign = 1\niterations = 5\n\
+             initial_state = [0.1, 0.0]\n\
              [output]\nbifurcation_points = 5\n[run]\nbackend = \"{backend}\"\n",
             common::FRICTION
         )
@@ -695,7 +696,44 @@ fn two_uncoupled_belts_give_the_union_of_their_spectra() {
             }
         };
         assert_eq!(lane.status, expected, "{what}");
-        for (p, q) in lane.exponents.iter().zip(&union) {
+        // A block that slips has a complex pair of exponents, whose split
+        // over a finite window depends on where the frame stands in the
+        // pair's plane, and the four-state frame stands elsewhere than each
+        // two-state one (README, the method, step 3): a pair (neighbours of
+        // the union within 1e-3) holds its sum to 1e-8 and each exponent to
+        // the window's 1/(N·T); the other exponents hold to 1e-8.
+        let window = 280.0 * std::f64::consts::TAU / eta;
+        let mut groups: Vec<std::ops::Range<usize>> = Vec::new();
+        for i in 0..union.len() {
+            match groups.last_mut() {
+                Some(g) if union[i].is_finite() && (union[i] - union[g.end - 1]).abs() < 1e-3 => {
+                    g.end = i + 1
+                }
+                _ => groups.push(i..i + 1),
+            }
+        }
+        for g in groups.iter().filter(|g| g.len() > 1) {
+            let (p, q) = (
+                lane.exponents[g.clone()].iter().sum::<f64>(),
+                union[g.clone()].iter().sum::<f64>(),
+            );
+            assert!(
+                (p - q).abs() <= 1e-8,
+                "{what}: {:?} vs {union:?}",
+                lane.exponents
+            );
+            worst = worst.max((p - q).abs());
+            for i in g.clone() {
+                let (p, q) = (lane.exponents[i], union[i]);
+                assert!((p - q).abs() <= 1.0 / window, "{what}: {p} vs {q}");
+            }
+        }
+        let single: Vec<usize> = groups
+            .iter()
+            .filter(|g| g.len() == 1)
+            .map(|g| g.start)
+            .collect();
+        for (p, q) in single.iter().map(|&i| (&lane.exponents[i], &union[i])) {
             assert!(
                 p == q || (p - q).abs() <= 1e-8,
                 "{what}: {:?} vs {union:?}",

@@ -531,6 +531,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
 
     let gpu_report = gpu_report.map(|mut report| {
         report.recomputed = recompute_sliding(scene, &mut lanes);
+        date_transient_failures(scene, &mut lanes);
         report.validation = validate(scene, precision, &mut lanes);
         report
     });
@@ -705,6 +706,48 @@ fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
         lanes[k] = lane;
     }
     flagged
+}
+
+/// Dates the failures the GPU found at the end of its transient, which
+/// runs without readback: a lane that went non-finite (or lost its section)
+/// in the transient is reported by the kernels at the first averaging
+/// iteration. Its transient is run again on the CPU path, and where that
+/// fails too, the row takes the CPU's iteration, as a CPU run would report
+/// it (the lane gave no numbers either way).
+fn date_transient_failures(scene: &Scene, lanes: &mut [LaneResult]) {
+    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
+    // The kernels' transient is the iterations before the aligning ones.
+    let first_with_jacobians = settings.transient;
+    let undated = |status: &LaneStatus| match status {
+        LaneStatus::NonFinite { iteration } | LaneStatus::NoReturn { iteration } => {
+            *iteration == first_with_jacobians
+        }
+        _ => false,
+    };
+    let failed: Vec<usize> = (0..lanes.len())
+        .filter(|&k| first_with_jacobians > 0 && undated(&lanes[k].status))
+        .collect();
+    if failed.is_empty() || follow_gpu_plan(scene, &mut settings).is_err() {
+        return;
+    }
+    // The transient alone: no averaging iteration is needed to date it.
+    settings.iterations = settings.align + 1;
+    use rayon::prelude::*;
+    let cpu: Vec<LaneStatus> = failed
+        .par_iter()
+        .map(|&k| {
+            let lane = crate::method::Lane {
+                params: scene.lane_params(k),
+                settings: &settings,
+            };
+            (crate::method::runner(scene.system).run_lane)(&lane).status
+        })
+        .collect();
+    for (&k, status) in failed.iter().zip(cpu) {
+        if status.is_failure() {
+            lanes[k].status = status;
+        }
+    }
 }
 
 /// Recomputes `scene.validate` sweep values, spread over the sweep, on the

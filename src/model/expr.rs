@@ -26,6 +26,8 @@
 
 use std::fmt;
 
+use crate::error::clip;
+
 /// The most characters an expression may have.
 pub const MAX_CHARS: usize = 20_000;
 
@@ -33,11 +35,6 @@ pub const MAX_CHARS: usize = 20_000;
 /// powers and minus signs, and the terms of a sum or factors of a product,
 /// each count one level.
 pub const MAX_DEPTH: usize = 1_000;
-
-/// A name or number of `text` cut to a length a message can show.
-pub fn shortened(text: &str) -> String {
-    crate::error::shortened(text, 60)
-}
 
 /// What a name in an expression stands for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -264,14 +261,14 @@ fn tokenize(text: &str) -> Result<Vec<(Token, usize)>, ParseError> {
             let literal: String = chars[start..i].iter().collect();
             let value = literal.parse::<f64>().map_err(|_| ParseError {
                 column,
-                message: format!("'{}' is not a number", shortened(&literal)),
+                message: format!("'{}' is not a number", clip(&literal)),
             })?;
             if value.is_infinite() {
                 return Err(ParseError {
                     column,
                     message: format!(
                         "'{}' is beyond the largest number ({:e})",
-                        shortened(&literal),
+                        clip(&literal),
                         f64::MAX
                     ),
                 });
@@ -425,7 +422,7 @@ impl Parser<'_> {
                     let Some(func) = Func::by_name(&name) else {
                         return Err(ParseError {
                             column,
-                            message: format!("unknown function '{}'", shortened(&name)),
+                            message: format!("unknown function '{}'", clip(&name)),
                         });
                     };
                     self.at += 1;
@@ -452,7 +449,7 @@ impl Parser<'_> {
                 }
                 let message = match Func::by_name(&name) {
                     Some(_) => format!("'{name}' is a function: write {name}(...)"),
-                    None => format!("unknown name '{}'", shortened(&name)),
+                    None => format!("unknown name '{}'", clip(&name)),
                 };
                 Err(ParseError { column, message })
             }
@@ -503,7 +500,7 @@ impl Parser<'_> {
 fn describe(token: &Token) -> String {
     match token {
         Token::Num(v) => format!("the number {v}"),
-        Token::Name(n) => format!("'{}'", shortened(n)),
+        Token::Name(n) => format!("'{}'", clip(n)),
         Token::Sym(c) => format!("'{c}'"),
         Token::End => "the end".to_owned(),
     }

@@ -550,7 +550,7 @@ impl Model {
                                 &name_key,
                                 format!(
                                     "{:?} has no letter or digit to name the event's column by",
-                                    super::expr::shortened(name)
+                                    crate::error::clip(name)
                                 ),
                             ));
                         }

@@ -22,7 +22,6 @@ use crate::integrate::clock::Phase;
 
 pub use crate::integrate::{FlowSettings, IterationStats, Part};
 
-
 /// Every coordinate of a map image that does not exist: a Poincaré map's
 /// trajectory that never came back to its section within the return bound.
 /// Not finite, so the lane fails as on any non-finite point, and

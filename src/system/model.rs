@@ -165,7 +165,12 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
             return Err(("model.map.section.at", format!("must be finite, got {at}")));
         }
     }
-    for limit in code.model.switches.iter().filter_map(|s| s.stick_limit.as_ref()) {
+    for limit in code
+        .model
+        .switches
+        .iter()
+        .filter_map(|s| s.stick_limit.as_ref())
+    {
         if let Some(value) = crate::model::table::bad_stick_limit(limit, &p.values) {
             return Err((
                 blamed(p, limit).unwrap_or("model.switches.stick_limit"),
