@@ -691,18 +691,7 @@ fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
     if follow_gpu_plan(scene, &mut settings).is_err() {
         return Vec::new();
     }
-    use rayon::prelude::*;
-    let cpu: Vec<LaneResult> = flagged
-        .par_iter()
-        .map(|&k| {
-            let lane = crate::method::Lane {
-                params: scene.lane_params(k),
-                settings: &settings,
-            };
-            (crate::method::runner(scene.system).run_lane)(&lane)
-        })
-        .collect();
-    for (&k, lane) in flagged.iter().zip(cpu) {
+    for (&k, lane) in flagged.iter().zip(cpu_lanes(scene, &settings, &flagged)) {
         lanes[k] = lane;
     }
     flagged
@@ -732,22 +721,27 @@ fn date_transient_failures(scene: &Scene, lanes: &mut [LaneResult]) {
     }
     // The transient alone: no averaging iteration is needed to date it.
     settings.iterations = settings.align + 1;
+    for (&k, cpu) in failed.iter().zip(cpu_lanes(scene, &settings, &failed)) {
+        if cpu.status.is_failure() {
+            lanes[k].status = cpu.status;
+        }
+    }
+}
+
+/// Lanes `picked` of the sweep run on the CPU path with `settings`, in
+/// parallel: what a GPU run hands back to the CPU.
+fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<LaneResult> {
     use rayon::prelude::*;
-    let cpu: Vec<LaneStatus> = failed
+    picked
         .par_iter()
         .map(|&k| {
             let lane = crate::method::Lane {
                 params: scene.lane_params(k),
-                settings: &settings,
+                settings,
             };
-            (crate::method::runner(scene.system).run_lane)(&lane).status
+            (crate::method::runner(scene.system).run_lane)(&lane)
         })
-        .collect();
-    for (&k, status) in failed.iter().zip(cpu) {
-        if status.is_failure() {
-            lanes[k].status = status;
-        }
-    }
+        .collect()
 }
 
 /// Recomputes `scene.validate` sweep values, spread over the sweep, on the
