@@ -83,6 +83,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #ifdef WALL
             nonlinearity = max(nonlinearity, max(departure(r, plus), departure(r, minus)));
 #endif
+#ifdef CENTRAL
+            if (plus != r && minus != r) {
+                nonlinearity = max(nonlinearity, asymmetry(r, plus, minus));
+            }
+#endif
         }
 #endif
 #ifdef POINTS
@@ -239,3 +244,27 @@ fn restart(base: u32, y: State, phase: vec2<real>, comp: State) {
     traj[base + TRAJ_FLUX] = real(0.0);
 #endif
 }
+
+#ifdef CENTRAL
+// How far a central column's copies left the linear regime between the
+// stops, |U₊ + U₋ - 2U₀| / |U₊ - U₋| in max norms (twin of the CPU's
+// `asymmetry` in jacobian::Copies::difference).
+fn asymmetry(r: u32, plus: u32, minus: u32) -> f32 {
+    var up = load_state(plus * TRAJ_STRIDE) - load_state(r * TRAJ_STRIDE);
+    var down = load_state(minus * TRAJ_STRIDE) - load_state(r * TRAJ_STRIDE);
+#ifdef COMPENSATED
+    up = up - (load_state(plus * TRAJ_STRIDE + DIM) - load_state(r * TRAJ_STRIDE + DIM));
+    down = down - (load_state(minus * TRAJ_STRIDE + DIM) - load_state(r * TRAJ_STRIDE + DIM));
+#endif
+    var even = real(0.0);
+    var odd = real(0.0);
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        even = max(even, abs(up[k] + down[k]));
+        odd = max(odd, abs(up[k] - down[k]));
+    }
+    if (even == real(0.0)) {
+        return 0.0f;
+    }
+    return f32(even / odd);
+}
+#endif

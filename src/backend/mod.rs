@@ -328,17 +328,18 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
         (0..scene.sweep.lanes())
             .any(|k| reachable(&scene.params_at(k), &scene.integration.initial_state))
     });
-    Variant {
+    let mut variant = Variant {
         system: scene.system,
         precision,
         lyapunov: scene.lyapunov,
         difference: scene.difference(),
         wall,
-        // The GPU host re-estimates grazing iterations from the reference
-        // point, so a wall and exponents need the points too.
-        points: scene.bifurcation_points > 0 || (wall && scene.lyapunov),
+        points: scene.bifurcation_points > 0,
         impact_location: scene.integration.impact_location,
-    }
+    };
+    // The GPU host re-estimates from the reference's points.
+    variant.points |= variant.reestimates();
+    variant
 }
 
 /// The GPU integrates every lane of a sweep with the same plan: the most

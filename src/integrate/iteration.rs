@@ -85,9 +85,11 @@ pub struct IterationStats {
     /// Of a Jacobian estimate: how far the perturbed copies left the linear
     /// regime, as the largest relative difference between a copy's slowest
     /// impact speed and the reference's (infinite when a column's copies
-    /// met the wall a different number of times on both sides); 0 without
-    /// impacts. A finite difference is off by about this fraction (forward)
-    /// or its square (central).
+    /// met the wall a different number of times on both sides), or, for
+    /// central differences, the copies' asymmetry |U₊ + U₋ - 2U₀| / |U₊ - U₋|
+    /// where that is larger (`jacobian::Copies::difference`). A finite
+    /// difference is off by about this fraction (forward) or its square
+    /// (central).
     pub nonlinearity: f64,
     /// Of a Jacobian estimate: re-estimated over a ladder of smaller δ
     /// because `nonlinearity` was too large for the Jacobian's conditioning

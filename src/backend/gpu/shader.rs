@@ -101,6 +101,14 @@ impl Variant {
         }
     }
 
+    /// Whether the host re-estimates some iterations on the CPU from the
+    /// reference's point (`method::lane::is_grazing`): the copies' impacts
+    /// move (a wall), or a central column's copies leave the linear
+    /// regime (their asymmetry, which finish.wgsl measures).
+    pub fn reestimates(&self) -> bool {
+        self.lyapunov && (self.wall || self.difference == Difference::Central)
+    }
+
     /// General surfaces (events, switches) in the impact code: the
     /// trajectories carry their region and the sum rule's ln |det S|.
     pub fn surfaces(&self) -> bool {

@@ -772,7 +772,7 @@ where
                 entries: &entries,
             })
         };
-        let grazing = (variant.wall && variant.lyapunov).then(|| {
+        let grazing = variant.reestimates().then(|| {
             let mut cpu =
                 crate::backend::method_settings(scene, crate::scene::Backend::Cpu, Precision::F64);
             cpu.flow.steps_per_period = steps;
