@@ -1,22 +1,18 @@
 #!/usr/bin/env bash
-# A device probe of 2026-11-27, run from .probe/ (ignored by git) with
-# carry [".devbin", ".gl", ".probe"]. Its first lines were those of
-# docs/device/check.sh up to its `log "commit` line (the loader, the ICD,
-# the binaries unpacked into $B, $O for the outputs), left out here.
-nvlib=/usr/local/nvidia/lib64
-devices=$(timeout 60 $B/lyapsweep devices 2>&1)
-for lib in $nvlib/libEGL_nvidia.so.0 $nvlib/libGLX_nvidia.so.0; do
-    grep -q -i nvidia <<<"$devices" && break
-    sed "s|\"library_path\": *\"[^\"]*\"|\"library_path\": \"$lib\"|" "$icd" >/tmp/nvidia_icd.json
-    export VK_DRIVER_FILES=/tmp/nvidia_icd.json
-    devices=$(timeout 60 $B/lyapsweep devices 2>&1)
-done
-echo "$devices" | head -2
+# Device time of the seed oscillator's sweep against its size, one command-line
+# run per row (scaling.txt): 200 RK4 steps per period, 20 iterations, the wall at
+# 2 (impacts) or 100 (out of reach), and 2 or 60 iterations at two sizes.
+# Usage, from the repository root, on a machine with the GPU:
+#   B=target/release bash docs/hardware/h100/scaling.sh [OUTPUT FOLDER]
+set -euo pipefail
+B=${B:-target/release}
+O=${1:-.}
+scene=docs/hardware/h100/scale.toml
 R="$O/scaling.txt"
 echo "values precision wall iterations device_s lane_steps_per_s(device) bytes_per_lane chunk" | tee "$R"
 one() { # count precision wall iterations
     local s
-    s=$(timeout 60 $B/lyapsweep run .probe/scale.toml -q --backend gpu --precision $2 --set sweep.count=$1 \
+    s=$(timeout 60 $B/lyapsweep run $scene -q --backend gpu --precision $2 --set sweep.count=$1 \
         --set system.wall=$3 --set integration.iterations=$4 --out /tmp/scale 2>&1)
     local dev=$(grep -o 'timestamp queries) [0-9.]* s' <<<"$s" | grep -o '[0-9.]* s' | cut -d' ' -f1)
     local bytes=$(grep -o '[0-9]* bytes of device memory per lane' <<<"$s" | cut -d' ' -f1)

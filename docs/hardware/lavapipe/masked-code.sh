@@ -2,7 +2,7 @@
 # Does lavapipe pay for kernel code that no invocation runs?
 #
 # 1. Four builds of the integrate kernel without impact code, run on the
-# speed issue's sweep with the wall out of reach (4096 values, 200 steps per
+# 200-step sweep with the wall out of reach (4096 values, 200 steps per
 # period, transient 20, iterations 20, f64), interleaved, median device time:
 #   base     the kernel as it is
 #   never    plus LINES lines of arithmetic per invocation, under an `if`
@@ -23,9 +23,9 @@
 #
 # Usage, from the repository root, after `cargo build --release` (or with
 # BIN naming another build of lyapsweep):
-#   bash docs/lavapipe/masked-code.sh [runs (default 9)] [lines (default 2000)]
+#   bash docs/hardware/lavapipe/masked-code.sh [runs (default 9)] [lines (default 2000)]
 # On a hardware GPU the same builds show what a GPU does with code no
-# thread of a warp takes (docs/device/check.sh runs it).
+# thread of a warp takes.
 set -euo pipefail
 runs=${1:-9}
 lines=${2:-2000}
@@ -60,7 +60,7 @@ for ((i = 0; i < lines; i++)); do chain+=" q = q * real(0.5) + real($i.25);"; do
 anchor='    for (var k = c.x; k < end; k = k + 1u) {'
 # variant NAME FROM TO ...: shaders/ with integrate.wgsl's text FROM
 # replaced by TO (each exactly once), under $work/NAME. Plain bash: the
-# device machines may lack python.
+# GPU machines may lack python.
 variant() {
     local name=$1 file text old new rest
     shift
