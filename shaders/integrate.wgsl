@@ -83,7 +83,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     // it, and the resolution path below takes that one step and goes back.
     // With the resolution inlined into every step, lavapipe ran the kernel
     // 21 times slower than the kernel without a wall, even when no impact
-    // happened (docs/BENCHMARKS.md, "Impacts off the hot path").
+    // happened (lavapipe runs masked code in full: docs/BENCHMARKS.md,
+    // "What lavapipe runs").
     loop {
         var y1 = y;
         var comp1 = comp;
@@ -200,8 +201,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // at a dispatch's start: stepping on to the dispatch's end through
         // a motion the kernels cannot follow left the lane wherever the
         // dispatch ended, so adapters with other dispatch lengths (an
-        // H100's whole periods, lavapipe's 256 steps) ended it apart
-        // (docs/BENCHMARKS.md, "The belt's non-finite lane").
+        // H100's whole periods, lavapipe's 256 steps) ended it apart.
         if ((c.z & FLAG_SLIDING) != 0u) {
             k = end;
         }

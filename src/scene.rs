@@ -86,7 +86,7 @@ pub const DEFAULT_PERTURBATION_F64: f64 = 1e-6;
 /// reference does not, limits large δ, and the host re-estimates ever more
 /// grazing iterations (93, 381, 813 and 7455). 5e-4's gain did not pay
 /// for four times the re-estimations (docs/BENCHMARKS.md, "f32's
-/// perturbation, measured again").
+/// perturbation δ").
 pub const DEFAULT_PERTURBATION_F32: f64 = 2e-4;
 /// Default number of sweep values a GPU run recomputes on the CPU.
 pub const DEFAULT_VALIDATE: usize = 4;

@@ -331,7 +331,8 @@ fn workgroup_size_changes_no_digit_and_device_time_is_measured() {
         // e = 0 and an overflowing forcing, 100 values each, so no size
         // divides the lane or trajectory count. Size 1 puts every invocation
         // alone in its SIMD group: on lavapipe, an earlier impact kernel let
-        // a chattering lane change its neighbours there (docs/BENCHMARKS.md).
+        // a chattering lane change its neighbours there (docs/STABILITY.md,
+        // "lavapipe's loop cap").
         let scenes: [&[&str]; 3] = [
             &["sweep.from=0.69", "sweep.to=0.74", "sweep.count=100"],
             &[

@@ -699,7 +699,7 @@ fn two_uncoupled_belts_give_the_union_of_their_spectra() {
         // A block that slips has a complex pair of exponents, whose split
         // over a finite window depends on where the frame stands in the
         // pair's plane, and the four-state frame stands elsewhere than each
-        // two-state one (README, the method, step 3): a pair (neighbours of
+        // two-state one (docs/VALIDATION.md, "The QR frame's start"): a pair (neighbours of
         // the union within 1e-3) holds its sum to 1e-8 and each exponent to
         // the window's 1/(N·T); the other exponents hold to 1e-8.
         let window = 280.0 * std::f64::consts::TAU / eta;

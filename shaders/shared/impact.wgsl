@@ -93,7 +93,7 @@ fn at_rest(w: Stop, y: State) -> bool {
 // The step loop's two tests, over every stop. Written out per stop rather
 // than as a loop: WALLS is a constant, so the branches of absent stops fold
 // away, and a loop inside the step loop would cost every step on lavapipe
-// (docs/BENCHMARKS.md, "Impacts off the hot path").
+// (docs/BENCHMARKS.md, "What lavapipe runs").
 fn reaches_a_stop(walls: Stops, y: State, h: real, y1: State) -> bool {
     var hit = reaches(stop(walls, 0u), y, h, y1);
     if (WALLS > 1u) {

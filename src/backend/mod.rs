@@ -680,7 +680,7 @@ impl Summary {
 /// gives the host no Jacobian, so a motion stopped at its flag no longer
 /// fails the QR. The lanes once recomputed for that (a ball locking onto
 /// a table, a belt's mass pressed into a stop) are flagged ones now
-/// (docs/BENCHMARKS.md, "The belt's non-finite lane").
+/// (docs/VALIDATION.md, `a_mass_carried_by_the_belt_into_a_stop_is_recomputed_on_the_cpu`).
 fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
     let flagged: Vec<usize> = (0..lanes.len())
         .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))

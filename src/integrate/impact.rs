@@ -1310,8 +1310,8 @@ impl Hermite {
     /// iterate repeated, took 25 iterations on average (up to 64: near the
     /// root the slope's rounding moves each step by a few ulps, and the
     /// bracket closed by bisection): at one call per oscillation and
-    /// trajectory, 7 percent of the CPU path's time on the speed issue's
-    /// sweep (docs/BENCHMARKS.md). Twin of `hermite_peak`.
+    /// trajectory, 7 percent of the CPU path's time on a 200-step sweep
+    /// of the seed's oscillator. Twin of `hermite_peak`.
     fn peak(&self) -> Option<f64> {
         if !(self.slope(0.0) > 0.0 && self.slope(1.0) < 0.0) {
             return None;

@@ -231,9 +231,9 @@ where
 /// column, u·√(steps accumulated)/δ, times the same ratio). Below the
 /// rounding, a smaller δ can only trade truncation for more rounding: in
 /// f64 that never decides (the noise is ~1e-8), but f32's δ = 2e-4 has
-/// noise 6e-4, and the f32 GPU run of the seed's scene re-estimated 8550
-/// iterations on the host (1.45 s of a 2.1 s run on the H100) at a
-/// threshold below its own rounding (docs/BENCHMARKS.md).
+/// noise 6e-4: a threshold below that rounding had the host of an f32 GPU
+/// run re-estimate thousands of the seed's iterations for nothing
+/// (docs/BENCHMARKS.md, "f32's perturbation δ").
 pub fn is_grazing<const D: usize>(
     settings: &MethodSettings,
     steps_per_part: usize,

@@ -59,14 +59,14 @@ pub enum ExactPropagator {
     /// ground truth the piecewise-linear propagator is tested against, and
     /// fast where a stiffly damped mass bounces on the wall thousands of
     /// times a period (e = 1: 2x2 closed-form cost per bounce rather than
-    /// the general scan's; docs/BENCHMARKS.md).
+    /// the general scan's; docs/STABILITY.md, "Stiff damping with a
+    /// reachable wall").
     SeedClosedForm,
 }
 
 /// The built-in kinds given as models: each kind's hand-written Rust and
 /// WGSL were retired for its model file once the model matched it in
-/// results and speed (docs/BENCHMARKS.md, "Models against the built-in
-/// system"). The Lorenz flow's model ran 1.11 times the built-in's speed on
+/// results and speed. The Lorenz flow's model ran 1.11 times the built-in's speed on
 /// the CPU and 0.89 times on lavapipe; the seed's impact oscillator's gave
 /// the same spectra to the bit over the main job's 4096 η, at 0.79 times
 /// the built-in's lane-steps per second on the CPU and 1.00 times on

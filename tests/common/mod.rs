@@ -96,7 +96,7 @@ pub fn gpu_or_skip(test: &str, precision: lyapsweep::scene::Precision) -> bool {
     false
 }
 
-/// Extreme sweeps (case 5 of docs/STABILITY.md) on any backend: η over three
+/// Extreme sweeps (docs/STABILITY.md, "Extreme sweeps") on any backend: η over three
 /// decades (η = 0.01 raises the steps to 10·T), forcing up to 100 times the
 /// seed's, every lane `ok` within `tolerance` of the sum rule; and a wall
 /// never reached, where λ1 = λ2 = -ζ within 1e-4. `sweep` runs the seed's

@@ -285,7 +285,7 @@ impl Variant {
 /// A kernel source by its path under `shaders/`. Where `LYAPSWEEP_SHADER_DIR`
 /// names a folder laid out as `shaders/`, its files replace the sources
 /// compiled in: a kernel experiment then needs no rebuild (a release build
-/// takes minutes on 2 cores; docs/lavapipe/masked-code.sh is one).
+/// takes minutes on 2 cores; docs/hardware/lavapipe/masked-code.sh is one).
 fn include(path: &str) -> Cow<'static, str> {
     source_in(source_dir().as_deref(), path)
 }

@@ -32,10 +32,10 @@ use crate::system::{IterationStats, Part};
 /// lane-steps take 2 ms at the 3e10 per second sought on an H100, 0.1 s on a
 /// GPU 50 times slower, 0.15 s on lavapipe), large enough that a dispatch's
 /// fixed cost (its launch, every trajectory's state loaded and stored) stays
-/// small. At 2^22 a sweep of 262 144 values (1.3 million trajectories) took 3
-/// steps per dispatch, and lavapipe ran it at 3.2e7 lane-steps per second
-/// against 2.2e8 at 4 096 values (docs/BENCHMARKS.md, "Throughput against
-/// sweep size").
+/// small: with a smaller budget a sweep of 262 144 values (1.3 million
+/// trajectories) took 3 steps per dispatch, and lavapipe ran it seven times
+/// slower per lane-step than 4 096 values (docs/BENCHMARKS.md, "Throughput
+/// against sweep size").
 pub(super) const DISPATCH_LANE_STEPS: usize = 1 << 26;
 /// Steps per integrate dispatch with a wall on a software adapter. lavapipe
 /// caps the loop iterations of one invocation at 65 535 (every loop
@@ -52,7 +52,8 @@ const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
 /// Invocations per workgroup unless the run asks otherwise
-/// (docs/BENCHMARKS.md measures sizes 1 to 256 on lavapipe).
+/// (docs/BENCHMARKS.md, "What lavapipe runs", and the H100's workgroup
+/// table under "NVIDIA H100 and H200").
 ///
 /// On lavapipe a lane chattering against the wall once changed the seven
 /// beside it in its SIMD group of 8: they share the adapter's loop budget
