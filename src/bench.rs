@@ -413,7 +413,7 @@ pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Resu
     };
     std::fs::create_dir_all(dir).map_err(|e| fail(dir, e))?;
     let csv_path = dir.join("bench.csv");
-    crate::output::write_atomically(&csv_path, |w| {
+    crate::output::files::write_atomically(&csv_path, |w| {
         w.write_record([
             "path",
             "steps_per_period",

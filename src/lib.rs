@@ -15,13 +15,14 @@
 
 pub mod backend;
 pub mod bench;
-pub mod budget;
 pub mod error;
 pub mod integrate;
+pub mod limits;
 pub mod method;
 pub mod model;
 pub mod output;
 pub mod perturbation;
+pub mod plan;
 pub mod scene;
 pub mod system;
 

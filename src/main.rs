@@ -202,7 +202,7 @@ fn run(
     });
     // Everything that can refuse the run does so before the first step:
     // its size, then the output folder.
-    let large = lyapsweep::budget::large_run(&scene);
+    let large = lyapsweep::plan::large_run(&scene);
     let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &scene.files)?)?;
     if let Some(line) = large.filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
@@ -214,7 +214,7 @@ fn run(
         device: how.device,
         ..Default::default()
     };
-    let batch = lyapsweep::budget::batch_lanes(&scene);
+    let batch = lyapsweep::plan::batch_lanes(&scene);
     let summary = lyapsweep::run_streaming(&scene, &options, batch, |batch, report| {
         writer.append(batch, report)
     });

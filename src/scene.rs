@@ -277,6 +277,23 @@ pub struct Integration {
     pub submaps: Option<usize>,
 }
 
+impl Integration {
+    /// The RK4 trajectory-steps of one lane: the reference over the transient,
+    /// and with its `copies` over the aligning and averaged iterations, at the
+    /// requested steps (lanes may need more).
+    pub fn steps_per_lane(&self, is_flow: bool, copies: usize) -> f64 {
+        let steps = if is_flow {
+            self.steps_per_period as f64
+        } else {
+            1.0
+        };
+        let i = self;
+        let plain = (i.transient - i.align) as f64;
+        let with_copies = (i.align + i.iterations) as f64 * (1 + copies) as f64;
+        (plain + with_copies) * steps
+    }
+}
+
 impl Scene {
     /// The difference scheme: the scene's, or central. Central differences
     /// are what lets a column switch sides when a copy crosses a grazing
@@ -504,7 +521,7 @@ pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {
 }
 
 /// [`load`], restricted to `shard` of the sweep: the run's size is checked
-/// for the shard's lanes (see `budget::check_sweep`).
+/// for the shard's lanes (see `limits::check_sweep`).
 pub fn load_shard(path: &Path, overrides: &[String], shard: Option<Shard>) -> Result<Scene> {
     let text = std::fs::read_to_string(path).map_err(|source| Error::ReadScene {
         path: path.to_owned(),
@@ -930,12 +947,12 @@ fn resolve(
     } else {
         0
     };
-    crate::budget::check_sweep(
+    crate::limits::check_sweep(
         &counts,
         info.dimension(),
         raw.output.bifurcation_points.unwrap_or(0),
-        crate::budget::steps_per_lane(&integration, info.is_flow, copies),
-        shard,
+        integration.steps_per_lane(info.is_flow, copies),
+        shard.map(|s| s.count),
     )?;
     let sweep = resolve_sweep(info, &params, raw.sweep)?;
 

@@ -5,8 +5,8 @@
 
 mod common;
 
-use lyapsweep::backend::method_settings;
 use lyapsweep::method::runner;
+use lyapsweep::plan::method_settings;
 use lyapsweep::scene::{Backend, Precision};
 
 /// Every lane of `scene` run alone and with its neighbours; the results'

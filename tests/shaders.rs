@@ -375,7 +375,11 @@ fn the_models_the_kernels_run_and_why_not_the_others() {
     let expected: Vec<(String, bool)> = expected.iter().map(|(n, r)| (n.to_string(), *r)).collect();
     assert_eq!(runs, expected);
     assert!(scene_system(EVERY_FUNCTION).wgsl.is_some());
-    assert!(no_parameters().wgsl.unwrap().contains("unused: real"));
+    assert!(no_parameters()
+        .wgsl
+        .unwrap()
+        .source
+        .contains("unused: real"));
 }
 
 #[test]
@@ -428,12 +432,40 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
     // The seed as a model: the retired hand-written file's tree
     // (`(-2ζ)·v - x + f·cos`, which the model matched to the bit), fully
     // bracketed, its wall from the stop.
-    let seed = system("impact-oscillator.toml").wgsl.unwrap();
+    let seed = system("impact-oscillator.toml").wgsl.unwrap().source;
     assert!(
         seed.contains("((((-real(2.0)) * p.p_zeta) * y.y) - y.x) + (p.p_f * phase.x)"),
         "{seed}"
     );
     assert!(seed.contains("fn wall_position(p: Params)"), "{seed}");
+}
+
+#[test]
+fn a_system_file_s_features_are_what_its_text_holds() {
+    // The kernels' defines follow the emitter's typed features; the text
+    // they describe must hold each exactly when the feature says so.
+    for system in gpu_systems() {
+        let file = system.wgsl.unwrap();
+        let source = file.source;
+        assert_eq!(
+            file.surfaces,
+            source.contains("const SURFACES: u32"),
+            "{}",
+            system.kind
+        );
+        assert_eq!(
+            file.section,
+            source.contains("const SECTION_STATE: u32"),
+            "{}",
+            system.kind
+        );
+        assert_eq!(
+            file.wraps_angles,
+            source.contains("fn wrap_angles("),
+            "{}",
+            system.kind
+        );
+    }
 }
 
 #[test]

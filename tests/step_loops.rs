@@ -6,10 +6,10 @@
 
 mod common;
 
-use lyapsweep::backend::method_settings;
 use lyapsweep::method::{runner, Lane};
 use lyapsweep::model::code::Code;
 use lyapsweep::model::Model;
+use lyapsweep::plan::method_settings;
 use lyapsweep::scene::{Backend, Precision};
 use lyapsweep::system::Params;
 

@@ -3,17 +3,19 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod options;
 pub mod progress;
 
 use std::time::{Duration, Instant};
 
 use crate::error::{Error, Result};
 use crate::method::lane::LanePlan;
-use crate::method::{LaneResult, LaneStatus, MethodSettings, Tangent};
+use crate::method::{LaneResult, LaneStatus, MethodSettings};
+use crate::plan::{cpu_twin, method_settings};
 use crate::scene::{Backend, Precision, Scene};
-use crate::system::FlowSettings;
 use gpu::context::{self, Want};
 use gpu::shader::Variant;
+pub use options::RunOptions;
 pub use progress::Progress;
 
 /// The outcome of a sweep.
@@ -45,12 +47,12 @@ pub struct GpuReport {
     /// Where the kernels' sources came from when not from the binary
     /// (`LYAPSWEEP_SHADER_DIR`, for kernel experiments): a run says so.
     pub kernel_sources: Option<std::path::PathBuf>,
-    pub timings: gpu::sweep::Timings,
+    pub timings: gpu::pipeline::Timings,
     pub batches: usize,
     pub chunk_steps: usize,
-    /// Batches redone with shorter dispatches (see `gpu::sweep::GpuRun::retries`).
+    /// Batches redone with shorter dispatches (see `gpu::pipeline::GpuRun::retries`).
     pub retries: usize,
-    /// Device memory per lane (see `gpu::sweep::GpuRun::bytes_per_lane`).
+    /// Device memory per lane (see `gpu::pipeline::GpuRun::bytes_per_lane`).
     pub bytes_per_lane: u64,
     pub validation: Option<Validation>,
     /// Indices of the sweep values the kernels flagged `sliding` (a motion
@@ -88,28 +90,6 @@ impl Report {
             .filter(|l| l.status != LaneStatus::Ok)
             .count()
     }
-}
-
-/// Options of a run that are not part of a scene.
-#[derive(Clone, Debug, Default)]
-pub struct RunOptions {
-    /// Split GPU sweeps into batches of at most this many lanes (the limits
-    /// of the device split them anyway; tests use this to exercise it).
-    pub max_batch_lanes: Option<usize>,
-    /// Keep every iteration's Jacobian in the lane results.
-    pub keep_jacobians: bool,
-    /// Invocations per GPU workgroup (default [`gpu::sweep::DEFAULT_WORKGROUP`]);
-    /// the benchmark varies it.
-    pub workgroup_size: Option<u32>,
-    /// Advanced as lanes run, for a progress display.
-    pub progress: Option<Progress>,
-    /// Run on adapter number `device` of `lyapsweep devices` (one process
-    /// per GPU of a machine, each with its shard).
-    pub device: Option<usize>,
-    /// RK4 steps per GPU integrate dispatch at most (default: 256 on a
-    /// software adapter with stops, else a whole period); tests set it to
-    /// run lavapipe as a hardware GPU runs.
-    pub dispatch_steps: Option<usize>,
 }
 
 /// The per-precision tolerance of the GPU's validation against the CPU.
@@ -282,43 +262,6 @@ fn no_kernels(scene: &Scene) -> Option<String> {
             .unwrap_or_else(|| "it has no WGSL kernel".into());
         format!("{}: {why}", system.kind)
     })
-}
-
-/// The per-lane settings a scene implies for a backend and precision.
-pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) -> MethodSettings {
-    let i = &scene.integration;
-    let steps = if scene.system.is_flow {
-        i.steps_per_period
-    } else {
-        1
-    };
-    MethodSettings {
-        // The aligning iterations run with Jacobians, as the averaging
-        // ones do; the lane's accumulator takes them for the frame alone.
-        transient: i.transient - i.align,
-        iterations: i.align + i.iterations,
-        align: i.align,
-        initial_state: i.initial_state.clone(),
-        perturbation: scene.perturbation(),
-        difference: scene.difference(),
-        flow: FlowSettings {
-            steps_per_period: i.steps_per_period,
-            impact_location: i.impact_location,
-        },
-        tangent: if backend == Backend::Exact {
-            Tangent::Exact
-        } else {
-            Tangent::FiniteDifference
-        },
-        lyapunov: scene.lyapunov,
-        bifurcation_points: scene.bifurcation_points,
-        keep_jacobians: false,
-        // The f32 kernels compensate the state update (Kahan), so rounding
-        // does not accumulate over the steps of an iteration.
-        rounding_accumulates: precision == Precision::F64 && steps > 1,
-        submaps: scene.integration.submaps,
-        rounding_unit: precision.rounding_unit(),
-    }
 }
 
 /// The kernel variant a scene needs: only the parts it uses.
@@ -496,7 +439,7 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
     let (mut lanes, gpu_report) = match &prepared.gpu {
         None => (cpu::sweep(scene, settings, &progress), None),
         Some((gpu, variant)) => {
-            let mut run = gpu::sweep::run(gpu, scene, variant, settings, options)?;
+            let mut run = gpu::run(gpu, scene, variant, settings, options)?;
             // The kernels ran every lane with the sweep's plan; a lane whose
             // own plan is beyond reach is not to be trusted (the CPU path
             // does not run it at all).
@@ -531,9 +474,9 @@ fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result
     let elapsed = start.elapsed();
 
     let gpu_report = gpu_report.map(|mut report| {
-        report.recomputed = recompute_sliding(scene, &mut lanes);
+        report.recomputed = recompute_sliding(scene, &prepared.settings, &mut lanes);
         date_transient_failures(scene, &mut lanes);
-        report.validation = validate(scene, precision, &mut lanes);
+        report.validation = validate(scene, precision, &prepared.settings, &mut lanes);
         report
     });
     // The period-map kernels do not integrate a state-dependent divergence
@@ -681,17 +624,14 @@ impl Summary {
 /// fails the QR. The lanes once recomputed for that (a ball locking onto
 /// a table, a belt's mass pressed into a stop) are flagged ones now
 /// (docs/VALIDATION.md, `a_mass_carried_by_the_belt_into_a_stop_is_recomputed_on_the_cpu`).
-fn recompute_sliding(scene: &Scene, lanes: &mut [LaneResult]) -> Vec<usize> {
+fn recompute_sliding(scene: &Scene, gpu: &MethodSettings, lanes: &mut [LaneResult]) -> Vec<usize> {
     let flagged: Vec<usize> = (0..lanes.len())
         .filter(|&k| matches!(lanes[k].status, LaneStatus::Sliding { .. }))
         .collect();
     if flagged.is_empty() {
         return flagged;
     }
-    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
-    if follow_gpu_plan(scene, &mut settings).is_err() {
-        return Vec::new();
-    }
+    let settings = cpu_twin(scene, gpu);
     for (&k, lane) in flagged.iter().zip(cpu_lanes(scene, &settings, &flagged)) {
         lanes[k] = lane;
     }
@@ -747,7 +687,12 @@ fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<
 
 /// Recomputes `scene.validate` sweep values, spread over the sweep, on the
 /// CPU path (f64) and marks GPU rows that differ beyond the tolerance.
-fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Option<Validation> {
+fn validate(
+    scene: &Scene,
+    precision: Precision,
+    gpu: &MethodSettings,
+    lanes: &mut [LaneResult],
+) -> Option<Validation> {
     if scene.validate == 0 || !scene.lyapunov || lanes.is_empty() {
         return None;
     }
@@ -765,9 +710,8 @@ fn validate(scene: &Scene, precision: Precision, lanes: &mut [LaneResult]) -> Op
     picks.dedup();
     // The same δ and difference scheme as the GPU run (both follow the
     // scene's precision), so the difference measures arithmetic only.
-    let mut settings = method_settings(scene, Backend::Cpu, Precision::F64);
     // The GPU ran every lane with the sweep's steps and parts.
-    follow_gpu_plan(scene, &mut settings).ok()?;
+    let settings = cpu_twin(scene, gpu);
     let tolerance = validation_tolerance(precision);
     let mut max_difference: f64 = 0.0;
     for &k in &picks {

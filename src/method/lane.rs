@@ -1231,7 +1231,7 @@ mod tests {
         } else {
             Precision::F64
         };
-        crate::backend::method_settings(&scene, Backend::Gpu, precision)
+        crate::plan::method_settings(&scene, Backend::Gpu, precision)
     }
 
     #[test]

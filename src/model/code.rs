@@ -252,10 +252,10 @@ impl Code {
         let mut walls = Vec::new();
         let mut surfaces = Vec::new();
         for (j, event) in model.events.iter().enumerate() {
-            let column = crate::output::event_column(&event.name);
+            let column = event_column(&event.name);
             if model.events[..j]
                 .iter()
-                .any(|e| crate::output::event_column(&e.name) == column)
+                .any(|e| event_column(&e.name) == column)
             {
                 return Err(Error::invalid(
                     format!("{key}.events[{j}].name"),
@@ -322,15 +322,12 @@ impl Code {
             ));
         }
         for (j, s) in surfaces.iter().enumerate() {
-            let column = crate::output::event_column(&s.name);
+            let column = event_column(&s.name);
             let earlier = walls
                 .iter()
                 .map(|w| &w.name)
                 .chain(surfaces[..j].iter().map(|s| &s.name));
-            if let Some(other) = earlier
-                .into_iter()
-                .find(|o| crate::output::event_column(o) == column)
-            {
+            if let Some(other) = earlier.into_iter().find(|o| event_column(o) == column) {
                 return Err(Error::invalid(
                     format!("{key}.switches"),
                     format!(
@@ -844,4 +841,14 @@ pub fn walls_at(code: &Code, params: &[f64]) -> Vec<Wall> {
             side: w.side,
         })
         .collect()
+}
+
+/// The `spectrum.csv` column of a model's event: its crossings per
+/// period (the model is refused where two events' columns would collide).
+pub fn event_column(event: &str) -> String {
+    let name: String = event
+        .chars()
+        .map(|c| if c.is_alphanumeric() { c } else { '_' })
+        .collect();
+    format!("{name}_per_period")
 }

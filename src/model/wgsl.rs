@@ -338,12 +338,6 @@ fn section_constants(w: &mut String, code: &Code, section: &crate::model::code::
     );
 }
 
-/// Whether a system file is a Poincaré section's, which
-/// `shaders/section.wgsl` runs in place of the period-map kernels.
-pub fn has_section(system: &str) -> bool {
-    system.contains("const SECTION_STATE: u32")
-}
-
 /// The stops of `code` as `shaders/shared/impact.wgsl` reads them: per
 /// stop j, component j of the constants and of the two functions (the
 /// components past `WALLS` are never read, and are 0).
@@ -571,24 +565,46 @@ fn stick_limits(w: &mut String, code: &Code) {
     let _ = writeln!(w, "        default: {{ return filippov; }}\n    }}\n}}");
 }
 
-/// Whether a system file has general surfaces (`SURFACES`), for the
-/// kernels' surface code and the trajectories' region.
-pub fn has_surfaces(system: &str) -> bool {
-    system.contains("const SURFACES: u32")
+/// A system's WGSL file for the kernels, with what the emitter put in it:
+/// the kernels' defines follow these, not the text.
+#[derive(Clone, Copy, Debug)]
+pub struct SystemFile {
+    pub source: &'static str,
+    /// General surfaces (`SURFACES`, events and switches): the kernels'
+    /// surface code and the trajectories' region.
+    pub surfaces: bool,
+    /// A Poincaré section (`SECTION_STATE`): `shaders/section.wgsl` runs
+    /// in place of the period-map kernels.
+    pub section: bool,
+    /// Angles wrapped at the end of each iteration (`wrap_angles`): the
+    /// finish kernel's `WRAP`.
+    pub wraps_angles: bool,
 }
 
-/// Whether a system file wraps angles (`wrap_angles`), for the `WRAP`
-/// define of the finish kernel.
-pub fn wraps_angles(system: &str) -> bool {
-    system.contains("fn wrap_angles(")
+impl SystemFile {
+    /// A hand-written file with none of the generated features.
+    pub const fn plain(source: &'static str) -> SystemFile {
+        SystemFile {
+            source,
+            surfaces: false,
+            section: false,
+            wraps_angles: false,
+        }
+    }
 }
 
 /// The system file of `code` for `SystemInfo::wgsl` (kept for the
 /// process, as the rest of a model's description is), or `None` when the
 /// kernels cannot run it ([`check`] says why).
-pub fn system_file(code: &Code) -> Option<&'static str> {
+pub fn system_file(code: &Code) -> Option<SystemFile> {
     let source = system_source(code).ok()?;
-    Some(Box::leak(source.into_boxed_str()))
+    // What `system_source` emitted for each, read from the same model.
+    Some(SystemFile {
+        source: Box::leak(source.into_boxed_str()),
+        surfaces: !code.surfaces.is_empty(),
+        section: code.section.is_some(),
+        wraps_angles: !code.model.angles.is_empty(),
+    })
 }
 
 /// The WGSL field of parameter i: `p_<name>`, which no WGSL keyword or

@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::results::{read_csv, scene_of};
-use super::set::{self, Staging};
-use super::{
+use super::files::{
     number, spectrum_file, write_atomically, write_text, BIFURCATION_FILE, SCENE_FILE, SHARD_FILE,
 };
+use super::results::{read_csv, scene_of};
+use super::set::{self, Staging};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 

@@ -14,36 +14,25 @@
 //! holds one run's files or the previous run's, never a mix.
 
 pub mod figure;
+pub mod files;
 pub mod merge;
 pub mod plot;
 pub mod results;
 pub mod set;
 
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::backend::Report;
 use crate::error::{Error, Result};
+use crate::model::code::event_column;
 use crate::scene::Scene;
+use files::{csv_to_io, number, write_text};
+pub use files::{
+    spectrum_file, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE,
+    SWEEP_FIGURE,
+};
 pub use set::Staging;
-
-/// The scene as run, next to its results.
-pub const SCENE_FILE: &str = "scene.toml";
-/// Which part of the sweep a shard holds (see [`merge`]).
-pub const SHARD_FILE: &str = "shard.toml";
-pub const SPECTRUM_FILE: &str = "spectrum.csv";
-pub const GRID_FILE: &str = "grid.csv";
-pub const BIFURCATION_FILE: &str = "bifurcation.csv";
-
-/// `spectrum.csv` for one swept parameter, `grid.csv` for two.
-pub fn spectrum_file(scene: &Scene) -> &'static str {
-    if scene.sweep.second.is_some() {
-        GRID_FILE
-    } else {
-        SPECTRUM_FILE
-    }
-}
 
 /// The header of `spectrum.csv` (`grid.csv`): the swept parameters, then
 /// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period`, for a
@@ -57,15 +46,6 @@ pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
     header.extend(["grazing", "grazing_bound", "status"].map(String::from));
     header
-}
-
-/// The column of a model's event: its crossings per period.
-pub fn event_column(event: &str) -> String {
-    let name: String = event
-        .chars()
-        .map(|c| if c.is_alphanumeric() { c } else { '_' })
-        .collect();
-    format!("{name}_per_period")
 }
 
 /// The header of `bifurcation.csv`: the swept parameters, then the state.
@@ -206,12 +186,6 @@ pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>>
     writer.finish()
 }
 
-/// Rust's `{}` for f64 is the shortest text that reads back to the same
-/// number: full precision without trailing noise.
-pub(crate) fn number(v: f64) -> String {
-    format!("{v}")
-}
-
 /// The `spectrum.csv` rows of the run's lanes, in order.
 fn spectrum_rows<'a>(
     scene: &'a Scene,
@@ -248,64 +222,4 @@ fn bifurcation_rows(scene: &Scene, report: &Report, j: usize) -> Vec<Vec<String>
             row
         })
         .collect()
-}
-
-/// Writes a text file under a temporary name and renames it into place.
-pub(crate) fn write_text(path: &Path, text: &str) -> Result<()> {
-    write_file(path, |file| file.write_all(text.as_bytes()))
-}
-
-/// Writes a CSV file under a temporary name and renames it into place.
-pub(crate) fn write_atomically(
-    path: &Path,
-    fill: impl FnOnce(&mut csv::Writer<&mut fs::File>) -> csv::Result<()>,
-) -> Result<()> {
-    write_file(path, |file| {
-        let mut writer = csv::Writer::from_writer(file);
-        fill(&mut writer).map_err(csv_to_io)?;
-        writer.flush()
-    })
-}
-
-/// The temporary name a file is written under before it is renamed to `path`
-/// (a hidden name with the process id, so that runs sharing a folder do not
-/// collide, and with `path`'s extension, which some writers go by).
-pub(crate) fn temporary_name(path: &Path) -> PathBuf {
-    let file_name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .unwrap_or("output");
-    let extension = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| format!(".{e}"))
-        .unwrap_or_default();
-    path.with_file_name(format!(
-        ".{file_name}.{}.partial{extension}",
-        std::process::id()
-    ))
-}
-
-fn write_file(path: &Path, fill: impl FnOnce(&mut fs::File) -> std::io::Result<()>) -> Result<()> {
-    let temporary = temporary_name(path);
-    let result = (|| {
-        let mut file = fs::File::create(&temporary)?;
-        fill(&mut file)?;
-        file.sync_all()?;
-        fs::rename(&temporary, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temporary);
-    }
-    result.map_err(|source| Error::Write {
-        path: path.to_owned(),
-        source,
-    })
-}
-
-fn csv_to_io(e: csv::Error) -> std::io::Error {
-    match e.into_kind() {
-        csv::ErrorKind::Io(io) => io,
-        other => std::io::Error::other(format!("{other:?}")),
-    }
 }

@@ -4,14 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::files::{spectrum_file, BIFURCATION_FILE, HEAT_MAP, SCENE_FILE, SWEEP_FIGURE};
 use super::plot::{self, GridData, SweepData};
-use super::{spectrum_file, BIFURCATION_FILE, SCENE_FILE};
 use crate::error::{Error, Result};
 use crate::scene::{self, Scene};
-
-/// The figures' file stems (each drawn as .png and .svg).
-pub const SWEEP_FIGURE: &str = "figure";
-pub const HEAT_MAP: &str = "heat-map";
 
 /// The scene of a results folder (its `scene.toml`).
 pub fn scene_of(dir: &Path) -> Result<Scene> {

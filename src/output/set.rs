@@ -23,8 +23,10 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use super::results::{HEAT_MAP, SWEEP_FIGURE};
-use super::{BIFURCATION_FILE, GRID_FILE, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE};
+use super::files::{
+    write_text, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE,
+    SWEEP_FIGURE,
+};
 use crate::error::{Error, Result};
 
 /// The list of a set's data files, with their sizes and digests.
@@ -81,7 +83,7 @@ fn is_ours(name: &str) -> bool {
         || FIGURE_STEMS
             .iter()
             .any(|stem| [".png", ".svg"].iter().any(|ext| name == format!("{stem}{ext}")))
-        // A single file's temporary (see `super::temporary_name`).
+        // A single file's temporary (see `files::temporary_name`).
         || (name.starts_with('.') && name.contains(".partial"))
 }
 
@@ -256,7 +258,7 @@ impl Staging {
         }
         let text = toml::to_string(&Manifest { files }).expect("a manifest serialises");
         pause(MANIFEST_FILE);
-        super::write_text(
+        write_text(
             &self.dir.join(MANIFEST_FILE),
             &format!("# The data files of this set (lyapsweep): their sizes and SHA-256.\n{text}"),
         )?;

@@ -165,7 +165,7 @@ pub struct SystemInfo {
     /// and per stop its coordinate, velocity, side, position and
     /// restitution, when it has any) or `map_step` for a map. `None`: no
     /// GPU backend for this system.
-    pub wgsl: Option<&'static str>,
+    pub wgsl: Option<crate::model::wgsl::SystemFile>,
     /// Whether the trajectory from this start can reach the system's wall at
     /// these parameters (a conservative bound: `true` when unsure); `None`
     /// for a system without a wall. A sweep that cannot reach it runs GPU

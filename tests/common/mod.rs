@@ -11,7 +11,7 @@ pub fn scene(text: &str, overrides: &[&str]) -> Scene {
 }
 
 /// Every lane of `scene` with the CPU path's f64 settings `settings`
-/// (`backend::method_settings`), in sweep order.
+/// (`plan::method_settings`), in sweep order.
 pub fn cpu_lanes<'a>(
     scene: &Scene,
     settings: &'a lyapsweep::method::MethodSettings,

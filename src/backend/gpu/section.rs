@@ -29,12 +29,12 @@ use nalgebra::{Const, DimMin, SMatrix};
 use rayon::prelude::*;
 
 use super::context::Gpu;
-use super::shader::{Kernel, Variant};
-use super::sweep::{
+use super::pipeline::{
     compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
     uniform_entry, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
-use crate::backend::RunOptions;
+use super::shader::{Kernel, Variant};
+use crate::backend::options::RunOptions;
 use crate::error::Result;
 use crate::integrate::section::{crossing_in_step, Crossing};
 use crate::method::lane::{not_run, plan_lane};

@@ -112,18 +112,12 @@ impl Variant {
     /// General surfaces (events, switches) in the impact code: the
     /// trajectories carry their region and the sum rule's ln |det S|.
     pub fn surfaces(&self) -> bool {
-        self.wall
-            && self
-                .system
-                .wgsl
-                .is_some_and(crate::model::wgsl::has_surfaces)
+        self.wall && self.system.wgsl.is_some_and(|file| file.surfaces)
     }
 
     /// A Poincaré map, which the section kernel runs.
     pub fn section(&self) -> bool {
-        self.system
-            .wgsl
-            .is_some_and(crate::model::wgsl::has_section)
+        self.system.wgsl.is_some_and(|file| file.section)
     }
 
     /// The kernels this variant runs.
@@ -185,11 +179,7 @@ impl Variant {
         if !self.system.is_flow {
             d.insert("MAP");
         }
-        if self
-            .system
-            .wgsl
-            .is_some_and(crate::model::wgsl::wraps_angles)
-        {
+        if self.system.wgsl.is_some_and(|file| file.wraps_angles) {
             d.insert("WRAP");
         }
         match self.precision {
@@ -217,12 +207,7 @@ impl Variant {
             .collect();
         // A model with surfaces: Params ends with the trajectory's region,
         // set by the integrate kernel (`Params()` zeroes it).
-        if !fields.is_empty()
-            && self
-                .system
-                .wgsl
-                .is_some_and(crate::model::wgsl::has_surfaces)
-        {
+        if !fields.is_empty() && self.system.wgsl.is_some_and(|file| file.surfaces) {
             fields.push("0u".into());
         }
         format!(
@@ -254,7 +239,8 @@ impl Variant {
         let system = self
             .system
             .wgsl
-            .expect("GPU variants exist only for systems with a WGSL twin");
+            .expect("GPU variants exist only for systems with a WGSL twin")
+            .source;
         let defines = self.defines();
         let mut out = self.prelude();
         out.push_str(&preprocess(system, &defines));

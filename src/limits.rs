@@ -1,21 +1,11 @@
-//! What a run will hold in memory and how much work it is, estimated from
-//! the scene before anything is allocated, so that a sweep too large for
-//! the machine is refused at once (naming the keys that make it large and
-//! how to split it) instead of failing hours in, or with an out-of-memory
-//! abort.
-//!
-//! A run holds its sweep values (8 bytes per value of each axis) and the
-//! results of one batch of lanes: the lanes are streamed through the output
-//! in batches of at most [`BATCH_BYTES`] of results (see
-//! `backend::run_streaming`), so only the values and one lane's kept points
-//! grow without bound.
+//! What one process takes on: the lanes a sweep may have, the RK4
+//! lane-steps one process may run, and the memory the sweep's values may
+//! hold, checked from the scene file's counts before any value is generated
+//! (`scene::resolve`), so that a sweep too large is refused at once, naming
+//! the keys that make it large and how to split it.
 
 use crate::error::{Error, Result};
-use crate::method::LaneResult;
-use crate::scene::{Integration, Scene, Shard};
 
-/// Results held at once: a batch of lanes is at most this large.
-pub const BATCH_BYTES: usize = 1 << 30;
 /// Lanes of one sweep: past this even checking every value takes minutes
 /// (split the sweep into several scenes).
 pub const MAX_SWEEP_LANES: f64 = 1e10;
@@ -53,7 +43,7 @@ pub fn check_sweep(
     dimension: usize,
     bifurcation_points: usize,
     lane_steps_per_lane: f64,
-    shard: Option<Shard>,
+    shards: Option<usize>,
 ) -> Result<()> {
     let keys = || {
         counts
@@ -73,7 +63,7 @@ pub fn check_sweep(
     }
     // The work of this process's lanes (its shard's), at the requested steps
     // (lanes may need more).
-    let run_lanes = shard.map_or(lanes, |s| (lanes / s.count as f64).ceil());
+    let run_lanes = shards.map_or(lanes, |n| (lanes / n as f64).ceil());
     let work = run_lanes * lane_steps_per_lane;
     if work > MAX_LANE_STEPS {
         // Shards split the lanes, never a lane: past the limit for one
@@ -121,69 +111,4 @@ pub fn check_sweep(
         });
     }
     Ok(())
-}
-
-/// Bytes of results one lane holds until its batch is written.
-pub fn lane_bytes(scene: &Scene) -> usize {
-    let dim = scene.system.dimension();
-    std::mem::size_of::<LaneResult>()
-        + 8 * (dim + 1) // exponents, expected sum
-        + 8 * dim * scene.bifurcation_points
-}
-
-/// Lanes per batch of the streamed run (all of them for most runs).
-pub fn batch_lanes(scene: &Scene) -> usize {
-    let budget = available_memory().map_or(BATCH_BYTES, |a| BATCH_BYTES.min((a / 4.0) as usize));
-    (budget / lane_bytes(scene)).clamp(1, scene.run_lane_count().max(1))
-}
-
-/// The RK4 trajectory-steps of one lane: the reference over the transient,
-/// and with its `copies` over the aligning and averaged iterations, at the
-/// requested steps (lanes may need more).
-pub fn steps_per_lane(integration: &Integration, is_flow: bool, copies: usize) -> f64 {
-    let steps = if is_flow {
-        integration.steps_per_period as f64
-    } else {
-        1.0
-    };
-    let i = integration;
-    let plain = (i.transient - i.align) as f64;
-    let with_copies = (i.align + i.iterations) as f64 * (1 + copies) as f64;
-    (plain + with_copies) * steps
-}
-
-/// The RK4 lane-steps of the run (of its shard).
-pub fn lane_steps(scene: &Scene) -> f64 {
-    let copies = if scene.lyapunov {
-        scene.difference().copies(scene.system.dimension())
-    } else {
-        0
-    };
-    scene.run_lane_count() as f64 * steps_per_lane(&scene.integration, scene.system.is_flow, copies)
-}
-
-/// A line describing a run large enough that its user should see what it
-/// will take (the limits were checked when the scene was read).
-pub fn large_run(scene: &Scene) -> Option<String> {
-    let work = lane_steps(scene);
-    let lanes = scene.run_lane_count();
-    let batch = batch_lanes(scene);
-    let held = 8.0
-        * scene
-            .sweep
-            .axes()
-            .map(|a| a.values.len() as f64)
-            .sum::<f64>()
-        + (batch.min(lanes) * lane_bytes(scene)) as f64;
-    (work > 1e12 || held > 1e9 || batch < lanes).then(|| {
-        format!(
-            "a large run: {lanes} lanes, about {work:.1e} RK4 lane-steps, {} held in memory{}",
-            bytes(held),
-            if batch < lanes {
-                format!(", results streamed in batches of {batch} lanes")
-            } else {
-                String::new()
-            }
-        )
-    })
 }

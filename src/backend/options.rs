@@ -1,0 +1,26 @@
+//! What a caller asks of a run beyond its scene: batch limits, a progress
+//! display, the adapter, the workgroup and dispatch sizes.
+
+use super::progress::Progress;
+
+/// Options of a run that are not part of a scene.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Split GPU sweeps into batches of at most this many lanes (the limits
+    /// of the device split them anyway; tests use this to exercise it).
+    pub max_batch_lanes: Option<usize>,
+    /// Keep every iteration's Jacobian in the lane results.
+    pub keep_jacobians: bool,
+    /// Invocations per GPU workgroup (default [`super::gpu::pipeline::DEFAULT_WORKGROUP`]);
+    /// the benchmark varies it.
+    pub workgroup_size: Option<u32>,
+    /// Advanced as lanes run, for a progress display.
+    pub progress: Option<Progress>,
+    /// Run on adapter number `device` of `lyapsweep devices` (one process
+    /// per GPU of a machine, each with its shard).
+    pub device: Option<usize>,
+    /// RK4 steps per GPU integrate dispatch at most (default: 256 on a
+    /// software adapter with stops, else a whole period); tests set it to
+    /// run lavapipe as a hardware GPU runs.
+    pub dispatch_steps: Option<usize>,
+}
