@@ -160,8 +160,8 @@ impl<const D: usize> Copies<D> {
                 return 0.0;
             }
             let (mut even, mut odd) = (0.0_f64, 0.0_f64);
-            for k in 0..D {
-                let (plus, minus) = (ys[a][k] - ys[0][k], ys[b][k] - ys[0][k]);
+            for ((p, m), o) in ys[a].iter().zip(&ys[b]).zip(&ys[0]) {
+                let (plus, minus) = (p - o, m - o);
                 even = even.max((plus + minus).abs());
                 odd = odd.max((plus - minus).abs());
             }
