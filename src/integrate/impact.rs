@@ -10,86 +10,16 @@
 //! several crossings in one step, on one surface or several, work and no
 //! step ends behind a wall or integrates across a switch.
 
-use serde::Deserialize;
-
 use super::clock::{cos_sin, rotate, Phase};
-use super::surface::{self, InRegion, Surface};
-use super::IterationStats;
-use super::{rk4, Flow};
+use super::flow::{EventHoldValues, Flow, InRegion};
+use super::iteration::{ImpactLocation, IterationStats};
+use super::rk4;
+use super::surface::{self, Surface};
 
-/// A rigid wall at `position` on coordinate `coordinate`, whose rate is
-/// coordinate `velocity`, with coefficient of restitution `restitution`.
-/// `side` +1 confines the motion to coordinate ≤ position (a wall
-/// approached from below), -1 to coordinate ≥ position.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Wall {
-    pub position: f64,
-    pub restitution: f64,
-    pub coordinate: usize,
-    pub velocity: usize,
-    pub side: f64,
-}
-
-/// Walls a flow may have (the crossings of each are counted apart).
-pub const MAX_WALLS: usize = 4;
-
-impl Wall {
-    /// The seed's wall: coordinate 0 (X) stopped from below, coordinate 1 its velocity.
-    pub fn above(position: f64, restitution: f64) -> Wall {
-        Wall {
-            position,
-            restitution,
-            coordinate: 0,
-            velocity: 1,
-            side: 1.0,
-        }
-    }
-
-    /// How far y lies beyond the wall (> 0: behind it).
-    #[inline(always)]
-    pub fn gap<const D: usize>(&self, y: &[f64; D]) -> f64 {
-        self.side * (y[self.coordinate] - self.position)
-    }
-
-    /// The speed towards the wall (> 0: approaching).
-    #[inline(always)]
-    pub fn speed<const D: usize>(&self, y: &[f64; D]) -> f64 {
-        self.side * y[self.velocity]
-    }
-
-    /// y moved onto the wall with approach speed `speed`.
-    #[inline]
-    fn on_wall<const D: usize>(&self, mut y: [f64; D], speed: f64) -> [f64; D] {
-        y[self.coordinate] = self.position;
-        y[self.velocity] = self.side * speed;
-        y
-    }
-}
-
-/// How the impact time inside a crossing step is found.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ImpactLocation {
-    /// The paper's recipe: linear interpolation of the state between the two
-    /// ends of the crossing step. Error O(h²) in t_c.
-    Linear,
-    /// Re-step to the event: Newton iteration on s ↦ X(RK4(t, y, s)) - X_w,
-    /// started from the root of the cubic Hermite interpolant, so the impact
-    /// lies on the RK4 solution itself (error O(h⁴), that of RK4). Also finds
-    /// an excursion past the wall between two step ends (the velocity turns
-    /// inside the step and RK4 re-stepped to the Hermite peak is beyond the wall).
-    #[default]
-    Newton,
-}
-
-impl ImpactLocation {
-    pub fn name(self) -> &'static str {
-        match self {
-            ImpactLocation::Linear => "linear",
-            ImpactLocation::Newton => "newton",
-        }
-    }
-}
+// A wall as data and the turn bound moved below the `Flow` trait
+// (`wall`); here under their old paths, which the generated code and the
+// GPU host name.
+pub use super::wall::{may_turn_past, Wall, MAX_WALLS, TURN_REACH};
 
 /// More impacts than this inside one RK4 step mean impacts accumulate
 /// faster than the accumulation test below catches; the step then stops
@@ -246,36 +176,6 @@ pub fn step<const D: usize, F: Flow<D>>(
 pub fn reaches_wall<const D: usize>(wall: &Wall, y: &[f64; D], h: f64, y1: &[f64; D]) -> bool {
     let (g0, s0, g1, s1) = (wall.gap(y), wall.speed(y), wall.gap(y1), wall.speed(y1));
     g1 > 0.0 || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
-}
-
-/// How far, in units of h·(s0 - s1), the event mechanism lets a step that
-/// turns back rise beyond its higher end before it stops looking: twice
-/// the most its cubic Hermite interpolant can rise (4/27, the peak of the
-/// basis functions θ(1-θ)² and θ²(1-θ)).
-pub const TURN_REACH: f64 = 8.0 / 27.0;
-
-/// Whether a step of size h whose speed towards the wall turns from s0 > 0
-/// to s1 < 0, both ends short of it (gaps g0, g1 <= 0), may pass the wall
-/// in between, and so needs the re-step to its Hermite peak that decides
-/// (`locate_newton`).
-///
-/// The interpolant g0·H00 + g1·H01 + h·s0·H10 + h·s1·H11 (H00 + H01 = 1,
-/// 0 <= H10, -H11 <= 4/27) stays below max(g0, g1) + (4/27)·h·(s0 - s1).
-/// RK4 re-stepped to the peak differs from it by O(h⁴), the step's whole
-/// rise is O(h²): with twice the bound as the reach, a turn ignored here
-/// could pass the wall only if RK4's sub-step overshot the cubic by more
-/// than the step's whole rise, a step that does not resolve the motion.
-/// Most turns happen far from any wall (97% of those on the speed issue's
-/// sweep at 0.1 or more short of it), and each one that passed this test
-/// left the step loop to find nothing.
-///
-/// Written as two comparisons rather than a max, so that every path (the
-/// step loops, the GPU's) computes it with the same operations; a NaN
-/// anywhere fails both and lets the step through.
-#[inline(always)]
-pub fn may_turn_past(g0: f64, s0: f64, g1: f64, s1: f64, h: f64) -> bool {
-    let reach = TURN_REACH * h * (s0 - s1);
-    !((g0 + reach < 0.0) & (g1 + reach < 0.0))
 }
 
 /// Applies every crossing inside the step [0, h] from (phase, y) of a
@@ -780,7 +680,7 @@ fn onto_hold<const D: usize, F: Flow<D>>(
 
 /// The direction the constraint force of a hold pushes in: ∇ġ on the
 /// states the reset changes (for a ball on a table, its velocity).
-fn pushing<const D: usize>(v: &crate::integrate::EventHoldValues<D>) -> [f64; D] {
+fn pushing<const D: usize>(v: &EventHoldValues<D>) -> [f64; D] {
     std::array::from_fn(|i| if v.pushed[i] { v.rate_gradient[i] } else { 0.0 })
 }
 

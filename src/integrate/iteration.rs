@@ -1,16 +1,47 @@
 //! What one map iteration is, to the integrator: how it is integrated
-//! ([`FlowSettings`]), which share of it a call takes ([`Part`]), and what
-//! happened on the way ([`IterationStats`]). The method reads these; the
-//! systems fill them.
+//! ([`FlowSettings`], [`ImpactLocation`]), which share of it a call takes
+//! ([`Part`]), and what happened on the way ([`IterationStats`]). The
+//! method reads these; the systems fill them.
 
-use super::ImpactLocation;
-use super::MAX_EVENTS;
+use serde::Deserialize;
+
+use super::region::MAX_SURFACES;
+use super::wall::MAX_WALLS;
+
+/// Crossings counted apart per iteration: the walls', then the general
+/// surfaces' (the output's event columns).
+pub const MAX_EVENTS: usize = MAX_WALLS + MAX_SURFACES;
 
 /// How one flow iteration is integrated (the part of `[integration]` a system sees).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FlowSettings {
     pub steps_per_period: usize,
     pub impact_location: ImpactLocation,
+}
+
+/// How the impact time inside a crossing step is found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ImpactLocation {
+    /// The paper's recipe: linear interpolation of the state between the two
+    /// ends of the crossing step. Error O(h²) in t_c.
+    Linear,
+    /// Re-step to the event: Newton iteration on s ↦ X(RK4(t, y, s)) - X_w,
+    /// started from the root of the cubic Hermite interpolant, so the impact
+    /// lies on the RK4 solution itself (error O(h⁴), that of RK4). Also finds
+    /// an excursion past the wall between two step ends (the velocity turns
+    /// inside the step and RK4 re-stepped to the Hermite peak is beyond the wall).
+    #[default]
+    Newton,
+}
+
+impl ImpactLocation {
+    pub fn name(self) -> &'static str {
+        match self {
+            ImpactLocation::Linear => "linear",
+            ImpactLocation::Newton => "newton",
+        }
+    }
 }
 
 /// Part `index` of `count` equal parts of one map iteration: a sub-map.

@@ -2,16 +2,29 @@
 //! twin of `shaders/shared/rk4.wgsl`.
 
 use super::clock::{rotate, Phase};
-use super::Flow;
+
+/// What a step here reads of a flow: its right-hand side F(t, y) at
+/// forcing phase `phase` = (cos ωt, sin ωt), and its own whole step where
+/// it takes one in a single call. Every `Flow` is one (see `flow`), so
+/// that the flows' default steps can call the steps here while nothing
+/// here depends on the rest of the trait.
+pub trait Field<const D: usize> {
+    /// F(t, y) ([`Flow::rhs`](super::Flow::rhs)).
+    fn rhs(&self, phase: &Phase, y: &[f64; D]) -> [f64; D];
+
+    /// One RK4 step with the stage phases given
+    /// ([`Flow::step_one`](super::Flow::step_one)).
+    fn step_one(&self, stages: &[Phase; 3], y: &[f64; D], h: f64) -> [f64; D];
+}
 
 /// One RK4 step of size h from y at forcing phase `phase` (= ωt), where
 /// `half` is the rotation through ωh/2:
 /// k1 = F(t, y), k2 = F(t + h/2, y + h/2·k1), k3 = F(t + h/2, y + h/2·k2),
 /// k4 = F(t + h, y + h·k3), y + h/6·(k1 + 2k2 + 2k3 + k4).
 /// Returns the new state and the phase at t + h. The flow takes the step
-/// ([`Flow::step_one`]): a compiled model in one native call.
+/// ([`Flow::step_one`](super::Flow::step_one)): a compiled model in one native call.
 #[inline]
-pub fn step<const D: usize, F: Flow<D> + ?Sized>(
+pub fn step<const D: usize, F: Field<D> + ?Sized>(
     flow: &F,
     phase: &Phase,
     half: &Phase,
@@ -33,7 +46,7 @@ pub fn stage_phases(phase: &Phase, half: &Phase) -> [Phase; 3] {
 
 /// One RK4 step with the stage phases given.
 #[inline]
-pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
+pub fn step_at<const D: usize, F: Field<D> + ?Sized>(
     flow: &F,
     phases: &[Phase; 3],
     y: &[f64; D],
@@ -47,7 +60,7 @@ pub fn step_at<const D: usize, F: Flow<D> + ?Sized>(
 /// integrated along the step by the same RK4 needs (a quadrature riding
 /// along, `integrate::advance_integrating`). Unused, they cost nothing.
 #[inline]
-pub fn step_with_stages<const D: usize, F: Flow<D> + ?Sized>(
+pub fn step_with_stages<const D: usize, F: Field<D> + ?Sized>(
     flow: &F,
     phases: &[Phase; 3],
     y: &[f64; D],
@@ -117,6 +130,7 @@ fn axpy<const D: usize>(y: &[f64; D], a: f64, k: &[f64; D]) -> [f64; D] {
 mod tests {
     use super::*;
     use crate::integrate::clock::{cos_sin, ZERO_PHASE};
+    use crate::integrate::Flow;
 
     struct Decay;
     impl Flow<1> for Decay {

@@ -7,9 +7,11 @@
 //! reach the section at different times: they are stepped together in one
 //! structure-of-arrays batch, and each leaves the batch when it crosses.
 
+use super::avx2::vectorised;
 use super::clock::{Phase, ZERO_PHASE};
+use super::flow::Flow;
 use super::impact::{newton_in_bracket, Hermite};
-use super::{rk4, vectorised, Flow};
+use super::rk4;
 
 /// The plane y_state = at, crossed in `direction` (+1: increasing).
 #[derive(Clone, Copy, Debug, PartialEq)]
