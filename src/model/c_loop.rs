@@ -15,9 +15,11 @@
 //! tests check.
 //!
 //! Where there is no C compiler (`cc`, or `$CC`), or it fails, the loop is
-//! cranelift's. The shared objects are cached by the hash of their source,
-//! compiler and flags in the user's cache directory, so a model is built
-//! once per machine, not once per run.
+//! cranelift's. The shared objects are cached in the user's cache
+//! directory by the hash of their source, compiler, flags and the
+//! processor `-march=native` resolves to, each checked against the digest
+//! written with it before it is loaded, so a model is built once per
+//! processor, not once per run.
 
 use super::expr::Func;
 use super::jit::{callback, Layout, StopCode, Walk, WALK_WIDTHS};
@@ -307,8 +309,15 @@ fn built<T: Copy>(
     stops: &[StopCode],
     kinds: &[Surface],
 ) -> Result<(libloading::Library, [[T; 2]; WALK_WIDTHS.len()]), String> {
-    // The functions called back into Rust, by their index in `calls`:
-    // the source holds no address, so one object serves every process.
+    let (source, calls) = source_of(regions, stops, kinds);
+    loaded(compiled(&source)?, &calls)
+}
+
+/// The C source of the step loops of `regions` (every width and layout)
+/// and of their slides, and the functions it calls back into Rust, by
+/// their index in its table (the source holds no address, so one object
+/// serves every process).
+fn source_of(regions: &[Region], stops: &[StopCode], kinds: &[Surface]) -> (String, Vec<Func>) {
     let mut calls: Vec<Func> = Vec::new();
     let tapes = regions
         .iter()
@@ -346,12 +355,20 @@ fn built<T: Copy>(
             sum_start(),
         );
     }
-    let library = compiled(&source)?;
+    (source, calls)
+}
+
+/// The library built from [`source_of`]'s source with its callbacks
+/// (`calls`) set, and its step loops, of type `T`.
+fn loaded<T: Copy>(
+    library: libloading::Library,
+    calls: &[Func],
+) -> Result<(libloading::Library, [[T; 2]; WALK_WIDTHS.len()]), String> {
     let table: Vec<extern "C" fn(f64, f64) -> f64> = calls.iter().map(|&f| callback(f)).collect();
-    // SAFETY: `set_calls` is defined above, reads `calls.len()` function
-    // pointers (C calling convention, two f64 to one) from the table;
-    // objects loaded twice share `calls`, and the same source sets the
-    // same table.
+    // SAFETY: `set_calls` is defined by the source, reads `calls.len()`
+    // function pointers (C calling convention, two f64 to one) from the
+    // table; objects loaded twice share `calls`, and the same source sets
+    // the same table.
     unsafe {
         let set = library
             .get::<unsafe extern "C" fn(*const extern "C" fn(f64, f64) -> f64)>(b"set_calls")
@@ -365,7 +382,11 @@ fn built<T: Copy>(
             // (`Walk`, or `SwitchWalk` where the regions have surfaces;
             // C calling convention), and the library stays loaded while
             // the loops' owner lives.
-            unsafe { *library.get::<T>(name.as_bytes()).expect("defined above") }
+            unsafe {
+                *library
+                    .get::<T>(name.as_bytes())
+                    .expect("defined by the source")
+            }
         })
     });
     Ok((library, walks))
@@ -409,51 +430,177 @@ fn sum_start() -> f64 {
     std::iter::once(-0.0_f64).sum()
 }
 
-/// The cached shared object built from `source`, loaded.
+/// The cached shared object built from `source` for this machine, loaded.
 fn compiled(source: &str) -> Result<libloading::Library, String> {
-    use sha2::{Digest, Sha256};
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    compiled_in(&cache_dir()?, &cc, cpu_target(&cc), source)
+}
+
+/// The name of the object built by `cc` for the processor `cpu` from
+/// `source`: the hash of all three and the flags. `-march=native` makes
+/// the code the host's, so a cache shared by machines of different
+/// processors (a cluster's nodes with one home directory) keeps one
+/// object for each, and none loads another's instructions.
+fn object_key(cc: &str, cpu: &str, source: &str) -> String {
+    use sha2::{Digest, Sha256};
     let mut hash = Sha256::new();
-    for part in [cc.as_str(), &FLAGS.join(" "), source] {
+    for part in [cc, &FLAGS.join(" "), cpu, source] {
         hash.update(part.as_bytes());
         hash.update([0]);
     }
-    let key: String = hash.finalize()[..12]
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
-    let dir = cache_dir()?;
+    hex(&hash.finalize()[..12])
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The SHA-256 of `bytes`, in hex.
+fn digest(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    hex(&Sha256::digest(bytes))
+}
+
+/// [`compiled`] in the directory `dir`, by the compiler `cc`, for the
+/// processor `cpu` (the key's part that [`cpu_target`] gives). Each
+/// object is kept with the SHA-256 of its bytes (`.sha256` beside it): an
+/// object that does not match it (cut short, overwritten) is built again,
+/// never loaded. Both are written under names of this thread's, then
+/// renamed: runs and threads at the same time never load a half-written
+/// object.
+fn compiled_in(
+    dir: &std::path::Path,
+    cc: &str,
+    cpu: &str,
+    source: &str,
+) -> Result<libloading::Library, String> {
+    let key = object_key(cc, cpu, source);
     let object = dir.join(format!("{key}.so"));
-    if !object.exists() {
-        // Built under a name of this thread's, then renamed: runs and
-        // threads at the same time never load a half-written object.
+    let sum = dir.join(format!("{key}.sha256"));
+    let intact = || -> bool {
+        match (std::fs::read(&object), std::fs::read_to_string(&sum)) {
+            (Ok(bytes), Ok(expected)) => digest(&bytes) == expected.trim(),
+            _ => false,
+        }
+    };
+    if !intact() {
         static BUILDS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let build = BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let unique = |ext: &str| -> PathBuf {
             dir.join(format!("{key}.{}-{build}.{ext}", std::process::id()))
         };
-        let (c, so) = (unique("c"), unique("so"));
+        let (c, so, so_sum) = (unique("c"), unique("so"), unique("sha256"));
         std::fs::write(&c, source).map_err(|e| format!("{}: {e}", c.display()))?;
-        let output = std::process::Command::new(&cc)
+        let output = std::process::Command::new(cc)
             .args(FLAGS)
             .arg("-o")
             .arg(&so)
             .arg(&c)
             .output()
-            .map_err(|e| format!("{cc}: {e}"))?;
+            .map_err(|e| format!("{cc}: {e}"));
         let _ = std::fs::remove_file(&c);
-        if !output.status.success() {
-            let _ = std::fs::remove_file(&so);
-            return Err(format!(
+        let output = output?;
+        let written = if output.status.success() {
+            std::fs::read(&so)
+                .and_then(|bytes| std::fs::write(&so_sum, digest(&bytes)))
+                .and_then(|()| std::fs::rename(&so, &object))
+                .and_then(|()| std::fs::rename(&so_sum, &sum))
+                .map_err(|e| format!("{}: {e}", object.display()))
+        } else {
+            Err(format!(
                 "{cc} failed: {}",
                 String::from_utf8_lossy(&output.stderr)
-            ));
+            ))
+        };
+        if written.is_err() {
+            let _ = std::fs::remove_file(&so);
+            let _ = std::fs::remove_file(&so_sum);
         }
-        std::fs::rename(&so, &object).map_err(|e| format!("{}: {e}", object.display()))?;
+        written?;
     }
     // SAFETY: the object is ours (built above or earlier from the same
-    // source, named by its hash) and has no initialisers.
+    // source for this processor, named by its hash, its bytes checked
+    // against the digest written with it) and has no initialisers.
     unsafe { libloading::Library::new(&object) }.map_err(|e| format!("{}: {e}", object.display()))
+}
+
+/// The processor `cc` builds for under `-march=native`, once per process:
+/// the target options its driver resolves `-march=native` to (GCC's
+/// `-march=`, `-mtune=` and every `-m` feature flag; clang's
+/// `-target-cpu` and `-target-feature`s, in `cc -###`'s commands), else
+/// the processor the system describes (`/proc/cpuinfo`'s model and
+/// features), else only the architecture.
+fn cpu_target(cc: &str) -> &'static str {
+    static TARGET: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    TARGET.get_or_init(|| {
+        resolved_native(cc)
+            .or_else(described_cpu)
+            .unwrap_or_else(|| format!("{} (unknown processor)", std::env::consts::ARCH))
+    })
+}
+
+/// `-march=native` as `cc`'s driver resolves it (see [`cpu_target`]).
+fn resolved_native(cc: &str) -> Option<String> {
+    let output = std::process::Command::new(cc)
+        .args([
+            "-###",
+            "-march=native",
+            "-x",
+            "c",
+            "-c",
+            "/dev/null",
+            "-o",
+            "/dev/null",
+        ])
+        .output()
+        .ok()?;
+    target_options(&String::from_utf8_lossy(&output.stderr))
+}
+
+/// The target options in a driver's `-###` listing of its commands:
+/// those that say which instructions the code may use (no file names,
+/// which change from run to run); `None` where `-march=native` was not
+/// resolved.
+fn target_options(listing: &str) -> Option<String> {
+    let mut options = Vec::new();
+    let mut words = listing
+        .split_whitespace()
+        .map(|w| w.trim_matches(|c| c == '"' || c == '\''));
+    while let Some(word) = words.next() {
+        if matches!(word, "-target-cpu" | "-target-feature" | "-triple") {
+            options.push(format!("{word} {}", words.next().unwrap_or_default()));
+        } else if word.starts_with("-m") {
+            options.push(word.to_string());
+        }
+    }
+    let resolved = options.iter().any(|o| {
+        o.starts_with("-target-cpu ") || (o.starts_with("-march=") && o != "-march=native")
+    });
+    resolved.then(|| options.join(" "))
+}
+
+/// The first processor of `/proc/cpuinfo`: its model and features.
+fn described_cpu() -> Option<String> {
+    let info = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let keys = [
+        "vendor_id",
+        "model name",
+        "flags",
+        "CPU implementer",
+        "CPU architecture",
+        "CPU variant",
+        "CPU part",
+        "Features",
+    ];
+    let described: Vec<&str> = info
+        .lines()
+        .take_while(|line| !line.trim().is_empty())
+        .filter(|line| {
+            let key = line.split(':').next().unwrap_or_default().trim();
+            keys.contains(&key)
+        })
+        .collect();
+    (!described.is_empty()).then(|| format!("{} {}", std::env::consts::ARCH, described.join("\n")))
 }
 
 /// Where the shared objects are kept: the user's cache directory
@@ -1139,6 +1286,105 @@ mod tests {
                 same_walks::<16>(&c, &cranelift, layout, (wall, side));
             }
         }
+    }
+
+    /// The objects are kept by processor: two identities, two objects; and
+    /// an object cut short or overwritten in the cache is built again,
+    /// not loaded, and runs as before, to the bit.
+    #[test]
+    #[cfg(unix)]
+    fn objects_are_kept_by_processor_and_a_damaged_one_is_built_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let tape = tape();
+        let stops = [StopCode {
+            coordinate: 0,
+            velocity: 1,
+            side: 1.0,
+        }];
+        let regions = [Region {
+            field: &tape,
+            surfaces: None,
+        }];
+        let (source, calls) = source_of(&regions, &stops, &[]);
+        let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+        let objects = || -> Vec<PathBuf> {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|e| e == "so"))
+                .collect();
+            found.sort();
+            found
+        };
+        // 300 steps of the loop for 8 slots (shared layout), the library
+        // then dropped (unmapped) before its file is touched.
+        let run = |library: libloading::Library| -> Vec<u64> {
+            let (library, walks) = loaded::<Walk>(library, &calls).unwrap();
+            let constants = tape.lane_values(&[0.05, 2.5, 0.8]).constants;
+            let h = [std::f64::consts::TAU / 0.8 / 200.0];
+            let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
+            let mut y: [[f64; 8]; 2] = [std::array::from_fn(|k| 0.05 * k as f64), [0.0; 8]];
+            let mut clock = [1.0, 0.0, half[0], half[1]];
+            let live = [0i64; 8];
+            // SAFETY: the loop for 8 slots, shared layout, of this tape's
+            // two states and one stop, reads and writes what it was
+            // compiled for.
+            let n = unsafe {
+                walks[1][Layout::Shared as usize](
+                    y.as_mut_ptr().cast(),
+                    clock.as_mut_ptr(),
+                    constants.as_ptr(),
+                    h.as_ptr(),
+                    [0.9].as_ptr(),
+                    live.as_ptr(),
+                    300,
+                )
+            };
+            drop(library);
+            let mut bits: Vec<u64> = y.as_flattened().iter().map(|v| v.to_bits()).collect();
+            bits.extend(clock.iter().map(|v| v.to_bits()));
+            bits.push(n);
+            bits
+        };
+        let a = run(compiled_in(dir.path(), &cc, "processor a", &source).unwrap());
+        assert_eq!(objects().len(), 1);
+        let b = run(compiled_in(dir.path(), &cc, "processor b", &source).unwrap());
+        assert_eq!(objects().len(), 2, "one object per processor");
+        assert_eq!(a, b);
+        let object = dir
+            .path()
+            .join(format!("{}.so", object_key(&cc, "processor a", &source)));
+        let good = std::fs::read(&object).unwrap();
+        let cut: Vec<u8> = good[..good.len() / 2].to_vec();
+        let garbage: Vec<u8> = (0..good.len()).map(|i| (i * 7 + 3) as u8).collect();
+        for damaged in [cut, garbage, Vec::new()] {
+            std::fs::write(&object, &damaged).unwrap();
+            let library = compiled_in(dir.path(), &cc, "processor a", &source).unwrap();
+            let rebuilt = std::fs::read(&object).unwrap();
+            assert_ne!(rebuilt, damaged, "the damaged object was replaced");
+            assert_eq!(rebuilt.len(), good.len());
+            assert_eq!(run(library), a);
+        }
+        assert_eq!(objects().len(), 2);
+        // And the processor resolved for this machine names one.
+        let target = cpu_target(&cc);
+        assert!(!target.is_empty() && !target.contains("native"), "{target}");
+    }
+
+    #[test]
+    fn the_driver_s_resolved_target_is_read_without_file_names() {
+        let gcc = r#" "/usr/lib/gcc/x86_64-linux-gnu/12/cc1" "-quiet" /dev/null "-march=znver3" -mmmx -mno-avx512f --param "l1-cache-size=32" -o /tmp/cczYGxKF.s"#;
+        assert_eq!(
+            target_options(gcc).as_deref(),
+            Some("-march=znver3 -mmmx -mno-avx512f")
+        );
+        let clang = r#" "/usr/bin/clang-16" "-cc1" "-triple" "x86_64-pc-linux-gnu" "-target-cpu" "znver3" "-target-feature" "+avx2" "-o" "/tmp/null-5e1f.o""#;
+        assert_eq!(
+            target_options(clang).as_deref(),
+            Some("-triple x86_64-pc-linux-gnu -target-cpu znver3 -target-feature +avx2")
+        );
+        assert_eq!(target_options(r#" "cc1" "-march=native" "-o" "x.o""#), None);
+        assert_eq!(target_options(""), None);
     }
 
     /// Two switches (four regions), a stop and an event on a surface that
