@@ -680,11 +680,13 @@ fn an_angle_is_wrapped_after_the_jacobian_and_keeps_the_pendulum_s_sum_rule() {
             .any(|l| l.bifurcation.chunks_exact(2).any(|p| p[0].abs() > 100.0)),
         "the sweep must contain rotating lanes"
     );
-    // Measured: 1.0e-4 wrapped (chaotic lanes, the difference's own
-    // nonlinearity at δ = 1e-6), 2.8e-2 unwrapped (δ grown with θ).
-    assert!(worst(&wrapped) < 2e-4, "{}", worst(&wrapped));
+    // Measured: 6.4e-6 wrapped, 8.8e-5 unwrapped (δ grown with θ). Both
+    // re-estimate the iterations whose central copies turn out asymmetric
+    // (`jacobian::Copies::difference`), which rescues much of the
+    // unwrapped run (2.8e-2 with every iteration kept) but not all of it.
+    assert!(worst(&wrapped) < 2e-5, "{}", worst(&wrapped));
     assert!(
-        worst(&unwrapped) > 100.0 * worst(&wrapped),
+        worst(&unwrapped) > 10.0 * worst(&wrapped),
         "{} vs {}",
         worst(&unwrapped),
         worst(&wrapped)
