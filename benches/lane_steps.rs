@@ -23,8 +23,9 @@
 //!    stops or a stop on another state (the impact pair, the two-mass
 //!    chain) and the models with a switch (the soft stop, the friction
 //!    belt) on the same sweep;
-//! 8. the CPU path's step loop between stops built by the host's C compiler
-//!    (the default) against cranelift's, whole runs alternated, on the
+//! 8. the CPU path's native code built by the host's C compiler (the
+//!    default) against the tape's interpreter alone
+//!    (`LYAPSWEEP_STEP_LOOPS=interpreter`), whole runs alternated, on the
 //!    impacts section's sweep and on the seed's at 1800 steps.
 //!
 //! GPU rows also give the device time of the compute passes where the
@@ -421,18 +422,18 @@ fn main() {
     }
 }
 
-/// Section 8: the CPU path with its step loop between stops built by the
-/// host's C compiler (`model::c_loop`, the default) and by cranelift
-/// (`LYAPSWEEP_STEP_LOOPS=cranelift`), the seed's model (its loops are
-/// built when the scene is parsed), whole runs alternated; the speed-up is
-/// the median of the rounds' ratios. The spectra are the same to the bit
-/// (tests: `model::c_loop`).
+/// Section 8: the CPU path with the native code built by the host's C
+/// compiler (`model::c_loop`, the default) and with the tape's interpreter
+/// alone (`LYAPSWEEP_STEP_LOOPS=interpreter`, the portable reference), the
+/// seed's model (its code is built when the scene is parsed), whole runs
+/// alternated; the speed-up is the median of the rounds' ratios. The
+/// spectra are the same to the bit (tests: `model::c_loop`).
 fn loops(repeats: usize) {
     println!(
-        "\nStep loops on the CPU path, the seed's model ({} threads; medians of {repeats} alternated rounds after a warm-up)\n",
+        "\nNative code on the CPU path, the seed's model ({} threads; medians of {repeats} alternated rounds after a warm-up)\n",
         rayon::current_num_threads()
     );
-    println!("| sweep | cranelift s | C compiler s | speed-up |");
+    println!("| sweep | interpreter s | C compiler s | speed-up |");
     println!("|---|---|---|---|");
     let model = format!(
         "model = {:?}\n",
@@ -458,7 +459,7 @@ fn loops(repeats: usize) {
     ];
     let options = lyapsweep::RunOptions::default();
     for (name, text) in sweeps {
-        let scenes = ["cranelift", "c"].map(|loops| {
+        let scenes = ["interpreter", "c"].map(|loops| {
             std::env::set_var("LYAPSWEEP_STEP_LOOPS", loops);
             scene::parse(&text, "bench", "bench", &[]).expect("scene")
         });
@@ -482,11 +483,12 @@ fn loops(repeats: usize) {
     loop_alone(repeats);
 }
 
-/// The step loop alone (8 slots, one trajectory of each of 8 lanes, no
-/// stop met), nanoseconds per slot-step of each compiler's.
+/// The C compiler's step loop alone (8 slots, one trajectory of each of 8
+/// lanes, no stop met), nanoseconds per slot-step.
 fn loop_alone(repeats: usize) {
+    use lyapsweep::model::c_loop::Native;
     use lyapsweep::model::expr::{Expr, Names};
-    use lyapsweep::model::jit::{Layout, Loops, Native, StopCode};
+    use lyapsweep::model::native::{Layout, StopCode};
     use lyapsweep::model::tape::Tape;
     const W: usize = 8;
     let names = Names {
@@ -510,40 +512,35 @@ fn loop_alone(repeats: usize) {
     let h = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
     let walls = [2.0; W];
     let half = std::f64::consts::PI / 200.0;
-    let natives = [Loops::Cranelift, Loops::CCompiler]
-        .map(|loops| Native::compile_stepping_by(&tape, Some(&stop), loops).expect("native code"));
+    let native = Native::compile_stepping(&tape, Some(&stop)).expect("native code");
     let (steps, calls) = (200, 20_000);
-    let mut ns = [Vec::new(), Vec::new()];
+    let mut ns = Vec::new();
     for round in 0..=repeats {
-        for (i, native) in natives.iter().enumerate() {
-            let mut y: [[f64; W]; 2] = [std::array::from_fn(|k| 0.1 * k as f64), [0.0; W]];
-            let mut clock = [1.0, 0.0, half.cos(), half.sin()];
-            let start = Instant::now();
-            let mut taken = 0;
-            for _ in 0..calls {
-                taken += native
-                    .walk(
-                        Layout::Each,
-                        &mut y,
-                        &mut clock,
-                        &lane,
-                        &h,
-                        &walls,
-                        0,
-                        steps,
-                    )
-                    .expect("a loop for 8 slots");
-            }
-            if round > 0 {
-                ns[i].push(start.elapsed().as_secs_f64() * 1e9 / (taken * W) as f64);
-            }
+        let mut y: [[f64; W]; 2] = [std::array::from_fn(|k| 0.1 * k as f64), [0.0; W]];
+        let mut clock = [1.0, 0.0, half.cos(), half.sin()];
+        let start = Instant::now();
+        let mut taken = 0;
+        for _ in 0..calls {
+            taken += native
+                .walk(
+                    Layout::Each,
+                    &mut y,
+                    &mut clock,
+                    &lane,
+                    &h,
+                    &walls,
+                    0,
+                    steps,
+                )
+                .expect("a loop for 8 slots");
+        }
+        if round > 0 {
+            ns.push(start.elapsed().as_secs_f64() * 1e9 / (taken * W) as f64);
         }
     }
-    let [a, b] = ns.map(median);
     println!(
-        "| the loop alone, 8 lanes' slots, ns per slot-step ({}) | {a:.2} | {b:.2} | {:.2}× |",
-        natives[1].loops().map_or("-".into(), |l| format!("{l:?}")),
-        a / b
+        "| the C compiler's loop alone, 8 lanes' slots, ns per slot-step | - | {:.2} | - |",
+        median(ns)
     );
 }
 

@@ -1,28 +1,30 @@
-//! A field's step loop ([`Walk`]) written in C and built by the host's C
-//! compiler for the host's own vector width; and for a model with general
-//! surfaces, the loop over its regions that also detects them
-//! ([`SwitchWalk`]).
+//! A tape's native code, written in C and built by the host's C compiler
+//! for the host's own vectors ([`Native`]): its functions (a field's
+//! right-hand side or RK4 step, a model's surfaces' values and rates; see
+//! [`super::native`]) and a field's step loop between stops ([`Walk`]);
+//! and for a model with general surfaces, the loop over its regions that
+//! also detects them ([`SwitchWalk`]) and the steps of its slides.
 //!
-//! Cranelift emits 128-bit vectors only: its loop over eight slots ran 9.2
-//! ns per slot-step on the seed's oscillator (an AVX-512 Xeon), the same
-//! operations as C loops over the slots that GCC vectorises for the host
-//! (`-march=native`) 3.8 to 4.5 ns (docs/BENCHMARKS.md, "The step loop
-//! built by the host's C compiler"). The C here is the cranelift loop's
-//! twin, operation for operation: every tape instruction one IEEE operation
-//! in the tape's order, no contraction into fused multiply-adds
-//! (`-ffp-contract=off`) and no reassociation (no `-ffast-math`), so the
-//! bits are those of [`Native::walk`](super::jit::Native::walk), which the
-//! tests check.
+//! Loops over the slots that GCC vectorises for the host
+//! (`-march=native`) ran 1.6 to 2.0 times as fast as the same operations
+//! in 128-bit vectors (docs/BENCHMARKS.md, "The step loop built by the
+//! host's C compiler"), and C compilers target every host. Every tape
+//! instruction is one IEEE operation in the tape's order, with no
+//! contraction into fused multiply-adds (`-ffp-contract=off`) and no
+//! reassociation (no `-ffast-math`), so the bits are the interpreter's
+//! ([`Tape::run`]), which the tests check.
 //!
-//! Where there is no C compiler (`cc`, or `$CC`), or it fails, the loop is
-//! cranelift's. The shared objects are cached in the user's cache
-//! directory by the hash of their source, compiler, flags and the
-//! processor `-march=native` resolves to, each checked against the digest
-//! written with it before it is loaded, so a model is built once per
-//! processor, not once per run.
+//! Where there is no C compiler (`cc`, or `$CC`), or it fails, the tape's
+//! interpreter runs the model, to the same bits. The shared objects are
+//! cached in the user's cache directory by the hash of their source,
+//! compiler, flags and the processor `-march=native` resolves to, each
+//! checked against the digest written with it before it is loaded, so a
+//! model is built once per processor, not once per run.
 
 use super::expr::Func;
-use super::jit::{callback, Layout, StopCode, Walk, WALK_WIDTHS};
+use super::native::{
+    callback, step_loops, Function, Kind, Layout, Loops, StopCode, Walk, WALK_WIDTHS, WIDTHS,
+};
 use super::tape::{Code, Tape};
 use crate::integrate::impact::TURN_REACH;
 use crate::integrate::surface::Surface;
@@ -40,34 +42,357 @@ const FLAGS: [&str; 6] = [
     "-shared",
 ];
 
-/// Step loops built by the C compiler, by width (4 and 8) and
-/// layout; the library that holds their code.
-pub struct CLoops {
-    pub walks: [[Walk; 2]; WALK_WIDTHS.len()],
+/// A tape's native code, built by the C compiler: its functions by
+/// kind, width and layout (no [`Kind::Step`] for a tape whose outputs are
+/// not a field's derivatives), and where stops were given, its step loops
+/// by width and layout; the library that holds them.
+pub struct Native {
+    functions: [[[Option<Function>; 2]; WIDTHS.len()]; 2],
+    walks: [[Option<Walk>; 2]; WALK_WIDTHS.len()],
+    stops: usize,
+    states: usize,
+    outputs: usize,
+    constants: usize,
     _library: libloading::Library,
 }
 
-impl std::fmt::Debug for CLoops {
+impl std::fmt::Debug for Native {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("CLoops")
+        write!(f, "Native {{ widths: {WIDTHS:?} }}")
     }
 }
 
-impl CLoops {
-    /// The step loops of `tape` detecting `stops`, or why not (no C
-    /// compiler, or it failed).
-    pub fn build(tape: &Tape, stops: &[StopCode]) -> Result<CLoops, String> {
-        // The functions called back into Rust, by their index in `calls`:
-        // the source holds no address, so one object serves every process.
-        let fields = [Region {
+impl Native {
+    /// The tape's functions for every width and layout, or why there are
+    /// none (no C compiler, it failed, or `LYAPSWEEP_STEP_LOOPS=interpreter`;
+    /// the interpreter then runs the tape): as [`Kind::Rhs`] always, and as
+    /// [`Kind::Step`] too where it has as many outputs as states (a flow's
+    /// equations).
+    pub fn compile(tape: &Tape) -> Result<Native, String> {
+        Native::compile_stepping(tape, None)
+    }
+
+    /// [`compile`](Self::compile) for a field's equations, with its step
+    /// loops ([`walk`](Self::walk)) where `stops` are given: each stop's
+    /// coordinate, velocity and side (±1, `model::code::Stop`), detected in
+    /// the loop as the step loop of `integrate` detects them.
+    pub fn compile_stepping(tape: &Tape, stops: Option<&[StopCode]>) -> Result<Native, String> {
+        if step_loops() == Loops::Interpreter {
+            return Err("LYAPSWEEP_STEP_LOOPS=interpreter asks for the interpreter".into());
+        }
+        let outputs = tape.lowered().2.len();
+        // A step integrates the outputs as the states' derivatives: only a
+        // field's tape has one.
+        let kinds: &[Kind] = if outputs == tape.states {
+            &[Kind::Rhs, Kind::Step]
+        } else {
+            &[Kind::Rhs]
+        };
+        let stops = stops.filter(|_| kinds.contains(&Kind::Step));
+        let region = [Region {
             field: tape,
             surfaces: None,
         }];
-        let (library, walks) = built::<Walk>(&fields, stops, &[])?;
-        Ok(CLoops {
+        let (source, calls) = source_of(&region, stops, &[], kinds);
+        let library = loaded(compiled(&source)?, &calls)?;
+        let functions = [Kind::Rhs, Kind::Step].map(|kind| {
+            WIDTHS.map(|w| {
+                [Layout::Shared, Layout::Each].map(|layout| {
+                    let name = format!("{kind:?}{w}{layout:?}");
+                    // SAFETY: the source defines `name` with the `Function`
+                    // signature (C calling convention) for each kind listed;
+                    // the library is kept with the functions.
+                    kinds.contains(&kind).then(|| unsafe {
+                        *library.get::<Function>(name.as_bytes()).expect("defined")
+                    })
+                })
+            })
+        });
+        let walks = match stops {
+            Some(_) => walks_of::<Walk>(&library).map(|by_layout| by_layout.map(Some)),
+            None => [[None; 2]; WALK_WIDTHS.len()],
+        };
+        Ok(Native {
+            functions,
             walks,
+            stops: stops.map_or(0, <[_]>::len),
+            states: tape.states,
+            outputs,
+            constants: tape.lane_constants.len(),
             _library: library,
         })
+    }
+
+    /// Whether the step loops ([`walk`](Self::walk)) were built.
+    pub fn has_loops(&self) -> bool {
+        self.walks.iter().flatten().any(Option::is_some)
+    }
+
+    /// Up to `steps` RK4 steps of W trajectories `y` in one loop of native
+    /// code that stops before the first step in which a live slot (bit k
+    /// of `live`) meets a stop: the step the step loop would hand to the
+    /// impact code (`integrate::steps`'s detection, the same comparisons
+    /// of the same values). Returns the steps taken, `y` and the phases in
+    /// `clock` advanced by them, each step's arithmetic [`Kind::Step`]'s
+    /// and `rk4::stage_phases`'s; `None` where there is no loop for W.
+    ///
+    /// `clock` holds cos and sin of the forcing phase (written back) and
+    /// of its turn per half step, one phase for every slot: lanes stepped
+    /// in lockstep share it (`clock::half_turn`), and each slot turning a
+    /// copy of its own was two fifths of the loop's arithmetic. By
+    /// `layout`, one value for every slot (`Shared`, a lane's
+    /// trajectories) or a row of W (`Each`, trajectories of W lanes):
+    /// `lane` holds the tape's constants, `h` the step size, and `walls`
+    /// each stop's position.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn walk<const W: usize, const D: usize>(
+        &self,
+        layout: Layout,
+        y: &mut [[f64; W]; D],
+        clock: &mut [f64],
+        lane: &[f64],
+        h: &[f64],
+        walls: &[f64],
+        live: u32,
+        steps: usize,
+    ) -> Option<usize> {
+        let w = WALK_WIDTHS.iter().position(|&w| w == W)?;
+        let f = self.walks[w][layout as usize]?;
+        let per_slot = if layout == Layout::Shared { 1 } else { W };
+        assert!(
+            D == self.states
+                && clock.len() >= 4
+                && lane.len() >= self.constants * per_slot
+                && h.len() >= per_slot
+                && walls.len() >= self.stops * per_slot
+        );
+        let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
+        // SAFETY: the loop reads and writes D·W states in `y` and the
+        // phase in `clock`, reads the tape's constants, the step sizes,
+        // two rows per stop and W masks, as `layout` lays them out
+        // (checked above); it was compiled for W, `layout` and this tape's
+        // D states.
+        let taken = unsafe {
+            f(
+                y.as_mut_ptr().cast(),
+                clock.as_mut_ptr(),
+                lane.as_ptr(),
+                h.as_ptr(),
+                walls.as_ptr(),
+                live.as_ptr(),
+                steps as u64,
+            )
+        };
+        rewrite_as_read(y);
+        Some(taken as usize)
+    }
+
+    /// Whether there is a function for batches of W.
+    #[inline(always)]
+    pub fn has<const W: usize>() -> bool {
+        WIDTHS.contains(&W)
+    }
+
+    /// Runs the function of `kind` for W and `layout` on states `y`, with
+    /// the clock (one stage for `Rhs`, three for `Step`), lane constants
+    /// and step sizes laid out as `layout` says; gives the tape's outputs
+    /// (the D states after the step for `Step`) in the first rows of N, the
+    /// rows past them zero.
+    ///
+    /// # Panics
+    /// If W is not a compiled width ([`has`](Self::has)), D or N are not
+    /// the tape's, `Step` is asked of a tape that has none, or a slice is
+    /// short.
+    #[inline(always)]
+    pub fn call<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+    ) -> [[f64; W]; N] {
+        let mut out = Aligned([[0.0; W]; N]);
+        self.write(kind, layout, y, clock, lane, h, &mut out.0);
+        read_as_written(&out)
+    }
+
+    /// [`call`](Self::call) with the outputs written into `out`, where the
+    /// caller keeps them (no copy of a batch's outputs per step), and
+    /// left there as the AVX2 code reads them (see `read_as_written`).
+    /// Only the tape's rows are written: the rows of `out` past them keep
+    /// what they held. `out` should be 32-byte aligned.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    pub fn call_into<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
+        self.write(kind, layout, y, clock, lane, h, out);
+        rewrite_as_read(&mut out[..self.outputs]);
+    }
+
+    /// Runs the function (see [`call`](Self::call)), its outputs written
+    /// into `out` by its stores.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn write<const W: usize, const D: usize, const N: usize>(
+        &self,
+        kind: Kind,
+        layout: Layout,
+        y: &[[f64; W]; D],
+        clock: &[f64],
+        lane: &[f64],
+        h: &[f64],
+        out: &mut [[f64; W]; N],
+    ) {
+        let per_slot = if layout == Layout::Shared { 1 } else { W };
+        let stages = if kind == Kind::Step { 3 } else { 1 };
+        let w = WIDTHS
+            .iter()
+            .position(|&w| w == W)
+            .expect("a compiled width");
+        assert!(
+            D == self.states
+                && N >= self.outputs
+                && clock.len() >= 2 * stages * per_slot
+                && lane.len() >= self.constants * per_slot
+                && (kind == Kind::Rhs || h.len() >= per_slot)
+        );
+        let f = self.functions[kind as usize][w][layout as usize]
+            .expect("a step only of a tape with as many outputs as states");
+        // SAFETY: the function reads D·W states, the clock of its stages,
+        // L constants and a step size per slot of `layout` (checked above),
+        // and writes its outputs' W values each, within `out`'s N rows
+        // (checked above; D of them for a step); it was compiled for W,
+        // `kind` and `layout`.
+        unsafe {
+            f(
+                y.as_ptr().cast(),
+                clock.as_ptr(),
+                lane.as_ptr(),
+                h.as_ptr(),
+                out.as_mut_ptr().cast(),
+            )
+        };
+    }
+}
+
+/// The native functions' results, aligned for [`read_as_written`].
+#[repr(C, align(32))]
+struct Aligned<T>(T);
+
+/// The results the native code has just stored, read back as 128-bit
+/// halves joined in registers: where the C compiler's code stores a batch
+/// in narrower pieces than the 256-bit vectors the caller's AVX2 code
+/// loads, each wide load waits for its stores to reach the cache (a failed
+/// store forward, measured as a fifth of the step loop's time with
+/// 128-bit stores); narrower loads forward from the stores at once.
+///
+/// A batch of one trajectory (W = 1) is stored as scalars, which LLVM
+/// read back in pairs (one 128-bit load across two stores, the same
+/// stall: three fifths of a friction belt's field evaluations while it
+/// slides, in `perf annotate`); each is read alone, by a volatile load
+/// that LLVM may not merge.
+#[inline(always)]
+fn read_as_written<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
+    #[cfg(target_arch = "x86_64")]
+    if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX; W is a multiple of 4.
+        return unsafe { joined(out) };
+    }
+    if W == 1 {
+        let mut read = [[0.0; W]; D];
+        for (row, from) in read.iter_mut().zip(&out.0) {
+            // SAFETY: a reference to an f64, so valid and aligned.
+            row[0] = unsafe { std::ptr::read_volatile(&from[0]) };
+        }
+        return read;
+    }
+    out.0
+}
+
+/// [`read_as_written`] with AVX: each 256-bit vector loaded as its two
+/// halves, joined in a register. In assembly, because LLVM turns a join of
+/// two loads into one wide load, and the store of a joined vector into
+/// two narrow stores (which the next wide load would wait for in turn).
+///
+/// # Safety
+/// The CPU has AVX, and W is a multiple of 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn joined<const W: usize, const D: usize>(out: &Aligned<[[f64; W]; D]>) -> [[f64; W]; D] {
+    use std::arch::x86_64::__m256d;
+    let mut read = Aligned([[0.0; W]; D]);
+    for i in 0..D {
+        for k in (0..W).step_by(4) {
+            let v: __m256d;
+            // SAFETY: out.0[i][k..k + 4] are four f64, read; and
+            // read.0[i][k..k + 4] four f64 at a 32-byte aligned address
+            // (the array is 32-aligned, W and k multiples of 4).
+            unsafe {
+                std::arch::asm!(
+                    "vmovupd {v:x}, xmmword ptr [{p}]",
+                    "vinsertf128 {v}, {v}, xmmword ptr [{p} + 16], 1",
+                    p = in(reg) out.0[i][k..].as_ptr(),
+                    v = out(ymm_reg) v,
+                    options(pure, readonly, nostack, preserves_flags),
+                );
+                read.0[i][k..].as_mut_ptr().cast::<__m256d>().write(v);
+            }
+        }
+    }
+    read.0
+}
+
+/// [`read_as_written`] in place: the native code's results rewritten
+/// where they lie as 256-bit vectors (each read as its two 128-bit halves),
+/// so that the AVX2 loads that follow take them from the store buffer.
+#[inline(always)]
+fn rewrite_as_read<const W: usize>(out: &mut [[f64; W]]) {
+    #[cfg(target_arch = "x86_64")]
+    if W % 4 == 0 && std::is_x86_feature_detected!("avx") {
+        // SAFETY: the CPU has AVX; W is a multiple of 4.
+        unsafe { rejoined(out) }
+    }
+    let _ = out;
+}
+
+/// [`rewrite_as_read`] with AVX (in assembly, as [`joined`] is).
+///
+/// # Safety
+/// The CPU has AVX, and W is a multiple of 4.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn rejoined<const W: usize>(out: &mut [[f64; W]]) {
+    use std::arch::x86_64::__m256d;
+    for row in out.iter_mut() {
+        for k in (0..W).step_by(4) {
+            let p = row[k..].as_mut_ptr();
+            let v: __m256d;
+            // SAFETY: row[k..k + 4] are four f64, read, then written as
+            // one unaligned 256-bit vector.
+            unsafe {
+                std::arch::asm!(
+                    "vmovupd {v:x}, xmmword ptr [{p}]",
+                    "vinsertf128 {v}, {v}, xmmword ptr [{p} + 16], 1",
+                    p = in(reg) p,
+                    v = out(ymm_reg) v,
+                    options(pure, readonly, nostack, preserves_flags),
+                );
+                p.cast::<__m256d>().write_unaligned(v);
+            }
+        }
     }
 }
 
@@ -151,7 +476,9 @@ impl SwitchLoops {
                 surfaces: Some(surfaces),
             })
             .collect();
-        let (library, walks) = built::<SwitchWalk>(&regions, stops, kinds)?;
+        let (source, calls) = source_of(&regions, Some(stops), kinds, &[]);
+        let library = loaded(compiled(&source)?, &calls)?;
+        let walks = walks_of::<SwitchWalk>(&library);
         let regions = fields.len();
         let mut steps = vec![None; regions * regions];
         for (base, bits) in slides(regions, kinds) {
@@ -231,7 +558,7 @@ impl SwitchLoops {
         Some(out)
     }
 
-    /// [`Native::walk`](super::jit::Native::walk) for a model with general
+    /// [`Native::walk`] for a model with general
     /// surfaces: up to `steps` steps of W trajectories, slot k in region
     /// `regions[k]` (none sliding or held), stopping before the first step
     /// in which a live slot meets a stop or may cross a surface; `values`
@@ -302,22 +629,18 @@ struct Region<'a> {
     surfaces: Option<&'a Tape>,
 }
 
-/// The library of the step loops of `regions` (every width and layout),
-/// loaded with its callbacks set, and the loops, of type `T`.
-fn built<T: Copy>(
+/// The C source of `regions`' code, and the functions it calls back into
+/// Rust, by their index in its table (the source holds no address, so one
+/// object serves every process): the first region's functions of
+/// `functions`' kinds ([`function`], every width and layout), where
+/// `stops` are given the step loops of `regions` ([`walk`], every width
+/// and layout), and the steps of their slides on the switches of `kinds`.
+fn source_of(
     regions: &[Region],
-    stops: &[StopCode],
+    stops: Option<&[StopCode]>,
     kinds: &[Surface],
-) -> Result<(libloading::Library, [[T; 2]; WALK_WIDTHS.len()]), String> {
-    let (source, calls) = source_of(regions, stops, kinds);
-    loaded(compiled(&source)?, &calls)
-}
-
-/// The C source of the step loops of `regions` (every width and layout)
-/// and of their slides, and the functions it calls back into Rust, by
-/// their index in its table (the source holds no address, so one object
-/// serves every process).
-fn source_of(regions: &[Region], stops: &[StopCode], kinds: &[Surface]) -> (String, Vec<Func>) {
+    functions: &[Kind],
+) -> (String, Vec<Func>) {
     let mut calls: Vec<Func> = Vec::new();
     let tapes = regions
         .iter()
@@ -337,9 +660,18 @@ fn source_of(regions: &[Region], stops: &[StopCode], kinds: &[Surface]) -> (Stri
          void set_calls(const apply *t) {{ for (int i = 0; i < {n}; i++) calls[i] = t[i]; }}\n",
         n = calls.len().max(1)
     );
-    for &w in &WALK_WIDTHS {
-        for layout in [Layout::Shared, Layout::Each] {
-            walk(&mut source, regions, &calls, stops, kinds, w, layout);
+    for &kind in functions {
+        for &w in &WIDTHS {
+            for layout in [Layout::Shared, Layout::Each] {
+                function(&mut source, regions[0].field, &calls, kind, w, layout);
+            }
+        }
+    }
+    if let Some(stops) = stops {
+        for &w in &WALK_WIDTHS {
+            for layout in [Layout::Shared, Layout::Each] {
+                walk(&mut source, regions, &calls, stops, kinds, w, layout);
+            }
         }
     }
     for (base, bits) in slides(regions.len(), kinds) {
@@ -359,11 +691,8 @@ fn source_of(regions: &[Region], stops: &[StopCode], kinds: &[Surface]) -> (Stri
 }
 
 /// The library built from [`source_of`]'s source with its callbacks
-/// (`calls`) set, and its step loops, of type `T`.
-fn loaded<T: Copy>(
-    library: libloading::Library,
-    calls: &[Func],
-) -> Result<(libloading::Library, [[T; 2]; WALK_WIDTHS.len()]), String> {
+/// (`calls`) set.
+fn loaded(library: libloading::Library, calls: &[Func]) -> Result<libloading::Library, String> {
     let table: Vec<extern "C" fn(f64, f64) -> f64> = calls.iter().map(|&f| callback(f)).collect();
     // SAFETY: `set_calls` is defined by the source, reads `calls.len()`
     // function pointers (C calling convention, two f64 to one) from the
@@ -375,7 +704,13 @@ fn loaded<T: Copy>(
             .map_err(|e| e.to_string())?;
         set(table.as_ptr());
     }
-    let walks = WALK_WIDTHS.map(|w| {
+    Ok(library)
+}
+
+/// The step loops of a library whose source has them, by width and
+/// layout, of type `T`.
+fn walks_of<T: Copy>(library: &libloading::Library) -> [[T; 2]; WALK_WIDTHS.len()] {
+    WALK_WIDTHS.map(|w| {
         [Layout::Shared, Layout::Each].map(|layout| {
             let name = format!("walk{w}{layout:?}");
             // SAFETY: the source defines `name` with the signature of `T`
@@ -388,8 +723,61 @@ fn loaded<T: Copy>(
                     .expect("defined by the source")
             }
         })
-    });
-    Ok((library, walks))
+    })
+}
+
+/// Appends `{kind:?}{w}{layout:?}`, the [`Function`] of `kind` of `tape`
+/// for batches of `w` in `layout`: a loop over the slots, each the tape's
+/// outputs at one clock phase ([`Kind::Rhs`], `Tape::run`) or one RK4 step
+/// (`rk4::step_batch`, the phases of its three stages in the clock), the
+/// same operations in the same order as the interpreter's and the step
+/// loops'.
+fn function(out: &mut String, tape: &Tape, calls: &[Func], kind: Kind, w: usize, layout: Layout) {
+    let d = tape.states;
+    let each = layout == Layout::Each;
+    // A value per slot (`Each`) or one for all (`Shared`), at row `r`.
+    let row = |base: &str, r: usize| {
+        if each {
+            format!("{base}[{} + k]", r * w)
+        } else {
+            format!("{base}[{r}]")
+        }
+    };
+    let _ = writeln!(
+        out,
+        "void {kind:?}{w}{layout:?}(const double *restrict y, const double *restrict clock, \
+         const double *restrict lane, const double *restrict h, double *restrict out) {{\n  \
+         for (int k = 0; k < {w}; k++) {{"
+    );
+    let state: Vec<String> = (0..d).map(|i| format!("y[{} + k]", i * w)).collect();
+    let lane = |_: &str, j: usize| row("lane", j);
+    let values = match kind {
+        Kind::Rhs => {
+            let _ = writeln!(
+                out,
+                "      const double c = {}, s = {};",
+                row("clock", 0),
+                row("clock", 1)
+            );
+            rhs(out, tape, calls, "v", &state, ("c", "s"), &lane)
+        }
+        Kind::Step => {
+            let names = ["c", "s", "mc", "ms", "ec", "es"];
+            for (r, name) in names.iter().enumerate() {
+                let _ = writeln!(out, "      const double {name} = {};", row("clock", r));
+            }
+            let _ = writeln!(
+                out,
+                "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
+                row("h", 0)
+            );
+            rk4(out, tape, calls, "", &state, &lane)
+        }
+    };
+    for (m, value) in values.iter().enumerate() {
+        let _ = writeln!(out, "      out[{} + k] = {value};", m * w);
+    }
+    out.push_str("  }\n}\n");
 }
 
 /// The slides a model's library has a step for: on one switch or two at
@@ -637,15 +1025,15 @@ fn cache_dir() -> Result<PathBuf, String> {
     Ok(dir)
 }
 
-/// Off Unix, no directory is known to be the user's alone: the loops are
-/// cranelift's.
+/// Off Unix, no directory is known to be the user's alone: there, too,
+/// the interpreter runs the model.
 #[cfg(not(unix))]
 fn cache_dir() -> Result<PathBuf, String> {
-    Err("the C compiler's loops are built on Unix only".into())
+    Err("the C compiler's code is built on Unix only".into())
 }
 
-/// Appends `walk{w}{layout:?}`: `jit::walk`'s loop (the phase turned, the
-/// RK4 step, the stops detected) over `w` slots, a loop over the slots per
+/// Appends `walk{w}{layout:?}`: the step loop (the phase turned, the
+/// RK4 step, the stops detected, as `integrate::steps` does) over `w` slots, a loop over the slots per
 /// step for the compiler to vectorise. Where the regions have surfaces it
 /// is a [`SwitchWalk`]: each slot steps its own region's field (every
 /// region present computed over the batch, each slot keeping its own's,
@@ -739,7 +1127,7 @@ fn walk(
     out.push_str(
         "  double c = clock[0], s = clock[1];\n  const double hc = clock[2], hs = clock[3];\n  uint64_t n = 0;\n  for (; n < steps; n++) {\n",
     );
-    // `clock::rotate`, as `jit::walk` turns it.
+    // `clock::rotate`, as `rk4::stage_phases` turns it.
     for (from, to) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
         let ((c, s), (c1, s1)) = (from, to);
         let _ = writeln!(
@@ -823,7 +1211,7 @@ fn walk(
             "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
         );
     }
-    // As `jit::walk` (and `integrate::steps`), in two passes: the plain
+    // As `integrate::steps`, in two passes: the plain
     // test in the loop over the slots (at rest on the stop, beyond it
     // after the step, or turning back inside it), and where that fires
     // (a few steps in a hundred), the turns again, only those within reach
@@ -1134,7 +1522,7 @@ fn rhs(
             Code::SubMul => format!("{c} - {a} * {b}"),
             Code::Call(Func::Sqrt) => format!("__builtin_sqrt({a})"),
             Code::Call(Func::Abs) => format!("__builtin_fabs({a})"),
-            // The same Rust functions as the cranelift code calls.
+            // The same Rust functions as the interpreter calls.
             Code::Call(f) => {
                 let i = calls.iter().position(|&g| g == f).expect("listed");
                 format!("calls[{i}]({a}, {b})")
@@ -1162,8 +1550,11 @@ fn literal(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::expr::{Expr, Names};
-    use crate::model::jit::{Loops, Native};
+    use crate::integrate::clock::Phase;
+    use crate::integrate::impact::may_turn_past;
+    use crate::integrate::rk4;
+    use crate::model::expr::{Expr, Names, Op};
+    use crate::model::tape::Registers;
 
     /// A field with every kind of instruction: fused products, a division,
     /// numbers, the exact functions and a call back into Rust.
@@ -1181,15 +1572,64 @@ mod tests {
         Tape::compile(&exprs, 2, Some(parse("eta"))).unwrap()
     }
 
-    /// Both compilers' loops for W slots in `layout` from the same states,
+    /// The step loop of `integrate::steps` on the interpreter, one step at
+    /// a time: up to `steps` RK4 steps (`rk4::step_batch` of `Tape::run`,
+    /// the phases `rk4::stage_phases` turns) of W trajectories with the
+    /// constants, step sizes and stops' positions laid out as `layout`
+    /// says, stopping before the first step in which a live slot meets the
+    /// stop on `side`; what [`Native::walk`] computes, as it takes them.
+    #[allow(clippy::too_many_arguments)]
+    fn interpreted_walk<const W: usize>(
+        tape: &Tape,
+        layout: Layout,
+        y: &mut [[f64; W]; 2],
+        clock: &mut [f64; 4],
+        lane: &[f64],
+        h: &[f64],
+        walls: &[f64],
+        side: f64,
+        live: u32,
+        steps: usize,
+    ) -> usize {
+        let each = layout == Layout::Each;
+        let slot = |k: usize| if each { k } else { 0 };
+        let per_slot = if each { W } else { 1 };
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| {
+            std::array::from_fn(|k| lane[j * per_slot + slot(k)])
+        });
+        let hs: [f64; W] = std::array::from_fn(|k| h[slot(k)]);
+        let half = [clock[2], clock[3]];
+        let mut phase = [clock[0], clock[1]];
+        let mut taken = steps;
+        for n in 0..steps {
+            let stages = rk4::stage_phases(&phase, &half);
+            let y1 = rk4::step_batch(|s, y| tape.run(&mut registers, &[stages[s]; W], y), y, &hs);
+            let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
+                let wall = walls[slot(k)];
+                let (g0, s0) = (side * (y[0][k] - wall), side * y[1][k]);
+                let (g1, s1) = (side * (y1[0][k] - wall), side * y1[1][k]);
+                (y[0][k] == wall && y[1][k] == 0.0)
+                    || g1 > 0.0
+                    || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, hs[k]))
+            });
+            if hit {
+                taken = n;
+                break;
+            }
+            *y = y1;
+            phase = stages[2];
+        }
+        clock[0] = phase[0];
+        clock[1] = phase[1];
+        taken
+    }
+
+    /// The C compiler's loop for W slots in `layout` against the
+    /// interpreter's steps ([`interpreted_walk`]) from the same states,
     /// with a stop at `wall` on `side`: the steps taken, the states and the
     /// phase, to the bit, runs that stop at the wall and runs that do not.
-    fn same_walks<const W: usize>(
-        c: &Native,
-        cranelift: &Native,
-        layout: Layout,
-        stop: (f64, f64),
-    ) {
+    fn same_walks<const W: usize>(c: &Native, layout: Layout, stop: (f64, f64)) {
         let tape = tape();
         let (wall, side) = stop;
         let each = layout == Layout::Each;
@@ -1219,38 +1659,37 @@ mod tests {
             b.extend(clock.iter().map(|v| v.to_bits()));
             b
         };
+        type Walker<'a, const W: usize> =
+            dyn Fn(&mut [[f64; W]; 2], &mut [f64; 4], u32, usize) -> usize + 'a;
         let mut stopped = 0;
         for (live, steps) in [(0u32, 3000), ((1 << W) - 1, 3000), (0b10, 3000)] {
-            let run = |native: &Native| {
+            let run = |walk: &Walker<W>| {
                 let (mut y, mut clock) = (start, [0.3f64.cos(), 0.3f64.sin(), half[0], half[1]]);
                 let mut taken = Vec::new();
                 // Walk on from each stop, one step at a time past it.
                 let mut left = steps;
                 while left > 0 {
-                    let n = native
-                        .walk(layout, &mut y, &mut clock, &lane, &h, &walls, live, left)
-                        .expect("a loop for W");
+                    let n = walk(&mut y, &mut clock, live, left);
                     taken.push(n);
                     left -= n;
                     if left > 0 {
-                        let n = native
-                            .walk(layout, &mut y, &mut clock, &lane, &h, &walls, 0, 1)
-                            .expect("a loop for W");
-                        left -= n;
+                        left -= walk(&mut y, &mut clock, 0, 1);
                     }
                 }
                 (taken, bits(&y, &clock))
             };
-            let (c_taken, c_bits) = run(c);
-            let (cranelift_taken, cranelift_bits) = run(cranelift);
-            assert_eq!(
-                c_taken, cranelift_taken,
-                "W = {W}, {layout:?}, side {side}, live {live:b}"
-            );
-            assert_eq!(
-                c_bits, cranelift_bits,
-                "W = {W}, {layout:?}, side {side}, live {live:b}"
-            );
+            let (c_taken, c_bits) = run(&|y, clock, live, steps| {
+                c.walk(layout, y, clock, &lane, &h, &walls, live, steps)
+                    .expect("a loop for W")
+            });
+            let (taken, expected) = run(&|y, clock, live, steps| {
+                interpreted_walk(
+                    &tape, layout, y, clock, &lane, &h, &walls, side, live, steps,
+                )
+            });
+            let context = format!("W = {W}, {layout:?}, side {side}, live {live:b}");
+            assert_eq!(c_taken, taken, "{context}");
+            assert_eq!(c_bits, expected, "{context}");
             stopped += c_taken.len() - 1;
         }
         assert!(stopped > 10, "the stop was met {stopped} times");
@@ -1258,7 +1697,7 @@ mod tests {
 
     #[test]
     #[cfg(unix)]
-    fn the_c_compiler_s_step_loops_are_cranelift_s_to_the_bit() {
+    fn the_c_compiler_s_step_loops_are_the_interpreter_s_steps_to_the_bit() {
         let tape = tape();
         // Stops met early and often, and one (at 4) far above the first
         // turns of the oscillation, which grows past it later.
@@ -1268,22 +1707,14 @@ mod tests {
                 velocity: 1,
                 side,
             }];
-            let c = Native::compile_stepping_by(&tape, Some(&stops), Loops::CCompiler).unwrap();
             // Not a skip where there is no C compiler: the test then fails
             // and says why.
-            assert_eq!(
-                c.loops(),
-                Some(Loops::CCompiler),
-                "{:?}",
-                c.c_compiler_failure()
-            );
-            let cranelift =
-                Native::compile_stepping_by(&tape, Some(&stops), Loops::Cranelift).unwrap();
-            assert_eq!(cranelift.loops(), Some(Loops::Cranelift));
+            let c = Native::compile_stepping(&tape, Some(&stops)).unwrap();
+            assert!(c.has_loops());
             for layout in [Layout::Shared, Layout::Each] {
-                same_walks::<4>(&c, &cranelift, layout, (wall, side));
-                same_walks::<8>(&c, &cranelift, layout, (wall, side));
-                same_walks::<16>(&c, &cranelift, layout, (wall, side));
+                same_walks::<4>(&c, layout, (wall, side));
+                same_walks::<8>(&c, layout, (wall, side));
+                same_walks::<16>(&c, layout, (wall, side));
             }
         }
     }
@@ -1305,7 +1736,7 @@ mod tests {
             field: &tape,
             surfaces: None,
         }];
-        let (source, calls) = source_of(&regions, &stops, &[]);
+        let (source, calls) = source_of(&regions, Some(&stops), &[], &[]);
         let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
         let objects = || -> Vec<PathBuf> {
             let mut found: Vec<PathBuf> = std::fs::read_dir(dir.path())
@@ -1319,7 +1750,8 @@ mod tests {
         // 300 steps of the loop for 8 slots (shared layout), the library
         // then dropped (unmapped) before its file is touched.
         let run = |library: libloading::Library| -> Vec<u64> {
-            let (library, walks) = loaded::<Walk>(library, &calls).unwrap();
+            let library = loaded(library, &calls).unwrap();
+            let walks = walks_of::<Walk>(&library);
             let constants = tape.lane_values(&[0.05, 2.5, 0.8]).constants;
             let h = [std::f64::consts::TAU / 0.8 / 200.0];
             let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
@@ -1421,7 +1853,7 @@ reset = { v = "-0.9*v" }
 
     /// The regions' loop for W slots in `layout`, slot k in its own
     /// region, against each slot stepped alone by its region's native
-    /// step (cranelift's: `ModelFlow::step_each_in`'s) with its surfaces'
+    /// step (`ModelFlow::step_each_in`'s) with its surfaces'
     /// values at each step's end and the integrator's detection (at rest
     /// on or reaching a stop, `impact::reaches_wall`; crossing a surface,
     /// `surface::may_cross`): the steps taken, the states, the phase and
@@ -1429,7 +1861,6 @@ reset = { v = "-0.9*v" }
     /// each stop one plain step at a time, as the integrator does.
     fn same_as_stepped<const W: usize>(code: &crate::model::code::Code, layout: Layout) {
         use crate::integrate::{impact, rk4, surface};
-        use crate::model::jit::Kind;
         let loops = code
             .switch_loops
             .as_ref()
@@ -1684,7 +2115,6 @@ reset = { v = "-0.9*v" }
         }
 
         fn rhs_in(&self, region: u32, phase: &[f64; 2], y: &[f64; D]) -> [f64; D] {
-            use crate::model::jit::Kind;
             let native = self.code.regions[region as usize].native.as_ref().unwrap();
             let c = &self.constants[region as usize];
             let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
@@ -1827,5 +2257,363 @@ reset = { v = "-0.9*v" }
             };
             assert_eq!(parsed.to_bits(), v.to_bits(), "{text}");
         }
+    }
+
+    /// Every operation and function, with operands that reach NaN, ±0 and
+    /// the ties of min/max/sign.
+    fn all_functions() -> Tape {
+        Tape::compile(&expressions(), 2, None).unwrap()
+    }
+
+    /// [`all_functions`]' expressions.
+    fn expressions() -> Vec<Expr> {
+        let names = Names {
+            states: vec!["x".into(), "v".into()],
+            parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+            switches: Vec::new(),
+        };
+        let texts = [
+            "-2*zeta*v - x + f*cos(eta*t) + sqrt(abs(v)) - sqrt(x) + min(x, v) - max(0*x, -0*v)",
+            "x^3 / v + atan2(v, x) * min(v, x) - tanh(x*v) + exp(-v) - log(x) + tan(0.3*x) \
+             + pow(abs(x), 1.5) + sin(x) - cos(v) + sin(t*eta)*max(x, log(v))",
+        ];
+        // sign() has no name in the parser (derivatives make it): added
+        // by hand, at x, v and v - v (±0).
+        let sign = |text: &str| {
+            let arg = Expr::parse(text, &names).unwrap();
+            Box::new(Expr::Call(Func::Sign, vec![arg]))
+        };
+        texts
+            .iter()
+            .zip(["x", "v - v"])
+            .map(|(t, s)| {
+                let e = Box::new(Expr::parse(t, &names).unwrap());
+                Expr::Bin(Op::Add, e, Box::new(Expr::Bin(Op::Mul, sign(s), sign("v"))))
+            })
+            .collect()
+    }
+
+    const STATES: [[f64; 8]; 2] = [
+        [0.3, -0.7, 0.0, -0.0, f64::NAN, 2.5, 1e-300, -3.0],
+        [-0.7, 0.4, -0.0, 0.0, 1.0, f64::NAN, 7.0, -0.0],
+    ];
+
+    fn bits<const W: usize>(a: &[[f64; W]; 2]) -> Vec<u64> {
+        a.iter().flatten().map(|x| x.to_bits()).collect()
+    }
+
+    #[test]
+    fn the_c_compiler_s_functions_are_the_interpreter_to_the_bit() {
+        let tape = all_functions();
+        let native = Native::compile(&tape).expect("the C compiler builds it");
+        let params = [[0.05, 1.2, 0.8], [0.1, -0.5, 1.3]];
+        let lanes = params.map(|p| tape.lane_values(&p));
+        let stages: [[Phase; 3]; 8] = std::array::from_fn(|k| {
+            let t = 0.37 * k as f64;
+            [0.0, 0.05, 0.1].map(|dt| [((t + dt) * 0.8).cos(), ((t + dt) * 0.8).sin()])
+        });
+        let h: [f64; 8] = std::array::from_fn(|k| 0.01 * (k + 1) as f64);
+        // One lane, W = 1, 4 and 8.
+        fn shared<const W: usize>(
+            tape: &Tape,
+            native: &Native,
+            c: &[f64],
+            st: &[Phase; 3],
+            h: f64,
+        ) {
+            let y: [[f64; W]; 2] = std::array::from_fn(|i| std::array::from_fn(|k| STATES[i][k]));
+            let mut registers = Registers::new();
+            tape.prepare(&mut registers, |j| [c[j]; W]);
+            let interpreted =
+                rk4::step_batch(|s, y| tape.run(&mut registers, &[st[s]; W], y), &y, &[h; W]);
+            let compiled = native.call(Kind::Step, Layout::Shared, &y, st.as_flattened(), c, &[h]);
+            assert_eq!(bits(&interpreted), bits(&compiled), "shared, W = {W}");
+            let rhs_compiled = native.call(Kind::Rhs, Layout::Shared, &y, &st[1], c, &[]);
+            let rhs_interpreted: [[f64; W]; 2] = tape.run(&mut registers, &[st[1]; W], &y);
+            assert_eq!(bits(&rhs_interpreted), bits(&rhs_compiled), "rhs, W = {W}");
+        }
+        shared::<1>(&tape, &native, &lanes[0].constants, &stages[0], h[0]);
+        shared::<4>(&tape, &native, &lanes[0].constants, &stages[0], h[0]);
+        shared::<8>(&tape, &native, &lanes[1].constants, &stages[3], h[3]);
+        // One trajectory of each of 8 lanes, alternating parameters.
+        let y = STATES;
+        let constant = |j: usize, k: usize| lanes[k % 2].constants[j];
+        let l = tape.lane_constants.len();
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| std::array::from_fn(|k| constant(j, k)));
+        let interpreted = rk4::step_batch(
+            |s, y| tape.run(&mut registers, &std::array::from_fn(|k| stages[k][s]), y),
+            &y,
+            &h,
+        );
+        let lane: Vec<f64> = (0..l)
+            .flat_map(|j| (0..8).map(move |k| constant(j, k)))
+            .collect();
+        let clock: Vec<f64> = (0..3)
+            .flat_map(|s| (0..2).flat_map(move |i| (0..8).map(move |k| stages[k][s][i])))
+            .collect();
+        let compiled = native.call(Kind::Step, Layout::Each, &y, &clock, &lane, &h);
+        assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
+    }
+
+    /// The step loop takes the steps [`Kind::Step`] takes, from the phases
+    /// `rk4::stage_phases` turns, to the bit, and stops before the step in
+    /// which the step loop's detection (`integrate::steps`) finds a live
+    /// slot meeting the stop; a slot not live is not watched.
+    #[test]
+    fn the_step_loop_is_the_step_function_to_the_bit_and_stops_where_detection_does() {
+        let names = Names {
+            states: vec!["x".into(), "v".into()],
+            parameters: vec!["zeta".into(), "f".into(), "eta".into()],
+            switches: Vec::new(),
+        };
+        let parse = |t: &str| Expr::parse(t, &names).unwrap();
+        let exprs = [parse("v"), parse("-2*zeta*v - x + f*cos(eta*t)")];
+        let tape = Tape::compile(&exprs, 2, Some(parse("eta"))).unwrap();
+        let stop = |side| StopCode {
+            coordinate: 0,
+            velocity: 1,
+            side,
+        };
+        let native =
+            Native::compile_stepping(&tape, Some(&[stop(1.0)])).expect("the C compiler builds it");
+        let (eta, steps) = (0.8, 400);
+        let c = tape.lane_values(&[0.05, 1.0, eta]).constants;
+        let h = std::f64::consts::TAU / eta / 200.0;
+        let half = crate::integrate::clock::cos_sin(0.5 * eta * h);
+        // The step loop of `integrate::steps`, one step at a time: the
+        // steps taken before the first that meets the stop in a live slot.
+        #[allow(clippy::too_many_arguments)]
+        fn by_steps<const W: usize>(
+            native: &Native,
+            c: &[f64],
+            (h, half): (f64, Phase),
+            (wall, side): (f64, f64),
+            live: u32,
+            steps: usize,
+            y: &mut [[f64; W]; 2],
+            phase: &mut Phase,
+        ) -> usize {
+            for n in 0..steps {
+                let stages = rk4::stage_phases(phase, &half);
+                let y1: [[f64; W]; 2] = native.call(
+                    Kind::Step,
+                    Layout::Shared,
+                    y,
+                    stages.as_flattened(),
+                    c,
+                    &[h],
+                );
+                let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
+                    let (g0, s0) = (side * (y[0][k] - wall), side * y[1][k]);
+                    let (g1, s1) = (side * (y1[0][k] - wall), side * y1[1][k]);
+                    (y[0][k] == wall && y[1][k] == 0.0)
+                        || g1 > 0.0
+                        || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
+                });
+                if hit {
+                    return n;
+                }
+                *y = y1;
+                *phase = stages[2];
+            }
+            steps
+        }
+        fn check<const W: usize>(
+            native: &Native,
+            c: &[f64],
+            step: (f64, Phase),
+            (wall, side): (f64, f64),
+        ) {
+            // Slots from near rest, a little apart; the last one beyond
+            // the stop and not live.
+            let mut y: [[f64; W]; 2] = [
+                std::array::from_fn(|k| 0.01 * k as f64),
+                std::array::from_fn(|k| -0.003 * k as f64),
+            ];
+            y[0][W - 1] = wall + 3.0 * side;
+            let live = (1u32 << (W - 1)) - 1;
+            let start = [0.3f64.cos(), 0.3f64.sin()];
+            let (mut expected, mut phase) = (y, start);
+            let stop = (wall, side);
+            let taken = by_steps(native, c, step, stop, live, 400, &mut expected, &mut phase);
+            let mut clock = [start[0], start[1], step.1[0], step.1[1]];
+            let walls = [wall];
+            let n = native
+                .walk(
+                    Layout::Shared,
+                    &mut y,
+                    &mut clock,
+                    c,
+                    &[step.0],
+                    &walls,
+                    live,
+                    400,
+                )
+                .expect("a loop for W");
+            assert_eq!(n, taken, "W = {W}, wall {wall}, side {side}");
+            assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
+            assert_eq!(clock[..2], phase);
+            // The motion turns back about every 90 steps: those turns
+            // stop the loop only within reach of the stop.
+            let reached = wall.abs() < 10.0;
+            assert_eq!(n < 400, reached, "W = {W}, wall {wall}: {n} steps");
+        }
+        // A stop reached within the steps, and one out of reach (whose
+        // turns the loop walks through), from either side.
+        let below =
+            Native::compile_stepping(&tape, Some(&[stop(-1.0)])).expect("the C compiler builds it");
+        for wall in [0.9, 50.0] {
+            check::<4>(&native, &c, (h, half), (wall, 1.0));
+            check::<8>(&native, &c, (h, half), (wall, 1.0));
+            check::<16>(&native, &c, (h, half), (wall, 1.0));
+            check::<4>(&below, &c, (h, half), (-wall, -1.0));
+            check::<8>(&below, &c, (h, half), (-wall, -1.0));
+            check::<16>(&below, &c, (h, half), (-wall, -1.0));
+        }
+        // One trajectory of each of 8 lanes: each its own η (so its own
+        // constants and step size) and wall, all with the grid's phase.
+        let etas: [f64; 8] = std::array::from_fn(|k| 0.7 + 0.05 * k as f64);
+        let lanes = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
+        let hs = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
+        let halves: [Phase; 8] =
+            std::array::from_fn(|k| crate::integrate::clock::half_turn(etas[k], hs[k], 200));
+        assert!(halves.iter().all(|h| *h == halves[0]), "one grid turn");
+        let walls: [f64; 8] = std::array::from_fn(|k| 0.8 + 0.1 * k as f64);
+        let l = tape.lane_constants.len();
+        let lane: Vec<f64> = (0..l)
+            .flat_map(|j| lanes.iter().map(move |c| c[j]))
+            .collect();
+        let live = 0x7f;
+        let start: [[f64; 8]; 2] = [
+            std::array::from_fn(|k| 0.01 * k as f64),
+            std::array::from_fn(|k| if k == 7 { 9.0 } else { 0.0 }),
+        ];
+        let (mut expected, mut phases) = (start, [[1.0, 0.0]; 8]);
+        let mut taken = steps;
+        for n in 0..steps {
+            let stages: [[Phase; 3]; 8] =
+                std::array::from_fn(|k| rk4::stage_phases(&phases[k], &halves[k]));
+            let clock: Vec<f64> = (0..3)
+                .flat_map(|s| (0..2).flat_map(move |i| (0..8).map(move |k| stages[k][s][i])))
+                .collect();
+            let y1: [[f64; 8]; 2] =
+                native.call(Kind::Step, Layout::Each, &expected, &clock, &lane, &hs);
+            let y = &expected;
+            let hit = (0..7).any(|k| {
+                let (g0, g1) = (y[0][k] - walls[k], y1[0][k] - walls[k]);
+                (y[0][k] == walls[k] && y[1][k] == 0.0)
+                    || g1 > 0.0
+                    || (y[1][k] > 0.0
+                        && y1[1][k] < 0.0
+                        && may_turn_past(g0, y[1][k], g1, y1[1][k], hs[k]))
+            });
+            if hit {
+                taken = n;
+                break;
+            }
+            expected = y1;
+            phases = std::array::from_fn(|k| stages[k][2]);
+        }
+        assert!(
+            taken > 0 && taken < steps,
+            "a stop is met after {taken} steps"
+        );
+        let mut clock = [1.0, 0.0, halves[0][0], halves[0][1]];
+        let bounds = walls;
+        let mut y = start;
+        let n = native
+            .walk(
+                Layout::Each,
+                &mut y,
+                &mut clock,
+                &lane,
+                &hs,
+                &bounds,
+                live,
+                steps,
+            )
+            .expect("a loop for 8");
+        assert_eq!(n, taken);
+        assert_eq!(bits(&y), bits(&expected));
+        for (k, phase) in phases.iter().enumerate() {
+            assert_eq!(clock[..2], *phase, "slot {k}");
+        }
+        let mut y = [[0.0; 8]; 2];
+        let mut phase = [1.0, 0.0];
+        let n = by_steps(
+            &native,
+            &c,
+            (h, half),
+            (0.9, 1.0),
+            0x7f,
+            steps,
+            &mut y,
+            &mut phase,
+        );
+        assert!(n > 0 && n < steps, "the stop is met after {n} steps");
+        // No loop without stops given, nor for other widths.
+        let plain = Native::compile(&tape).unwrap();
+        let mut clock = [1.0, 0.0, half[0], half[1]];
+        let mut y = [[0.0; 4]; 2];
+        assert!(plain
+            .walk(Layout::Shared, &mut y, &mut clock, &c, &[h], &[], 1, 1)
+            .is_none());
+        let mut y = [[0.0; 1]; 2];
+        assert!(native
+            .walk(Layout::Shared, &mut y, &mut clock, &c, &[h], &[0.9], 1, 1)
+            .is_none());
+    }
+
+    /// A tape with more outputs than states (a model's surfaces: values,
+    /// then rates) compiles to its outputs alone, with no step.
+    #[test]
+    fn c_outputs_other_than_a_field_are_the_interpreter_to_the_bit() {
+        // The two expressions of `tape`, and a padding zero (as surfaces
+        // are padded).
+        let mut exprs = expressions();
+        exprs.push(Expr::Num(0.0));
+        let tape = Tape::compile(&exprs, 2, None).unwrap();
+        let native = Native::compile(&tape).expect("the C compiler builds it");
+        assert!(native.functions[Kind::Step as usize]
+            .iter()
+            .flatten()
+            .all(Option::is_none));
+        fn bits<const W: usize>(a: &[[f64; W]; 3]) -> Vec<u64> {
+            a.iter().flatten().map(|x| x.to_bits()).collect()
+        }
+        let lanes = [[0.05, 1.2, 0.8], [0.1, -0.5, 1.3]].map(|p| tape.lane_values(&p).constants);
+        let phases: [Phase; 8] = std::array::from_fn(|k| {
+            let t = 0.37 * k as f64;
+            [t.cos(), t.sin()]
+        });
+        // One lane, W = 1, 4 and 8.
+        fn shared<const W: usize>(tape: &Tape, native: &Native, c: &[f64], phase: &Phase) {
+            let y: [[f64; W]; 2] = std::array::from_fn(|i| std::array::from_fn(|k| STATES[i][k]));
+            let mut registers = Registers::new();
+            tape.prepare(&mut registers, |j| [c[j]; W]);
+            let interpreted: [[f64; W]; 3] = tape.run(&mut registers, &[*phase; W], &y);
+            let compiled: [[f64; W]; 3] = native.call(Kind::Rhs, Layout::Shared, &y, phase, c, &[]);
+            assert_eq!(bits(&interpreted), bits(&compiled), "W = {W}");
+        }
+        shared::<1>(&tape, &native, &lanes[0], &phases[1]);
+        shared::<4>(&tape, &native, &lanes[0], &phases[2]);
+        shared::<8>(&tape, &native, &lanes[1], &phases[3]);
+        // One trajectory of each of 8 lanes, alternating parameters, each
+        // at its own phase.
+        let constant = |j: usize, k: usize| lanes[k % 2][j];
+        let l = tape.lane_constants.len();
+        let lane: Vec<f64> = (0..l)
+            .flat_map(|j| (0..8).map(move |k| constant(j, k)))
+            .collect();
+        let clock: Vec<f64> = (0..2)
+            .flat_map(|i| phases.iter().map(move |p| p[i]))
+            .collect();
+        let mut registers = Registers::new();
+        tape.prepare(&mut registers, |j| std::array::from_fn(|k| constant(j, k)));
+        let interpreted: [[f64; 8]; 3] = tape.run(&mut registers, &phases, &STATES);
+        let compiled: [[f64; 8]; 3] =
+            native.call(Kind::Rhs, Layout::Each, &STATES, &clock, &lane, &[]);
+        assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
     }
 }

@@ -17,9 +17,9 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::c_loop::SwitchLoops;
+use super::c_loop::{Native, SwitchLoops};
 use super::expr::{Expr, Var, Written};
-use super::jit::{step_loops, Loops, Native, StopCode};
+use super::native::{step_loops, Loops, StopCode};
 pub(crate) use super::tape::reads_state_or_time;
 use super::tape::Tape;
 use super::{Map, Model};
@@ -155,9 +155,11 @@ impl EventHold {
 #[derive(Debug)]
 pub struct Field {
     pub equations: Tape,
-    /// The equations as native code, where the host allows (else the
-    /// tape's interpreter runs them).
+    /// The equations as native code, where the host's C compiler builds
+    /// it (else the tape's interpreter runs them).
     pub native: Option<Native>,
+    /// Why there is no native code, where there is none.
+    pub native_failure: Option<String>,
     /// g of each general surface followed by its rate ∇g·F along this
     /// field, surface by surface (rows 2j and 2j + 1 of a
     /// `surface::SurfaceBatch`).
@@ -778,13 +780,18 @@ fn field(
     let jacobian = (0..n * n)
         .map(|ij| equations[ij / n].derivative(Var::State(ij % n)))
         .collect();
+    let (native, native_failure) = match Native::compile_stepping(&tape, stops) {
+        Ok(native) => (Some(native), None),
+        Err(why) => (None, Some(why)),
+    };
     Ok(Field {
-        native: Native::compile_stepping(&tape, stops),
+        native,
+        native_failure,
         equations: tape,
         surfaces_native: if surfaces.is_empty() {
             None
         } else {
-            Native::compile(&surface_tape)
+            Native::compile(&surface_tape).ok()
         },
         surfaces: surface_tape,
         jacobian,

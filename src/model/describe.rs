@@ -7,7 +7,6 @@ use std::fmt::Write;
 
 use super::code::Code;
 use super::expr::{Expr, Op, Var, Written};
-use super::jit::Loops;
 use super::tape::reads_state_or_time;
 use super::wgsl;
 use crate::integrate::surface::Surface;
@@ -213,20 +212,18 @@ pub fn describe(code: &Code) -> String {
         code.equations.instructions.len(),
         code.equations.lane_constants.len()
     );
-    if let Some(native) = code.regions.first().and_then(|r| r.native.as_ref()) {
-        let loops = match (native.loops(), native.c_compiler_failure()) {
-            (Some(Loops::CCompiler), _) => {
-                "built by the C compiler for this machine's vectors".into()
+    if let Some(field) = code.regions.first() {
+        let native = match (&field.native, &field.native_failure) {
+            (Some(native), _) if native.has_loops() => {
+                "native code built by the C compiler for this machine's vectors, its step \
+                 loop between stops too"
+                    .into()
             }
-            (Some(Loops::Cranelift), Some(why)) => {
-                format!("cranelift's (the C compiler failed: {why})")
-            }
-            (Some(Loops::Cranelift), None) => "cranelift's".into(),
-            (None, _) => String::new(),
+            (Some(_), _) => "native code built by the C compiler for this machine's vectors".into(),
+            (None, Some(why)) => format!("the tape's interpreter ({why})"),
+            (None, None) => "the tape's interpreter".into(),
         };
-        if !loops.is_empty() {
-            let _ = writeln!(w, "CPU: the step loop between stops is {loops}");
-        }
+        let _ = writeln!(w, "CPU: the equations run as {native}");
     }
     match &code.switch_loops {
         Some(Ok(_)) => {

@@ -243,7 +243,7 @@ impl Tape {
         out
     }
 
-    /// The tape as [`Tape::run`] runs it, for the JIT (`model::jit`): the
+    /// The tape as [`Tape::run`] runs it, for the native code (`model::c_loop`): the
     /// lowered instructions, the numbers (slots after the lane constants)
     /// and the slot of each output. Slots are the states, cos and sin of
     /// the clock, the lane constants, the numbers, then one result per

@@ -20,9 +20,10 @@ use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues,
     Switching, Wall,
 };
+use crate::model::c_loop::Native;
 use crate::model::code::{piecewise_linear, reads_state_or_time, walls_at, Code};
 use crate::model::expr::{Expr, Var};
-use crate::model::jit::{Kind, Layout, Native};
+use crate::model::native::{Kind, Layout};
 use crate::model::tape::Registers;
 
 fn leak(s: &str) -> &'static str {
