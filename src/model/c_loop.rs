@@ -7,7 +7,7 @@
 //!
 //! Loops over the slots that GCC vectorises for the host
 //! (`-march=native`) ran 1.6 to 2.0 times as fast as the same operations
-//! in 128-bit vectors (docs/BENCHMARKS.md, "The step loop built by the
+//! in 128-bit vectors (docs/BENCHMARKS.md, "Native code built by the
 //! host's C compiler"), and C compilers target every host. Every tape
 //! instruction is one IEEE operation in the tape's order, with no
 //! contraction into fused multiply-adds (`-ffp-contract=off`) and no
