@@ -65,15 +65,25 @@ fn on_stop(w: Stop, y: State, v: real) -> State {
     return out;
 }
 
-// Whether a step of size h from y to y1 may meet the stop: it ends behind
-// it, or the velocity turns inside it within reach of it (an excursion
-// between the ends; twin of reaches_wall).
+// The stop's (gap, speed) at y: the value and rate its impact is detected
+// and located on, as a surface's oriented (g, rate) is.
+fn stop_values(w: Stop, y: State) -> vec2<real> {
+    return vec2<real>(gap(w, y), speed(w, y));
+}
+
+// The stop test of stops and surfaces alike: whether a step of size h whose
+// event value and rate go from `start` to `end` may cross (value > 0 across):
+// it ends across, or the rate turns from approaching to leaving inside it
+// within reach (an excursion between the ends). Twin of reaches_wall and
+// surface::may_cross, the same test written for each.
+fn may_meet(start: vec2<real>, end: vec2<real>, h: real) -> bool {
+    return end.x > real(0.0) || (start.y > real(0.0) && end.y < real(0.0) && may_turn_past(start.x, start.y, end.x, end.y, h));
+}
+
+// Whether a step of size h from y to y1 may meet the stop (twin of
+// reaches_wall).
 fn reaches(w: Stop, y: State, h: real, y1: State) -> bool {
-    let g0 = gap(w, y);
-    let s0 = speed(w, y);
-    let g1 = gap(w, y1);
-    let s1 = speed(w, y1);
-    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
+    return may_meet(stop_values(w, y), stop_values(w, y1), h);
 }
 
 // Whether a step turning back inside (speed s0 > 0 to s1 < 0, gaps g0, g1
@@ -231,6 +241,16 @@ struct Hit {
     y: State,
 }
 
+// max(1, |y_i|): the size of a state, which a surface's tolerances are
+// relative to (the CPU's fold over the state).
+fn state_scale(y: State) -> real {
+    var scale = real(1.0);
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        scale = max(scale, abs(y[i]));
+    }
+    return scale;
+}
+
 // An RK4 step of any size s from a given phase: the re-steps of impact location.
 fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Stepped {
     return rk4_step(p, phase, cos_sin(real(0.5) * omega * s), y, s);
@@ -285,13 +305,23 @@ fn pressed(p: Params, w: Stop, phase: vec2<real>, y: State) -> bool {
     return y[w.coordinate] == w.position && pressing(p, w, phase, y) > real(0.0);
 }
 
-// A stop's impact in the rest of a step, if any.
-fn locate(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+// Event `which`'s crossing in the rest of a step [0, h] from (phase0, y0)
+// to y1, if any, given its value and rate at both ends (`start`, `end`).
+// Events are numbered as first_met's: the stops, then the general surfaces
+// (which - WALLS); stops and surfaces share every location below, and only
+// event_at, event_scale and crossing_fraction tell them apart.
+fn locate(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
 #ifdef IMPACT_LINEAR
-    return locate_linear(w, y0, h, y1);
+    return locate_linear(walls, which, y0, h, y1, start, end);
 #else
-    return locate_newton(p, omega, w, phase0, y0, h, y1);
+    return locate_newton(p, omega, walls, which, phase0, y0, h, y1, start, end);
 #endif
+}
+
+// Stop j's impact in the rest of a step, if any.
+fn locate_stop(p: Params, omega: real, walls: Stops, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+    let w = stop(walls, j);
+    return locate(p, omega, walls, j, phase0, y0, h, y1, stop_values(w, y0), stop_values(w, y1));
 }
 
 // The first stop (or surface) met, and where.
@@ -317,33 +347,35 @@ fn earlier(met: Met, found: Hit, j: u32) -> Met {
 }
 
 // The first stop or surface met in the step [0, h] from (phase0, y0) to y1
-// (NONE_MET: none). Without stops (WALLS = 0) stop 0's constants are zeros
-// (side 0), and it is never met.
+// (NONE_MET: none).
 fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
-    var met = earlier(Met(Hit(false, real(0.0), y0), NONE_MET), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
+    var met = Met(Hit(false, real(0.0), y0), NONE_MET);
+    if (WALLS > 0u) {
+        met = earlier(met, locate_stop(p, omega, walls, 0u, phase0, y0, h, y1), 0u);
+    }
     if (WALLS > 1u) {
-        met = earlier(met, locate(p, omega, stop(walls, 1u), phase0, y0, h, y1), 1u);
+        met = earlier(met, locate_stop(p, omega, walls, 1u, phase0, y0, h, y1), 1u);
     }
     if (WALLS > 2u) {
-        met = earlier(met, locate(p, omega, stop(walls, 2u), phase0, y0, h, y1), 2u);
+        met = earlier(met, locate_stop(p, omega, walls, 2u, phase0, y0, h, y1), 2u);
     }
     if (WALLS > 3u) {
-        met = earlier(met, locate(p, omega, stop(walls, 3u), phase0, y0, h, y1), 3u);
+        met = earlier(met, locate_stop(p, omega, walls, 3u, phase0, y0, h, y1), 3u);
     }
 #ifdef SURFACES
     // The surfaces' values at both ends of the rest of the step, in the
     // trajectory's region (a surface may move with the forcing).
     let before = surface_values(p, phase0, y0);
     let after = surface_values(p, rotate(phase0, cos_sin(omega * h)), y1);
-    met = earlier(met, locate_surface(p, omega, 0u, phase0, y0, h, y1, before, after), WALLS);
+    met = earlier(met, locate_surface(p, omega, walls, 0u, phase0, y0, h, y1, before, after), WALLS);
     if (SURFACES > 1u) {
-        met = earlier(met, locate_surface(p, omega, 1u, phase0, y0, h, y1, before, after), WALLS + 1u);
+        met = earlier(met, locate_surface(p, omega, walls, 1u, phase0, y0, h, y1, before, after), WALLS + 1u);
     }
     if (SURFACES > 2u) {
-        met = earlier(met, locate_surface(p, omega, 2u, phase0, y0, h, y1, before, after), WALLS + 2u);
+        met = earlier(met, locate_surface(p, omega, walls, 2u, phase0, y0, h, y1, before, after), WALLS + 2u);
     }
     if (SURFACES > 3u) {
-        met = earlier(met, locate_surface(p, omega, 3u, phase0, y0, h, y1, before, after), WALLS + 3u);
+        met = earlier(met, locate_surface(p, omega, walls, 3u, phase0, y0, h, y1, before, after), WALLS + 3u);
     }
 #endif
     return met;
@@ -513,27 +545,42 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
 }
 
 #ifdef IMPACT_LINEAR
-// The paper's location: linear interpolation between the step's ends.
-fn locate_linear(w: Stop, y0: State, h: real, y1: State) -> Hit {
-    if (gap(w, y1) <= real(0.0)) {
+// The paper's location: linear interpolation between the step's ends, for
+// a stop (locate_linear in impact.rs) or a surface (the linear branch of
+// `locate` there).
+fn locate_linear(walls: Stops, which: u32, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
+    if (end.x <= real(0.0)) {
         return Hit(false, real(0.0), y0);
     }
-    let c = w.coordinate;
-    let theta = clamp((w.position - y0[c]) / (y1[c] - y0[c]), real(0.0), real(1.0));
+    let theta = clamp(crossing_fraction(walls, which, y0, y1, start, end), real(0.0), real(1.0));
     return Hit(true, theta * h, y0 + theta * (y1 - y0));
 }
 
+// Where the straight line from y0 to y1 crosses event `which`, as a
+// fraction of the step: a stop's from its coordinate and position, a
+// surface's from its values at the ends (each as its twin computes it).
+fn crossing_fraction(walls: Stops, which: u32, y0: State, y1: State, start: vec2<real>, end: vec2<real>) -> real {
+    if (which < WALLS) {
+        let w = stop(walls, which);
+        let c = w.coordinate;
+        return (w.position - y0[c]) / (y1[c] - y0[c]);
+    }
+    return -start.x / (end.x - start.x);
+}
+
 #else
-// Re-steps RK4 to the impact (Newton from the Hermite root), so the impact
-// lies on the RK4 solution itself; also finds an excursion past the stop
-// between the step's ends. The CPU's locate_newton and newton_from, the
-// same steps in the same order, with every re-step in one place: NIR
-// inlines every call, and each call site of sub_step is a copy of the RK4
-// step and its right-hand sides in the compiled kernel (three call sites
-// here cost lavapipe a quarter of the wall kernel's compile time).
-// The safeguarded Newton of locate_newton and locate_surface
-// (newton_in_bracket in impact.rs): s in the bracket [lo, hi] of the step,
-// hi at the step's end or the Hermite peak of an excursion that turns back.
+// Re-steps RK4 to the crossing (Newton from the Hermite root), so that it
+// lies on the RK4 solution itself; also finds an excursion across between
+// the step's ends. The CPU's locate_newton (stops), `locate` (surfaces)
+// and newton_from, the same steps in the same order, written once for
+// both, with every re-step in one place: NIR inlines every call, and each
+// call site of sub_step is a copy of the RK4 step and its right-hand sides
+// in the compiled kernel (three call sites here cost lavapipe a quarter of
+// the wall kernel's compile time).
+
+// The safeguarded Newton of locate_newton (newton_in_bracket in
+// impact.rs): s in the bracket [lo, hi] of the step, hi at the step's end
+// or the Hermite peak of an excursion that turns back.
 struct Bracket {
     found: bool,
     at_peak: bool,
@@ -579,31 +626,32 @@ fn newton_update(b: Bracket, g: real, rate: real) -> Bracket {
     return out;
 }
 
-fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
-    // Turning back inside the step: the first re-step, to the Hermite
-    // peak, decides whether the excursion passes the stop.
-    let start = vec2<real>(gap(w, y0), speed(w, y0));
-    let end = vec2<real>(gap(w, y1), speed(w, y1));
-    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
-        // A turn that cannot reach the stop (as locate_newton's).
+// Event `which`'s crossing (see `locate`) by Newton on re-stepped RK4.
+fn locate_newton(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
+    let fine = event_scale(walls, which, y0);
+    // A step the stop test rules out has no crossing (the CPU's resolve
+    // locates only the events that test lets through).
+    if (!may_meet(start, end, h)) {
         return Hit(false, real(0.0), y0);
     }
+    // Turning back inside the step: the first re-step, to the Hermite
+    // peak, decides whether the excursion crosses.
     var b = bracket_of(start, end, h);
     if (!b.found) {
         return Hit(false, real(0.0), y0);
     }
     var at_peak = b.at_peak;
-    // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in
-    // [0, hi]: the step to s, then (at most 32 times) a Newton update and
-    // the step to the new s.
-    let tolerance = real(4.0) * EPSILON * max(abs(w.position), real(1.0));
+    // Safeguarded Newton on g(s) = the event's value at RK4(y0, s), g'(s)
+    // ≈ its rate, in the bracket: the step to s, then (at most 32 times) a
+    // Newton update and the step to the new s.
+    let tolerance = real(4.0) * EPSILON * max(abs(fine.x), real(1.0));
     var to = select(b.s, b.hi, at_peak);
     var y = y0;
     var updates = 0u;
     loop {
         y = sub_step(p, omega, phase0, y0, to).y;
         if (at_peak) {
-            if (gap(w, y) <= real(0.0)) {
+            if (event_at(p, omega, walls, which, phase0, to, y).x <= fine.y) {
                 return Hit(false, real(0.0), y0);
             }
             at_peak = false;
@@ -614,11 +662,11 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
             break;
         }
         updates = updates + 1u;
-        let g = gap(w, y);
-        if (abs(g) <= tolerance) {
+        let v = event_at(p, omega, walls, which, phase0, b.s, y);
+        if (abs(v.x) <= tolerance) {
             break;
         }
-        b = newton_update(b, g, speed(w, y));
+        b = newton_update(b, v.x, v.y);
         if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
             // As the CPU: s updated, y the last step's.
             break;
@@ -627,6 +675,34 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
     }
     return Hit(true, b.s, y);
 }
+
+// Event `which`'s value and rate at y, s into the step from phase0: a
+// stop's (gap, speed), a surface's oriented (g, rate) (the CPU's
+// `distance` and `rate` closures of locate and locate_newton).
+fn event_at(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
+#ifdef SURFACES
+    if (which >= WALLS) {
+        return surface_at(p, omega, which - WALLS, phase0, s, y);
+    }
+#endif
+    return stop_values(stop(walls, which), y);
+}
+
+// How finely event `which` is located from the step's start y0: the size
+// its value is resolved to 4 ulp of (x), and how far past it an excursion
+// must reach to cross (y). A stop: its position, and any depth > 0 (the
+// CPU's locate_newton); a surface: the state's size, and more than the
+// tolerance itself, shallower being a touch in rounding (its `locate`).
+fn event_scale(walls: Stops, which: u32, y0: State) -> vec2<real> {
+#ifdef SURFACES
+    if (which >= WALLS) {
+        let scale = state_scale(y0);
+        return vec2<real>(scale, real(4.0) * EPSILON * scale);
+    }
+#endif
+    return vec2<real>(walls.position[which], real(0.0));
+}
+
 // The cubic Hermite interpolant of g = X - X_w over the step, θ in [0, 1]:
 // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³.
 fn hermite_new(g0: real, v0: real, g1: real, v1: real, h: real) -> vec4<real> {
@@ -907,12 +983,14 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
 // surface j: its end lies across, or its rate turns from approaching to
 // leaving inside it within reach of the surface (surface::may_cross).
 fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
-    let o = orientation(region, j);
-    let g0 = o * before.g[j];
-    let s0 = o * before.rate[j];
-    let g1 = o * after.g[j];
-    let s1 = o * after.rate[j];
-    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
+    return may_meet(oriented(region, j, before), oriented(region, j, after), h);
+}
+
+// Surface j's (g, rate) in values v, oriented so that > 0 lies across it
+// for a trajectory in `region`: the value and rate its crossing is
+// detected and located on, as a stop's (gap, speed) is.
+fn oriented(region: u32, j: u32, v: SurfaceValues) -> vec2<real> {
+    return orientation(region, j) * vec2<real>(v.g[j], v.rate[j]);
 }
 
 // The step loop's test over every surface, written out per surface as the
@@ -933,79 +1011,14 @@ fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues, h
 
 // Surface j's oriented distance and rate at (s into the step from phase0, y).
 fn surface_at(p: Params, omega: real, j: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
-    let v = surface_values(p, rotate(phase0, cos_sin(omega * s)), y);
-    return orientation(p.region, j) * vec2<real>(v.g[j], v.rate[j]);
+    return oriented(p.region, j, surface_values(p, rotate(phase0, cos_sin(omega * s)), y));
 }
 
 // Surface j's crossing in the step [0, h] from (phase0, y0) to y1, given
-// its values at both ends: twin of `locate` in impact.rs, the stops'
-// location (Hermite guess, then Newton on re-stepped RK4, an excursion
-// across and back found at the Hermite peak) on g instead of a gap.
-fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State, before: SurfaceValues, after: SurfaceValues) -> Hit {
-    let o = orientation(p.region, j);
-    let start = o * vec2<real>(before.g[j], before.rate[j]);
-    let end = o * vec2<real>(after.g[j], after.rate[j]);
-#ifdef IMPACT_LINEAR
-    if (end.x <= real(0.0)) {
-        return Hit(false, real(0.0), y0);
-    }
-    let theta = clamp(-start.x / (end.x - start.x), real(0.0), real(1.0));
-    return Hit(true, theta * h, y0 + theta * (y1 - y0));
-#else
-    var scale = real(1.0);
-    for (var i = 0u; i < DIM; i = i + 1u) {
-        scale = max(scale, abs(y0[i]));
-    }
-    // A turn out of reach of the surface cannot cross it (as the CPU's
-    // resolve skips it).
-    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
-        return Hit(false, real(0.0), y0);
-    }
-    // Turning back inside the step: the first re-step, to the Hermite
-    // peak, decides whether the excursion crosses (as locate_newton, every
-    // re-step in one call site).
-    var b = bracket_of(start, end, h);
-    if (!b.found) {
-        return Hit(false, real(0.0), y0);
-    }
-    var at_peak = b.at_peak;
-    // Safeguarded Newton (newton_in_bracket): g resolved to 4 ulp of the
-    // state's size; the step to s, then (at most 32 times) a Newton update
-    // and the step to the new s.
-    let tolerance = real(4.0) * EPSILON * max(abs(scale), real(1.0));
-    var to = select(b.s, b.hi, at_peak);
-    var y = y0;
-    var updates = 0u;
-    loop {
-        y = sub_step(p, omega, phase0, y0, to).y;
-        if (at_peak) {
-            // An excursion no deeper than the location's own tolerance is
-            // a touch in rounding, not a crossing.
-            if (surface_at(p, omega, j, phase0, to, y).x <= real(4.0) * EPSILON * scale) {
-                return Hit(false, real(0.0), y0);
-            }
-            at_peak = false;
-            to = b.s;
-            continue;
-        }
-        if (updates == 32u) {
-            break;
-        }
-        updates = updates + 1u;
-        let v = surface_at(p, omega, j, phase0, b.s, y);
-        let g = v.x;
-        if (abs(g) <= tolerance) {
-            break;
-        }
-        b = newton_update(b, g, v.y);
-        if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
-            // As the CPU: s updated, y the last step's.
-            break;
-        }
-        to = b.s;
-    }
-    return Hit(true, b.s, y);
-#endif
+// its values at both ends: the stops' location on its oriented g instead
+// of a gap (`locate` in impact.rs).
+fn locate_surface(p: Params, omega: real, walls: Stops, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State, before: SurfaceValues, after: SurfaceValues) -> Hit {
+    return locate(p, omega, walls, WALLS + j, phase0, y0, h, y1, oriented(p.region, j, before), oriented(p.region, j, after));
 }
 
 // A crossing of a general surface, applied (cross in impact.rs).
@@ -1098,10 +1111,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         var after = p;
         after.region = jumped(p, phase, y, r.y);
         let now = surface_values(after, phase, r.y);
-        var scale = real(1.0);
-        for (var i = 0u; i < DIM; i = i + 1u) {
-            scale = max(scale, abs(y[i]));
-        }
+        let scale = state_scale(y);
         // Back where the motion lives, and leaving the surface.
         if (!(now.g[j] <= real(4.0) * EPSILON * scale && now.rate[j] < real(0.0))) {
             out.chattering = true;
