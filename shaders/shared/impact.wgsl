@@ -283,6 +283,22 @@ fn clamp_to_stops(walls: Stops, y: State) -> State {
     return out;
 }
 
+// Whether y lies behind a stop (a sliding motion meeting one is flagged, as
+// in the CPU's slide).
+fn behind_a_stop(walls: Stops, y: State) -> bool {
+    var behind = WALLS > 0u && gap(stop(walls, 0u), y) > real(0.0);
+    if (WALLS > 1u) {
+        behind = behind || gap(stop(walls, 1u), y) > real(0.0);
+    }
+    if (WALLS > 2u) {
+        behind = behind || gap(stop(walls, 2u), y) > real(0.0);
+    }
+    if (WALLS > 3u) {
+        behind = behind || gap(stop(walls, 3u), y) > real(0.0);
+    }
+    return behind;
+}
+
 // The first stop y lies on with a force pressing it there, or WALLS.
 fn pressed_on(p: Params, walls: Stops, phase: vec2<real>, y: State) -> u32 {
     var on = WALLS;
@@ -381,12 +397,38 @@ fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State
     return met;
 }
 
+// resolve_impacts' account of its step so far (the locals of the CPU's
+// resolve): how far into the step its events reach, the phase and state
+// there, and what they did.
+struct Resolution {
+    done: real,
+    phase0: vec2<real>,
+    y0: State,
+    impacts: u32,
+    crossings: vec4<u32>,
+    slowest: real,
+    rank_loss: u32,
+    // The mass came to rest on this stop (WALLS: it did not).
+    stuck: u32,
+    // The rest of the step from (phase0, y0) is to be stepped, at the top
+    // of the next pass.
+    restep: bool,
+#ifdef SURFACES
+    // A crossing flagged unresolved ends the step once its rest is taken;
+    // whether it was a chattering one.
+    unresolved: bool,
+    chattering: bool,
+#endif
+}
+
 // Applies every impact inside the step [0, h] from (phase, y), whose plain
 // RK4 image y1 reached a stop or turned back inside the step; a mass that
 // comes to rest is handed back with `stuck`, and the integrate kernel's
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
-// invocation is small: see loop_budget_exhausted).
+// invocation is small: see loop_budget_exhausted). The loop of the CPU's
+// resolve: each pass finds the first event and hands it to impact or
+// cross_surface, or slides on a switch (slide).
 #ifdef SURFACES
 fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
     // A copy, whose region follows the crossings.
@@ -394,38 +436,29 @@ fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>,
 #else
 fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
 #endif
-    var done = real(0.0);
-    var phase0 = phase;
-    var y0 = y;
-    var y1 = y1_plain;
-    var impacts = 0u;
-    var crossings = vec4<u32>();
-    var slowest = NO_IMPACT;
-    // How the loop ended: 0 no further impact in the step, 1 at rest on
-    // stop `stuck` (stuck_step takes the rest of the step from phase0), 2
-    // out of impacts.
-    var ending = 2u;
-    var stuck = WALLS;
-    var rank_loss = 0u;
-    // The rest of the step from (phase0, y0) is stepped in one place, at
-    // the top of the next pass: NIR inlines every call, and each call site
-    // of sub_step is a copy of the RK4 step (a kernel with switches had
-    // four here). The extra pass only steps, so that the last event's
-    // rest of the step is taken as before the loop ran out.
-    var restep = false;
 #ifdef SURFACES
-    // A crossing flagged unresolved ends the step once its rest is taken.
-    var unresolved = false;
-    var chattering = false;
+    var r = Resolution(real(0.0), phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false, false, false);
+#else
+    var r = Resolution(real(0.0), phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false);
 #endif
+    var y1 = y1_plain;
+    // How the loop ended: 0 no further impact in the step, 1 at rest on
+    // stop r.stuck (stuck_step takes the rest of the step from r.phase0),
+    // 2 out of impacts.
+    var ending = 2u;
     for (var n = 0u; n <= MAX_IMPACTS_PER_STEP; n = n + 1u) {
-        if (restep) {
-            y1 = sub_step(p, omega, phase0, y0, h - done).y;
-            restep = false;
+        // The rest of the step from (phase0, y0) is stepped in one place:
+        // NIR inlines every call, and each call site of sub_step is a copy
+        // of the RK4 step (a kernel with switches had four here). The
+        // extra pass only steps, so that the last event's rest of the step
+        // is taken as before the loop ran out.
+        if (r.restep) {
+            y1 = sub_step(p, omega, r.phase0, r.y0, h - r.done).y;
+            r.restep = false;
         }
 #ifdef SURFACES
-        if (unresolved) {
-            return WallStep(y1, impacts, crossings, chattering, rank_loss, slowest, WALLS, h, phase0);
+        if (r.unresolved) {
+            return WallStep(y1, r.impacts, r.crossings, r.chattering, r.rank_loss, r.slowest, WALLS, h, r.phase0);
         }
 #endif
         if (n == MAX_IMPACTS_PER_STEP) {
@@ -435,113 +468,104 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
         if (is_sliding(p.region)) {
             // On a switch: the rest of the step slides, unless the motion
             // leaves it (twin of the sliding branch of resolve).
-            let slid = slide(p, omega, phase0, y0, h - done);
+            let slid = slide(p, omega, r.phase0, r.y0, h - r.done);
             crossed.sliding = crossed.sliding || slid.flagged;
             if (!slid.leaves) {
-                return WallStep(slid.y, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+                return WallStep(slid.y, r.impacts, r.crossings, false, r.rank_loss, r.slowest, WALLS, h, r.phase0);
             }
-            done = done + slid.s;
-            phase0 = rotate(phase0, cos_sin(omega * slid.s));
-            y0 = slid.y;
+            r.done = r.done + slid.s;
+            r.phase0 = rotate(r.phase0, cos_sin(omega * slid.s));
+            r.y0 = slid.y;
             p.region = slid.region;
             crossed.region = slid.region;
-            restep = true;
+            r.restep = true;
             continue;
         }
 #endif
-        let rest = h - done;
-        let met = first_met(p, walls, omega, phase0, y0, rest, y1);
-        let first = met.stop;
-        let hit = met.hit;
-        if (first == NONE_MET) {
+        let met = first_met(p, walls, omega, r.phase0, r.y0, h - r.done, y1);
+        if (met.stop == NONE_MET) {
             ending = 0u;
             break;
         }
 #ifdef SURFACES
-        if (first >= WALLS) {
-            // A general surface (twin of the surface branch of resolve).
-            let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-            done = done + hit.s;
-            let crossing = cross(p, first - WALLS, phase_c, hit.y);
-            slowest = min(slowest, crossing.approach);
-            if (crossing.counted) {
-                crossings[first] = crossings[first] + 1u;
-            }
-            if (crossing.rank_loss) {
-                rank_loss = max(rank_loss, 1u);
-            }
-            p.region = crossing.region;
-            crossed.region = crossing.region;
-            crossed.log_flux = crossed.log_flux + crossing.log_det;
-            crossed.sliding = crossed.sliding || crossing.sliding;
-            if (!crossing.resolved) {
-                // Flagged: the rest of the step in the field now in force.
-                phase0 = phase_c;
-                y0 = hit.y;
-                restep = true;
-                unresolved = true;
-                chattering = crossing.chattering;
-                continue;
-            }
-            if (crossing.slides) {
-                crossed.sliding_phases = crossed.sliding_phases + 1u;
-            }
-            phase0 = phase_c;
-            y0 = crossing.y;
-            restep = !is_sliding(p.region);
+        if (met.stop >= WALLS) {
+            r = cross_surface(p, omega, met, r);
+            p.region = crossed.region;
             continue;
         }
 #endif
-        let w = stop(walls, first);
-        let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-        let v = speed(w, hit.y);
-        done = done + hit.s;
-        phase0 = phase_c;
-        if (v <= real(0.0)) {
-            // Arriving at rest, pressed into the stop: it sticks.
-            y0 = hit.y;
-            stuck = first;
+        r = impact(p, walls, omega, met, h, r);
+        if (r.stuck < WALLS) {
             ending = 1u;
             break;
         }
-        impacts = impacts + 1u;
-        crossings[first] = crossings[first] + 1u;
-        slowest = min(slowest, v);
-        let e = w.restitution;
-        let rebound = e * v;
-        let push = pressing(p, w, phase_c, hit.y);
-        // e = 0 stops the mass dead; bounces that would accumulate within a
-        // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
-        if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
-            rank_loss = 1u;
-            y0 = hit.y;
-            stuck = first;
-            ending = 1u;
-            break;
-        }
-        y0 = on_stop(w, hit.y, -rebound);
 #ifdef SURFACES
         // The rebound may jump across a switch (a velocity reversed across
         // a friction's slip): the field after it is that side's.
-        p.region = jumped(p, phase0, hit.y, y0);
+        p.region = jumped(p, r.phase0, met.hit.y, r.y0);
         crossed.region = p.region;
 #endif
-        restep = true;
     }
+    return resolved(p, walls, h, y1, r, ending);
+}
+
+// Stop met.stop's impact at met.hit (the stop branch of resolve): the mass
+// arriving at rest, or with bounces accumulating, stays on the stop
+// (r.stuck); else it rebounds, V -> -e·V, and the rest of the step is
+// stepped again.
+fn impact(p: Params, walls: Stops, omega: real, met: Met, h: real, r_in: Resolution) -> Resolution {
+    var r = r_in;
+    let w = stop(walls, met.stop);
+    let phase_c = rotate(r.phase0, cos_sin(omega * met.hit.s));
+    let v = speed(w, met.hit.y);
+    r.done = r.done + met.hit.s;
+    r.phase0 = phase_c;
+    if (v <= real(0.0)) {
+        // Arriving at rest, pressed into the stop: it sticks.
+        r.y0 = met.hit.y;
+        r.stuck = met.stop;
+        return r;
+    }
+    r.impacts = r.impacts + 1u;
+    r.crossings[met.stop] = r.crossings[met.stop] + 1u;
+    r.slowest = min(r.slowest, v);
+    let e = w.restitution;
+    let rebound = e * v;
+    let push = pressing(p, w, phase_c, met.hit.y);
+    // e = 0 stops the mass dead; bounces that would accumulate within a
+    // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
+    if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
+        r.rank_loss = 1u;
+        r.y0 = met.hit.y;
+        r.stuck = met.stop;
+        return r;
+    }
+    r.y0 = on_stop(w, met.hit.y, -rebound);
+    r.restep = true;
+    return r;
+}
+
+// The step's outcome once resolve_impacts' loop has ended (`ending` as
+// there): at rest on a stop, with the rest of the step to stuck_step; at
+// y1 after the last event; or, out of impacts, at rest if a force presses
+// the mass onto a stop, else chattering, clamped to the stops.
+fn resolved(p: Params, walls: Stops, h: real, y1: State, r: Resolution, ending_in: u32) -> WallStep {
+    var ending = ending_in;
+    var stuck = r.stuck;
     if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
-        stuck = pressed_on(p, walls, phase0, y0);
+        stuck = pressed_on(p, walls, r.phase0, r.y0);
         if (stuck < WALLS) {
             ending = 1u;
         }
     }
     if (ending == 1u) {
-        return WallStep(y0, impacts, crossings, false, rank_loss, slowest, stuck, done, phase0);
+        return WallStep(r.y0, r.impacts, r.crossings, false, r.rank_loss, r.slowest, stuck, r.done, r.phase0);
     }
     if (ending == 0u) {
-        return WallStep(y1, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+        return WallStep(y1, r.impacts, r.crossings, false, r.rank_loss, r.slowest, WALLS, h, r.phase0);
     }
-    return WallStep(clamp_to_stops(walls, y1), impacts, crossings, true, rank_loss, slowest, WALLS, h, phase0);
+    return WallStep(clamp_to_stops(walls, y1), r.impacts, r.crossings, true, r.rank_loss, r.slowest, WALLS, h, r.phase0);
 }
 
 #ifdef IMPACT_LINEAR
@@ -890,17 +914,7 @@ fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
             }
             // A stop reached while sliding would need a motion along the
             // switch and into the stop at once: flagged, as on the CPU.
-            let walls = stops_of(p);
-            if (WALLS > 0u && gap(stop(walls, 0u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 1u && gap(stop(walls, 1u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 2u && gap(stop(walls, 2u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 3u && gap(stop(walls, 3u), y_to) > real(0.0)) {
+            if (behind_a_stop(stops_of(p), y_to)) {
                 flagged = true;
             }
             if (holds(m_to)) {
@@ -1175,5 +1189,42 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     out.log_det = log_r(leaving / approach_rate);
     out.resolved = true;
     return out;
+}
+
+// General surface met.stop - WALLS crossed at met.hit (the surface branch
+// of resolve): the crossing applied, counted and, in `crossed`, its region,
+// ln |det S| and flags; the rest of the step is stepped again unless the
+// motion now slides (resolve_impacts' next pass slides it).
+fn cross_surface(p: Params, omega: real, met: Met, r_in: Resolution) -> Resolution {
+    var r = r_in;
+    let phase_c = rotate(r.phase0, cos_sin(omega * met.hit.s));
+    r.done = r.done + met.hit.s;
+    let crossing = cross(p, met.stop - WALLS, phase_c, met.hit.y);
+    r.slowest = min(r.slowest, crossing.approach);
+    if (crossing.counted) {
+        r.crossings[met.stop] = r.crossings[met.stop] + 1u;
+    }
+    if (crossing.rank_loss) {
+        r.rank_loss = max(r.rank_loss, 1u);
+    }
+    crossed.region = crossing.region;
+    crossed.log_flux = crossed.log_flux + crossing.log_det;
+    crossed.sliding = crossed.sliding || crossing.sliding;
+    r.phase0 = phase_c;
+    if (!crossing.resolved) {
+        // Flagged: the rest of the step in the field now in force, and the
+        // step ends there.
+        r.y0 = met.hit.y;
+        r.restep = true;
+        r.unresolved = true;
+        r.chattering = crossing.chattering;
+        return r;
+    }
+    if (crossing.slides) {
+        crossed.sliding_phases = crossed.sliding_phases + 1u;
+    }
+    r.y0 = crossing.y;
+    r.restep = !is_sliding(crossing.region);
+    return r;
 }
 #endif
