@@ -68,6 +68,7 @@ struct Trajectory {
 #endif
 }
 
+// Trajectory record at `base` in traj, with its state y and counts c.
 fn load_trajectory(base: u32, y: State, c: vec4<u32>) -> Trajectory {
     var tr: Trajectory;
     tr.y = y;
@@ -106,7 +107,9 @@ struct Stepping {
     omega: real,
 }
 
-// Trajectory t of `lane` advanced by this dispatch's steps.
+// Trajectory t of `lane` advanced by this dispatch's steps, up to the end
+// of the current part (the CPU's part_map_many and its step loop,
+// integrate::steps_of).
 fn advance(lane: u32, t: u32, tr_in: Trajectory) -> Trajectory {
     let p = load_params(lane);
     let lb = lane * LANE_STRIDE;
@@ -171,21 +174,22 @@ fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajector
         var comp1 = tr.comp;
         var pending = false;
         for (; k < end; k = k + 1u) {
-            if (resting_on(walls, tr.y) < WALLS) {
+            let y = tr.y;
+            if (resting_on(walls, y) < WALLS) {
                 pending = true;
                 break;
             }
-            let inc = rk4_increment(p, tr.phase, step.half, tr.y, step.h);
+            let inc = rk4_increment(p, tr.phase, step.half, y, step.h);
 #ifdef COMPENSATED
             // Kahan summation: the increment of one step is far smaller
             // than y, and f32 would drop its low bits every step.
             let corrected = inc.y - tr.comp;
-            y1 = select(tr.y + corrected, tr.y, control.opaque_zero != 0u);
-            comp1 = (y1 - tr.y) - corrected;
+            y1 = select(y + corrected, y, control.opaque_zero != 0u);
+            comp1 = (y1 - y) - corrected;
 #else
-            y1 = tr.y + inc.y;
+            y1 = y + inc.y;
 #endif
-            if (reaches_a_stop(walls, tr.y, step.h, y1)) {
+            if (reaches_a_stop(walls, y, step.h, y1)) {
                 pending = true;
                 break;
             }
@@ -316,20 +320,21 @@ fn record(tr_in: Trajectory, t: u32, w: WallStep, y1: State, comp1: State) -> Tr
     return tr;
 }
 #else
-// The steps up to `end` of a system without stops: plain RK4.
+// The steps up to `end` of a system without stops: plain RK4 (rk4::step).
 fn plain_steps(p: Params, step: Stepping, end: u32, tr_in: Trajectory) -> Trajectory {
     var tr = tr_in;
     for (var k = tr.c.x; k < end; k = k + 1u) {
         let next_phase = rotate(rotate(tr.phase, step.half), step.half);
-        let inc = rk4_increment(p, tr.phase, step.half, tr.y, step.h);
+        let y = tr.y;
+        let inc = rk4_increment(p, tr.phase, step.half, y, step.h);
 #ifdef COMPENSATED
         // Kahan summation: the increment of one step is far smaller than
         // y, and f32 would drop its low bits every step.
         let corrected = inc.y - tr.comp;
-        let y1 = select(tr.y + corrected, tr.y, control.opaque_zero != 0u);
-        tr.comp = (y1 - tr.y) - corrected;
+        let y1 = select(y + corrected, y, control.opaque_zero != 0u);
+        tr.comp = (y1 - y) - corrected;
 #else
-        let y1 = tr.y + inc.y;
+        let y1 = y + inc.y;
 #endif
         tr.y = y1;
         tr.phase = next_phase;

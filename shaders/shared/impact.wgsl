@@ -47,17 +47,17 @@ fn stop(walls: Stops, j: u32) -> Stop {
     return Stop(walls.position[j], walls.restitution[j], WALL_COORDINATE[j], WALL_VELOCITY[j], WALL_SIDE[j]);
 }
 
-// How far y lies beyond the stop (> 0: behind it).
+// How far y lies beyond the stop (> 0: behind it; Wall::gap).
 fn gap(w: Stop, y: State) -> real {
     return w.side * (y[w.coordinate] - w.position);
 }
 
-// The speed towards the stop (> 0: approaching).
+// The speed towards the stop (> 0: approaching; Wall::speed).
 fn speed(w: Stop, y: State) -> real {
     return w.side * y[w.velocity];
 }
 
-// y moved onto the stop with approach speed v.
+// y moved onto the stop with approach speed v (Wall::on_wall).
 fn on_stop(w: Stop, y: State, v: real) -> State {
     var out = y;
     out[w.coordinate] = w.position;
@@ -157,7 +157,8 @@ struct WallStep {
 }
 
 // The acceleration towards the stop at rest on it (y moved onto it at
-// speed 0) at `phase`: > 0 presses the mass into the stop.
+// speed 0) at `phase`: > 0 presses the mass into the stop (pressing in
+// impact.rs).
 fn pressing(p: Params, w: Stop, phase: vec2<real>, y: State) -> real {
     return w.side * rhs(p, phase, on_stop(w, y, real(0.0)))[w.velocity];
 }
@@ -260,7 +261,8 @@ fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Ste
 // over them, as in the step loop's tests: a loop of one pass (the seed's
 // single stop) still cost lavapipe 10% of the whole kernel's time.
 
-// y moved back onto a stop it lies behind, moving towards it at most.
+// y moved back onto a stop it lies behind, moving towards it at most
+// (clamp_to_wall).
 fn clamp_to(w: Stop, y: State) -> State {
     if (gap(w, y) > real(0.0)) {
         return on_stop(w, y, min(speed(w, y), real(0.0)));
@@ -334,7 +336,8 @@ fn locate(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, 
 #endif
 }
 
-// Stop j's impact in the rest of a step, if any.
+// Stop j's impact in the rest of a step, if any (the stops' call of
+// locate_linear or locate_newton in impact.rs's resolve).
 fn locate_stop(p: Params, omega: real, walls: Stops, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
     let w = stop(walls, j);
     return locate(p, omega, walls, j, phase0, y0, h, y1, stop_values(w, y0), stop_values(w, y1));
@@ -363,7 +366,7 @@ fn earlier(met: Met, found: Hit, j: u32) -> Met {
 }
 
 // The first stop or surface met in the step [0, h] from (phase0, y0) to y1
-// (NONE_MET: none).
+// (NONE_MET: none): the search for the earliest event in resolve.
 fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
     var met = Met(Hit(false, real(0.0), y0), NONE_MET);
     if (WALLS > 0u) {
@@ -832,7 +835,27 @@ struct Equivalent {
 }
 
 fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
-    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let s = switch_sides(p, firstTrailingBit(p.region >> SLIDING_SHIFT), phase, y);
+    let alpha = s.a / (s.a - s.b);
+    return Equivalent(s.lo + alpha * (s.hi - s.lo), alpha, s.margins);
+}
+
+// Switch j's two sides at y, for a trajectory on either side of it or
+// sliding on it: the fields lo (g < 0) and hi, their rates a and b along
+// ∇g, and the stick margins (L - m, L + m), m = (a + b)/2, L the stick
+// limit or the half jump (a - b)/2; both > 0, the switch holds the motion
+// (surface::joining_margins, and the sides of surface::equivalent_on, for
+// one switch). What a crossing decides sliding from and what the sliding
+// motion leaves by, written once.
+struct SwitchSides {
+    lo: State,
+    hi: State,
+    a: real,
+    b: real,
+    margins: vec2<real>,
+}
+
+fn switch_sides(p: Params, j: u32, phase: vec2<real>, y: State) -> SwitchSides {
     let bit = SURFACE_BIT[j];
     var lo_p = p;
     lo_p.region = (p.region & SIDES) & ~(1u << bit);
@@ -843,10 +866,9 @@ fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
     let n = surface_gradient(p, phase, y, j);
     let a = dot_in_order(n, lo);
     let b = dot_in_order(n, hi);
-    let alpha = a / (a - b);
     let mean = real(0.5) * (a + b);
     let limit = stick_limit(p, y, j, real(0.5) * (a - b));
-    return Equivalent(lo + alpha * (hi - lo), alpha, vec2<real>(limit - mean, limit + mean));
+    return SwitchSides(lo, hi, a, b, vec2<real>(limit - mean, limit + mean));
 }
 
 // The sliding field (NaN where the combination does not exist, as the
@@ -860,7 +882,8 @@ fn sliding_field(p: Params, phase: vec2<real>, y: State) -> State {
     return e.field;
 }
 
-// The switch still holds the motion: both margins > 0.
+// The switch still holds the motion: both margins > 0 (as the CPU's
+// slide and cross test them).
 fn holds(m: vec2<real>) -> bool {
     return m.x > real(0.0) && m.y > real(0.0);
 }
@@ -1023,7 +1046,8 @@ fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues, h
     return hit;
 }
 
-// Surface j's oriented distance and rate at (s into the step from phase0, y).
+// Surface j's oriented distance and rate at (s into the step from phase0,
+// y): the `distance` and `rate` of `locate` in impact.rs for a surface.
 fn surface_at(p: Params, omega: real, j: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
     return oriented(p.region, j, surface_values(p, rotate(phase0, cos_sin(omega * s)), y));
 }
@@ -1138,20 +1162,11 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         out.y = r.y;
         return out;
     }
-    // The rates a, b of the two sides' fields along ∇g (joining_margins:
-    // the stick limit, or Filippov's, the half jump).
-    var below = p;
-    below.region = p.region & ~(1u << bit);
-    var above = p;
-    above.region = p.region | (1u << bit);
-    let n = surface_gradient(p, phase, y, j);
-    let a = dot_in_order(n, field(below, phase, y));
-    let b = dot_in_order(n, field(above, phase, y));
-    let m = real(0.5) * (a + b);
-    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
-    let plus = limit - m;
-    let minus = limit + m;
-    if (plus > real(0.0) && minus > real(0.0)) {
+    // The stick margins of the two sides (joining_margins: the stick
+    // limit, or Filippov's, the half jump). The trajectory is on one side
+    // (resolve_impacts slides a sliding one before it looks for crossings).
+    let margins = switch_sides(p, j, phase, y).margins;
+    if (holds(margins)) {
         // Both fields point into the switch (or the stick limit holds the
         // motion): it slides, where its Filippov combination exists, and
         // forgets how far from the surface it came (one direction); the
@@ -1170,7 +1185,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         out.log_det = zero / zero;
         return out;
     }
-    let to_plus = plus <= minus;
+    let to_plus = margins.x <= margins.y;
     if (to_plus == (((p.region >> bit) & 1u) == 1u)) {
         // Only touched the surface (in rounding): no crossing.
         out.counted = false;
