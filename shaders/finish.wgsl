@@ -41,71 +41,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // iterations where that matters (grazing).
         var nonlinearity = 0.0f;
 #ifdef LYAPUNOV
-        for (var i = 0u; i < DIM; i = i + 1u) {
-            // Column i from the copy at x + δe_i and, for central
-            // differences, the one at x - δe_i (else the reference itself).
-            var plus = r + 1u + i;
-#ifdef CENTRAL
-            var minus = r + 1u + DIM + i;
-            let step_plus = deltas[lane * 2u * DIM + i];
-            let step_minus = deltas[lane * 2u * DIM + DIM + i];
-            flags = flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
-            // A copy that met a stop a different number of times than the
-            // reference crossed a grazing boundary: its difference is O(1)
-            // wrong. Difference on the other side, where the map is smooth.
-            let same_plus = same_impacts(r, plus) && (counts[plus].z & FLAG_BEHIND_WALL) == 0u;
-            let same_minus = same_impacts(r, minus) && (counts[minus].z & FLAG_BEHIND_WALL) == 0u;
-            var step = step_plus + step_minus;
-            if (!same_plus && same_minus) {
-                plus = r;
-                step = step_minus;
-            } else if (same_plus && !same_minus) {
-                minus = r;
-                step = step_plus;
-            }
-#else
-            let minus = r;
-            let step = deltas[lane * DIM + i];
-            flags = flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
+        let columns = write_columns(lane, r, slot);
+        flags = flags | columns.flags;
+        nonlinearity = columns.nonlinearity;
 #endif
-            // The two images are close, so their difference is exact; their
-            // low bits are what the column is made of.
-            var difference = load_state(plus * TRAJ_STRIDE) - load_state(minus * TRAJ_STRIDE);
-#ifdef COMPENSATED
-            // Each compensation holds the rounding its state still owes
-            // (the exact sum is y - comp): without it, f32 would round every
-            // column by up to ulp(y)/δ.
-            difference = difference - (load_state(plus * TRAJ_STRIDE + DIM) - load_state(minus * TRAJ_STRIDE + DIM));
-#endif
-            for (var k = 0u; k < DIM; k = k + 1u) {
-                jac[slot * DIM * DIM + k * DIM + i] = difference[k] / step;
-            }
-#ifdef WALL
-            nonlinearity = max(nonlinearity, max(departure(r, plus), departure(r, minus)));
-#endif
-#ifdef CENTRAL
-            if (plus != r && minus != r) {
-                nonlinearity = max(nonlinearity, asymmetry(r, plus, minus));
-            }
-#endif
-        }
-#endif
-#ifdef POINTS
-        for (var k = 0u; k < DIM; k = k + 1u) {
-            points[slot * DIM + k] = y[k];
-        }
-#endif
-        var scale = real(0.0);
-        for (var k = 0u; k < DIM; k = k + 1u) {
-            scale = max(scale, abs(y[k]));
-        }
-        summary[SUMMARY_STRIDE * slot] = vec4<u32>(cr.y, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
-#ifdef WALL
-        summary[SUMMARY_STRIDE * slot + 1u] = crossings[r];
-#endif
-#ifdef SURFACES
-        fluxes[slot] = traj[r * TRAJ_STRIDE + TRAJ_FLUX];
-#endif
+        write_summary(r, slot, y, cr.y, flags, nonlinearity);
         if (last) {
             cr.w = cr.w + 1u;
         }
@@ -134,7 +74,78 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     crossings[r] = vec4<u32>();
 #endif
 #ifdef LYAPUNOV
-    // δ relative to the state's size, as on the CPU: δ·max(1, ‖y‖∞).
+    reseed_copies(lane, r, y, phase, comp, cr);
+#endif
+}
+
+#ifdef LYAPUNOV
+// The flags the copies raise in the part, and how far they left the
+// linear regime.
+struct Columns {
+    flags: u32,
+    nonlinearity: f32,
+}
+
+// The part's estimated Jacobian of lane (reference r) into ring slot
+// `slot`, a column per coordinate from its copies (the CPU's
+// jacobian::Copies::difference).
+fn write_columns(lane: u32, r: u32, slot: u32) -> Columns {
+    var out = Columns(0u, 0.0f);
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        // Column i from the copy at x + δe_i and, for central
+        // differences, the one at x - δe_i (else the reference itself).
+        var plus = r + 1u + i;
+#ifdef CENTRAL
+        var minus = r + 1u + DIM + i;
+        let step_plus = deltas[lane * 2u * DIM + i];
+        let step_minus = deltas[lane * 2u * DIM + DIM + i];
+        out.flags = out.flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
+        // A copy that met a stop a different number of times than the
+        // reference crossed a grazing boundary: its difference is O(1)
+        // wrong. Difference on the other side, where the map is smooth.
+        let same_plus = same_impacts(r, plus) && (counts[plus].z & FLAG_BEHIND_WALL) == 0u;
+        let same_minus = same_impacts(r, minus) && (counts[minus].z & FLAG_BEHIND_WALL) == 0u;
+        var step = step_plus + step_minus;
+        if (!same_plus && same_minus) {
+            plus = r;
+            step = step_minus;
+        } else if (same_plus && !same_minus) {
+            minus = r;
+            step = step_plus;
+        }
+#else
+        let minus = r;
+        let step = deltas[lane * DIM + i];
+        out.flags = out.flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
+#endif
+        // The two images are close, so their difference is exact; their
+        // low bits are what the column is made of.
+        var difference = load_state(plus * TRAJ_STRIDE) - load_state(minus * TRAJ_STRIDE);
+#ifdef COMPENSATED
+        // Each compensation holds the rounding its state still owes (the
+        // exact sum is y - comp): without it, f32 would round every column
+        // by up to ulp(y)/δ.
+        difference = difference - (load_state(plus * TRAJ_STRIDE + DIM) - load_state(minus * TRAJ_STRIDE + DIM));
+#endif
+        for (var k = 0u; k < DIM; k = k + 1u) {
+            jac[slot * DIM * DIM + k * DIM + i] = difference[k] / step;
+        }
+#ifdef WALL
+        out.nonlinearity = max(out.nonlinearity, max(departure(r, plus), departure(r, minus)));
+#endif
+#ifdef CENTRAL
+        if (plus != r && minus != r) {
+            out.nonlinearity = max(out.nonlinearity, asymmetry(r, plus, minus));
+        }
+#endif
+    }
+    return out;
+}
+
+// The copies of lane (reference r) seeded from the reference's state y, at
+// its phase and with its compensation: δ relative to the state's size, as
+// on the CPU, δ·max(1, ‖y‖∞).
+fn reseed_copies(lane: u32, r: u32, y: State, phase: vec2<real>, comp: State, cr: vec4<u32>) {
     var size = real(1.0);
     for (var k = 0u; k < DIM; k = k + 1u) {
         size = max(size, abs(y[k]));
@@ -165,6 +176,29 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 #endif
 #endif
     }
+}
+#endif
+
+// The part's record of the reference r in ring slot `slot`: its point,
+// summary (impacts, flags, size, nonlinearity), impacts per stop and
+// Σ ln |det S| (what the CPU's IterationStats and points hold; read back
+// by src/backend/gpu/sweep.rs).
+fn write_summary(r: u32, slot: u32, y: State, impacts: u32, flags: u32, nonlinearity: f32) {
+#ifdef POINTS
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        points[slot * DIM + k] = y[k];
+    }
+#endif
+    var scale = real(0.0);
+    for (var k = 0u; k < DIM; k = k + 1u) {
+        scale = max(scale, abs(y[k]));
+    }
+    summary[SUMMARY_STRIDE * slot] = vec4<u32>(impacts, flags, bitcast<u32>(f32(scale)), bitcast<u32>(nonlinearity));
+#ifdef WALL
+    summary[SUMMARY_STRIDE * slot + 1u] = crossings[r];
+#endif
+#ifdef SURFACES
+    fluxes[slot] = traj[r * TRAJ_STRIDE + TRAJ_FLUX];
 #endif
 }
 

@@ -25,52 +25,143 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if ((c.z & FLAG_NONFINITE) != 0u) {
         return;
     }
-#ifdef SURFACES
-    // The lane's parameters and the trajectory's region (set below).
-    var p = load_params(lane);
-#else
-    let p = load_params(lane);
-#endif
     let base = t * TRAJ_STRIDE;
     var y = load_state(base);
 #ifdef MAP
     if (c.x < 1u) {
-        y = map_step(p, y);
+        y = map_step(load_params(lane), y);
         c.x = 1u;
     }
 #else
-    var comp = load_state(base + DIM);
-    var phase = vec2<real>(traj[base + 2u * DIM], traj[base + 2u * DIM + 1u]);
+    let tr = advance(lane, t, load_trajectory(base, y, c));
+    store_trajectory(base, tr);
+    y = tr.y;
+    c = tr.c;
+#endif
+    if (!is_finite(y)) {
+        c.z = c.z | FLAG_NONFINITE;
+    }
+    if (loop_budget_exhausted()) {
+        c.z = c.z | FLAG_TRUNCATED;
+    }
+    store_state(base, y);
+    counts[t] = c;
+}
+
+#ifndef MAP
+// A flow's trajectory as a dispatch advances it: its state, the
+// compensation of the state, the forcing phase and counts[t]; with stops,
+// the slowest impact speed of the iteration so far; with surfaces, its
+// region of the switches and the part's Σ ln |det S| (the buffers' layout
+// is in bindings.wgsl).
+struct Trajectory {
+    y: State,
+    comp: State,
+    phase: vec2<real>,
+    c: vec4<u32>,
+#ifdef WALL
+    slowest: real,
+#endif
+#ifdef SURFACES
+    region: u32,
+    flux: real,
+#endif
+}
+
+// Trajectory record at `base` in traj, with its state y and counts c.
+fn load_trajectory(base: u32, y: State, c: vec4<u32>) -> Trajectory {
+    var tr: Trajectory;
+    tr.y = y;
+    tr.comp = load_state(base + DIM);
+    tr.phase = vec2<real>(traj[base + 2u * DIM], traj[base + 2u * DIM + 1u]);
+    tr.c = c;
+#ifdef WALL
+    tr.slowest = traj[base + TRAJ_SLOWEST];
+#endif
+#ifdef SURFACES
+    tr.region = u32(traj[base + TRAJ_REGION]);
+    tr.flux = traj[base + TRAJ_FLUX];
+#endif
+    return tr;
+}
+
+// The trajectory's record past its state (which main stores with counts[t]).
+fn store_trajectory(base: u32, tr: Trajectory) {
+    store_state(base + DIM, tr.comp);
+    traj[base + 2u * DIM] = tr.phase.x;
+    traj[base + 2u * DIM + 1u] = tr.phase.y;
+#ifdef WALL
+    traj[base + TRAJ_SLOWEST] = tr.slowest;
+#endif
+#ifdef SURFACES
+    traj[base + TRAJ_REGION] = real(tr.region);
+    traj[base + TRAJ_FLUX] = tr.flux;
+#endif
+}
+
+// A lane's step: h, the rotation (cos, sin)(ωh/2) of the forcing phase
+// through half a step, and ω.
+struct Stepping {
+    h: real,
+    half: vec2<real>,
+    omega: real,
+}
+
+// Trajectory t of `lane` advanced by this dispatch's steps, up to the end
+// of the current part (the CPU's part_map_many and its step loop,
+// integrate::steps_of).
+fn advance(lane: u32, t: u32, tr_in: Trajectory) -> Trajectory {
+    let p = load_params(lane);
     let lb = lane * LANE_STRIDE;
-    let h = lanes[lb + LANE_H];
-    let half = vec2<real>(lanes[lb + LANE_HALF], lanes[lb + LANE_HALF + 1u]);
-    let omega = lanes[lb + LANE_OMEGA];
+    let step = Stepping(lanes[lb + LANE_H], vec2<real>(lanes[lb + LANE_HALF], lanes[lb + LANE_HALF + 1u]), lanes[lb + LANE_OMEGA]);
     // While averaging, a dispatch stops at the end of the current part,
     // where the finish kernel re-seeds the copies.
     var part_end = control.steps_per_period;
     if (control.transient == 0u) {
-        part_end = (c.x / control.part_steps + 1u) * control.part_steps;
+        part_end = (tr_in.c.x / control.part_steps + 1u) * control.part_steps;
     }
-    let end = min(c.x + control.chunk_steps, part_end);
+    let end = min(tr_in.c.x + control.chunk_steps, part_end);
 #ifdef WALL
-    var slowest = traj[base + TRAJ_SLOWEST];
+    var tr = wall_steps(p, t, step, end, tr_in);
+#else
+    var tr = plain_steps(p, step, end, tr_in);
+#endif
+    tr.c.x = end;
+    return tr;
+}
+
+#ifdef WALL
+// The steps up to `end` of a system with stops (and surfaces). The hot
+// loop only steps and detects: a step whose plain image reaches a stop or
+// turns back inside it (or may cross a surface), or a mass at rest on a
+// stop, ends it, and resolve_step takes that one step and goes back. With
+// the resolution inlined into every step, lavapipe ran the kernel 21 times
+// slower than the kernel without a wall, even when no impact happened
+// (lavapipe runs masked code in full: docs/BENCHMARKS.md, "What lavapipe
+// runs").
+fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajectory) -> Trajectory {
+#ifdef SURFACES
+    // The lane's parameters and the trajectory's region (set below).
+    var p = p_lane;
+#else
+    let p = p_lane;
+#endif
+    var tr = tr_in;
     let walls = stops_of(p);
-    var k = c.x;
+    var k = tr.c.x;
 #ifdef SURFACES
     // The region: from the state at the start of a part (of the whole
     // iteration in the transient), as the CPU path finds it at the start
     // of each call; else carried over from the last dispatch.
     let part_start = select(k % control.part_steps == 0u, k == 0u, control.transient != 0u);
     if (part_start) {
-        p.region = region_of(p, phase, y);
-    } else {
-        p.region = u32(traj[base + TRAJ_REGION]);
+        tr.region = region_of(p, tr.phase, tr.y);
     }
-    var flux = traj[base + TRAJ_FLUX];
+    p.region = tr.region;
     // The surfaces' values at the step's start (carried from step to
     // step, as the CPU's at_start).
-    var before = surface_values(p, phase, y);
-    if ((c.z & FLAG_SLIDING) != 0u) {
+    var before = surface_values(p, tr.phase, tr.y);
+    if ((tr.c.z & FLAG_SLIDING) != 0u) {
         // A lane flagged sliding is the CPU's to recompute: its
         // trajectories only count their steps from here on (stepping on
         // from a state the kernels did not integrate costs, and can run
@@ -78,33 +169,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         k = end;
     }
 #endif
-    // The hot loop only steps and detects: a step whose plain image reaches
-    // a stop or turns back inside it, or a mass at rest on a stop, ends
-    // it, and the resolution path below takes that one step and goes back.
-    // With the resolution inlined into every step, lavapipe ran the kernel
-    // 21 times slower than the kernel without a wall, even when no impact
-    // happened (lavapipe runs masked code in full: docs/BENCHMARKS.md,
-    // "What lavapipe runs").
     loop {
-        var y1 = y;
-        var comp1 = comp;
+        var y1 = tr.y;
+        var comp1 = tr.comp;
         var pending = false;
         for (; k < end; k = k + 1u) {
+            let y = tr.y;
             if (resting_on(walls, y) < WALLS) {
                 pending = true;
                 break;
             }
-            let inc = rk4_increment(p, phase, half, y, h);
+            let inc = rk4_increment(p, tr.phase, step.half, y, step.h);
 #ifdef COMPENSATED
             // Kahan summation: the increment of one step is far smaller
             // than y, and f32 would drop its low bits every step.
-            let corrected = inc.y - comp;
+            let corrected = inc.y - tr.comp;
             y1 = select(y + corrected, y, control.opaque_zero != 0u);
             comp1 = (y1 - y) - corrected;
 #else
             y1 = y + inc.y;
 #endif
-            if (reaches_a_stop(walls, y, h, y1)) {
+            if (reaches_a_stop(walls, y, step.h, y1)) {
                 pending = true;
                 break;
             }
@@ -116,132 +201,145 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             let after = surface_values(p, inc.phase, y1);
-            if (crosses_a_surface(p.region, before, after, h)) {
+            if (crosses_a_surface(p.region, before, after, step.h)) {
                 pending = true;
                 break;
             }
             before = after;
 #endif
-            y = y1;
-            comp = comp1;
-            phase = rotate(rotate(phase, half), half);
+            tr.y = y1;
+            tr.comp = comp1;
+            tr.phase = rotate(rotate(tr.phase, step.half), step.half);
         }
         if (!pending) {
             break;
         }
-        // Step k meets a stop (or starts at rest on one).
-        let next_phase = rotate(rotate(phase, half), half);
-        // At rest on a stop, from the step's start or from an impact inside
-        // it: stuck_step takes (the rest of) the step, called here only
-        // (see resolve_impacts).
-        var stuck = resting_on(walls, y);
-        var rest_at = real(0.0);
-        var rest_phase = phase;
-        if (stuck == WALLS) {
-#ifdef SURFACES
-            crossed = Crossed(p.region, real(0.0), false, 0u);
-#endif
-            let w = resolve_impacts(p, walls, omega, phase, y, h, y1);
-#ifdef SURFACES
-            p.region = crossed.region;
-            flux = flux + crossed.log_flux;
-            if (crossed.sliding) {
-                c.z = c.z | FLAG_SLIDING;
-            }
-            // The sliding phases entered, counted in the flags' high half.
-            c.z = c.z + (min(crossed.sliding_phases, 0xffffu - (c.z >> 16u)) << 16u);
-#endif
-            // Whatever the stops did (an impact, a rest, a departure from
-            // rest), the step ends where resolve_impacts says; the
-            // compensation belongs to the plain step it replaced.
-            if (any(w.y != y1)) {
-                y = w.y;
-                comp = State();
-            } else {
-                y = y1;
-                comp = comp1;
-            }
-            c.y = c.y + w.impacts;
-            // Straight to the buffer: a vector kept live across the step
-            // loop would cost every step (registers), for a rare event.
-            crossings[t] = crossings[t] + w.crossings;
-            slowest = min(slowest, w.slowest);
-            if (w.chattering) {
-                c.z = c.z | FLAG_CHATTERING;
-#ifdef SURFACES
-                // Crossings of a general event that accumulate (a ball
-                // locking onto a vibrating table) are held on the surface
-                // by the CPU path (impact::hold_step), not here: the lane
-                // is the CPU's.
-                c.z = c.z | FLAG_SLIDING;
-#endif
-            }
-            c.z = c.z | rank_flags(w.rank_loss);
-            stuck = w.stuck;
-            rest_at = w.rest_at;
-            rest_phase = w.rest_phase;
-        }
-        if (stuck < WALLS) {
-#ifdef SURFACES
-            // Released from a stop, the CPU resolves the rest of the step
-            // with its surfaces, where stuck_step takes one plain step:
-            // the lane is the CPU's, as a motion the kernels cannot slide.
-            c.z = c.z | FLAG_SLIDING;
-#endif
-            let w = stuck_step(p, walls, stuck, omega, rest_phase, y, h - rest_at);
-            y = w.y;
-            comp = State();
-            c.z = c.z | rank_flags(w.rank_loss);
-        }
-        phase = next_phase;
+        tr = resolve_step(p, walls, t, step, y1, comp1, tr);
         k = k + 1u;
 #ifdef SURFACES
-        before = surface_values(p, phase, y);
+        p.region = tr.region;
+        before = surface_values(p, tr.phase, tr.y);
         // Flagged sliding, the lane is the CPU's from here on, at once as
         // at a dispatch's start: stepping on to the dispatch's end through
         // a motion the kernels cannot follow left the lane wherever the
         // dispatch ended, so adapters with other dispatch lengths (an
         // H100's whole periods, lavapipe's 256 steps) ended it apart.
-        if ((c.z & FLAG_SLIDING) != 0u) {
+        if ((tr.c.z & FLAG_SLIDING) != 0u) {
             k = end;
         }
 #endif
     }
+    return tr;
+}
+
+// The step from tr (its plain RK4 image y1, with compensation comp1) that
+// meets a stop or surface, or starts at rest on a stop: resolve_impacts
+// applies its events, and a mass at rest, from the step's start or from an
+// impact inside it, takes (the rest of) the step in stuck_step, called
+// here only (see resolve_impacts). The CPU's impact::step.
+#ifdef SURFACES
+fn resolve_step(p_lane: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Trajectory {
+    // A copy, whose region follows the crossings.
+    var p = p_lane;
 #else
-    for (var k = c.x; k < end; k = k + 1u) {
-        let next_phase = rotate(rotate(phase, half), half);
-        let inc = rk4_increment(p, phase, half, y, h);
+fn resolve_step(p: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Trajectory {
+#endif
+    var tr = tr_in;
+    let next_phase = rotate(rotate(tr.phase, step.half), step.half);
+    var stuck = resting_on(walls, tr.y);
+    var rest_at = real(0.0);
+    var rest_phase = tr.phase;
+    if (stuck == WALLS) {
+#ifdef SURFACES
+        crossed = Crossed(p.region, real(0.0), false, 0u);
+#endif
+        let w = resolve_impacts(p, walls, step.omega, tr.phase, tr.y, step.h, y1);
+        tr = record(tr, t, w, y1, comp1);
+#ifdef SURFACES
+        p.region = tr.region;
+#endif
+        stuck = w.stuck;
+        rest_at = w.rest_at;
+        rest_phase = w.rest_phase;
+    }
+    if (stuck < WALLS) {
+#ifdef SURFACES
+        // Released from a stop, the CPU resolves the rest of the step
+        // with its surfaces, where stuck_step takes one plain step:
+        // the lane is the CPU's, as a motion the kernels cannot slide.
+        tr.c.z = tr.c.z | FLAG_SLIDING;
+#endif
+        let w = stuck_step(p, walls, stuck, step.omega, rest_phase, tr.y, step.h - rest_at);
+        tr.y = w.y;
+        tr.comp = State();
+        tr.c.z = tr.c.z | rank_flags(w.rank_loss);
+    }
+    tr.phase = next_phase;
+    return tr;
+}
+
+// What resolve_impacts did in the step (w, and with surfaces `crossed`),
+// recorded in the trajectory: its state, impacts and crossings, slowest
+// impact, flags, region and Σ ln |det S|.
+fn record(tr_in: Trajectory, t: u32, w: WallStep, y1: State, comp1: State) -> Trajectory {
+    var tr = tr_in;
+#ifdef SURFACES
+    tr.region = crossed.region;
+    tr.flux = tr.flux + crossed.log_flux;
+    if (crossed.sliding) {
+        tr.c.z = tr.c.z | FLAG_SLIDING;
+    }
+    // The sliding phases entered, counted in the flags' high half.
+    tr.c.z = tr.c.z + (min(crossed.sliding_phases, 0xffffu - (tr.c.z >> 16u)) << 16u);
+#endif
+    // Whatever the stops did (an impact, a rest, a departure from rest),
+    // the step ends where resolve_impacts says; the compensation belongs
+    // to the plain step it replaced.
+    if (any(w.y != y1)) {
+        tr.y = w.y;
+        tr.comp = State();
+    } else {
+        tr.y = y1;
+        tr.comp = comp1;
+    }
+    tr.c.y = tr.c.y + w.impacts;
+    // Straight to the buffer: a vector kept live across the step loop
+    // would cost every step (registers), for a rare event.
+    crossings[t] = crossings[t] + w.crossings;
+    tr.slowest = min(tr.slowest, w.slowest);
+    if (w.chattering) {
+        tr.c.z = tr.c.z | FLAG_CHATTERING;
+#ifdef SURFACES
+        // Crossings of a general event that accumulate (a ball locking
+        // onto a vibrating table) are held on the surface by the CPU path
+        // (impact::hold_step), not here: the lane is the CPU's.
+        tr.c.z = tr.c.z | FLAG_SLIDING;
+#endif
+    }
+    tr.c.z = tr.c.z | rank_flags(w.rank_loss);
+    return tr;
+}
+#else
+// The steps up to `end` of a system without stops: plain RK4 (rk4::step).
+fn plain_steps(p: Params, step: Stepping, end: u32, tr_in: Trajectory) -> Trajectory {
+    var tr = tr_in;
+    for (var k = tr.c.x; k < end; k = k + 1u) {
+        let next_phase = rotate(rotate(tr.phase, step.half), step.half);
+        let y = tr.y;
+        let inc = rk4_increment(p, tr.phase, step.half, y, step.h);
 #ifdef COMPENSATED
         // Kahan summation: the increment of one step is far smaller than
         // y, and f32 would drop its low bits every step.
-        let corrected = inc.y - comp;
+        let corrected = inc.y - tr.comp;
         let y1 = select(y + corrected, y, control.opaque_zero != 0u);
-        comp = (y1 - y) - corrected;
+        tr.comp = (y1 - y) - corrected;
 #else
         let y1 = y + inc.y;
 #endif
-        y = y1;
-        phase = next_phase;
+        tr.y = y1;
+        tr.phase = next_phase;
     }
-#endif
-    c.x = end;
-    store_state(base + DIM, comp);
-    traj[base + 2u * DIM] = phase.x;
-    traj[base + 2u * DIM + 1u] = phase.y;
-#ifdef WALL
-    traj[base + TRAJ_SLOWEST] = slowest;
-#endif
-#ifdef SURFACES
-    traj[base + TRAJ_REGION] = real(p.region);
-    traj[base + TRAJ_FLUX] = flux;
-#endif
-#endif
-    if (!is_finite(y)) {
-        c.z = c.z | FLAG_NONFINITE;
-    }
-    if (loop_budget_exhausted()) {
-        c.z = c.z | FLAG_TRUNCATED;
-    }
-    store_state(base, y);
-    counts[t] = c;
+    return tr;
 }
+#endif
+#endif

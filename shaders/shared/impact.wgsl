@@ -47,17 +47,17 @@ fn stop(walls: Stops, j: u32) -> Stop {
     return Stop(walls.position[j], walls.restitution[j], WALL_COORDINATE[j], WALL_VELOCITY[j], WALL_SIDE[j]);
 }
 
-// How far y lies beyond the stop (> 0: behind it).
+// How far y lies beyond the stop (> 0: behind it; Wall::gap).
 fn gap(w: Stop, y: State) -> real {
     return w.side * (y[w.coordinate] - w.position);
 }
 
-// The speed towards the stop (> 0: approaching).
+// The speed towards the stop (> 0: approaching; Wall::speed).
 fn speed(w: Stop, y: State) -> real {
     return w.side * y[w.velocity];
 }
 
-// y moved onto the stop with approach speed v.
+// y moved onto the stop with approach speed v (Wall::on_wall).
 fn on_stop(w: Stop, y: State, v: real) -> State {
     var out = y;
     out[w.coordinate] = w.position;
@@ -65,15 +65,25 @@ fn on_stop(w: Stop, y: State, v: real) -> State {
     return out;
 }
 
-// Whether a step of size h from y to y1 may meet the stop: it ends behind
-// it, or the velocity turns inside it within reach of it (an excursion
-// between the ends; twin of reaches_wall).
+// The stop's (gap, speed) at y: the value and rate its impact is detected
+// and located on, as a surface's oriented (g, rate) is.
+fn stop_values(w: Stop, y: State) -> vec2<real> {
+    return vec2<real>(gap(w, y), speed(w, y));
+}
+
+// The stop test of stops and surfaces alike: whether a step of size h whose
+// event value and rate go from `start` to `end` may cross (value > 0 across):
+// it ends across, or the rate turns from approaching to leaving inside it
+// within reach (an excursion between the ends). Twin of reaches_wall and
+// surface::may_cross, the same test written for each.
+fn may_meet(start: vec2<real>, end: vec2<real>, h: real) -> bool {
+    return end.x > real(0.0) || (start.y > real(0.0) && end.y < real(0.0) && may_turn_past(start.x, start.y, end.x, end.y, h));
+}
+
+// Whether a step of size h from y to y1 may meet the stop (twin of
+// reaches_wall).
 fn reaches(w: Stop, y: State, h: real, y1: State) -> bool {
-    let g0 = gap(w, y);
-    let s0 = speed(w, y);
-    let g1 = gap(w, y1);
-    let s1 = speed(w, y1);
-    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
+    return may_meet(stop_values(w, y), stop_values(w, y1), h);
 }
 
 // Whether a step turning back inside (speed s0 > 0 to s1 < 0, gaps g0, g1
@@ -147,7 +157,8 @@ struct WallStep {
 }
 
 // The acceleration towards the stop at rest on it (y moved onto it at
-// speed 0) at `phase`: > 0 presses the mass into the stop.
+// speed 0) at `phase`: > 0 presses the mass into the stop (pressing in
+// impact.rs).
 fn pressing(p: Params, w: Stop, phase: vec2<real>, y: State) -> real {
     return w.side * rhs(p, phase, on_stop(w, y, real(0.0)))[w.velocity];
 }
@@ -231,6 +242,16 @@ struct Hit {
     y: State,
 }
 
+// max(1, |y_i|): the size of a state, which a surface's tolerances are
+// relative to (the CPU's fold over the state).
+fn state_scale(y: State) -> real {
+    var scale = real(1.0);
+    for (var i = 0u; i < DIM; i = i + 1u) {
+        scale = max(scale, abs(y[i]));
+    }
+    return scale;
+}
+
 // An RK4 step of any size s from a given phase: the re-steps of impact location.
 fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Stepped {
     return rk4_step(p, phase, cos_sin(real(0.5) * omega * s), y, s);
@@ -240,7 +261,8 @@ fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Ste
 // over them, as in the step loop's tests: a loop of one pass (the seed's
 // single stop) still cost lavapipe 10% of the whole kernel's time.
 
-// y moved back onto a stop it lies behind, moving towards it at most.
+// y moved back onto a stop it lies behind, moving towards it at most
+// (clamp_to_wall).
 fn clamp_to(w: Stop, y: State) -> State {
     if (gap(w, y) > real(0.0)) {
         return on_stop(w, y, min(speed(w, y), real(0.0)));
@@ -261,6 +283,22 @@ fn clamp_to_stops(walls: Stops, y: State) -> State {
         out = clamp_to(stop(walls, 3u), out);
     }
     return out;
+}
+
+// Whether y lies behind a stop (a sliding motion meeting one is flagged, as
+// in the CPU's slide).
+fn behind_a_stop(walls: Stops, y: State) -> bool {
+    var behind = WALLS > 0u && gap(stop(walls, 0u), y) > real(0.0);
+    if (WALLS > 1u) {
+        behind = behind || gap(stop(walls, 1u), y) > real(0.0);
+    }
+    if (WALLS > 2u) {
+        behind = behind || gap(stop(walls, 2u), y) > real(0.0);
+    }
+    if (WALLS > 3u) {
+        behind = behind || gap(stop(walls, 3u), y) > real(0.0);
+    }
+    return behind;
 }
 
 // The first stop y lies on with a force pressing it there, or WALLS.
@@ -285,13 +323,24 @@ fn pressed(p: Params, w: Stop, phase: vec2<real>, y: State) -> bool {
     return y[w.coordinate] == w.position && pressing(p, w, phase, y) > real(0.0);
 }
 
-// A stop's impact in the rest of a step, if any.
-fn locate(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+// Event `which`'s crossing in the rest of a step [0, h] from (phase0, y0)
+// to y1, if any, given its value and rate at both ends (`start`, `end`).
+// Events are numbered as first_met's: the stops, then the general surfaces
+// (which - WALLS); stops and surfaces share every location below, and only
+// event_at, event_scale and crossing_fraction tell them apart.
+fn locate(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
 #ifdef IMPACT_LINEAR
-    return locate_linear(w, y0, h, y1);
+    return locate_linear(walls, which, y0, h, y1, start, end);
 #else
-    return locate_newton(p, omega, w, phase0, y0, h, y1);
+    return locate_newton(p, omega, walls, which, phase0, y0, h, y1, start, end);
 #endif
+}
+
+// Stop j's impact in the rest of a step, if any (the stops' call of
+// locate_linear or locate_newton in impact.rs's resolve).
+fn locate_stop(p: Params, omega: real, walls: Stops, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
+    let w = stop(walls, j);
+    return locate(p, omega, walls, j, phase0, y0, h, y1, stop_values(w, y0), stop_values(w, y1));
 }
 
 // The first stop (or surface) met, and where.
@@ -317,36 +366,62 @@ fn earlier(met: Met, found: Hit, j: u32) -> Met {
 }
 
 // The first stop or surface met in the step [0, h] from (phase0, y0) to y1
-// (NONE_MET: none). Without stops (WALLS = 0) stop 0's constants are zeros
-// (side 0), and it is never met.
+// (NONE_MET: none): the search for the earliest event in resolve.
 fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State, h: real, y1: State) -> Met {
-    var met = earlier(Met(Hit(false, real(0.0), y0), NONE_MET), locate(p, omega, stop(walls, 0u), phase0, y0, h, y1), 0u);
+    var met = Met(Hit(false, real(0.0), y0), NONE_MET);
+    if (WALLS > 0u) {
+        met = earlier(met, locate_stop(p, omega, walls, 0u, phase0, y0, h, y1), 0u);
+    }
     if (WALLS > 1u) {
-        met = earlier(met, locate(p, omega, stop(walls, 1u), phase0, y0, h, y1), 1u);
+        met = earlier(met, locate_stop(p, omega, walls, 1u, phase0, y0, h, y1), 1u);
     }
     if (WALLS > 2u) {
-        met = earlier(met, locate(p, omega, stop(walls, 2u), phase0, y0, h, y1), 2u);
+        met = earlier(met, locate_stop(p, omega, walls, 2u, phase0, y0, h, y1), 2u);
     }
     if (WALLS > 3u) {
-        met = earlier(met, locate(p, omega, stop(walls, 3u), phase0, y0, h, y1), 3u);
+        met = earlier(met, locate_stop(p, omega, walls, 3u, phase0, y0, h, y1), 3u);
     }
 #ifdef SURFACES
     // The surfaces' values at both ends of the rest of the step, in the
     // trajectory's region (a surface may move with the forcing).
     let before = surface_values(p, phase0, y0);
     let after = surface_values(p, rotate(phase0, cos_sin(omega * h)), y1);
-    met = earlier(met, locate_surface(p, omega, 0u, phase0, y0, h, y1, before, after), WALLS);
+    met = earlier(met, locate_surface(p, omega, walls, 0u, phase0, y0, h, y1, before, after), WALLS);
     if (SURFACES > 1u) {
-        met = earlier(met, locate_surface(p, omega, 1u, phase0, y0, h, y1, before, after), WALLS + 1u);
+        met = earlier(met, locate_surface(p, omega, walls, 1u, phase0, y0, h, y1, before, after), WALLS + 1u);
     }
     if (SURFACES > 2u) {
-        met = earlier(met, locate_surface(p, omega, 2u, phase0, y0, h, y1, before, after), WALLS + 2u);
+        met = earlier(met, locate_surface(p, omega, walls, 2u, phase0, y0, h, y1, before, after), WALLS + 2u);
     }
     if (SURFACES > 3u) {
-        met = earlier(met, locate_surface(p, omega, 3u, phase0, y0, h, y1, before, after), WALLS + 3u);
+        met = earlier(met, locate_surface(p, omega, walls, 3u, phase0, y0, h, y1, before, after), WALLS + 3u);
     }
 #endif
     return met;
+}
+
+// resolve_impacts' account of its step so far (the locals of the CPU's
+// resolve): how far into the step its events reach, the phase and state
+// there, and what they did.
+struct Resolution {
+    done: real,
+    phase0: vec2<real>,
+    y0: State,
+    impacts: u32,
+    crossings: vec4<u32>,
+    slowest: real,
+    rank_loss: u32,
+    // The mass came to rest on this stop (WALLS: it did not).
+    stuck: u32,
+    // The rest of the step from (phase0, y0) is to be stepped, at the top
+    // of the next pass.
+    restep: bool,
+#ifdef SURFACES
+    // A crossing flagged unresolved ends the step once its rest is taken;
+    // whether it was a chattering one.
+    unresolved: bool,
+    chattering: bool,
+#endif
 }
 
 // Applies every impact inside the step [0, h] from (phase, y), whose plain
@@ -354,7 +429,9 @@ fn first_met(p: Params, walls: Stops, omega: real, phase0: vec2<real>, y0: State
 // comes to rest is handed back with `stuck`, and the integrate kernel's
 // one call of stuck_step takes the rest of the step (every inlined copy of
 // its bisection loop costs loop iterations on lavapipe, whose budget per
-// invocation is small: see loop_budget_exhausted).
+// invocation is small: see loop_budget_exhausted). The loop of the CPU's
+// resolve: each pass finds the first event and hands it to impact or
+// cross_surface, or slides on a switch (slide).
 #ifdef SURFACES
 fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
     // A copy, whose region follows the crossings.
@@ -362,38 +439,29 @@ fn resolve_impacts(p_lane: Params, walls: Stops, omega: real, phase: vec2<real>,
 #else
 fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: State, h: real, y1_plain: State) -> WallStep {
 #endif
-    var done = real(0.0);
-    var phase0 = phase;
-    var y0 = y;
-    var y1 = y1_plain;
-    var impacts = 0u;
-    var crossings = vec4<u32>();
-    var slowest = NO_IMPACT;
-    // How the loop ended: 0 no further impact in the step, 1 at rest on
-    // stop `stuck` (stuck_step takes the rest of the step from phase0), 2
-    // out of impacts.
-    var ending = 2u;
-    var stuck = WALLS;
-    var rank_loss = 0u;
-    // The rest of the step from (phase0, y0) is stepped in one place, at
-    // the top of the next pass: NIR inlines every call, and each call site
-    // of sub_step is a copy of the RK4 step (a kernel with switches had
-    // four here). The extra pass only steps, so that the last event's
-    // rest of the step is taken as before the loop ran out.
-    var restep = false;
 #ifdef SURFACES
-    // A crossing flagged unresolved ends the step once its rest is taken.
-    var unresolved = false;
-    var chattering = false;
+    var r = Resolution(real(0.0), phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false, false, false);
+#else
+    var r = Resolution(real(0.0), phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false);
 #endif
+    var y1 = y1_plain;
+    // How the loop ended: 0 no further impact in the step, 1 at rest on
+    // stop r.stuck (stuck_step takes the rest of the step from r.phase0),
+    // 2 out of impacts.
+    var ending = 2u;
     for (var n = 0u; n <= MAX_IMPACTS_PER_STEP; n = n + 1u) {
-        if (restep) {
-            y1 = sub_step(p, omega, phase0, y0, h - done).y;
-            restep = false;
+        // The rest of the step from (phase0, y0) is stepped in one place:
+        // NIR inlines every call, and each call site of sub_step is a copy
+        // of the RK4 step (a kernel with switches had four here). The
+        // extra pass only steps, so that the last event's rest of the step
+        // is taken as before the loop ran out.
+        if (r.restep) {
+            y1 = sub_step(p, omega, r.phase0, r.y0, h - r.done).y;
+            r.restep = false;
         }
 #ifdef SURFACES
-        if (unresolved) {
-            return WallStep(y1, impacts, crossings, chattering, rank_loss, slowest, WALLS, h, phase0);
+        if (r.unresolved) {
+            return WallStep(y1, r.impacts, r.crossings, r.chattering, r.rank_loss, r.slowest, WALLS, h, r.phase0);
         }
 #endif
         if (n == MAX_IMPACTS_PER_STEP) {
@@ -403,137 +471,143 @@ fn resolve_impacts(p: Params, walls: Stops, omega: real, phase: vec2<real>, y: S
         if (is_sliding(p.region)) {
             // On a switch: the rest of the step slides, unless the motion
             // leaves it (twin of the sliding branch of resolve).
-            let slid = slide(p, omega, phase0, y0, h - done);
+            let slid = slide(p, omega, r.phase0, r.y0, h - r.done);
             crossed.sliding = crossed.sliding || slid.flagged;
             if (!slid.leaves) {
-                return WallStep(slid.y, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+                return WallStep(slid.y, r.impacts, r.crossings, false, r.rank_loss, r.slowest, WALLS, h, r.phase0);
             }
-            done = done + slid.s;
-            phase0 = rotate(phase0, cos_sin(omega * slid.s));
-            y0 = slid.y;
+            r.done = r.done + slid.s;
+            r.phase0 = rotate(r.phase0, cos_sin(omega * slid.s));
+            r.y0 = slid.y;
             p.region = slid.region;
             crossed.region = slid.region;
-            restep = true;
+            r.restep = true;
             continue;
         }
 #endif
-        let rest = h - done;
-        let met = first_met(p, walls, omega, phase0, y0, rest, y1);
-        let first = met.stop;
-        let hit = met.hit;
-        if (first == NONE_MET) {
+        let met = first_met(p, walls, omega, r.phase0, r.y0, h - r.done, y1);
+        if (met.stop == NONE_MET) {
             ending = 0u;
             break;
         }
 #ifdef SURFACES
-        if (first >= WALLS) {
-            // A general surface (twin of the surface branch of resolve).
-            let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-            done = done + hit.s;
-            let crossing = cross(p, first - WALLS, phase_c, hit.y);
-            slowest = min(slowest, crossing.approach);
-            if (crossing.counted) {
-                crossings[first] = crossings[first] + 1u;
-            }
-            if (crossing.rank_loss) {
-                rank_loss = max(rank_loss, 1u);
-            }
-            p.region = crossing.region;
-            crossed.region = crossing.region;
-            crossed.log_flux = crossed.log_flux + crossing.log_det;
-            crossed.sliding = crossed.sliding || crossing.sliding;
-            if (!crossing.resolved) {
-                // Flagged: the rest of the step in the field now in force.
-                phase0 = phase_c;
-                y0 = hit.y;
-                restep = true;
-                unresolved = true;
-                chattering = crossing.chattering;
-                continue;
-            }
-            if (crossing.slides) {
-                crossed.sliding_phases = crossed.sliding_phases + 1u;
-            }
-            phase0 = phase_c;
-            y0 = crossing.y;
-            restep = !is_sliding(p.region);
+        if (met.stop >= WALLS) {
+            r = cross_surface(p, omega, met, r);
+            p.region = crossed.region;
             continue;
         }
 #endif
-        let w = stop(walls, first);
-        let phase_c = rotate(phase0, cos_sin(omega * hit.s));
-        let v = speed(w, hit.y);
-        done = done + hit.s;
-        phase0 = phase_c;
-        if (v <= real(0.0)) {
-            // Arriving at rest, pressed into the stop: it sticks.
-            y0 = hit.y;
-            stuck = first;
+        r = impact(p, walls, omega, met, h, r);
+        if (r.stuck < WALLS) {
             ending = 1u;
             break;
         }
-        impacts = impacts + 1u;
-        crossings[first] = crossings[first] + 1u;
-        slowest = min(slowest, v);
-        let e = w.restitution;
-        let rebound = e * v;
-        let push = pressing(p, w, phase_c, hit.y);
-        // e = 0 stops the mass dead; bounces that would accumulate within a
-        // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
-        if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
-            rank_loss = 1u;
-            y0 = hit.y;
-            stuck = first;
-            ending = 1u;
-            break;
-        }
-        y0 = on_stop(w, hit.y, -rebound);
 #ifdef SURFACES
         // The rebound may jump across a switch (a velocity reversed across
         // a friction's slip): the field after it is that side's.
-        p.region = jumped(p, phase0, hit.y, y0);
+        p.region = jumped(p, r.phase0, met.hit.y, r.y0);
         crossed.region = p.region;
 #endif
-        restep = true;
     }
+    return resolved(p, walls, h, y1, r, ending);
+}
+
+// Stop met.stop's impact at met.hit (the stop branch of resolve): the mass
+// arriving at rest, or with bounces accumulating, stays on the stop
+// (r.stuck); else it rebounds, V -> -e·V, and the rest of the step is
+// stepped again.
+fn impact(p: Params, walls: Stops, omega: real, met: Met, h: real, r_in: Resolution) -> Resolution {
+    var r = r_in;
+    let w = stop(walls, met.stop);
+    let phase_c = rotate(r.phase0, cos_sin(omega * met.hit.s));
+    let v = speed(w, met.hit.y);
+    r.done = r.done + met.hit.s;
+    r.phase0 = phase_c;
+    if (v <= real(0.0)) {
+        // Arriving at rest, pressed into the stop: it sticks.
+        r.y0 = met.hit.y;
+        r.stuck = met.stop;
+        return r;
+    }
+    r.impacts = r.impacts + 1u;
+    r.crossings[met.stop] = r.crossings[met.stop] + 1u;
+    r.slowest = min(r.slowest, v);
+    let e = w.restitution;
+    let rebound = e * v;
+    let push = pressing(p, w, phase_c, met.hit.y);
+    // e = 0 stops the mass dead; bounces that would accumulate within a
+    // sliver of the step (2v/(a(1 - e)) in all) end at rest as well.
+    if (rebound == real(0.0) || (push > real(0.0) && real(2.0) * rebound < real(ACCUMULATION_FRACTION) * h * push * (real(1.0) - e))) {
+        r.rank_loss = 1u;
+        r.y0 = met.hit.y;
+        r.stuck = met.stop;
+        return r;
+    }
+    r.y0 = on_stop(w, met.hit.y, -rebound);
+    r.restep = true;
+    return r;
+}
+
+// The step's outcome once resolve_impacts' loop has ended (`ending` as
+// there): at rest on a stop, with the rest of the step to stuck_step; at
+// y1 after the last event; or, out of impacts, at rest if a force presses
+// the mass onto a stop, else chattering, clamped to the stops.
+fn resolved(p: Params, walls: Stops, h: real, y1: State, r: Resolution, ending_in: u32) -> WallStep {
+    var ending = ending_in;
+    var stuck = r.stuck;
     if (ending == 2u) {
         // Bounces this dense under a pressing force: the mass is at rest.
-        stuck = pressed_on(p, walls, phase0, y0);
+        stuck = pressed_on(p, walls, r.phase0, r.y0);
         if (stuck < WALLS) {
             ending = 1u;
         }
     }
     if (ending == 1u) {
-        return WallStep(y0, impacts, crossings, false, rank_loss, slowest, stuck, done, phase0);
+        return WallStep(r.y0, r.impacts, r.crossings, false, r.rank_loss, r.slowest, stuck, r.done, r.phase0);
     }
     if (ending == 0u) {
-        return WallStep(y1, impacts, crossings, false, rank_loss, slowest, WALLS, h, phase0);
+        return WallStep(y1, r.impacts, r.crossings, false, r.rank_loss, r.slowest, WALLS, h, r.phase0);
     }
-    return WallStep(clamp_to_stops(walls, y1), impacts, crossings, true, rank_loss, slowest, WALLS, h, phase0);
+    return WallStep(clamp_to_stops(walls, y1), r.impacts, r.crossings, true, r.rank_loss, r.slowest, WALLS, h, r.phase0);
 }
 
 #ifdef IMPACT_LINEAR
-// The paper's location: linear interpolation between the step's ends.
-fn locate_linear(w: Stop, y0: State, h: real, y1: State) -> Hit {
-    if (gap(w, y1) <= real(0.0)) {
+// The paper's location: linear interpolation between the step's ends, for
+// a stop (locate_linear in impact.rs) or a surface (the linear branch of
+// `locate` there).
+fn locate_linear(walls: Stops, which: u32, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
+    if (end.x <= real(0.0)) {
         return Hit(false, real(0.0), y0);
     }
-    let c = w.coordinate;
-    let theta = clamp((w.position - y0[c]) / (y1[c] - y0[c]), real(0.0), real(1.0));
+    let theta = clamp(crossing_fraction(walls, which, y0, y1, start, end), real(0.0), real(1.0));
     return Hit(true, theta * h, y0 + theta * (y1 - y0));
 }
 
+// Where the straight line from y0 to y1 crosses event `which`, as a
+// fraction of the step: a stop's from its coordinate and position, a
+// surface's from its values at the ends (each as its twin computes it).
+fn crossing_fraction(walls: Stops, which: u32, y0: State, y1: State, start: vec2<real>, end: vec2<real>) -> real {
+    if (which < WALLS) {
+        let w = stop(walls, which);
+        let c = w.coordinate;
+        return (w.position - y0[c]) / (y1[c] - y0[c]);
+    }
+    return -start.x / (end.x - start.x);
+}
+
 #else
-// Re-steps RK4 to the impact (Newton from the Hermite root), so the impact
-// lies on the RK4 solution itself; also finds an excursion past the stop
-// between the step's ends. The CPU's locate_newton and newton_from, the
-// same steps in the same order, with every re-step in one place: NIR
-// inlines every call, and each call site of sub_step is a copy of the RK4
-// step and its right-hand sides in the compiled kernel (three call sites
-// here cost lavapipe a quarter of the wall kernel's compile time).
-// The safeguarded Newton of locate_newton and locate_surface
-// (newton_in_bracket in impact.rs): s in the bracket [lo, hi] of the step,
-// hi at the step's end or the Hermite peak of an excursion that turns back.
+// Re-steps RK4 to the crossing (Newton from the Hermite root), so that it
+// lies on the RK4 solution itself; also finds an excursion across between
+// the step's ends. The CPU's locate_newton (stops), `locate` (surfaces)
+// and newton_from, the same steps in the same order, written once for
+// both, with every re-step in one place: NIR inlines every call, and each
+// call site of sub_step is a copy of the RK4 step and its right-hand sides
+// in the compiled kernel (three call sites here cost lavapipe a quarter of
+// the wall kernel's compile time).
+
+// The safeguarded Newton of locate_newton (newton_in_bracket in
+// impact.rs): s in the bracket [lo, hi] of the step, hi at the step's end
+// or the Hermite peak of an excursion that turns back.
 struct Bracket {
     found: bool,
     at_peak: bool,
@@ -579,31 +653,32 @@ fn newton_update(b: Bracket, g: real, rate: real) -> Bracket {
     return out;
 }
 
-fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State, h: real, y1: State) -> Hit {
-    // Turning back inside the step: the first re-step, to the Hermite
-    // peak, decides whether the excursion passes the stop.
-    let start = vec2<real>(gap(w, y0), speed(w, y0));
-    let end = vec2<real>(gap(w, y1), speed(w, y1));
-    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
-        // A turn that cannot reach the stop (as locate_newton's).
+// Event `which`'s crossing (see `locate`) by Newton on re-stepped RK4.
+fn locate_newton(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, y0: State, h: real, y1: State, start: vec2<real>, end: vec2<real>) -> Hit {
+    let fine = event_scale(walls, which, y0);
+    // A step the stop test rules out has no crossing (the CPU's resolve
+    // locates only the events that test lets through).
+    if (!may_meet(start, end, h)) {
         return Hit(false, real(0.0), y0);
     }
+    // Turning back inside the step: the first re-step, to the Hermite
+    // peak, decides whether the excursion crosses.
     var b = bracket_of(start, end, h);
     if (!b.found) {
         return Hit(false, real(0.0), y0);
     }
     var at_peak = b.at_peak;
-    // Safeguarded Newton on g(s) = gap(RK4(y0, s)), g'(s) ≈ speed(s), in
-    // [0, hi]: the step to s, then (at most 32 times) a Newton update and
-    // the step to the new s.
-    let tolerance = real(4.0) * EPSILON * max(abs(w.position), real(1.0));
+    // Safeguarded Newton on g(s) = the event's value at RK4(y0, s), g'(s)
+    // ≈ its rate, in the bracket: the step to s, then (at most 32 times) a
+    // Newton update and the step to the new s.
+    let tolerance = real(4.0) * EPSILON * max(abs(fine.x), real(1.0));
     var to = select(b.s, b.hi, at_peak);
     var y = y0;
     var updates = 0u;
     loop {
         y = sub_step(p, omega, phase0, y0, to).y;
         if (at_peak) {
-            if (gap(w, y) <= real(0.0)) {
+            if (event_at(p, omega, walls, which, phase0, to, y).x <= fine.y) {
                 return Hit(false, real(0.0), y0);
             }
             at_peak = false;
@@ -614,11 +689,11 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
             break;
         }
         updates = updates + 1u;
-        let g = gap(w, y);
-        if (abs(g) <= tolerance) {
+        let v = event_at(p, omega, walls, which, phase0, b.s, y);
+        if (abs(v.x) <= tolerance) {
             break;
         }
-        b = newton_update(b, g, speed(w, y));
+        b = newton_update(b, v.x, v.y);
         if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
             // As the CPU: s updated, y the last step's.
             break;
@@ -627,6 +702,34 @@ fn locate_newton(p: Params, omega: real, w: Stop, phase0: vec2<real>, y0: State,
     }
     return Hit(true, b.s, y);
 }
+
+// Event `which`'s value and rate at y, s into the step from phase0: a
+// stop's (gap, speed), a surface's oriented (g, rate) (the CPU's
+// `distance` and `rate` closures of locate and locate_newton).
+fn event_at(p: Params, omega: real, walls: Stops, which: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
+#ifdef SURFACES
+    if (which >= WALLS) {
+        return surface_at(p, omega, which - WALLS, phase0, s, y);
+    }
+#endif
+    return stop_values(stop(walls, which), y);
+}
+
+// How finely event `which` is located from the step's start y0: the size
+// its value is resolved to 4 ulp of (x), and how far past it an excursion
+// must reach to cross (y). A stop: its position, and any depth > 0 (the
+// CPU's locate_newton); a surface: the state's size, and more than the
+// tolerance itself, shallower being a touch in rounding (its `locate`).
+fn event_scale(walls: Stops, which: u32, y0: State) -> vec2<real> {
+#ifdef SURFACES
+    if (which >= WALLS) {
+        let scale = state_scale(y0);
+        return vec2<real>(scale, real(4.0) * EPSILON * scale);
+    }
+#endif
+    return vec2<real>(walls.position[which], real(0.0));
+}
+
 // The cubic Hermite interpolant of g = X - X_w over the step, θ in [0, 1]:
 // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³.
 fn hermite_new(g0: real, v0: real, g1: real, v1: real, h: real) -> vec4<real> {
@@ -732,7 +835,27 @@ struct Equivalent {
 }
 
 fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
-    let j = firstTrailingBit(p.region >> SLIDING_SHIFT);
+    let s = switch_sides(p, firstTrailingBit(p.region >> SLIDING_SHIFT), phase, y);
+    let alpha = s.a / (s.a - s.b);
+    return Equivalent(s.lo + alpha * (s.hi - s.lo), alpha, s.margins);
+}
+
+// Switch j's two sides at y, for a trajectory on either side of it or
+// sliding on it: the fields lo (g < 0) and hi, their rates a and b along
+// ∇g, and the stick margins (L - m, L + m), m = (a + b)/2, L the stick
+// limit or the half jump (a - b)/2; both > 0, the switch holds the motion
+// (surface::joining_margins, and the sides of surface::equivalent_on, for
+// one switch). What a crossing decides sliding from and what the sliding
+// motion leaves by, written once.
+struct SwitchSides {
+    lo: State,
+    hi: State,
+    a: real,
+    b: real,
+    margins: vec2<real>,
+}
+
+fn switch_sides(p: Params, j: u32, phase: vec2<real>, y: State) -> SwitchSides {
     let bit = SURFACE_BIT[j];
     var lo_p = p;
     lo_p.region = (p.region & SIDES) & ~(1u << bit);
@@ -743,10 +866,9 @@ fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
     let n = surface_gradient(p, phase, y, j);
     let a = dot_in_order(n, lo);
     let b = dot_in_order(n, hi);
-    let alpha = a / (a - b);
     let mean = real(0.5) * (a + b);
     let limit = stick_limit(p, y, j, real(0.5) * (a - b));
-    return Equivalent(lo + alpha * (hi - lo), alpha, vec2<real>(limit - mean, limit + mean));
+    return SwitchSides(lo, hi, a, b, vec2<real>(limit - mean, limit + mean));
 }
 
 // The sliding field (NaN where the combination does not exist, as the
@@ -760,7 +882,8 @@ fn sliding_field(p: Params, phase: vec2<real>, y: State) -> State {
     return e.field;
 }
 
-// The switch still holds the motion: both margins > 0.
+// The switch still holds the motion: both margins > 0 (as the CPU's
+// slide and cross test them).
 fn holds(m: vec2<real>) -> bool {
     return m.x > real(0.0) && m.y > real(0.0);
 }
@@ -814,17 +937,7 @@ fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
             }
             // A stop reached while sliding would need a motion along the
             // switch and into the stop at once: flagged, as on the CPU.
-            let walls = stops_of(p);
-            if (WALLS > 0u && gap(stop(walls, 0u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 1u && gap(stop(walls, 1u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 2u && gap(stop(walls, 2u), y_to) > real(0.0)) {
-                flagged = true;
-            }
-            if (WALLS > 3u && gap(stop(walls, 3u), y_to) > real(0.0)) {
+            if (behind_a_stop(stops_of(p), y_to)) {
                 flagged = true;
             }
             if (holds(m_to)) {
@@ -907,12 +1020,14 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
 // surface j: its end lies across, or its rate turns from approaching to
 // leaving inside it within reach of the surface (surface::may_cross).
 fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
-    let o = orientation(region, j);
-    let g0 = o * before.g[j];
-    let s0 = o * before.rate[j];
-    let g1 = o * after.g[j];
-    let s1 = o * after.rate[j];
-    return g1 > real(0.0) || (s0 > real(0.0) && s1 < real(0.0) && may_turn_past(g0, s0, g1, s1, h));
+    return may_meet(oriented(region, j, before), oriented(region, j, after), h);
+}
+
+// Surface j's (g, rate) in values v, oriented so that > 0 lies across it
+// for a trajectory in `region`: the value and rate its crossing is
+// detected and located on, as a stop's (gap, speed) is.
+fn oriented(region: u32, j: u32, v: SurfaceValues) -> vec2<real> {
+    return orientation(region, j) * vec2<real>(v.g[j], v.rate[j]);
 }
 
 // The step loop's test over every surface, written out per surface as the
@@ -931,81 +1046,17 @@ fn crosses_a_surface(region: u32, before: SurfaceValues, after: SurfaceValues, h
     return hit;
 }
 
-// Surface j's oriented distance and rate at (s into the step from phase0, y).
+// Surface j's oriented distance and rate at (s into the step from phase0,
+// y): the `distance` and `rate` of `locate` in impact.rs for a surface.
 fn surface_at(p: Params, omega: real, j: u32, phase0: vec2<real>, s: real, y: State) -> vec2<real> {
-    let v = surface_values(p, rotate(phase0, cos_sin(omega * s)), y);
-    return orientation(p.region, j) * vec2<real>(v.g[j], v.rate[j]);
+    return oriented(p.region, j, surface_values(p, rotate(phase0, cos_sin(omega * s)), y));
 }
 
 // Surface j's crossing in the step [0, h] from (phase0, y0) to y1, given
-// its values at both ends: twin of `locate` in impact.rs, the stops'
-// location (Hermite guess, then Newton on re-stepped RK4, an excursion
-// across and back found at the Hermite peak) on g instead of a gap.
-fn locate_surface(p: Params, omega: real, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State, before: SurfaceValues, after: SurfaceValues) -> Hit {
-    let o = orientation(p.region, j);
-    let start = o * vec2<real>(before.g[j], before.rate[j]);
-    let end = o * vec2<real>(after.g[j], after.rate[j]);
-#ifdef IMPACT_LINEAR
-    if (end.x <= real(0.0)) {
-        return Hit(false, real(0.0), y0);
-    }
-    let theta = clamp(-start.x / (end.x - start.x), real(0.0), real(1.0));
-    return Hit(true, theta * h, y0 + theta * (y1 - y0));
-#else
-    var scale = real(1.0);
-    for (var i = 0u; i < DIM; i = i + 1u) {
-        scale = max(scale, abs(y0[i]));
-    }
-    // A turn out of reach of the surface cannot cross it (as the CPU's
-    // resolve skips it).
-    if (end.x <= real(0.0) && !may_turn_past(start.x, start.y, end.x, end.y, h)) {
-        return Hit(false, real(0.0), y0);
-    }
-    // Turning back inside the step: the first re-step, to the Hermite
-    // peak, decides whether the excursion crosses (as locate_newton, every
-    // re-step in one call site).
-    var b = bracket_of(start, end, h);
-    if (!b.found) {
-        return Hit(false, real(0.0), y0);
-    }
-    var at_peak = b.at_peak;
-    // Safeguarded Newton (newton_in_bracket): g resolved to 4 ulp of the
-    // state's size; the step to s, then (at most 32 times) a Newton update
-    // and the step to the new s.
-    let tolerance = real(4.0) * EPSILON * max(abs(scale), real(1.0));
-    var to = select(b.s, b.hi, at_peak);
-    var y = y0;
-    var updates = 0u;
-    loop {
-        y = sub_step(p, omega, phase0, y0, to).y;
-        if (at_peak) {
-            // An excursion no deeper than the location's own tolerance is
-            // a touch in rounding, not a crossing.
-            if (surface_at(p, omega, j, phase0, to, y).x <= real(4.0) * EPSILON * scale) {
-                return Hit(false, real(0.0), y0);
-            }
-            at_peak = false;
-            to = b.s;
-            continue;
-        }
-        if (updates == 32u) {
-            break;
-        }
-        updates = updates + 1u;
-        let v = surface_at(p, omega, j, phase0, b.s, y);
-        let g = v.x;
-        if (abs(g) <= tolerance) {
-            break;
-        }
-        b = newton_update(b, g, v.y);
-        if (b.hi - b.lo <= EPSILON * abs(b.hi)) {
-            // As the CPU: s updated, y the last step's.
-            break;
-        }
-        to = b.s;
-    }
-    return Hit(true, b.s, y);
-#endif
+// its values at both ends: the stops' location on its oriented g instead
+// of a gap (`locate` in impact.rs).
+fn locate_surface(p: Params, omega: real, walls: Stops, j: u32, phase0: vec2<real>, y0: State, h: real, y1: State, before: SurfaceValues, after: SurfaceValues) -> Hit {
+    return locate(p, omega, walls, WALLS + j, phase0, y0, h, y1, oriented(p.region, j, before), oriented(p.region, j, after));
 }
 
 // A crossing of a general surface, applied (cross in impact.rs).
@@ -1098,10 +1149,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         var after = p;
         after.region = jumped(p, phase, y, r.y);
         let now = surface_values(after, phase, r.y);
-        var scale = real(1.0);
-        for (var i = 0u; i < DIM; i = i + 1u) {
-            scale = max(scale, abs(y[i]));
-        }
+        let scale = state_scale(y);
         // Back where the motion lives, and leaving the surface.
         if (!(now.g[j] <= real(4.0) * EPSILON * scale && now.rate[j] < real(0.0))) {
             out.chattering = true;
@@ -1114,20 +1162,11 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         out.y = r.y;
         return out;
     }
-    // The rates a, b of the two sides' fields along ∇g (joining_margins:
-    // the stick limit, or Filippov's, the half jump).
-    var below = p;
-    below.region = p.region & ~(1u << bit);
-    var above = p;
-    above.region = p.region | (1u << bit);
-    let n = surface_gradient(p, phase, y, j);
-    let a = dot_in_order(n, field(below, phase, y));
-    let b = dot_in_order(n, field(above, phase, y));
-    let m = real(0.5) * (a + b);
-    let limit = stick_limit(p, y, j, real(0.5) * (a - b));
-    let plus = limit - m;
-    let minus = limit + m;
-    if (plus > real(0.0) && minus > real(0.0)) {
+    // The stick margins of the two sides (joining_margins: the stick
+    // limit, or Filippov's, the half jump). The trajectory is on one side
+    // (resolve_impacts slides a sliding one before it looks for crossings).
+    let margins = switch_sides(p, j, phase, y).margins;
+    if (holds(margins)) {
         // Both fields point into the switch (or the stick limit holds the
         // motion): it slides, where its Filippov combination exists, and
         // forgets how far from the surface it came (one direction); the
@@ -1146,7 +1185,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
         out.log_det = zero / zero;
         return out;
     }
-    let to_plus = plus <= minus;
+    let to_plus = margins.x <= margins.y;
     if (to_plus == (((p.region >> bit) & 1u) == 1u)) {
         // Only touched the surface (in rounding): no crossing.
         out.counted = false;
@@ -1165,5 +1204,42 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     out.log_det = log_r(leaving / approach_rate);
     out.resolved = true;
     return out;
+}
+
+// General surface met.stop - WALLS crossed at met.hit (the surface branch
+// of resolve): the crossing applied, counted and, in `crossed`, its region,
+// ln |det S| and flags; the rest of the step is stepped again unless the
+// motion now slides (resolve_impacts' next pass slides it).
+fn cross_surface(p: Params, omega: real, met: Met, r_in: Resolution) -> Resolution {
+    var r = r_in;
+    let phase_c = rotate(r.phase0, cos_sin(omega * met.hit.s));
+    r.done = r.done + met.hit.s;
+    let crossing = cross(p, met.stop - WALLS, phase_c, met.hit.y);
+    r.slowest = min(r.slowest, crossing.approach);
+    if (crossing.counted) {
+        r.crossings[met.stop] = r.crossings[met.stop] + 1u;
+    }
+    if (crossing.rank_loss) {
+        r.rank_loss = max(r.rank_loss, 1u);
+    }
+    crossed.region = crossing.region;
+    crossed.log_flux = crossed.log_flux + crossing.log_det;
+    crossed.sliding = crossed.sliding || crossing.sliding;
+    r.phase0 = phase_c;
+    if (!crossing.resolved) {
+        // Flagged: the rest of the step in the field now in force, and the
+        // step ends there.
+        r.y0 = met.hit.y;
+        r.restep = true;
+        r.unresolved = true;
+        r.chattering = crossing.chattering;
+        return r;
+    }
+    if (crossing.slides) {
+        crossed.sliding_phases = crossed.sliding_phases + 1u;
+    }
+    r.y0 = crossing.y;
+    r.restep = !is_sliding(crossing.region);
+    return r;
 }
 #endif
