@@ -10,6 +10,7 @@ pub mod closed_form;
 pub mod flow;
 pub mod impact;
 pub mod iteration;
+mod locate;
 pub mod piecewise_linear;
 pub mod region;
 pub mod rk4;
@@ -27,7 +28,7 @@ pub use wall::Wall;
 use avx2::vectorised;
 use clock::{half_turn, Phase, ZERO_PHASE};
 use flow::column;
-use wall::may_turn_past;
+use wall::may_reach;
 
 /// The time-T map of a flow: `steps` RK4 steps of h = T/steps from t = 0,
 /// with every wall impact located and applied inside its step.
@@ -524,7 +525,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             // reaching it (or turning back inside the step) after it; in
             // two passes, as the step loops (`c_loop::walk` says why): the
             // turns that the plain test finds again, only those within
-            // reach of the wall (`wall::may_turn_past`).
+            // reach of the wall (the stop test, `wall::may_reach`).
             let detect = |within_reach: bool| {
                 let mut hits = [false; W];
                 for (j, wall) in walls[0].iter().enumerate() {
@@ -533,10 +534,8 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                     for k in 0..W {
                         let (g0, s0) = (side[k] * (y[c][k] - position[k]), side[k] * y[v][k]);
                         let (g1, s1) = (side[k] * (y1[c][k] - position[k]), side[k] * y1[v][k]);
-                        let near = !within_reach || may_turn_past(g0, s0, g1, s1, h[k]);
                         hits[k] |= ((y[c][k] == position[k]) & (y[v][k] == 0.0))
-                            | (g1 > 0.0)
-                            | ((s0 > 0.0) & (s1 < 0.0) & near);
+                            | may_reach(g0, s0, g1, s1, h[k], within_reach);
                     }
                 }
                 hits.iter()
