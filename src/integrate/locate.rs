@@ -35,7 +35,7 @@ impl<F> SubStep<'_, F> {
 
 /// Locates the crossing of a general surface inside the step [0, h] from
 /// (phase0, y0) to y1, given its oriented distance and rate (> 0 beyond
-/// and approaching) at both ends, as [`locate_wall`] locates an impact
+/// and approaching) at both ends, as [`locate_newton`] locates an impact
 /// ([`hermite_newton`]); an event's surface just left by its reset is met
 /// again after the trough (`rebounding`).
 #[allow(clippy::too_many_arguments)]
@@ -105,7 +105,7 @@ pub(super) fn locate<const D: usize, F: Flow<D>>(
 /// Re-steps RK4 from (phase0, y0) to the impact on `wall` inside the step
 /// [0, h] to y1: returns the offset s into the step and the state RK4
 /// reaches there, X(s) = X_w to rounding.
-pub(super) fn locate_wall<const D: usize, F: Flow<D>>(
+pub(super) fn locate_newton<const D: usize, F: Flow<D>>(
     sub: &SubStep<F>,
     wall: &Wall,
     phase0: &Phase,

@@ -62,7 +62,7 @@ pub const TURN_REACH: f64 = 8.0 / 27.0;
 /// Whether a step of size h whose speed towards the wall turns from s0 > 0
 /// to s1 < 0, both ends short of it (gaps g0, g1 <= 0), may pass the wall
 /// in between, and so needs the re-step to its Hermite peak that decides
-/// (`locate::locate_wall`).
+/// (`locate::locate_newton`).
 ///
 /// The interpolant g0·H00 + g1·H01 + h·s0·H10 + h·s1·H11 (H00 + H01 = 1,
 /// 0 <= H10, -H11 <= 4/27) stays below max(g0, g1) + (4/27)·h·(s0 - s1).

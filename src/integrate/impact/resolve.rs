@@ -12,7 +12,7 @@ use std::ops::ControlFlow;
 use crate::integrate::clock::{cos_sin, rotate, Phase};
 use crate::integrate::flow::{Flow, InRegion};
 use crate::integrate::iteration::{ImpactLocation, IterationStats};
-use crate::integrate::locate::{locate, locate_linear, locate_wall, SubStep};
+use crate::integrate::locate::{locate, locate_linear, locate_newton, SubStep};
 use crate::integrate::rk4;
 use crate::integrate::surface::{self, Surface};
 use crate::integrate::wall::{may_reach, Wall};
@@ -392,7 +392,7 @@ impl<F> Resolving<'_, F> {
                 j,
                 match self.location {
                     ImpactLocation::Linear => locate_linear(wall, y0, rest, y1),
-                    ImpactLocation::Newton => locate_wall(&sub, wall, phase0, y0, rest, y1),
+                    ImpactLocation::Newton => locate_newton(&sub, wall, phase0, y0, rest, y1),
                 },
             );
         }

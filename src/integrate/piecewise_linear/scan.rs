@@ -2,7 +2,7 @@
 //! by a cubic majorant of every watched function, halved until each one in
 //! doubt is bracketed, and each root refined by safeguarded Newton on the
 //! exact solution. (Roots of the exact solution: the RK4 path's location,
-//! `impact::locate`, solves a different problem, roots of its own
+//! `integrate::locate`, solves a different problem, roots of its own
 //! re-stepped integrator.)
 
 use nalgebra::DVector;
