@@ -173,7 +173,7 @@ impl PiecewiseLinear {
         }
     }
 
-    /// A mass coming to rest on stop `event` at `p`: the
+    /// A mass coming to rest on stop `event` at y: the
     /// state put on the stop at rest (x_i = d, x_v = 0) and the saltation
     /// into the held motion, which forgets x_i and x_v (the other states'
     /// rows of the held field are the free field's, so the arrival time
