@@ -23,8 +23,10 @@
 //!
 //! Impacts are located by a left-to-right scan that is certified by a bound on
 //! |X'''|, so that it cannot step over a near-grazing approach, and refined to
-//! machine precision by safeguarded Newton iteration. The tangent map of one
-//! period is the exact product of free-flight flow matrices and impact
+//! machine precision by safeguarded Newton iteration. (Roots of the exact
+//! solution: the RK4 path's location, `integrate::locate`, finds roots of
+//! RK4 re-stepped instead, and the two are kept apart.) The tangent map of
+//! one period is the exact product of free-flight flow matrices and impact
 //! saltation matrices.
 
 use nalgebra::{Matrix2, Vector2};

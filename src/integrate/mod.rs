@@ -10,6 +10,7 @@ pub mod closed_form;
 pub mod flow;
 pub mod impact;
 pub mod iteration;
+mod locate;
 pub mod piecewise_linear;
 pub mod region;
 pub mod rk4;
@@ -27,7 +28,7 @@ pub use wall::Wall;
 use avx2::vectorised;
 use clock::{half_turn, Phase, ZERO_PHASE};
 use flow::column;
-use wall::may_turn_past;
+use wall::may_reach;
 
 /// The time-T map of a flow: `steps` RK4 steps of h = T/steps from t = 0,
 /// with every wall impact located and applied inside its step.
@@ -412,20 +413,10 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     const { assert!(W < 32) };
     let n = ys.len();
     let steps = settings.steps_per_period;
-    let location = settings.impact_location;
     let h: [f64; W] = std::array::from_fn(|k| flows.period(k, period) / steps as f64);
     let omega: [f64; W] = std::array::from_fn(|k| flows.of(k).forcing_frequency());
     let half: [Phase; W] = std::array::from_fn(|k| half_turn(omega[k], h[k], steps));
-    let walls: [&[Wall]; W] = std::array::from_fn(|k| flows.of(k).walls());
-    let count = walls[0].len();
-    debug_assert!(walls.iter().all(|w| w.len() == count));
-    // Wall j's position and side in each slot (its coordinates are the
-    // same in every slot: one system).
-    let position: [[f64; W]; wall::MAX_WALLS] = std::array::from_fn(|j| {
-        std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.position))
-    });
-    let side: [[f64; W]; wall::MAX_WALLS] =
-        std::array::from_fn(|j| std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side)));
+    let walls = WallColumns::of(flows);
     let mut y: [[f64; W]; D] =
         std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
     // General surfaces: each trajectory's region of the switches, and its
@@ -440,13 +431,6 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     // stalled every step on failed store forwards. `phases` is then
     // unused until the end.
     let mut phase = phases[0];
-    let phase_of = |phases: &[Phase; W], phase: &Phase, k: usize| {
-        if S::SHARED {
-            *phase
-        } else {
-            phases[k]
-        }
-    };
     let unset = [[ZERO_PHASE; 3]; W];
     let mut regions = [0u32; W];
     // (Kept outside the step loop and touched only where there are
@@ -460,15 +444,8 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let mut values = [SurfaceBatch::<W>::default(); 2];
     let mut at_start = 0;
     if SURFACES {
-        for (k, region) in regions.iter_mut().enumerate().take(n) {
-            let (flow, yk) = (flows.of(k), column(&y, k));
-            let phase = phase_of(&phases, &phase, k);
-            *region = surface::region_of(flow, &phase, &yk);
-            values[at_start].set_column(
-                k,
-                &flow.surface_values(surface::sides(*region), &phase, &yk),
-            );
-        }
+        let start_of = |k: usize| phase_of(S::SHARED, &phases, &phase, k);
+        start_regions(flows, &y, start_of, n, &mut regions, &mut values[at_start]);
     }
     // A flow with a step loop of its own takes the steps that meet no wall
     // there, and this loop the one that does (or every step, without).
@@ -481,76 +458,30 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 regions: std::array::from_fn(|k| regions[k.min(n - 1)]),
                 values: &mut values[at_start],
             });
-            let walked = if S::SHARED {
-                flows
-                    .of(0)
-                    .walk_shared(&mut y, &mut phase, &half[0], h[0], live, left, switching)
-            } else {
-                let each = std::array::from_fn(|k| flows.of(k));
-                S::F::walk_each(&each, &mut y, &mut phases, &half, &h, live, left, switching)
-            };
-            left -= walked.unwrap_or(0);
+            let phases = (&mut phase, &mut phases);
+            left -= walk(flows, &mut y, phases, (&half, &h), (live, left), switching);
             if left == 0 {
                 break;
             }
         }
         left -= 1;
-        // The batch's step (see `Flow::step_shared`), then detection.
-        let shared = rk4::stage_phases(&phase, &half[0]);
-        let each: [[Phase; 3]; W] = if S::SHARED {
-            unset
-        } else {
-            std::array::from_fn(|k| rk4::stage_phases(&phases[k], &half[k]))
-        };
-        let mut y1 = if !SURFACES {
-            flows.step(&shared, &each, &y, &h)
-        } else {
-            let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
-            flows.step_in(&sides, &shared, &each, &y, &h)
-        };
-        let next_phase = shared[2];
-        let next: [Phase; W] = if S::SHARED {
-            phases
-        } else {
-            std::array::from_fn(|k| each[k][2])
-        };
+        // The batch's step, then detection. Every slot's sides (unused
+        // slots repeat the last trajectory's).
+        let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
+        let (mut y1, next_phase, next) = batch_step::<D, W, S, SURFACES>(
+            flows,
+            &y,
+            (&phase, &phases),
+            (&half, &h),
+            &sides,
+            &unset,
+        );
         // Bit k: slot k meets a wall or surface in this step. (A mask: the
         // loop over an array of bools that found whether any was set read
         // back, one at a time, the bytes the vector compares had just
         // stored, and cost a tenth of the loop.)
-        let mut meets = 0u32;
-        if count > 0 {
-            // Detection only: at rest on a wall before the step, or
-            // reaching it (or turning back inside the step) after it; in
-            // two passes, as the step loops (`c_loop::walk` says why): the
-            // turns that the plain test finds again, only those within
-            // reach of the wall (`wall::may_turn_past`).
-            let detect = |within_reach: bool| {
-                let mut hits = [false; W];
-                for (j, wall) in walls[0].iter().enumerate() {
-                    let (c, v) = (wall.coordinate, wall.velocity);
-                    let (position, side) = (&position[j], &side[j]);
-                    for k in 0..W {
-                        let (g0, s0) = (side[k] * (y[c][k] - position[k]), side[k] * y[v][k]);
-                        let (g1, s1) = (side[k] * (y1[c][k] - position[k]), side[k] * y1[v][k]);
-                        let near = !within_reach || may_turn_past(g0, s0, g1, s1, h[k]);
-                        hits[k] |= ((y[c][k] == position[k]) & (y[v][k] == 0.0))
-                            | (g1 > 0.0)
-                            | ((s0 > 0.0) & (s1 < 0.0) & near);
-                    }
-                }
-                hits.iter()
-                    .enumerate()
-                    .fold(0u32, |m, (k, &hit)| m | (hit as u32) << k)
-            };
-            meets = detect(false);
-            if meets != 0 {
-                meets = detect(true);
-            }
-        }
+        let mut meets = walls.meets(&y, &y1, &h);
         if SURFACES {
-            // Every slot's sides (unused slots repeat the last trajectory's).
-            let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
             let [first, second] = &mut values;
             let (before, after) = if at_start == 0 {
                 (&*first, second)
@@ -558,73 +489,21 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 (&*second, first)
             };
             flows.surface_values(&sides, &next_phase, &next, &y1, after);
-            // Over all W slots, a vector per surface (the unused ones are
-            // masked off below).
-            let mut hits = [false; W];
-            for k in 0..W {
-                // A sliding or held trajectory takes the slow path at
-                // every step.
-                hits[k] = surface::is_constrained(regions[k]);
-            }
-            for (j, &kind) in surfaces.iter().enumerate() {
-                let (g0, rate0) = (before.g(j), before.rate(j));
-                let (g1, rate1) = (after.g(j), after.rate(j));
-                for k in 0..W {
-                    hits[k] |= surface::may_cross(
-                        kind,
-                        regions[k],
-                        (g0[k], rate0[k]),
-                        (g1[k], rate1[k]),
-                        h[k],
-                    );
-                }
-            }
-            for (k, &hit) in hits.iter().enumerate() {
-                meets |= (hit as u32) << k;
-            }
+            meets |= surface_meets(surfaces, &regions, (before, after), &h);
         }
         // Unused slots repeat a trajectory and are never resolved.
         meets &= (1u32 << n) - 1;
         if meets != 0 {
-            for k in (0..n).filter(|&k| meets & (1 << k) != 0) {
-                let w = walls[k];
-                let flow = flows.of(k);
-                let before = column(&y, k);
-                let start = phase_of(&phases, &phase, k);
-                let after = if let Some(j) = impact::resting_on(w, &before) {
-                    impact::stuck_step(
-                        flow,
-                        &mut regions[k],
-                        j,
-                        location,
-                        omega[k],
-                        &start,
-                        &before,
-                        h[k],
-                        &mut stats[k],
-                    )
-                } else {
-                    impact::resolve(
-                        flow,
-                        &mut regions[k],
-                        location,
-                        omega[k],
-                        &start,
-                        &before,
-                        h[k],
-                        column(&y1, k),
-                        &mut stats[k],
-                    )
-                };
-                for i in 0..D {
-                    y1[i][k] = after[i];
-                }
-                if SURFACES {
-                    let end = phase_of(&next, &next_phase, k);
-                    let at_end = flow.surface_values(surface::sides(regions[k]), &end, &after);
-                    values[1 - at_start].set_column(k, &at_end);
-                }
-            }
+            let slots = Slots {
+                flows,
+                location: settings.impact_location,
+                omega: &omega,
+                h: &h,
+                start_of: |k: usize| phase_of(S::SHARED, &phases, &phase, k),
+                end_of: |k: usize| phase_of(S::SHARED, &next, &next_phase, k),
+            };
+            let end_values = SURFACES.then(|| &mut values[1 - at_start]);
+            slots.resolve(meets, (&y, &mut y1), &mut regions, end_values, stats);
         }
         y = y1;
         phases = next;
@@ -636,5 +515,256 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     for (k, out) in ys.iter_mut().enumerate() {
         *out = std::array::from_fn(|i| y[i][k]);
     }
-    std::array::from_fn(|k| phase_of(&phases, &phase, k))
+    std::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k))
+}
+
+/// The steps a flow's own step loop takes from y before one meets a wall
+/// or surface (none without a loop of its own), of the `left` the part
+/// has: `Flow::walk_shared` where the slots share their phase, else
+/// `Flow::walk_each`.
+#[inline(always)]
+fn walk<const D: usize, const W: usize, S: Flows<D>>(
+    flows: &S,
+    y: &mut [[f64; W]; D],
+    (phase, phases): (&mut Phase, &mut [Phase; W]),
+    (half, h): (&[Phase; W], &[f64; W]),
+    (live, left): (u32, usize),
+    switching: Option<Switching<'_, W>>,
+) -> usize {
+    let walked = if S::SHARED {
+        flows
+            .of(0)
+            .walk_shared(y, phase, &half[0], h[0], live, left, switching)
+    } else {
+        let each = std::array::from_fn(|k| flows.of(k));
+        S::F::walk_each(&each, y, phases, half, h, live, left, switching)
+    };
+    walked.unwrap_or(0)
+}
+
+/// One RK4 step of every slot of the batch from y (see
+/// `Flow::step_shared`), each in its region's field (`sides`) where there
+/// are surfaces: the states at its end, and the forcing phases there
+/// (shared, and each slot's: `phases` again where shared, left alone).
+/// `unset` stands for the slots' own stage phases where they share them.
+#[inline(always)]
+fn batch_step<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
+    flows: &S,
+    y: &[[f64; W]; D],
+    (phase, phases): (&Phase, &[Phase; W]),
+    (half, h): (&[Phase; W], &[f64; W]),
+    sides: &[u32; W],
+    unset: &[[Phase; 3]; W],
+) -> ([[f64; W]; D], Phase, [Phase; W]) {
+    let shared = rk4::stage_phases(phase, &half[0]);
+    let each: [[Phase; 3]; W] = if S::SHARED {
+        *unset
+    } else {
+        std::array::from_fn(|k| rk4::stage_phases(&phases[k], &half[k]))
+    };
+    let y1 = if !SURFACES {
+        flows.step(&shared, &each, y, h)
+    } else {
+        flows.step_in(sides, &shared, &each, y, h)
+    };
+    let next: [Phase; W] = if S::SHARED {
+        *phases
+    } else {
+        std::array::from_fn(|k| each[k][2])
+    };
+    (y1, shared[2], next)
+}
+
+/// Trajectory k's forcing phase: `phase` where the slots share it, else
+/// its own in `phases`.
+#[inline(always)]
+fn phase_of<const W: usize>(shared: bool, phases: &[Phase; W], phase: &Phase, k: usize) -> Phase {
+    if shared {
+        *phase
+    } else {
+        phases[k]
+    }
+}
+
+/// Each trajectory's region of the switches at the start, and its
+/// surfaces' values and rates there (into `values`).
+#[inline(always)]
+fn start_regions<const D: usize, const W: usize, S: Flows<D>>(
+    flows: &S,
+    y: &[[f64; W]; D],
+    start_of: impl Fn(usize) -> Phase,
+    n: usize,
+    regions: &mut [u32; W],
+    values: &mut SurfaceBatch<W>,
+) {
+    for (k, region) in regions.iter_mut().enumerate().take(n) {
+        let (flow, yk) = (flows.of(k), column(y, k));
+        let phase = start_of(k);
+        *region = surface::region_of(flow, &phase, &yk);
+        values.set_column(
+            k,
+            &flow.surface_values(surface::sides(*region), &phase, &yk),
+        );
+    }
+}
+
+/// The walls of a batch's system as columns over its slots: wall j's
+/// position and side in each slot (its coordinates are the same in every
+/// slot: one system).
+struct WallColumns<'a, const W: usize> {
+    walls: &'a [Wall],
+    position: [[f64; W]; wall::MAX_WALLS],
+    side: [[f64; W]; wall::MAX_WALLS],
+}
+
+impl<'a, const W: usize> WallColumns<'a, W> {
+    #[inline(always)]
+    fn of<const D: usize, S: Flows<D>>(flows: &'a S) -> Self {
+        let walls: [&[Wall]; W] = std::array::from_fn(|k| flows.of(k).walls());
+        debug_assert!(walls.iter().all(|w| w.len() == walls[0].len()));
+        WallColumns {
+            walls: walls[0],
+            position: std::array::from_fn(|j| {
+                std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.position))
+            }),
+            side: std::array::from_fn(|j| {
+                std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side))
+            }),
+        }
+    }
+
+    /// The slots (bit k) whose step from y to y1 meets a wall: at rest on
+    /// it before the step, or the stop test ([`wall::may_reach`]) after it;
+    /// in two passes, as the step loops (`c_loop::walk` says why): the
+    /// turns that the plain test finds again, only those within reach of
+    /// the wall.
+    #[inline(always)]
+    fn meets<const D: usize>(&self, y: &[[f64; W]; D], y1: &[[f64; W]; D], h: &[f64; W]) -> u32 {
+        if self.walls.is_empty() {
+            return 0;
+        }
+        let detect = |within_reach: bool| {
+            let mut hits = [false; W];
+            for (j, wall) in self.walls.iter().enumerate() {
+                let (c, v) = (wall.coordinate, wall.velocity);
+                let (position, side) = (&self.position[j], &self.side[j]);
+                for k in 0..W {
+                    let (g0, s0) = (side[k] * (y[c][k] - position[k]), side[k] * y[v][k]);
+                    let (g1, s1) = (side[k] * (y1[c][k] - position[k]), side[k] * y1[v][k]);
+                    hits[k] |= ((y[c][k] == position[k]) & (y[v][k] == 0.0))
+                        | may_reach(g0, s0, g1, s1, h[k], within_reach);
+                }
+            }
+            hits.iter()
+                .enumerate()
+                .fold(0u32, |m, (k, &hit)| m | (hit as u32) << k)
+        };
+        let meets = detect(false);
+        if meets != 0 {
+            detect(true)
+        } else {
+            meets
+        }
+    }
+}
+
+/// The slots (bit k) that may cross a general surface in a step from the
+/// surfaces' values `before` to `after` (the stop test of each,
+/// `surface::may_cross`), or that slide or are held: over all W slots, a
+/// vector per surface (the unused ones are masked off by the caller).
+#[inline(always)]
+fn surface_meets<const W: usize>(
+    surfaces: &[Surface],
+    regions: &[u32; W],
+    (before, after): (&SurfaceBatch<W>, &SurfaceBatch<W>),
+    h: &[f64; W],
+) -> u32 {
+    let mut hits = [false; W];
+    for k in 0..W {
+        // A sliding or held trajectory takes the slow path at every step.
+        hits[k] = surface::is_constrained(regions[k]);
+    }
+    for (j, &kind) in surfaces.iter().enumerate() {
+        let (g0, rate0) = (before.g(j), before.rate(j));
+        let (g1, rate1) = (after.g(j), after.rate(j));
+        for k in 0..W {
+            hits[k] |=
+                surface::may_cross(kind, regions[k], (g0[k], rate0[k]), (g1[k], rate1[k]), h[k]);
+        }
+    }
+    let mut meets = 0u32;
+    for (k, &hit) in hits.iter().enumerate() {
+        meets |= (hit as u32) << k;
+    }
+    meets
+}
+
+/// What the slow path needs of a batch's step: the slots' flows, how
+/// impacts are located, their forcing frequencies and step sizes, and
+/// each slot's forcing phase at the step's start and end.
+struct Slots<'a, S, const W: usize, P, Q> {
+    flows: &'a S,
+    location: ImpactLocation,
+    omega: &'a [f64; W],
+    h: &'a [f64; W],
+    start_of: P,
+    end_of: Q,
+}
+
+impl<S, const W: usize, P: Fn(usize) -> Phase, Q: Fn(usize) -> Phase> Slots<'_, S, W, P, Q> {
+    /// The step of each slot in `meets` redone alone by the impact code
+    /// from its start (column k of y) into y1 (at rest on a wall: stuck
+    /// there while pressed), its region updated, and where there are
+    /// surfaces its surfaces' values at the step's end into `end_values`.
+    #[inline(always)]
+    fn resolve<const D: usize>(
+        &self,
+        meets: u32,
+        (y, y1): (&[[f64; W]; D], &mut [[f64; W]; D]),
+        regions: &mut [u32; W],
+        mut end_values: Option<&mut SurfaceBatch<W>>,
+        stats: &mut [IterationStats],
+    ) where
+        S: Flows<D>,
+    {
+        let (omega, h) = (self.omega, self.h);
+        for k in (0..W).filter(|&k| meets & (1 << k) != 0) {
+            let flow = self.flows.of(k);
+            let before = column(y, k);
+            let start = (self.start_of)(k);
+            let after = if let Some(j) = impact::resting_on(flow.walls(), &before) {
+                impact::stuck_step(
+                    flow,
+                    &mut regions[k],
+                    j,
+                    self.location,
+                    omega[k],
+                    &start,
+                    &before,
+                    h[k],
+                    &mut stats[k],
+                )
+            } else {
+                impact::resolve(
+                    flow,
+                    &mut regions[k],
+                    self.location,
+                    omega[k],
+                    &start,
+                    &before,
+                    h[k],
+                    column(y1, k),
+                    &mut stats[k],
+                )
+            };
+            for i in 0..D {
+                y1[i][k] = after[i];
+            }
+            if let Some(values) = end_values.as_deref_mut() {
+                let at_end =
+                    flow.surface_values(surface::sides(regions[k]), &(self.end_of)(k), &after);
+                values.set_column(k, &at_end);
+            }
+        }
+    }
 }

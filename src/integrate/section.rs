@@ -10,7 +10,7 @@
 use super::avx2::vectorised;
 use super::clock::{Phase, ZERO_PHASE};
 use super::flow::Flow;
-use super::impact::{newton_in_bracket, Hermite};
+use super::locate::{newton_in_bracket, Hermite};
 use super::rk4;
 
 /// The plane y_state = at, crossed in `direction` (+1: increasing).

@@ -10,7 +10,7 @@
 //! ([`InRegion`](super::InRegion)), and a step whose end lies across a surface (or whose
 //! rate ∇g·F turns inside it, an excursion across and back) is cut at the
 //! crossing, located on the integrator's own solution as impacts are
-//! (Newton on re-stepped RK4, `impact::newton_in_bracket`).
+//! (Newton on re-stepped RK4, `locate::newton_in_bracket`).
 //!
 //! Each crossing multiplies phase-space volume by |det S|, S the saltation
 //! matrix, which the sum rule needs (added to `IterationStats::log_flux`):
@@ -68,7 +68,7 @@ use nalgebra::DMatrix;
 use super::clock::Phase;
 use super::flow::Flow;
 use super::region::MAX_SLIDING;
-use super::wall::may_turn_past;
+use super::wall::may_reach;
 
 // What a surface is and the region bits moved below the `Flow` trait
 // (`region`); here under their old paths, which the generated code and
@@ -443,14 +443,11 @@ pub fn jumped(
 }
 
 /// Whether a step of size h from values `before` to `after` (oriented by
-/// the trajectory's region) may cross surface j: its end lies across, or
-/// its rate turns from approaching to leaving inside the step within reach
-/// of the surface (`wall::may_turn_past`: the rate is g's derivative
-/// along the motion, as a stop's speed is its gap's, so the same bound on
-/// the step's cubic holds).
-///
-/// (Bitwise `|` and `&`, not `||` and `&&`: the same answer without
-/// branches, so the step loop's test over a batch's slots vectorises.)
+/// the trajectory's region) may cross surface j: the stop test
+/// (`wall::may_reach`: its end lies across, or its rate turns from
+/// approaching to leaving inside the step within reach of the surface;
+/// the rate is g's derivative along the motion, as a stop's speed is its
+/// gap's, so the same bound on the step's cubic holds).
 #[inline(always)]
 pub fn may_cross(
     kind: Surface,
@@ -461,7 +458,7 @@ pub fn may_cross(
 ) -> bool {
     let o = kind.orientation(region);
     let (g0, r0, g1, r1) = (o * before.0, o * before.1, o * after.0, o * after.1);
-    (g1 > 0.0) | ((r0 > 0.0) & (r1 < 0.0) & may_turn_past(g0, r0, g1, r1, h))
+    may_reach(g0, r0, g1, r1, h, true)
 }
 
 /// ln |det S| of an event's crossing: the reset's Jacobian `dr` and rate

@@ -1,8 +1,8 @@
-//! A rigid wall (a stop) as data, and the bound on a step that turns back
-//! short of it: what the `Flow` trait, the step loops' detection (the
-//! vector loop of `integrate`, the generated ones, the shaders') and the
-//! impact code share, below all of them. Locating and applying an impact
-//! is `impact`'s.
+//! A rigid wall (a stop) as data, and the stop test of a step (does it
+//! end across a surface, or turn back within reach of it): what the `Flow`
+//! trait, the step loops' detection (the vector loop of `integrate`, the
+//! generated ones, the shaders') and the impact code share, below all of
+//! them. Locating a crossing is `locate`'s, applying it `impact`'s.
 
 /// A rigid wall at `position` on coordinate `coordinate`, whose rate is
 /// coordinate `velocity`, with coefficient of restitution `restitution`.
@@ -62,7 +62,7 @@ pub const TURN_REACH: f64 = 8.0 / 27.0;
 /// Whether a step of size h whose speed towards the wall turns from s0 > 0
 /// to s1 < 0, both ends short of it (gaps g0, g1 <= 0), may pass the wall
 /// in between, and so needs the re-step to its Hermite peak that decides
-/// (`impact::locate_newton`).
+/// (`locate::locate_newton`).
 ///
 /// The interpolant g0·H00 + g1·H01 + h·s0·H10 + h·s1·H11 (H00 + H01 = 1,
 /// 0 <= H10, -H11 <= 4/27) stays below max(g0, g1) + (4/27)·h·(s0 - s1).
@@ -81,4 +81,24 @@ pub const TURN_REACH: f64 = 8.0 / 27.0;
 pub fn may_turn_past(g0: f64, s0: f64, g1: f64, s1: f64, h: f64) -> bool {
     let reach = TURN_REACH * h * (s0 - s1);
     !((g0 + reach < 0.0) & (g1 + reach < 0.0))
+}
+
+/// The stop test of a step of size h along a distance g to a surface
+/// (a wall's gap, a general surface's oriented g) whose rate s is g's
+/// derivative along the motion (a wall's approach speed): whether the step
+/// may cross it, because its end lies beyond (g1 > 0), or because the rate
+/// turns from approaching to leaving inside the step (s0 > 0 > s1) within
+/// reach of the surface ([`may_turn_past`]). Every Rust path that decides
+/// whether a step meets a wall or a surface asks this; the generated step
+/// loops and the shaders are its twins.
+///
+/// `bounded` false counts every turn, out of reach or not: the step loops'
+/// cheap first pass, whose hits the bounded test then sifts (or the
+/// sliding motion's, which has no reach bound).
+///
+/// (Bitwise `|` and `&`, not `||` and `&&`: the same answer without
+/// branches, so the step loop's test over a batch's slots vectorises.)
+#[inline(always)]
+pub fn may_reach(g0: f64, s0: f64, g1: f64, s1: f64, h: f64, bounded: bool) -> bool {
+    (g1 > 0.0) | ((s0 > 0.0) & (s1 < 0.0) & (!bounded || may_turn_past(g0, s0, g1, s1, h)))
 }
