@@ -251,12 +251,24 @@ fn merge(out: &std::path::Path, shards: &[PathBuf]) -> Result<(), Error> {
     Ok(())
 }
 
+/// The summary a run prints: what ran where, on what, how, what was
+/// adjusted, how long it took and what came out.
 fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
-    let i = &scene.integration;
     println!("lyapsweep: {} ({})", scene.name, scene.system.kind);
     if let Some(choice) = &report.choice {
         println!("  {choice}");
     }
+    print_backend(report);
+    print_lanes(scene);
+    print_method(scene, report);
+    print_adjustments(scene, report);
+    println!("  time         {:.3} s", report.elapsed.as_secs_f64());
+    print_gpu_run(report);
+    print_outcome(report, written);
+}
+
+/// The backend and precision, and for the GPU its adapter and kernels.
+fn print_backend(report: &Summary) {
     let precision = match report.precision {
         Precision::F64 => "f64",
         Precision::F32 => "f32",
@@ -281,6 +293,10 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
             report.threads
         ),
     }
+}
+
+/// The lanes: each axis's values, and the shard's part of them.
+fn print_lanes(scene: &Scene) {
     let ranges: Vec<String> = scene
         .sweep
         .axes()
@@ -310,6 +326,11 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         )
     });
     println!("  lanes        {}{shard}", ranges.join(" × "));
+}
+
+/// The method's settings as this backend uses them.
+fn print_method(scene: &Scene, report: &Summary) {
+    let i = &scene.integration;
     let mut method = format!(
         "transient {} (the last {} aligning the QR frame), iterations {}",
         i.transient, i.align, i.iterations
@@ -324,6 +345,12 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
         }
     }
     println!("  method       {method}");
+}
+
+/// What the run changed or left out of the scene: points lowered, keys not
+/// used, steps raised and iterations cut into sub-maps.
+fn print_adjustments(scene: &Scene, report: &Summary) {
+    let i = &scene.integration;
     if let Some(asked) = scene.bifurcation_points_asked {
         println!(
             "  points       output.bifurcation_points lowered from {asked} to {}: a lane keeps at most one point per averaged iteration (integration.iterations = {})",
@@ -355,48 +382,56 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
             "  sub-maps     {cut} lanes cut each iteration into up to {most} parts: over a whole one the fastest contraction falls below what the finite difference resolves"
         );
     }
-    println!("  time         {:.3} s", report.elapsed.as_secs_f64());
-    if let Some(gpu) = &report.gpu {
-        let t = &gpu.timings;
+}
+
+/// A GPU run's timings, retries, recomputed and validated lanes.
+fn print_gpu_run(report: &Summary) {
+    let Some(gpu) = &report.gpu else {
+        return;
+    };
+    let t = &gpu.timings;
+    println!(
+        "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch, {} bytes of device memory per lane",
+        t.setup.as_secs_f64(),
+        t.transient.as_secs_f64(),
+        t.averaging.as_secs_f64(),
+        t.gpu_wait.as_secs_f64(),
+        t.readback.as_secs_f64(),
+        t.host_qr.as_secs_f64(),
+        gpu.batches,
+        gpu.chunk_steps,
+        gpu.bytes_per_lane
+    );
+    if gpu.retries > 0 {
         println!(
-            "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch, {} bytes of device memory per lane",
-            t.setup.as_secs_f64(),
-            t.transient.as_secs_f64(),
-            t.averaging.as_secs_f64(),
-            t.gpu_wait.as_secs_f64(),
-            t.readback.as_secs_f64(),
-            t.host_qr.as_secs_f64(),
-            gpu.batches,
-            gpu.chunk_steps,
-            gpu.bytes_per_lane
+            "               {} batch run(s) redone with shorter dispatches: the adapter cut loops short past its cap (lavapipe: 65 535 loop iterations per invocation)",
+            gpu.retries
         );
-        if gpu.retries > 0 {
-            println!(
-                "               {} batch run(s) redone with shorter dispatches: the adapter cut loops short past its cap (lavapipe: 65 535 loop iterations per invocation)",
-                gpu.retries
-            );
-        }
-        if let Some(busy) = t.gpu_busy {
-            println!(
-                "               device time of the compute passes (timestamp queries) {:.3} s",
-                busy.as_secs_f64()
-            );
-        }
-        if !gpu.recomputed.is_empty() {
-            println!(
-                "  sliding      {} values recomputed on the CPU: the kernels flagged a motion they do not integrate (sliding, or held on an event)",
-                gpu.recomputed.len()
-            );
-        }
-        if let Some(v) = &gpu.validation {
-            println!(
-                "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",
-                v.lanes.len(),
-                v.max_difference,
-                v.tolerance
-            );
-        }
     }
+    if let Some(busy) = t.gpu_busy {
+        println!(
+            "               device time of the compute passes (timestamp queries) {:.3} s",
+            busy.as_secs_f64()
+        );
+    }
+    if !gpu.recomputed.is_empty() {
+        println!(
+            "  sliding      {} values recomputed on the CPU: the kernels flagged a motion they do not integrate (sliding, or held on an event)",
+            gpu.recomputed.len()
+        );
+    }
+    if let Some(v) = &gpu.validation {
+        println!(
+            "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",
+            v.lanes.len(),
+            v.max_difference,
+            v.tolerance
+        );
+    }
+}
+
+/// The sum rule's largest miss, the flagged and failed lanes, the files.
+fn print_outcome(report: &Summary, written: &[PathBuf]) {
     if let Some(err) = report.max_sum_error {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }

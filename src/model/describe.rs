@@ -11,10 +11,10 @@ use super::tape::reads_state_or_time;
 use super::wgsl;
 use crate::integrate::surface::Surface;
 
-/// The report of a model that compiled.
+/// The report of a model that compiled: the model as written, then as the
+/// integrator sees it, then what each backend runs.
 pub fn describe(code: &Code) -> String {
-    let model = &code.model;
-    let names = &model.names;
+    let names = &code.model.names;
     let show = |e: &Expr| {
         Written {
             expr: &tidy(e),
@@ -22,9 +22,23 @@ pub fn describe(code: &Code) -> String {
         }
         .to_string()
     };
+    // Each part writes to a String, which cannot fail: the `let _ =` of
+    // their writes drop no error.
     let mut out = String::new();
-    // Writing to a String cannot fail.
-    let w = &mut out;
+    write_model(&mut out, code, &show);
+    write_map(&mut out, code, &show);
+    write_sum_rule(&mut out, code, &show);
+    write_events(&mut out, code, &show);
+    write_jacobian(&mut out, code, &show);
+    write_cpu(&mut out, code);
+    write_gpu(&mut out, code);
+    out
+}
+
+/// The model line (states, parameters and their ranges) and the equations.
+fn write_model(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
+    let model = &code.model;
+    let names = &model.names;
     let parameters: Vec<String> = names
         .parameters
         .iter()
@@ -53,6 +67,13 @@ pub fn describe(code: &Code) -> String {
     for (s, e) in names.states.iter().zip(&model.equations) {
         let _ = writeln!(w, "  {s}' = {}", show(e));
     }
+}
+
+/// How the flow is reduced to a map: its period or its section, and the
+/// forcing read from the clock.
+fn write_map(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
+    let model = &code.model;
+    let names = &model.names;
     let _ = writeln!(w, "\nmap:");
     match (&model.map, &code.section) {
         (crate::model::Map::Period(t), _) => {
@@ -90,6 +111,13 @@ pub fn describe(code: &Code) -> String {
             show(w_expr)
         );
     }
+}
+
+/// What the exponents must add up to: the divergence, and the terms each
+/// impact, crossing or section return adds.
+fn write_sum_rule(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
+    let model = &code.model;
+    let names = &model.names;
     let _ = writeln!(w, "\nsum rule (exponents per unit time add up to):");
     match &code.divergence {
         Some(d) => {
@@ -133,6 +161,13 @@ pub fn describe(code: &Code) -> String {
             names.states[section.state]
         );
     }
+}
+
+/// The events as the integrator sees them: stops, general surfaces and
+/// switches, and whether the exact propagator applies.
+fn write_events(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
+    let model = &code.model;
+    let names = &model.names;
     if !code.walls.is_empty() {
         let _ = writeln!(w, "\nevents (stops):");
         for stop in &code.walls {
@@ -197,6 +232,12 @@ pub fn describe(code: &Code) -> String {
             }
         );
     }
+}
+
+/// The Jacobian of the field, whose time scales set the steps.
+fn write_jacobian(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
+    let model = &code.model;
+    let names = &model.names;
     let n = names.states.len();
     let _ = writeln!(
         w,
@@ -206,6 +247,11 @@ pub fn describe(code: &Code) -> String {
         let row: Vec<String> = (0..n).map(|j| show(&code.jacobian[i * n + j])).collect();
         let _ = writeln!(w, "  [{}]", row.join(", "));
     }
+}
+
+/// What the CPU runs: the tape, native code or the interpreter, and the
+/// step loops built by the C compiler.
+fn write_cpu(w: &mut String, code: &Code) {
     let _ = writeln!(
         w,
         "\nCPU: a tape of {} instructions, {} lane constants (parameter-only subexpressions, once per lane)",
@@ -271,6 +317,10 @@ pub fn describe(code: &Code) -> String {
         }
         None => {}
     }
+}
+
+/// Whether the GPU runs the model, and the system file generated for it.
+fn write_gpu(w: &mut String, code: &Code) {
     match wgsl::system_source(code) {
         Ok(source) => {
             let how = if code.section.is_some() {
@@ -286,7 +336,6 @@ pub fn describe(code: &Code) -> String {
             let _ = writeln!(w, "GPU: not run on the GPU kernels: {why}");
         }
     }
-    out
 }
 
 /// `e` with the zeros, ones and double negations that building

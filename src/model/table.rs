@@ -264,6 +264,9 @@ pub const STICK_LIMIT_RULE: &str = "must be a finite number ≥ 0 (the size of t
 
 impl Model {
     /// Parses the `[model]` table; `key` names it in messages ("model").
+    /// Its parts are read in the order they depend on one another: states
+    /// and parameters name what the switches' surfaces read, the switches
+    /// name the sides the equations read.
     pub fn parse(table_value: &toml::Value, key: &str) -> Result<Model> {
         let root = table(table_value, key)?;
         let at = |name: &str| format!("{key}.{name}");
@@ -286,340 +289,21 @@ impl Model {
             Some(v) => string(v, &at("name"))?.to_owned(),
             None => "model".to_owned(),
         };
-
-        let states_key = at("states");
-        let states: Vec<String> = match root.get("states") {
-            None => return Err(invalid(&states_key, "is required: the states, in order")),
-            Some(toml::Value::Array(items)) if !items.is_empty() => items
-                .iter()
-                .map(|v| string(v, &states_key).map(str::to_owned))
-                .collect::<Result<_>>()?,
-            Some(other) => {
-                return Err(invalid(
-                    &states_key,
-                    format!("expected a non-empty array of names, got {other}"),
-                ))
-            }
-        };
-        for (i, s) in states.iter().enumerate() {
-            check_name(&states_key, s)?;
-            if states[..i].contains(s) {
-                return Err(invalid(&states_key, format!("'{s}' is listed twice")));
-            }
-        }
-
-        let parameters_key = at("parameters");
-        let mut parameters = Vec::new();
-        let mut defaults = Vec::new();
-        let mut ranges = Vec::new();
-        if let Some(value) = root.get("parameters") {
-            for (p, v) in table(value, &parameters_key)? {
-                let key = format!("{parameters_key}.{p}");
-                check_name(&key, p)?;
-                if states.contains(p) {
-                    return Err(invalid(
-                        &key,
-                        format!("'{p}' is both a state and a parameter"),
-                    ));
-                }
-                let (number, range) = parameter(v, &key)?;
-                parameters.push(p.clone());
-                defaults.push(number);
-                ranges.push(range);
-            }
-        }
+        let states = parse_states(root.get("states"), &at("states"))?;
+        let (parameters, defaults, ranges) =
+            parse_parameters(root.get("parameters"), &at("parameters"), &states)?;
         let mut names = Names {
             states: states.clone(),
             parameters,
             switches: Vec::new(),
         };
-
-        let switches_key = at("switches");
-        let mut switches = Vec::new();
-        if let Some(value) = root.get("switches") {
-            let items = value
-                .as_array()
-                .ok_or_else(|| invalid(&switches_key, "expected [[model.switches]] tables"))?;
-            // Known before any surface is read, so that a surface or stick
-            // limit naming a switch is told why it may not, not that the
-            // switch does not exist.
-            names.switches = items
-                .iter()
-                .filter_map(|i| i.get("name").and_then(toml::Value::as_str))
-                .map(str::to_owned)
-                .collect();
-            for (n, item) in items.iter().enumerate() {
-                let key = format!("{switches_key}[{n}]");
-                let switch = table(item, &key)?;
-                known_keys(
-                    switch,
-                    &key,
-                    "a switch",
-                    &["name", "surface", "stick_limit"],
-                )?;
-                let name_key = format!("{key}.name");
-                let name = string(
-                    switch.get("name").ok_or_else(|| {
-                        invalid(&name_key, "is required: step(name) and sign(name) read it")
-                    })?,
-                    &name_key,
-                )?
-                .to_owned();
-                check_name(&name_key, &name)?;
-                if names.states.contains(&name) || names.parameters.contains(&name) {
-                    return Err(invalid(
-                        &name_key,
-                        format!("'{name}' is already a state or a parameter"),
-                    ));
-                }
-                if switches.iter().any(|s: &Switch| s.name == name) {
-                    return Err(invalid(&name_key, format!("'{name}' names two switches")));
-                }
-                let surface_key = format!("{key}.surface");
-                let surface = expression(
-                    switch.get("surface").ok_or_else(|| {
-                        invalid(
-                            &surface_key,
-                            "is required: the field switches where it crosses 0",
-                        )
-                    })?,
-                    &surface_key,
-                    &names,
-                    switch_state,
-                )?;
-                crossable(&surface, &names, &surface_key)?;
-                let stick_limit = match switch.get("stick_limit") {
-                    None => None,
-                    Some(text) => {
-                        let limit_key = format!("{key}.stick_limit");
-                        let limit = expression(text, &limit_key, &names, switch_state)?;
-                        if let Some(value) = bad_stick_limit(&limit, &defaults) {
-                            return Err(invalid(
-                                &limit_key,
-                                format!("{STICK_LIMIT_RULE}, got {value} at the defaults"),
-                            ));
-                        }
-                        Some(limit)
-                    }
-                };
-                switches.push(Switch {
-                    name,
-                    surface,
-                    stick_limit,
-                });
-            }
-            if switches.len() > MAX_SWITCHES {
-                return Err(invalid(
-                    &switches_key,
-                    format!(
-                        "{} switches: at most {MAX_SWITCHES} are supported",
-                        switches.len()
-                    ),
-                ));
-            }
-        }
+        let switches =
+            parse_switches(root.get("switches"), &at("switches"), &mut names, &defaults)?;
         names.switches = switches.iter().map(|s| s.name.clone()).collect();
-
-        let equations_key = at("equations");
-        let written = root
-            .get("equations")
-            .ok_or_else(|| invalid(&equations_key, "is required: d(state)/dt for every state"))?;
-        let written = table(written, &equations_key)?;
-        for k in written.keys() {
-            if !states.contains(k) {
-                return Err(invalid(
-                    &format!("{equations_key}.{k}"),
-                    format!("'{k}' is not a state (states: {})", states.join(", ")),
-                ));
-            }
-        }
-        let equations = states
-            .iter()
-            .map(|s| {
-                let key = format!("{equations_key}.{s}");
-                let text = written.get(s).ok_or_else(|| {
-                    invalid(&equations_key, format!("no equation for the state '{s}'"))
-                })?;
-                expression(text, &key, &names, any)
-            })
-            .collect::<Result<Vec<_>>>()?;
-
-        let map_key = at("map");
-        let map_table = root.get("map").ok_or_else(|| {
-            invalid(
-                &map_key,
-                "is required: period = \"...\" or section = { ... }",
-            )
-        })?;
-        let map_table = table(map_table, &map_key)?;
-        known_keys(map_table, &map_key, "a map", &["period", "section"])?;
-        let map = match (map_table.get("period"), map_table.get("section")) {
-            (Some(_), Some(_)) => {
-                return Err(invalid(&map_key, "give period or section, not both"))
-            }
-            (None, None) => {
-                return Err(invalid(
-                    &map_key,
-                    "give period = \"...\" or section = { ... }",
-                ))
-            }
-            (Some(period), None) => Map::Period(expression(
-                period,
-                &format!("{map_key}.period"),
-                &names,
-                parameters_only,
-            )?),
-            (None, Some(section)) => {
-                let key = format!("{map_key}.section");
-                let section = table(section, &key)?;
-                known_keys(section, &key, "a section", &["state", "at", "direction"])?;
-                let state_key = format!("{key}.state");
-                let state_name = string(
-                    section.get("state").ok_or_else(|| {
-                        invalid(
-                            &state_key,
-                            "is required: the state that defines the section",
-                        )
-                    })?,
-                    &state_key,
-                )?;
-                let state = states.iter().position(|s| s == state_name).ok_or_else(|| {
-                    invalid(
-                        &state_key,
-                        format!(
-                            "'{state_name}' is not a state (states: {})",
-                            states.join(", ")
-                        ),
-                    )
-                })?;
-                if states.len() < 2 {
-                    return Err(invalid(
-                        &state_key,
-                        "a section needs a flow of at least 2 states",
-                    ));
-                }
-                let at_key = format!("{key}.at");
-                let at = expression(
-                    section
-                        .get("at")
-                        .ok_or_else(|| invalid(&at_key, "is required: where the section lies"))?,
-                    &at_key,
-                    &names,
-                    parameters_only,
-                )?;
-                let increasing = match section
-                    .get("direction")
-                    .map(|d| string(d, &format!("{key}.direction")))
-                {
-                    None => true,
-                    Some(Ok("increasing")) => true,
-                    Some(Ok("decreasing")) => false,
-                    Some(Ok(other)) => {
-                        return Err(invalid(
-                            &format!("{key}.direction"),
-                            format!("expected \"increasing\" or \"decreasing\", got {other:?}"),
-                        ))
-                    }
-                    Some(Err(e)) => return Err(e),
-                };
-                Map::Section {
-                    state,
-                    at,
-                    increasing,
-                }
-            }
-        };
-
-        let events_key = at("events");
-        let mut events = Vec::new();
-        if let Some(value) = root.get("events") {
-            let items = value
-                .as_array()
-                .ok_or_else(|| invalid(&events_key, "expected [[model.events]] tables"))?;
-            for (n, item) in items.iter().enumerate() {
-                let key = format!("{events_key}[{n}]");
-                let event = table(item, &key)?;
-                known_keys(event, &key, "an event", &["name", "surface", "reset"])?;
-                let name = match event.get("name") {
-                    Some(v) => {
-                        let name_key = format!("{key}.name");
-                        let name = string(v, &name_key)?;
-                        // The name heads the event's column of spectrum.csv.
-                        if !name.chars().any(char::is_alphanumeric) {
-                            return Err(invalid(
-                                &name_key,
-                                format!(
-                                    "{:?} has no letter or digit to name the event's column by",
-                                    crate::error::clip(name)
-                                ),
-                            ));
-                        }
-                        name.to_owned()
-                    }
-                    None => format!("event {n}"),
-                };
-                let surface_key = format!("{key}.surface");
-                let surface = expression(
-                    event.get("surface").ok_or_else(|| {
-                        invalid(
-                            &surface_key,
-                            "is required: the event fires where it crosses 0 from below",
-                        )
-                    })?,
-                    &surface_key,
-                    &names,
-                    no_sides,
-                )?;
-                crossable(&surface, &names, &surface_key)?;
-                let mut reset = Vec::new();
-                if let Some(r) = event.get("reset") {
-                    let reset_key = format!("{key}.reset");
-                    for (s, text) in table(r, &reset_key)? {
-                        let state = states.iter().position(|x| x == s).ok_or_else(|| {
-                            invalid(
-                                &format!("{reset_key}.{s}"),
-                                format!("'{s}' is not a state (states: {})", states.join(", ")),
-                            )
-                        })?;
-                        reset.push((
-                            state,
-                            expression(text, &format!("{reset_key}.{s}"), &names, no_sides)?,
-                        ));
-                    }
-                }
-                events.push(Event {
-                    name,
-                    surface,
-                    reset,
-                });
-            }
-        }
-        let angles_key = at("angles");
-        let mut angles = Vec::new();
-        if let Some(value) = root.get("angles") {
-            let items = value
-                .as_array()
-                .ok_or_else(|| invalid(&angles_key, "expected an array of state names"))?;
-            for item in items {
-                let name = string(item, &angles_key)?;
-                let state = states.iter().position(|s| s == name).ok_or_else(|| {
-                    invalid(
-                        &angles_key,
-                        format!("'{name}' is not a state (states: {})", states.join(", ")),
-                    )
-                })?;
-                if angles.contains(&state) {
-                    return Err(invalid(&angles_key, format!("'{name}' is listed twice")));
-                }
-                if matches!(map, Map::Section { .. }) {
-                    return Err(invalid(
-                        &angles_key,
-                        "angles in a model with a Poincaré section are not supported yet",
-                    ));
-                }
-                angles.push(state);
-            }
-        }
+        let equations = parse_equations(root.get("equations"), &at("equations"), &names)?;
+        let map = parse_map(root.get("map"), &at("map"), &names)?;
+        let events = parse_events(root.get("events"), &at("events"), &names)?;
+        let angles = parse_angles(root.get("angles"), &at("angles"), &states, &map)?;
         Ok(Model {
             name,
             names,
@@ -652,4 +336,397 @@ impl Model {
             _ => Ok(()),
         }
     }
+}
+
+/// `states = [...]`: distinct names, at least one.
+fn parse_states(value: Option<&toml::Value>, states_key: &str) -> Result<Vec<String>> {
+    let states: Vec<String> = match value {
+        None => return Err(invalid(states_key, "is required: the states, in order")),
+        Some(toml::Value::Array(items)) if !items.is_empty() => items
+            .iter()
+            .map(|v| string(v, states_key).map(str::to_owned))
+            .collect::<Result<_>>()?,
+        Some(other) => {
+            return Err(invalid(
+                states_key,
+                format!("expected a non-empty array of names, got {other}"),
+            ))
+        }
+    };
+    for (i, s) in states.iter().enumerate() {
+        check_name(states_key, s)?;
+        if states[..i].contains(s) {
+            return Err(invalid(states_key, format!("'{s}' is listed twice")));
+        }
+    }
+    Ok(states)
+}
+
+/// `[model.parameters]`: their names, defaults and ranges, in the order
+/// written; no name may also be a state's.
+#[allow(clippy::type_complexity)]
+fn parse_parameters(
+    value: Option<&toml::Value>,
+    parameters_key: &str,
+    states: &[String],
+) -> Result<(Vec<String>, Vec<f64>, Vec<(f64, f64)>)> {
+    let mut parameters = Vec::new();
+    let mut defaults = Vec::new();
+    let mut ranges = Vec::new();
+    if let Some(value) = value {
+        for (p, v) in table(value, parameters_key)? {
+            let key = format!("{parameters_key}.{p}");
+            check_name(&key, p)?;
+            if states.contains(p) {
+                return Err(invalid(
+                    &key,
+                    format!("'{p}' is both a state and a parameter"),
+                ));
+            }
+            let (number, range) = parameter(v, &key)?;
+            parameters.push(p.clone());
+            defaults.push(number);
+            ranges.push(range);
+        }
+    }
+    Ok((parameters, defaults, ranges))
+}
+
+/// `[[model.switches]]`, at most [`MAX_SWITCHES`]; `names.switches` is
+/// set to every name written before any surface is read, so that a surface
+/// or stick limit naming a switch is told why it may not, not that the
+/// switch does not exist. `defaults` check the stick limits.
+fn parse_switches(
+    value: Option<&toml::Value>,
+    switches_key: &str,
+    names: &mut Names,
+    defaults: &[f64],
+) -> Result<Vec<Switch>> {
+    let mut switches = Vec::new();
+    let Some(value) = value else {
+        return Ok(switches);
+    };
+    let items = value
+        .as_array()
+        .ok_or_else(|| invalid(switches_key, "expected [[model.switches]] tables"))?;
+    names.switches = items
+        .iter()
+        .filter_map(|i| i.get("name").and_then(toml::Value::as_str))
+        .map(str::to_owned)
+        .collect();
+    for (n, item) in items.iter().enumerate() {
+        let switch = parse_switch(
+            item,
+            &format!("{switches_key}[{n}]"),
+            names,
+            defaults,
+            &switches,
+        )?;
+        switches.push(switch);
+    }
+    if switches.len() > MAX_SWITCHES {
+        return Err(invalid(
+            switches_key,
+            format!(
+                "{} switches: at most {MAX_SWITCHES} are supported",
+                switches.len()
+            ),
+        ));
+    }
+    Ok(switches)
+}
+
+/// One switch: its name (not one of the `earlier` switches'), its surface
+/// (which must be crossable) and its stick limit, if any.
+fn parse_switch(
+    item: &toml::Value,
+    key: &str,
+    names: &Names,
+    defaults: &[f64],
+    earlier: &[Switch],
+) -> Result<Switch> {
+    let switch = table(item, key)?;
+    known_keys(switch, key, "a switch", &["name", "surface", "stick_limit"])?;
+    let name_key = format!("{key}.name");
+    let name = string(
+        switch
+            .get("name")
+            .ok_or_else(|| invalid(&name_key, "is required: step(name) and sign(name) read it"))?,
+        &name_key,
+    )?
+    .to_owned();
+    check_name(&name_key, &name)?;
+    if names.states.contains(&name) || names.parameters.contains(&name) {
+        return Err(invalid(
+            &name_key,
+            format!("'{name}' is already a state or a parameter"),
+        ));
+    }
+    if earlier.iter().any(|s| s.name == name) {
+        return Err(invalid(&name_key, format!("'{name}' names two switches")));
+    }
+    let surface_key = format!("{key}.surface");
+    let surface = expression(
+        switch.get("surface").ok_or_else(|| {
+            invalid(
+                &surface_key,
+                "is required: the field switches where it crosses 0",
+            )
+        })?,
+        &surface_key,
+        names,
+        switch_state,
+    )?;
+    crossable(&surface, names, &surface_key)?;
+    let stick_limit = match switch.get("stick_limit") {
+        None => None,
+        Some(text) => {
+            let limit_key = format!("{key}.stick_limit");
+            let limit = expression(text, &limit_key, names, switch_state)?;
+            if let Some(value) = bad_stick_limit(&limit, defaults) {
+                return Err(invalid(
+                    &limit_key,
+                    format!("{STICK_LIMIT_RULE}, got {value} at the defaults"),
+                ));
+            }
+            Some(limit)
+        }
+    };
+    Ok(Switch {
+        name,
+        surface,
+        stick_limit,
+    })
+}
+
+/// `[model.equations]`: one for every state, and none for anything else.
+fn parse_equations(
+    value: Option<&toml::Value>,
+    equations_key: &str,
+    names: &Names,
+) -> Result<Vec<Expr>> {
+    let states = &names.states;
+    let written =
+        value.ok_or_else(|| invalid(equations_key, "is required: d(state)/dt for every state"))?;
+    let written = table(written, equations_key)?;
+    for k in written.keys() {
+        if !states.contains(k) {
+            return Err(invalid(
+                &format!("{equations_key}.{k}"),
+                format!("'{k}' is not a state (states: {})", states.join(", ")),
+            ));
+        }
+    }
+    states
+        .iter()
+        .map(|s| {
+            let key = format!("{equations_key}.{s}");
+            let text = written.get(s).ok_or_else(|| {
+                invalid(equations_key, format!("no equation for the state '{s}'"))
+            })?;
+            expression(text, &key, names, any)
+        })
+        .collect::<Result<Vec<_>>>()
+}
+
+/// `[model.map]`: a period, or a Poincaré section.
+fn parse_map(value: Option<&toml::Value>, map_key: &str, names: &Names) -> Result<Map> {
+    let map_table = value.ok_or_else(|| {
+        invalid(
+            map_key,
+            "is required: period = \"...\" or section = { ... }",
+        )
+    })?;
+    let map_table = table(map_table, map_key)?;
+    known_keys(map_table, map_key, "a map", &["period", "section"])?;
+    match (map_table.get("period"), map_table.get("section")) {
+        (Some(_), Some(_)) => Err(invalid(map_key, "give period or section, not both")),
+        (None, None) => Err(invalid(
+            map_key,
+            "give period = \"...\" or section = { ... }",
+        )),
+        (Some(period), None) => Ok(Map::Period(expression(
+            period,
+            &format!("{map_key}.period"),
+            names,
+            parameters_only,
+        )?)),
+        (None, Some(section)) => parse_section(section, &format!("{map_key}.section"), names),
+    }
+}
+
+/// `section = { state, at, direction }`: the state whose value `at` is the
+/// section, crossed increasing unless `direction` says otherwise.
+fn parse_section(section: &toml::Value, key: &str, names: &Names) -> Result<Map> {
+    let states = &names.states;
+    let section = table(section, key)?;
+    known_keys(section, key, "a section", &["state", "at", "direction"])?;
+    let state_key = format!("{key}.state");
+    let state_name = string(
+        section.get("state").ok_or_else(|| {
+            invalid(
+                &state_key,
+                "is required: the state that defines the section",
+            )
+        })?,
+        &state_key,
+    )?;
+    let state = states.iter().position(|s| s == state_name).ok_or_else(|| {
+        invalid(
+            &state_key,
+            format!(
+                "'{state_name}' is not a state (states: {})",
+                states.join(", ")
+            ),
+        )
+    })?;
+    if states.len() < 2 {
+        return Err(invalid(
+            &state_key,
+            "a section needs a flow of at least 2 states",
+        ));
+    }
+    let at_key = format!("{key}.at");
+    let at = expression(
+        section
+            .get("at")
+            .ok_or_else(|| invalid(&at_key, "is required: where the section lies"))?,
+        &at_key,
+        names,
+        parameters_only,
+    )?;
+    let increasing = match section
+        .get("direction")
+        .map(|d| string(d, &format!("{key}.direction")))
+    {
+        None => true,
+        Some(Ok("increasing")) => true,
+        Some(Ok("decreasing")) => false,
+        Some(Ok(other)) => {
+            return Err(invalid(
+                &format!("{key}.direction"),
+                format!("expected \"increasing\" or \"decreasing\", got {other:?}"),
+            ))
+        }
+        Some(Err(e)) => return Err(e),
+    };
+    Ok(Map::Section {
+        state,
+        at,
+        increasing,
+    })
+}
+
+/// `[[model.events]]`, in the order written.
+fn parse_events(
+    value: Option<&toml::Value>,
+    events_key: &str,
+    names: &Names,
+) -> Result<Vec<Event>> {
+    let Some(value) = value else {
+        return Ok(Vec::new());
+    };
+    let items = value
+        .as_array()
+        .ok_or_else(|| invalid(events_key, "expected [[model.events]] tables"))?;
+    items
+        .iter()
+        .enumerate()
+        .map(|(n, item)| parse_event(item, n, &format!("{events_key}[{n}]"), names))
+        .collect()
+}
+
+/// Event `n`: its name (by default "event n"), its surface (which must be
+/// crossable) and its reset.
+fn parse_event(item: &toml::Value, n: usize, key: &str, names: &Names) -> Result<Event> {
+    let states = &names.states;
+    let event = table(item, key)?;
+    known_keys(event, key, "an event", &["name", "surface", "reset"])?;
+    let name = match event.get("name") {
+        Some(v) => {
+            let name_key = format!("{key}.name");
+            let name = string(v, &name_key)?;
+            // The name heads the event's column of spectrum.csv.
+            if !name.chars().any(char::is_alphanumeric) {
+                return Err(invalid(
+                    &name_key,
+                    format!(
+                        "{:?} has no letter or digit to name the event's column by",
+                        crate::error::clip(name)
+                    ),
+                ));
+            }
+            name.to_owned()
+        }
+        None => format!("event {n}"),
+    };
+    let surface_key = format!("{key}.surface");
+    let surface = expression(
+        event.get("surface").ok_or_else(|| {
+            invalid(
+                &surface_key,
+                "is required: the event fires where it crosses 0 from below",
+            )
+        })?,
+        &surface_key,
+        names,
+        no_sides,
+    )?;
+    crossable(&surface, names, &surface_key)?;
+    let mut reset = Vec::new();
+    if let Some(r) = event.get("reset") {
+        let reset_key = format!("{key}.reset");
+        for (s, text) in table(r, &reset_key)? {
+            let state = states.iter().position(|x| x == s).ok_or_else(|| {
+                invalid(
+                    &format!("{reset_key}.{s}"),
+                    format!("'{s}' is not a state (states: {})", states.join(", ")),
+                )
+            })?;
+            reset.push((
+                state,
+                expression(text, &format!("{reset_key}.{s}"), names, no_sides)?,
+            ));
+        }
+    }
+    Ok(Event {
+        name,
+        surface,
+        reset,
+    })
+}
+
+/// `angles = [...]`: distinct states, in a period map only.
+fn parse_angles(
+    value: Option<&toml::Value>,
+    angles_key: &str,
+    states: &[String],
+    map: &Map,
+) -> Result<Vec<usize>> {
+    let mut angles = Vec::new();
+    if let Some(value) = value {
+        let items = value
+            .as_array()
+            .ok_or_else(|| invalid(angles_key, "expected an array of state names"))?;
+        for item in items {
+            let name = string(item, angles_key)?;
+            let state = states.iter().position(|s| s == name).ok_or_else(|| {
+                invalid(
+                    angles_key,
+                    format!("'{name}' is not a state (states: {})", states.join(", ")),
+                )
+            })?;
+            if angles.contains(&state) {
+                return Err(invalid(angles_key, format!("'{name}' is listed twice")));
+            }
+            if matches!(map, Map::Section { .. }) {
+                return Err(invalid(
+                    angles_key,
+                    "angles in a model with a Poincaré section are not supported yet",
+                ));
+            }
+            angles.push(state);
+        }
+    }
+    Ok(angles)
 }

@@ -86,9 +86,47 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let Some(first) = shards.first() else {
         return Err(Error::invalid("merge", "give the shard folders to merge"));
     };
-    // They must come from the same scene, split the same way, all present.
+    let (count, lanes) = check_split(&shards)?;
+    let scene = scene_of(&first.dir)?;
+    let shard_lanes = |i: usize| (i..lanes).step_by(count).count();
+    check_lane_lists(&shards, count, lanes)?;
+
+    // Every file is read and checked before anything is written.
+    let mut tables = Vec::new();
+    if scene.lyapunov {
+        tables.push(gather(&shards, spectrum_file(&scene), &|i| {
+            vec![1; shard_lanes(i)]
+        })?);
+    }
+    if scene.bifurcation_points > 0 {
+        tables.push(gather(&shards, BIFURCATION_FILE, &|i| {
+            shards[i].file.bifurcation_rows.clone()
+        })?);
+    }
+
+    let shard_dirs: Vec<&Path> = shards.iter().map(|s| s.dir.as_path()).collect();
+    for table in &tables {
+        check_rows(&scene, table, &shard_dirs)?;
+    }
+
+    let dir = staging.dir().to_owned();
+    set::pause(SCENE_FILE);
+    write_text(&dir.join(SCENE_FILE), &first.scene_text)?;
+    write_tables(&dir, &tables, count, lanes)?;
+    if scene.plot {
+        set::pause("figures");
+        super::results::draw(&dir, &dir)?;
+    }
+    staging.commit()
+}
+
+/// The shards (sorted by index, at least one) come from the same scene,
+/// split the same way, each once and all present; returns the split's
+/// shard count and the sweep's lanes.
+fn check_split(shards: &[Shard]) -> Result<(usize, usize)> {
+    let first = &shards[0];
     let (count, lanes) = (first.file.count, first.file.lanes);
-    for shard in &shards {
+    for shard in shards {
         let here = |name: &str| shard.dir.join(name);
         if shard.scene_text != first.scene_text {
             return Err(bad(
@@ -137,7 +175,11 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
             ),
         ));
     }
-    let scene = scene_of(&first.dir)?;
+    Ok((count, lanes))
+}
+
+/// Each shard lists the bifurcation rows of as many lanes as it has.
+fn check_lane_lists(shards: &[Shard], count: usize, lanes: usize) -> Result<()> {
     let shard_lanes = |i: usize| (i..lanes).step_by(count).count();
     for (i, shard) in shards.iter().enumerate() {
         if shard.file.bifurcation_rows.len() != shard_lanes(i) {
@@ -152,65 +194,57 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         }
     }
 
-    // Every file is read and checked before anything is written. Per shard,
-    // its rows grouped by lane; lane k of the sweep is lane k / n of shard
-    // k % n.
-    let gather = |name: &'static str, rows_of: &dyn Fn(usize) -> Vec<usize>| -> Result<Table> {
-        let mut header: Option<csv::StringRecord> = None;
-        let mut per_shard = Vec::new();
-        for (i, shard) in shards.iter().enumerate() {
-            let (h, records) = read_csv(&shard.dir, name)?;
-            if header.as_ref().is_some_and(|first| *first != h) {
-                return Err(bad(
-                    &shard.dir.join(name),
-                    "its header differs from shard 0's",
-                ));
-            }
-            header = Some(h);
-            let counts = rows_of(i);
-            let expected: usize = counts.iter().sum();
-            if expected != records.len() {
-                return Err(bad(
-                    &shard.dir.join(name),
-                    format!(
-                        "{} rows, {expected} expected from {SHARD_FILE}",
-                        records.len()
-                    ),
-                ));
-            }
-            let mut rows = records.into_iter();
-            per_shard.push(
-                counts
-                    .iter()
-                    .map(|&n| rows.by_ref().take(n).collect())
-                    .collect(),
-            );
+    Ok(())
+}
+
+/// One file of every shard, read and checked: per shard, its rows grouped
+/// by lane, `rows_of(i)` rows for each lane of shard i.
+fn gather(
+    shards: &[Shard],
+    name: &'static str,
+    rows_of: &dyn Fn(usize) -> Vec<usize>,
+) -> Result<Table> {
+    let mut header: Option<csv::StringRecord> = None;
+    let mut per_shard = Vec::new();
+    for (i, shard) in shards.iter().enumerate() {
+        let (h, records) = read_csv(&shard.dir, name)?;
+        if header.as_ref().is_some_and(|first| *first != h) {
+            return Err(bad(
+                &shard.dir.join(name),
+                "its header differs from shard 0's",
+            ));
         }
-        Ok(Table {
-            name,
-            header: header.expect("at least one shard"),
-            per_shard,
-        })
-    };
-    let mut tables = Vec::new();
-    if scene.lyapunov {
-        tables.push(gather(spectrum_file(&scene), &|i| vec![1; shard_lanes(i)])?);
+        header = Some(h);
+        let counts = rows_of(i);
+        let expected: usize = counts.iter().sum();
+        if expected != records.len() {
+            return Err(bad(
+                &shard.dir.join(name),
+                format!(
+                    "{} rows, {expected} expected from {SHARD_FILE}",
+                    records.len()
+                ),
+            ));
+        }
+        let mut rows = records.into_iter();
+        per_shard.push(
+            counts
+                .iter()
+                .map(|&n| rows.by_ref().take(n).collect())
+                .collect(),
+        );
     }
-    if scene.bifurcation_points > 0 {
-        tables.push(gather(BIFURCATION_FILE, &|i| {
-            shards[i].file.bifurcation_rows.clone()
-        })?);
-    }
+    Ok(Table {
+        name,
+        header: header.expect("at least one shard"),
+        per_shard,
+    })
+}
 
-    let shard_dirs: Vec<&Path> = shards.iter().map(|s| s.dir.as_path()).collect();
-    for table in &tables {
-        check_rows(&scene, table, &shard_dirs)?;
-    }
-
-    let dir = staging.dir().to_owned();
-    set::pause(SCENE_FILE);
-    write_text(&dir.join(SCENE_FILE), &first.scene_text)?;
-    for table in &tables {
+/// The merged tables in the staging folder `dir`, in the sweep's lane
+/// order: lane k of the sweep is lane k / n of shard k % n.
+fn write_tables(dir: &Path, tables: &[Table], count: usize, lanes: usize) -> Result<()> {
+    for table in tables {
         set::pause(table.name);
         write_atomically(&dir.join(table.name), |w| {
             w.write_record(&table.header)?;
@@ -222,11 +256,7 @@ pub fn merge(out: &Path, dirs: &[PathBuf]) -> Result<Vec<PathBuf>> {
             Ok(())
         })?;
     }
-    if scene.plot {
-        set::pause("figures");
-        super::results::draw(&dir, &dir)?;
-    }
-    staging.commit()
+    Ok(())
 }
 
 /// Every row of a shard's table is of the lane it stands for (its

@@ -8,6 +8,7 @@
 pub mod context;
 pub mod pipeline;
 pub mod section;
+pub mod seed;
 pub mod shader;
 pub mod spirv;
 pub mod stopwatch;

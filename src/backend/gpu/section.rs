@@ -35,6 +35,7 @@ use super::pipeline::{
 };
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
+use crate::backend::progress::Progress;
 use crate::error::Result;
 use crate::integrate::section::{crossing_in_step, Crossing};
 use crate::method::lane::{not_run, plan_lane};
@@ -308,62 +309,10 @@ impl<'a> Stepper<'a> {
         queue.write_buffer(&self.states, 0, &state_bytes);
         let jobs_bytes = 16 * jobs.len() as u64;
         let states_bytes = state_bytes.len() as u64;
-        // Steps to dispatch before each look: all of them for ADVANCE, the
-        // longest return so far for SEEK.
-        let ahead = jobs
-            .iter()
-            .map(|j| {
-                if j.seek {
-                    self.longest_return.max(1)
-                } else {
-                    j.limit as usize
-                }
-            })
-            .max()
-            .unwrap_or(1)
-            .min(jobs.iter().map(|j| j.limit as usize).max().unwrap_or(1))
-            .max(1);
+        let ahead = self.steps_ahead(jobs);
         loop {
-            let control = Control {
-                job_count: jobs.len() as u32,
-                chunk_steps: self.chunk as u32,
-                opaque_zero: 0,
-                pad: 0,
-            };
-            queue.write_buffer(&self.control, 0, bytemuck::bytes_of(&control));
-            let dispatches = ahead.div_ceil(self.chunk);
-            let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("section"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &self.bind_group, &[]);
-                let groups = jobs.len().div_ceil(self.workgroup as usize) as u32;
-                for _ in 0..dispatches {
-                    pass.dispatch_workgroups(groups, 1, 1);
-                }
-            }
-            encoder.copy_buffer_to_buffer(&self.jobs, 0, &self.readback, 0, jobs_bytes);
-            encoder.copy_buffer_to_buffer(
-                &self.states,
-                0,
-                &self.readback,
-                jobs_bytes,
-                states_bytes,
-            );
-            queue.submit([encoder.finish()]);
-            let wait = Instant::now();
-            let (read_jobs, read_states) = read_back(&self.gpu.device, &self.readback, |b| {
-                let jobs_part = &b[..jobs_bytes as usize];
-                let states_part = &b[jobs_bytes as usize..(jobs_bytes + states_bytes) as usize];
-                (
-                    bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(jobs_part),
-                    reals_from(states_part, self.precision),
-                )
-            })?;
-            self.timings.gpu_wait += wait.elapsed();
+            let (read_jobs, read_states) =
+                self.dispatch(jobs.len(), ahead, jobs_bytes, states_bytes)?;
             table = read_jobs;
             states = read_states;
             if table.iter().any(|j| j[1] & TRUNCATED != 0) {
@@ -389,7 +338,76 @@ impl<'a> Stepper<'a> {
                 break;
             }
         }
-        let outcomes = table
+        Ok(self.outcomes::<N>(&table, &states))
+    }
+
+    /// Steps to dispatch before each look: all of them for ADVANCE, the
+    /// longest return so far for SEEK.
+    fn steps_ahead<const N: usize>(&self, jobs: &[Job<N>]) -> usize {
+        jobs.iter()
+            .map(|j| {
+                if j.seek {
+                    self.longest_return.max(1)
+                } else {
+                    j.limit as usize
+                }
+            })
+            .max()
+            .unwrap_or(1)
+            .min(jobs.iter().map(|j| j.limit as usize).max().unwrap_or(1))
+            .max(1)
+    }
+
+    /// One submission: `ahead` steps of every job in dispatches of
+    /// `chunk` steps, then the jobs' table and states read back.
+    fn dispatch(
+        &mut self,
+        job_count: usize,
+        ahead: usize,
+        jobs_bytes: u64,
+        states_bytes: u64,
+    ) -> Result<(Vec<[u32; 4]>, Vec<f64>)> {
+        let queue = &self.gpu.queue;
+        let control = Control {
+            job_count: job_count as u32,
+            chunk_steps: self.chunk as u32,
+            opaque_zero: 0,
+            pad: 0,
+        };
+        queue.write_buffer(&self.control, 0, bytemuck::bytes_of(&control));
+        let dispatches = ahead.div_ceil(self.chunk);
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("section"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            let groups = job_count.div_ceil(self.workgroup as usize) as u32;
+            for _ in 0..dispatches {
+                pass.dispatch_workgroups(groups, 1, 1);
+            }
+        }
+        encoder.copy_buffer_to_buffer(&self.jobs, 0, &self.readback, 0, jobs_bytes);
+        encoder.copy_buffer_to_buffer(&self.states, 0, &self.readback, jobs_bytes, states_bytes);
+        queue.submit([encoder.finish()]);
+        let wait = Instant::now();
+        let read = read_back(&self.gpu.device, &self.readback, |b| {
+            let jobs_part = &b[..jobs_bytes as usize];
+            let states_part = &b[jobs_bytes as usize..(jobs_bytes + states_bytes) as usize];
+            (
+                bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(jobs_part),
+                reals_from(states_part, self.precision),
+            )
+        })?;
+        self.timings.gpu_wait += wait.elapsed();
+        Ok(read)
+    }
+
+    /// What each job's table entry and states say happened.
+    fn outcomes<const N: usize>(&mut self, table: &[[u32; 4]], states: &[f64]) -> Vec<Outcome<N>> {
+        table
             .iter()
             .enumerate()
             .map(|(k, j)| {
@@ -412,8 +430,7 @@ impl<'a> Stepper<'a> {
                     }
                 }
             })
-            .collect();
-        Ok(outcomes)
+            .collect()
     }
 }
 
@@ -478,6 +495,9 @@ where
     }
 }
 
+/// A batch of lanes of a Poincaré map on the GPU: the lanes planned, their
+/// transient, then their averaging iterations, each a round of returns
+/// (and of tangents) for every lane still running.
 fn run_dim<const D: usize, const N: usize>(
     gpu: &Gpu,
     scene: &Scene,
@@ -492,8 +512,58 @@ where
     let start = Instant::now();
     let progress = options.progress.clone().unwrap_or_default();
     let count = batch.len();
-    let mut lanes: Vec<Lane<D, N>> = batch
-        .clone()
+    let mut lanes = plan_lanes::<D, N>(scene, settings, batch.clone());
+    // Per lane: its parameters and the section's position.
+    let mut lane_data = Vec::new();
+    for (k, lane) in batch.zip(&lanes) {
+        lane_data.extend_from_slice(&scene.lane_params(k).values);
+        lane_data.push(lane.system.section().at);
+    }
+    let trajectories = 1 + if settings.lyapunov {
+        settings.difference.copies(D)
+    } else {
+        0
+    };
+    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, workgroup);
+    stepper.timings.setup = start.elapsed();
+
+    let transient_start = Instant::now();
+    transient(&mut stepper, &mut lanes, settings, &progress)?;
+    stepper.timings.transient = transient_start.elapsed();
+
+    let averaging = Instant::now();
+    average(&mut stepper, &mut lanes, settings, &progress)?;
+    stepper.timings.averaging = averaging.elapsed();
+    let results = lanes
+        .into_iter()
+        .map(|lane| match lane.result {
+            Some(result) => result,
+            None => lane.accumulator.finish(),
+        })
+        .collect();
+    Ok(GpuRun {
+        lanes: results,
+        timings: stepper.timings,
+        batches: 1,
+        chunk_steps: stepper.chunk,
+        retries: stepper.retries,
+        // (Set by `run`.)
+        bytes_per_lane: 0,
+    })
+}
+
+/// The batch's lanes, each planned; a lane whose plan is not affordable
+/// has its result already.
+fn plan_lanes<const D: usize, const N: usize>(
+    scene: &Scene,
+    settings: &MethodSettings,
+    batch: std::ops::Range<usize>,
+) -> Vec<Lane<D, N>>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    batch
         .map(|k| {
             let params = scene.lane_params(k);
             let system = SectionFlow::<D, N>::new(&params);
@@ -515,26 +585,23 @@ where
                 factors: Vec::new(),
             }
         })
-        .collect();
-    // Per lane: its parameters and the section's position.
-    let mut lane_data = Vec::new();
-    for (k, lane) in batch.zip(&lanes) {
-        lane_data.extend_from_slice(&scene.lane_params(k).values);
-        lane_data.push(lane.system.section().at);
-    }
-    let trajectories = 1 + if settings.lyapunov {
-        settings.difference.copies(D)
-    } else {
-        0
-    };
-    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
-    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, workgroup);
-    stepper.timings.setup = start.elapsed();
+        .collect()
+}
 
-    // The first point: from the scene's state of the flow to the section.
-    let transient_start = Instant::now();
+/// The first point (from the scene's state of the flow to the section),
+/// then the transient's returns; a lane that goes non-finite fails there.
+fn transient<const D: usize, const N: usize>(
+    stepper: &mut Stepper,
+    lanes: &mut [Lane<D, N>],
+    settings: &MethodSettings,
+    progress: &Progress,
+) -> Result<()>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let count = lanes.len();
     let initial: [f64; N] = std::array::from_fn(|i| settings.initial_state[i]);
-    returns(&mut stepper, &mut lanes, |_| initial)?;
+    returns(stepper, lanes, |_| initial)?;
     for lane in lanes.iter_mut().filter(|l| l.active()) {
         lane.x = lane.back.take().expect("a return").image;
         if !lane.x.iter().all(|v| v.is_finite()) {
@@ -544,7 +611,7 @@ where
         }
     }
     for n in 0..settings.transient {
-        returns(&mut stepper, &mut lanes, |lane| lane.system.lift(&lane.x))?;
+        returns(stepper, lanes, |lane| lane.system.lift(&lane.x))?;
         for lane in lanes.iter_mut().filter(|l| l.active()) {
             lane.x = lane.back.take().expect("a return").image;
             lane.system.wrap(&mut lane.x);
@@ -556,22 +623,34 @@ where
         }
         progress.advance(count as u64);
     }
-    stepper.timings.transient = transient_start.elapsed();
+    Ok(())
+}
 
-    let averaging = Instant::now();
+/// The averaging iterations: each lane's return, its tangent factors, then
+/// its accumulator on the host.
+fn average<const D: usize, const N: usize>(
+    stepper: &mut Stepper,
+    lanes: &mut [Lane<D, N>],
+    settings: &MethodSettings,
+    progress: &Progress,
+) -> Result<()>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let count = lanes.len();
     for _ in 0..settings.iterations {
         for lane in lanes.iter_mut() {
             lane.stats = IterationStats::default();
             lane.factors.clear();
         }
-        returns(&mut stepper, &mut lanes, |lane| lane.system.lift(&lane.x))?;
+        returns(stepper, lanes, |lane| lane.system.lift(&lane.x))?;
         // In the CPU's order: the return's terms, then each part's
         // divergence integral (the same sum to the bit).
         for lane in lanes.iter_mut().filter(|l| l.active()) {
             lane.back.expect("a return").add_to(&mut lane.stats);
         }
         if settings.lyapunov {
-            tangents(&mut stepper, &mut lanes, settings)?;
+            tangents(stepper, lanes, settings)?;
         }
         let host = Instant::now();
         lanes
@@ -589,23 +668,7 @@ where
         stepper.timings.host_qr += host.elapsed();
         progress.advance(count as u64);
     }
-    stepper.timings.averaging = averaging.elapsed();
-    let results = lanes
-        .into_iter()
-        .map(|lane| match lane.result {
-            Some(result) => result,
-            None => lane.accumulator.finish(),
-        })
-        .collect();
-    Ok(GpuRun {
-        lanes: results,
-        timings: stepper.timings,
-        batches: 1,
-        chunk_steps: stepper.chunk,
-        retries: stepper.retries,
-        // (Set by `run`.)
-        bytes_per_lane: 0,
-    })
+    Ok(())
 }
 
 /// A return of every active lane's reference from `start(lane)`, left in

@@ -21,12 +21,12 @@ use super::pipeline::{
     uniform_entry, wait_for, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS,
     TRUNCATION_RETRY,
 };
+use super::seed::{lane_constants, Seeds};
 use super::shader::{Kernel, Variant};
 use super::stopwatch::{self, Stopwatch};
 use crate::backend::options::RunOptions;
 use crate::backend::progress::Progress;
 use crate::error::{Error, Result};
-use crate::integrate::clock::half_turn;
 use crate::method::lane::{is_grazing, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
@@ -345,6 +345,9 @@ impl<'a, const D: usize> Batch<'a, D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
+    /// The batch of lanes `first..first + count`: their constants and
+    /// starting trajectories uploaded, the ring of iterations read back per
+    /// chunk sized, the dispatches' steps chosen and the buffers bound.
     #[allow(clippy::too_many_arguments)]
     fn new(
         gpu: &Gpu,
@@ -358,116 +361,33 @@ where
         count: usize,
         max_chunk: usize,
     ) -> Self {
-        let device = &gpu.device;
         let precision = variant.precision;
-        let info = scene.system;
-        let steps = if info.is_flow {
+        let steps = if scene.system.is_flow {
             settings.flow.steps_per_period
         } else {
             1
         };
-        let traj = layout.traj;
         // The backend makes the steps a multiple of the parts (`gpu_plan`).
         assert_eq!(steps % layout.parts, 0, "steps are whole parts");
         let part_steps = steps / layout.parts;
-
-        // Per lane: parameters, h, cos(ωh/2), sin(ωh/2), ω, δ.
-        let mut lane_data = Vec::with_capacity(count * layout.lane_stride);
-        let mut periods = Vec::with_capacity(count);
-        for k in first..first + count {
-            let params = scene.lane_params(k);
-            let period = (info.period)(&params);
-            let omega = (info.forcing_frequency)(&params);
-            let h = period / steps as f64;
-            let half = half_turn(omega, h, steps);
-            lane_data.extend_from_slice(&params.values);
-            lane_data.extend_from_slice(&[h, half[0], half[1], omega, settings.perturbation]);
-            periods.push(period);
-        }
-        // Trajectories: the reference at the initial state, copies at x0 + δe_i,
-        // with the perturbation actually taken in the variant's precision.
-        let x0 = &settings.initial_state;
-        let delta = crate::method::lane::perturbation_at(settings.perturbation, x0);
-        let mut traj_data = Vec::with_capacity(count * traj * layout.traj_stride);
-        let mut deltas = Vec::with_capacity(count * D);
-        // Per trajectory: step 0, no impacts, FLAG_BEHIND_WALL for a copy
-        // that starts behind the wall (as the finish kernel seeds them).
-        let mut counts_data: Vec<[u32; 4]> = Vec::with_capacity(count * traj);
-        for k in first..first + count {
-            let params = scene.lane_params(k);
-            for t in 0..traj {
-                let mut y = x0.clone();
-                if t > 0 {
-                    // Copies 1..=D at x + δe_i, then (central) D+1..=2D at x - δe_i.
-                    let i = (t - 1) % D;
-                    let sign = if t > D { -1.0 } else { 1.0 };
-                    let (shifted, step) = match precision {
-                        Precision::F64 => {
-                            let s = x0[i] + sign * delta;
-                            (s, sign * (s - x0[i]))
-                        }
-                        Precision::F32 => {
-                            let (x, d) = (x0[i] as f32, delta as f32);
-                            let s = if sign > 0.0 { x + d } else { x - d };
-                            (
-                                f64::from(s),
-                                f64::from(if sign > 0.0 { s - x } else { x - s }),
-                            )
-                        }
-                    };
-                    y[i] = shifted;
-                    deltas.push(step);
-                }
-                let behind = t > 0 && (info.check_state)(&params, &y).is_err();
-                counts_data.push([0, 0, if behind { FLAG_BEHIND_WALL } else { 0 }, 0]);
-                traj_data.extend_from_slice(&y);
-                traj_data.extend(std::iter::repeat_n(0.0, D));
-                // Phase (1, 0); the slowest impact speed: none yet (NO_IMPACT).
-                traj_data.extend_from_slice(&[1.0, 0.0, 1e30]);
-                if pipelines.surfaces {
-                    // The region (found from the state at the first step)
-                    // and the flux.
-                    traj_data.extend_from_slice(&[0.0, 0.0]);
-                }
-            }
-        }
-
+        let (lane_data, periods) =
+            lane_constants(scene, settings, layout.lane_stride, first, count, steps);
+        let seeds = Seeds::new::<D>(
+            scene,
+            settings,
+            (layout.traj, layout.traj_stride),
+            pipelines.surfaces,
+            precision,
+            first,
+            count,
+        );
         let per_iteration = layout.per_iteration() * count as u64;
-        let binding = gpu
-            .limits
-            .max_storage_buffer_binding_size
-            .min(gpu.limits.max_buffer_size);
-        let ring_budget = CHUNK_BYTES.min(binding);
-        let ring_by_budget = (ring_budget / per_iteration.max(1)) as usize;
-        let ring_by_binding = (binding / (layout.largest_per_iteration() * count as u64)) as usize;
-        let ring = ring_by_budget
-            .min(ring_by_binding)
-            .clamp(1, settings.iterations.max(1));
-
+        let ring = ring_size(gpu, layout, settings, count, per_iteration);
         let chunk =
             |trajectories: usize| (DISPATCH_LANE_STEPS / trajectories.max(1)).clamp(1, steps);
         // While averaging a dispatch stops at the end of a part.
-        let chunk_steps = chunk(count * traj).min(part_steps).min(max_chunk);
+        let chunk_steps = chunk(count * layout.traj).min(part_steps).min(max_chunk);
         let transient_chunk_steps = chunk(count).min(max_chunk);
-
-        let storage = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST;
-        let init = |label: &str, contents: &[u8], usage| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage,
-            })
-        };
-        let empty = |label: &str, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
         let control = |transient: bool, chunk_steps: usize| Control {
             lane_count: count as u32,
             steps_per_period: steps as u32,
@@ -478,122 +398,23 @@ where
             part_steps: part_steps as u32,
             parts: layout.parts as u32,
         };
-        let transient_uniform = init(
-            "control (transient)",
-            bytemuck::bytes_of(&control(true, transient_chunk_steps)),
-            wgpu::BufferUsages::UNIFORM,
-        );
-        let averaging_uniform = init(
-            "control (averaging)",
-            bytemuck::bytes_of(&control(false, chunk_steps)),
-            wgpu::BufferUsages::UNIFORM,
-        );
-        let lanes_buffer = init(
-            "lanes",
-            &real_bytes(&lane_data, precision),
-            wgpu::BufferUsages::STORAGE,
-        );
-        let traj_buffer = init("trajectories", &real_bytes(&traj_data, precision), storage);
-        let counts = init("counts", bytemuck::cast_slice(&counts_data), storage);
-        // Per trajectory, its impacts on each stop: none yet.
-        let crossings = pipelines.wall.then(|| {
-            init(
-                "crossings",
-                bytemuck::cast_slice(&vec![[0u32; 4]; count * traj]),
-                storage,
-            )
-        });
+        let controls = [
+            control(true, transient_chunk_steps),
+            control(false, chunk_steps),
+        ];
         let slots = (ring * layout.parts * count) as u64;
-        let summary = empty("summary", layout.summary * slots, storage);
-        let deltas_buffer = pipelines
-            .lyapunov
-            .then(|| init("deltas", &real_bytes(&deltas, precision), storage));
-        let jac = pipelines
-            .lyapunov
-            .then(|| empty("jacobians", layout.jacobian * slots, storage));
-        let points = pipelines
-            .points
-            .then(|| empty("points", layout.point * slots, storage));
-        let fluxes = pipelines
-            .surfaces
-            .then(|| empty("fluxes", layout.flux * slots, storage));
-        let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
         let ticks_offset = per_iteration * ring as u64;
-        let ticks_bytes = if stopwatch.is_some() {
-            stopwatch::TICKS_BYTES
-        } else {
-            0
-        };
-        let staging = [0, 1].map(|_| empty("staging", ticks_offset + ticks_bytes, readable));
-        let transient_ticks = stopwatch.map(|_| empty("transient ticks", ticks_bytes, readable));
-        let device_bytes = [&lanes_buffer, &traj_buffer, &counts, &summary]
-            .into_iter()
-            .chain(&deltas_buffer)
-            .chain(&crossings)
-            .chain(&jac)
-            .chain(&points)
-            .chain(&fluxes)
-            .chain(&staging)
-            .map(|b| b.size())
-            .sum();
-
-        let bind_group = |uniform: &wgpu::Buffer| {
-            let mut entries = vec![
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: uniform.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: lanes_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: traj_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: counts.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: summary.as_entire_binding(),
-                },
-            ];
-            if let (Some(d), Some(j)) = (&deltas_buffer, &jac) {
-                entries.push(wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: d.as_entire_binding(),
-                });
-                entries.push(wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: j.as_entire_binding(),
-                });
-            }
-            if let Some(p) = &points {
-                entries.push(wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: p.as_entire_binding(),
-                });
-            }
-            if let Some(c) = &crossings {
-                entries.push(wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: c.as_entire_binding(),
-                });
-            }
-            if let Some(f) = &fluxes {
-                entries.push(wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: f.as_entire_binding(),
-                });
-            }
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("sweep"),
-                layout: &pipelines.layout,
-                entries: &entries,
-            })
-        };
+        let b = Buffers::new(
+            gpu,
+            pipelines,
+            layout,
+            stopwatch.is_some(),
+            precision,
+            (count, slots, ticks_offset),
+            &lane_data,
+            &seeds,
+            controls,
+        );
         let grazing = variant.reestimates().then(|| {
             let cpu = crate::plan::cpu_twin(scene, settings);
             Grazing {
@@ -605,7 +426,7 @@ where
             }
         });
         Batch {
-            device_bytes,
+            device_bytes: b.device_bytes(),
             stopwatch,
             settings,
             layout,
@@ -616,17 +437,17 @@ where
             chunk_steps,
             transient_chunk_steps,
             ring,
-            transient_control: bind_group(&transient_uniform),
-            averaging_control: bind_group(&averaging_uniform),
-            summary,
-            jac,
-            points,
-            fluxes,
-            staging,
+            transient_control: b.bind_group(gpu, pipelines, &b.transient_uniform),
+            averaging_control: b.bind_group(gpu, pipelines, &b.averaging_uniform),
+            summary: b.summary,
+            jac: b.jac,
+            points: b.points,
+            fluxes: b.fluxes,
+            staging: b.staging,
             ticks_offset,
-            transient_ticks,
+            transient_ticks: b.transient_ticks,
             periods,
-            traj: traj_buffer,
+            traj: b.traj,
             grazing,
         }
     }
@@ -842,7 +663,6 @@ where
     /// Waits for a submitted chunk's staging copy, reads it and accumulates
     /// QR for every lane; false (nothing accumulated) when a dispatch ran
     /// past the adapter's loop cap.
-    #[allow(clippy::too_many_arguments)]
     fn collect(
         &self,
         gpu: &Gpu,
@@ -852,6 +672,32 @@ where
         pending: Pending,
         timings: &mut Timings,
     ) -> Result<bool> {
+        let (first_iteration, n) = chunks[pending.chunk];
+        let Some(chunk) = self.read_back(gpu, pending, n, timings)? else {
+            return Ok(false);
+        };
+        let start = Instant::now();
+        accumulators
+            .par_iter_mut()
+            .zip(previous.par_iter_mut())
+            .enumerate()
+            .for_each(|(lane, (acc, x_n))| {
+                self.accumulate(&chunk, lane, first_iteration, n, acc, x_n);
+            });
+        timings.host_qr += start.elapsed();
+        Ok(true)
+    }
+
+    /// The results of a submitted chunk of `n` iterations, once the device
+    /// is done and the staging buffer mapped; `None` when a dispatch ran
+    /// past the adapter's loop cap.
+    fn read_back(
+        &self,
+        gpu: &Gpu,
+        pending: Pending,
+        n: usize,
+        timings: &mut Timings,
+    ) -> Result<Option<Readback>> {
         let start = Instant::now();
         wait_for(&gpu.device, pending.index)?;
         timings.gpu_wait += start.elapsed();
@@ -861,12 +707,9 @@ where
             .recv()
             .map_err(|_| gpu_error("readback was cancelled".into()))?
             .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
-        let c = pending.chunk;
-        let (first_iteration, n) = chunks[c];
-        let staging = &self.staging[c % 2];
-        let parts = self.layout.parts;
-        let lanes = (n * parts * self.count) as u64;
-        let (summary, jac, points, fluxes) = {
+        let staging = &self.staging[pending.chunk % 2];
+        let lanes = (n * self.layout.parts * self.count) as u64;
+        let chunk = {
             let view = staging
                 .get_mapped_range(..)
                 .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
@@ -879,131 +722,376 @@ where
             let j_end = s_end + (self.layout.jacobian * lanes) as usize;
             let p_end = j_end + (self.layout.point * lanes) as usize;
             let f_end = p_end + (self.layout.flux * lanes) as usize;
-            (
-                bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(&bytes[..s_end]),
-                reals_from(&bytes[s_end..j_end], self.precision),
-                reals_from(&bytes[j_end..p_end], self.precision),
-                reals_from(&bytes[p_end..f_end], self.precision),
-            )
+            Readback {
+                summary: bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(&bytes[..s_end]),
+                jac: reals_from(&bytes[s_end..j_end], self.precision),
+                points: reals_from(&bytes[j_end..p_end], self.precision),
+                fluxes: reals_from(&bytes[p_end..f_end], self.precision),
+            }
         };
         staging.unmap();
         timings.readback += start.elapsed();
         let stride = self.layout.summary_stride;
-        if summary
+        if chunk
+            .summary
             .iter()
             .step_by(stride)
             .any(|s| s[1] & FLAG_TRUNCATED != 0)
         {
-            return Ok(false);
+            return Ok(None);
         }
+        Ok(Some(chunk))
+    }
 
-        let start = Instant::now();
-        let count = self.count;
-        let transient = self.settings.transient;
-        let has_jac = self.jac.is_some();
-        let has_points = self.points.is_some();
-        let grazing = self.grazing.as_ref();
-        let steps_per_part = self.part_steps;
-        accumulators
-            .par_iter_mut()
-            .zip(previous.par_iter_mut())
-            .enumerate()
-            .for_each(|(lane, (acc, x_n))| {
-                let mut jacobians: Vec<SMatrix<f64, D, D>> = Vec::with_capacity(parts);
-                for j in 0..n {
-                    let slot = |part: usize| (j * parts + part) * count + lane;
-                    // A failed reference reports in its iteration's last
-                    // part; the earlier slots may hold an older iteration.
-                    if (0..parts).any(|p| summary[stride * slot(p)][1] & FLAG_NONFINITE != 0) {
-                        acc.fail(transient + first_iteration + j);
-                        break;
-                    }
-                    let mut stats = IterationStats::default();
-                    let mut scale = 0.0;
-                    let mut point = None;
-                    jacobians.clear();
-                    for p in 0..parts {
-                        let s = slot(p);
-                        let [impacts, flags, scale_bits, nonlinearity_bits] = summary[stride * s];
-                        // With stops, the impacts on each follow (their sum
-                        // is `impacts`); without, there are none.
-                        let per_stop = if stride > 1 {
-                            summary[stride * s + 1]
-                        } else {
-                            [0; 4]
-                        };
-                        let mut part = IterationStats {
-                            impacts,
-                            crossings: std::array::from_fn(|j| {
-                                per_stop.get(j).copied().unwrap_or(0)
-                            }),
-                            // After a motion the kernels flagged sliding
-                            // (sticky: FLAG_STICKY), whatever else they
-                            // report comes from a state they did not
-                            // integrate: the lane is `sliding`, which the
-                            // backend recomputes on the CPU.
-                            chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
-                            sliding: flags & FLAG_SLIDING != 0,
-                            // Counted in the flags' high half.
-                            sliding_phases: flags >> 16,
-                            log_flux: fluxes.get(s).copied().unwrap_or(0.0),
-                            // Sticking collapses the mass's position and
-                            // velocity (all of a 2-state system).
-                            rank_loss: if flags & FLAG_RANK_TWO != 0 {
-                                2.min(D as u32)
-                            } else {
-                                u32::from(flags & FLAG_RANK_ONE != 0)
-                            },
-                            ..Default::default()
-                        };
-                        // A flagged part's trajectories stopped at the flag,
-                        // not at the part's end: its columns are no
-                        // derivative of the map (a copy frozen at one state,
-                        // the reference at another gave a singular one,
-                        // which failed the lane as non-finite).
-                        if has_jac && !part.sliding {
-                            let mut jacobian =
-                                SMatrix::from_row_slice(&jac[s * D * D..(s + 1) * D * D]);
-                            // A grazing part: the host redoes it on the CPU,
-                            // from the point it started at, with the δ ladder.
-                            let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
-                            if let (Some(g), Some(x)) = (grazing, x_n.as_ref()) {
-                                if part.rank_loss == 0
-                                    && is_grazing(
-                                        self.settings,
-                                        steps_per_part,
-                                        nonlinearity,
-                                        &jacobian,
-                                    )
-                                {
-                                    let index = Part {
-                                        index: p,
-                                        count: parts,
-                                    };
-                                    let (cpu, cpu_stats) = (crate::method::runner(g.system)
-                                        .reestimate)(
-                                        &g.params[lane], &g.settings, index, x
-                                    );
-                                    jacobian = SMatrix::from_row_slice(&cpu);
-                                    part.grazing = true;
-                                    part.grazing_error = cpu_stats.grazing_error;
-                                }
-                            }
-                            jacobians.push(jacobian);
-                        }
-                        stats.merge(&part);
-                        point = has_points.then(|| std::array::from_fn(|k| points[s * D + k]));
-                        *x_n = point;
-                        // The size of the iteration's image, as on the CPU.
-                        scale = f64::from(f32::from_bits(scale_bits));
-                    }
-                    if !acc.record(scale, point.as_ref(), &jacobians, &stats) {
-                        break;
-                    }
+    /// Lane `lane`'s `n` iterations of a chunk starting at averaging
+    /// iteration `first_iteration`, taken into its accumulator; `x_n` is
+    /// its latest reference point (where a grazing part is redone).
+    fn accumulate(
+        &self,
+        chunk: &Readback,
+        lane: usize,
+        first_iteration: usize,
+        n: usize,
+        acc: &mut LaneAccumulator<D>,
+        x_n: &mut Option<[f64; D]>,
+    ) {
+        let parts = self.layout.parts;
+        let stride = self.layout.summary_stride;
+        let summary = &chunk.summary;
+        let mut jacobians: Vec<SMatrix<f64, D, D>> = Vec::with_capacity(parts);
+        for j in 0..n {
+            let slot = |part: usize| (j * parts + part) * self.count + lane;
+            // A failed reference reports in its iteration's last
+            // part; the earlier slots may hold an older iteration.
+            if (0..parts).any(|p| summary[stride * slot(p)][1] & FLAG_NONFINITE != 0) {
+                acc.fail(self.settings.transient + first_iteration + j);
+                break;
+            }
+            let mut stats = IterationStats::default();
+            let mut scale = 0.0;
+            let mut point = None;
+            jacobians.clear();
+            for p in 0..parts {
+                let s = slot(p);
+                let [_, _, scale_bits, nonlinearity_bits] = summary[stride * s];
+                let mut part = part_stats::<D>(chunk, stride, s);
+                // A flagged part's trajectories stopped at the flag,
+                // not at the part's end: its columns are no
+                // derivative of the map (a copy frozen at one state,
+                // the reference at another gave a singular one,
+                // which failed the lane as non-finite).
+                if self.jac.is_some() && !part.sliding {
+                    let jacobian = SMatrix::from_row_slice(&chunk.jac[s * D * D..(s + 1) * D * D]);
+                    let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
+                    let part_of = Part {
+                        index: p,
+                        count: parts,
+                    };
+                    jacobians.push(self.reestimate_grazing(
+                        jacobian,
+                        nonlinearity,
+                        &mut part,
+                        lane,
+                        part_of,
+                        x_n.as_ref(),
+                    ));
                 }
+                stats.merge(&part);
+                point = self
+                    .points
+                    .is_some()
+                    .then(|| std::array::from_fn(|k| chunk.points[s * D + k]));
+                *x_n = point;
+                // The size of the iteration's image, as on the CPU.
+                scale = f64::from(f32::from_bits(scale_bits));
+            }
+            if !acc.record(scale, point.as_ref(), &jacobians, &stats) {
+                break;
+            }
+        }
+    }
+
+    /// A part's Jacobian as the kernels estimated it, or, for a grazing
+    /// part, as the host redoes it on the CPU from the point `x` it started
+    /// at, with the δ ladder (noted in `part`'s statistics).
+    fn reestimate_grazing(
+        &self,
+        jacobian: SMatrix<f64, D, D>,
+        nonlinearity: f64,
+        part: &mut IterationStats,
+        lane: usize,
+        index: Part,
+        x: Option<&[f64; D]>,
+    ) -> SMatrix<f64, D, D> {
+        let (Some(g), Some(x)) = (self.grazing.as_ref(), x) else {
+            return jacobian;
+        };
+        if part.rank_loss != 0
+            || !is_grazing(self.settings, self.part_steps, nonlinearity, &jacobian)
+        {
+            return jacobian;
+        }
+        let (cpu, cpu_stats) =
+            (crate::method::runner(g.system).reestimate)(&g.params[lane], &g.settings, index, x);
+        part.grazing = true;
+        part.grazing_error = cpu_stats.grazing_error;
+        SMatrix::from_row_slice(&cpu)
+    }
+}
+
+/// A chunk's results as read back, per slot (iteration × part × lane).
+struct Readback {
+    summary: Vec<[u32; 4]>,
+    jac: Vec<f64>,
+    points: Vec<f64>,
+    fluxes: Vec<f64>,
+}
+
+/// The statistics the kernels report for slot `s` (its summary's flags and
+/// counts, `stride` summary entries a slot, and its flux term).
+fn part_stats<const D: usize>(chunk: &Readback, stride: usize, s: usize) -> IterationStats {
+    let summary = &chunk.summary;
+    let [impacts, flags, _, _] = summary[stride * s];
+    // With stops, the impacts on each follow (their sum
+    // is `impacts`); without, there are none.
+    let per_stop = if stride > 1 {
+        summary[stride * s + 1]
+    } else {
+        [0; 4]
+    };
+    IterationStats {
+        impacts,
+        crossings: std::array::from_fn(|j| per_stop.get(j).copied().unwrap_or(0)),
+        // After a motion the kernels flagged sliding
+        // (sticky: FLAG_STICKY), whatever else they
+        // report comes from a state they did not
+        // integrate: the lane is `sliding`, which the
+        // backend recomputes on the CPU.
+        chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
+        sliding: flags & FLAG_SLIDING != 0,
+        // Counted in the flags' high half.
+        sliding_phases: flags >> 16,
+        log_flux: chunk.fluxes.get(s).copied().unwrap_or(0.0),
+        // Sticking collapses the mass's position and
+        // velocity (all of a 2-state system).
+        rank_loss: if flags & FLAG_RANK_TWO != 0 {
+            2.min(D as u32)
+        } else {
+            u32::from(flags & FLAG_RANK_ONE != 0)
+        },
+        ..Default::default()
+    }
+}
+
+/// Iterations of the batch read back at once: as many as fit the chunk's
+/// byte budget and a storage binding, at least 1 and at most the run's.
+fn ring_size(
+    gpu: &Gpu,
+    layout: &Layout,
+    settings: &MethodSettings,
+    count: usize,
+    per_iteration: u64,
+) -> usize {
+    let binding = gpu
+        .limits
+        .max_storage_buffer_binding_size
+        .min(gpu.limits.max_buffer_size);
+    let ring_budget = CHUNK_BYTES.min(binding);
+    let ring_by_budget = (ring_budget / per_iteration.max(1)) as usize;
+    let ring_by_binding = (binding / (layout.largest_per_iteration() * count as u64)) as usize;
+    ring_by_budget
+        .min(ring_by_binding)
+        .clamp(1, settings.iterations.max(1))
+}
+
+/// A batch's device buffers, before they are bound.
+struct Buffers {
+    transient_uniform: wgpu::Buffer,
+    averaging_uniform: wgpu::Buffer,
+    lanes: wgpu::Buffer,
+    traj: wgpu::Buffer,
+    counts: wgpu::Buffer,
+    crossings: Option<wgpu::Buffer>,
+    summary: wgpu::Buffer,
+    deltas: Option<wgpu::Buffer>,
+    jac: Option<wgpu::Buffer>,
+    points: Option<wgpu::Buffer>,
+    fluxes: Option<wgpu::Buffer>,
+    staging: [wgpu::Buffer; 2],
+    transient_ticks: Option<wgpu::Buffer>,
+}
+
+impl Buffers {
+    /// The buffers of `count` lanes with `slots` result slots (ring ×
+    /// parts × lanes), the staging buffers holding `ticks_offset` bytes of
+    /// results and the timestamps after them when `timed`.
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        gpu: &Gpu,
+        pipelines: &Pipelines,
+        layout: &Layout,
+        timed: bool,
+        precision: Precision,
+        (count, slots, ticks_offset): (usize, u64, u64),
+        lane_data: &[f64],
+        seeds: &Seeds,
+        [transient, averaging]: [Control; 2],
+    ) -> Buffers {
+        let device = &gpu.device;
+        let traj = layout.traj;
+        let storage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST;
+        let init = |label: &str, contents: &[u8], usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage,
+            })
+        };
+        let empty = |label: &str, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let transient_uniform = init(
+            "control (transient)",
+            bytemuck::bytes_of(&transient),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let averaging_uniform = init(
+            "control (averaging)",
+            bytemuck::bytes_of(&averaging),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let lanes_buffer = init(
+            "lanes",
+            &real_bytes(lane_data, precision),
+            wgpu::BufferUsages::STORAGE,
+        );
+        let traj_buffer = init("trajectories", &real_bytes(&seeds.traj, precision), storage);
+        let counts = init("counts", bytemuck::cast_slice(&seeds.counts), storage);
+        // Per trajectory, its impacts on each stop: none yet.
+        let crossings = pipelines.wall.then(|| {
+            init(
+                "crossings",
+                bytemuck::cast_slice(&vec![[0u32; 4]; count * traj]),
+                storage,
+            )
+        });
+        let summary = empty("summary", layout.summary * slots, storage);
+        let deltas_buffer = pipelines
+            .lyapunov
+            .then(|| init("deltas", &real_bytes(&seeds.deltas, precision), storage));
+        let jac = pipelines
+            .lyapunov
+            .then(|| empty("jacobians", layout.jacobian * slots, storage));
+        let points = pipelines
+            .points
+            .then(|| empty("points", layout.point * slots, storage));
+        let fluxes = pipelines
+            .surfaces
+            .then(|| empty("fluxes", layout.flux * slots, storage));
+        let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        let ticks_bytes = if timed { stopwatch::TICKS_BYTES } else { 0 };
+        let staging = [0, 1].map(|_| empty("staging", ticks_offset + ticks_bytes, readable));
+        let transient_ticks = timed.then(|| empty("transient ticks", ticks_bytes, readable));
+        Buffers {
+            transient_uniform,
+            averaging_uniform,
+            lanes: lanes_buffer,
+            traj: traj_buffer,
+            counts,
+            crossings,
+            summary,
+            deltas: deltas_buffer,
+            jac,
+            points,
+            fluxes,
+            staging,
+            transient_ticks,
+        }
+    }
+
+    /// Bytes of device memory in the buffers the batch holds.
+    fn device_bytes(&self) -> u64 {
+        [&self.lanes, &self.traj, &self.counts, &self.summary]
+            .into_iter()
+            .chain(&self.deltas)
+            .chain(&self.crossings)
+            .chain(&self.jac)
+            .chain(&self.points)
+            .chain(&self.fluxes)
+            .chain(&self.staging)
+            .map(|b| b.size())
+            .sum()
+    }
+
+    /// The bind group of the sweep's kernels with `uniform` as the control.
+    fn bind_group(
+        &self,
+        gpu: &Gpu,
+        pipelines: &Pipelines,
+        uniform: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: uniform.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: self.lanes.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: self.traj.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: self.counts.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: self.summary.as_entire_binding(),
+            },
+        ];
+        if let (Some(d), Some(j)) = (&self.deltas, &self.jac) {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 5,
+                resource: d.as_entire_binding(),
             });
-        timings.host_qr += start.elapsed();
-        Ok(true)
+            entries.push(wgpu::BindGroupEntry {
+                binding: 6,
+                resource: j.as_entire_binding(),
+            });
+        }
+        if let Some(p) = &self.points {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 7,
+                resource: p.as_entire_binding(),
+            });
+        }
+        if let Some(c) = &self.crossings {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 8,
+                resource: c.as_entire_binding(),
+            });
+        }
+        if let Some(f) = &self.fluxes {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 9,
+                resource: f.as_entire_binding(),
+            });
+        }
+        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("sweep"),
+            layout: &pipelines.layout,
+            entries: &entries,
+        })
     }
 }
 
@@ -1022,5 +1110,4 @@ const FLAG_NONFINITE: u32 = 2;
 const FLAG_RANK_ONE: u32 = 4;
 const FLAG_RANK_TWO: u32 = 8;
 const FLAG_TRUNCATED: u32 = 16;
-const FLAG_BEHIND_WALL: u32 = 32;
 const FLAG_SLIDING: u32 = 64;

@@ -1,0 +1,175 @@
+//! Neighbouring lanes of a sweep stepped together: their transients as one
+//! batch, and where the system allows, their averaging iterations in
+//! lockstep, every lane's numbers those of a lane run alone.
+
+use nalgebra::{Const, DimMin};
+
+use super::accumulator::{all_finite, LaneAccumulator};
+use super::driver::{average, run_lane, Lane};
+use super::grazing::resolve_grazing;
+use super::plan::{plan_lane, LanePlan};
+use super::result::LaneResult;
+use super::settings::{MethodSettings, Tangent};
+use crate::integrate::clock::ZERO_PHASE;
+use crate::method::jacobian;
+use crate::perturbation::perturbation_at;
+use crate::system::{FlowSettings, IterationStats, Part, System};
+
+/// [`run_lane`] for neighbouring lanes of a sweep: where they share their
+/// plan's steps (and use finite differences), their transients run as one
+/// batch, the references stepped together ([`System::iterate_lanes`]);
+/// where the system allows it ([`System::averages_across_lanes`]) they
+/// then average in lockstep (`average_lanes`), else each on its own.
+/// Every lane's numbers are those of [`run_lane`], to the last bit.
+pub fn run_lanes<const D: usize, S: System<D>>(lanes: &[Lane]) -> Vec<LaneResult>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let Some(first) = lanes.first() else {
+        return Vec::new();
+    };
+    let settings = first.settings;
+    let systems: Vec<S> = lanes.iter().map(|l| S::new(&l.params)).collect();
+    let plans: Vec<LanePlan> = systems.iter().map(|s| plan_lane(s, settings)).collect();
+    let together = lanes.len() > 1
+        && settings.tangent == Tangent::FiniteDifference
+        && lanes.iter().all(|l| std::ptr::eq(l.settings, settings))
+        && plans
+            .iter()
+            .all(|p| p.affordable() && p.steps_per_period == plans[0].steps_per_period);
+    if !together {
+        return lanes.iter().map(run_lane::<D, S>).collect();
+    }
+    let flow = &FlowSettings {
+        steps_per_period: plans[0].steps_per_period,
+        ..settings.flow
+    };
+    let mut xs: Vec<[f64; D]> = systems
+        .iter()
+        .map(|s| s.start(&settings.initial_state, flow))
+        .collect();
+    let each: Vec<&S> = systems.iter().collect();
+    let mut discard = vec![IterationStats::default(); lanes.len()];
+    // A lane that fails goes on being stepped with the others (its
+    // numbers touch no other lane's) but is reported at its first failure.
+    let mut failed: Vec<Option<(usize, bool)>> = xs
+        .iter()
+        .map(|x| (!all_finite(x)).then(|| (0, crate::system::is_no_return(x))))
+        .collect();
+    for n in 0..settings.transient {
+        discard.fill(IterationStats::default());
+        S::iterate_lanes(&each, &mut xs, flow, &mut discard);
+        for (system, x) in systems.iter().zip(xs.iter_mut()) {
+            system.wrap(x);
+        }
+        for (k, x) in xs.iter().enumerate() {
+            if failed[k].is_none() && !all_finite(x) {
+                failed[k] = Some((n, crate::system::is_no_return(x)));
+            }
+        }
+    }
+    let lockstep = settings.lyapunov
+        && plans.iter().all(|p| p.parts == 1)
+        && systems.iter().all(|s| s.averages_across_lanes());
+    let accumulators = systems
+        .iter()
+        .zip(&plans)
+        .zip(&failed)
+        .map(|((system, &plan), failed)| {
+            let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
+            if let Some((n, no_return)) = *failed {
+                acc.fail(n);
+                acc.no_return = no_return;
+            }
+            acc
+        })
+        .collect();
+    if lockstep {
+        return average_lanes(&systems, settings, flow, accumulators, xs);
+    }
+    systems
+        .iter()
+        .zip(plans)
+        .zip(xs.into_iter().zip(accumulators))
+        .map(|((system, plan), (x, acc))| match acc.failed_at {
+            Some(_) => acc.finish(),
+            None => average(system, settings, plan, x),
+        })
+        .collect()
+}
+
+/// The averaging iterations of neighbouring lanes in lockstep, from their
+/// transients' ends `xs` (for lanes of one whole part per iteration, with
+/// exponents): each iteration integrates every lane's reference and copies
+/// as batches across lanes, so a lane's three or five trajectories no
+/// longer wait on their own chains' latencies, then takes each lane's
+/// Jacobian and accumulates it as [`average`] does. A grazing iteration is
+/// re-estimated by that lane alone ([`resolve_grazing`]), and a lane that
+/// fails stops being stepped. Every lane's numbers are [`average`]'s.
+fn average_lanes<const D: usize, S: System<D>>(
+    systems: &[S],
+    settings: &MethodSettings,
+    flow: &FlowSettings,
+    mut accumulators: Vec<LaneAccumulator<D>>,
+    mut xs: Vec<[f64; D]>,
+) -> Vec<LaneResult>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let mut live: Vec<usize> = (0..systems.len())
+        .filter(|&k| accumulators[k].failed_at.is_none())
+        .collect();
+    let (mut owners, mut ys, mut st) = (Vec::new(), Vec::new(), Vec::new());
+    let mut copies = Vec::with_capacity(live.len());
+    for _ in 0..settings.iterations {
+        if live.is_empty() {
+            break;
+        }
+        copies.clear();
+        owners.clear();
+        ys.clear();
+        for &k in &live {
+            let delta = perturbation_at(settings.perturbation, &xs[k]);
+            let c = jacobian::Copies::new(&systems[k], &xs[k], delta, settings.difference);
+            ys.extend_from_slice(c.starts());
+            owners.extend(std::iter::repeat_n(&systems[k], c.count()));
+            copies.push(c);
+        }
+        st.clear();
+        st.resize(ys.len(), IterationStats::default());
+        S::iterate_lanes(&owners, &mut ys, flow, &mut st);
+        let mut from = 0;
+        let mut lane = copies.iter();
+        live.retain(|&k| {
+            let c = lane.next().expect("a lane's copies");
+            let (system, x) = (&systems[k], xs[k]);
+            let to = from + c.count();
+            // As `step` takes a whole-part iteration: the part's statistics
+            // from zero, merged into the iteration's.
+            let mut part_stats = IterationStats::default();
+            let mut first = part_stats;
+            let estimate = c.difference(&ys[from..to], &st[from..to], &mut first);
+            from = to;
+            let (mut next, j) = resolve_grazing(
+                system,
+                flow,
+                settings,
+                Part::WHOLE,
+                ZERO_PHASE,
+                &x,
+                &mut part_stats,
+                first,
+                estimate,
+            );
+            let mut stats = IterationStats::default();
+            stats.merge(&part_stats);
+            system.wrap(&mut next);
+            xs[k] = next;
+            accumulators[k].push(&next, &[j], &stats)
+        });
+    }
+    accumulators
+        .into_iter()
+        .map(LaneAccumulator::finish)
+        .collect()
+}

@@ -1,0 +1,67 @@
+//! What every lane of a sweep shares: the method's settings, and the
+//! rounding noise of a finite-difference column they imply.
+
+use crate::system::FlowSettings;
+
+use crate::method::jacobian;
+
+/// Where each iteration's Jacobian comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tangent {
+    /// The paper's method: forward differences of perturbed copies.
+    FiniteDifference,
+    /// The closed-form tangent map (the `exact` backend).
+    Exact,
+}
+
+/// The settings shared by every lane of a sweep.
+#[derive(Clone, Debug)]
+pub struct MethodSettings {
+    /// Iterations of the reference alone, discarded.
+    pub transient: usize,
+    /// Iterations with Jacobians: the first `align` of them turn the QR
+    /// frame only (the scene's transient's last ones), the others are
+    /// averaged.
+    pub iterations: usize,
+    pub align: usize,
+    pub initial_state: Vec<f64>,
+    /// δ of the perturbed copies, relative to the state's size: the copies
+    /// of x_n start at x_n ± δ·max(1, ‖x_n‖∞)·e_i (see [`perturbation_at`]).
+    pub perturbation: f64,
+    /// Forward (the paper's) or central differences.
+    pub difference: jacobian::Difference,
+    pub flow: FlowSettings,
+    pub tangent: Tangent,
+    /// Whether to compute exponents at all (`[output] lyapunov`).
+    pub lyapunov: bool,
+    /// How many of the last reference points to keep.
+    pub bifurcation_points: usize,
+    /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
+    pub submaps: Option<usize>,
+    /// Whether rounding accumulates over the RK4 steps of an iteration (f64),
+    /// or is compensated (the f32 kernels' Kahan update): with the number of
+    /// steps, sets the smallest contraction the finite difference resolves.
+    pub rounding_accumulates: bool,
+    /// Keep every iteration's Jacobian in the result (for comparing backends).
+    pub keep_jacobians: bool,
+    /// The unit roundoff of the arithmetic the images are computed in
+    /// (f64::EPSILON, or f32::EPSILON on the GPU's f32 path).
+    pub rounding_unit: f64,
+}
+
+impl MethodSettings {
+    /// The relative rounding noise of a finite-difference column after
+    /// `steps` steps ([`difference_noise`] of an image of size 1): the
+    /// steps count only where rounding accumulates.
+    pub fn column_noise(&self, steps: usize) -> f64 {
+        let steps = if self.rounding_accumulates { steps } else { 1 };
+        difference_noise(self.rounding_unit, 1.0, steps, self.perturbation)
+    }
+}
+
+/// The noise in a finite-difference column: the rounding of an image of
+/// size `scale`, accumulated over the `steps` of one iteration, over δ.
+/// An R_ii near it is mostly rounding.
+pub fn difference_noise(unit: f64, scale: f64, steps: usize, delta: f64) -> f64 {
+    unit * scale.max(1.0) * (steps as f64).sqrt() / delta
+}

@@ -1,0 +1,348 @@
+//! The checked scene and its parts: what a run is asked to compute.
+
+use std::path::PathBuf;
+
+use serde::Deserialize;
+
+use super::defaults::{DEFAULT_PERTURBATION_F32, DEFAULT_PERTURBATION_F64};
+use crate::error::{clip, Error, Result};
+use crate::integrate::ImpactLocation;
+use crate::method::jacobian::Difference;
+use crate::system::{Params, SystemInfo};
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// A hardware GPU when there is one, otherwise the CPU.
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+    /// The closed-form tangent map: the ground truth.
+    Exact,
+}
+
+impl Backend {
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Auto => "auto",
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+            Backend::Exact => "exact",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    #[default]
+    F64,
+    F32,
+}
+
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        }
+    }
+
+    /// The unit roundoff of the arithmetic, as an f64.
+    pub fn rounding_unit(self) -> f64 {
+        match self {
+            Precision::F64 => f64::EPSILON,
+            Precision::F32 => f64::from(f32::EPSILON),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Lyapunov {
+    #[default]
+    Spectrum,
+    None,
+}
+
+/// A scene, parsed, completed with defaults and checked.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub name: String,
+    pub system: &'static SystemInfo,
+    /// The `[system]` parameter values (the swept one at its scene value).
+    pub params: Params,
+    /// Shared by the batches a large run is streamed in (see [`Scene::batch`]).
+    pub sweep: std::sync::Arc<Sweep>,
+    pub integration: Integration,
+    pub backend: Backend,
+    pub precision: Precision,
+    /// Sweep values a GPU run recomputes on the CPU to check itself.
+    pub validate: usize,
+    pub lyapunov: bool,
+    pub bifurcation_points: usize,
+    /// The points the scene file asked for, when `--set
+    /// integration.iterations` lowered the iterations below them: a lane
+    /// keeps at most one point per iteration, so `bifurcation_points` is
+    /// lowered to the iterations (and the summary says so).
+    pub bifurcation_points_asked: Option<usize>,
+    /// Draw the figures next to the CSV files.
+    pub plot: bool,
+    /// The part of the sweep this run computes (`--shard i/n`), if not all.
+    pub shard: Option<Shard>,
+    /// The lanes of the shard (or sweep) computed now, when a large run is
+    /// streamed in batches (see [`Scene::batch`]).
+    pub batch: Option<std::ops::Range<usize>>,
+    /// The scene as TOML after overrides (keys sorted), written next to the
+    /// results so that `plot` and `merge` know what produced them.
+    pub source: String,
+    /// The files the scene was read from: the scene file and the model
+    /// file it names (none for a scene given as text). Its output folder
+    /// must not hold them.
+    pub files: Vec<PathBuf>,
+}
+
+/// One swept parameter and its values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Axis {
+    pub parameter: String,
+    /// Index of the parameter in the system's list.
+    pub index: usize,
+    pub values: Vec<f64>,
+}
+
+/// What a scene sweeps: one parameter, or two (`[sweep.second]`) for a map
+/// over their grid. Lanes run over the grid with the first axis fastest:
+/// lane k is (first[k % n₁], second[k / n₁]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub first: Axis,
+    pub second: Option<Axis>,
+}
+
+impl Sweep {
+    /// Lanes in the whole sweep.
+    pub fn lanes(&self) -> usize {
+        self.first.values.len() * self.second.as_ref().map_or(1, |a| a.values.len())
+    }
+
+    /// The axes, first then second.
+    pub fn axes(&self) -> impl Iterator<Item = &Axis> {
+        std::iter::once(&self.first).chain(self.second.as_ref())
+    }
+
+    /// The swept values of lane `k`, one per axis.
+    pub fn values_at(&self, k: usize) -> Vec<f64> {
+        let n = self.first.values.len();
+        let mut values = vec![self.first.values[k % n]];
+        values.extend(self.second.as_ref().map(|a| a.values[k / n]));
+        values
+    }
+}
+
+/// Shard `index` of `count` (`--shard i/n`, counted from 0): sweep lanes
+/// index, index + count, index + 2·count, …, so that every shard gets its
+/// share of each region of the sweep (chaotic windows cost more).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// `i/n` as the command line gives it.
+    pub fn parse(text: &str) -> Result<Shard> {
+        let bad = |reason: &str| Error::invalid("--shard", format!("{:?}: {reason}", clip(text)));
+        let (i, n) = text
+            .split_once('/')
+            .ok_or_else(|| bad("expected i/n, e.g. 0/4"))?;
+        let number = |t: &str| {
+            t.trim()
+                .parse::<usize>()
+                .map_err(|_| bad("i and n must be whole numbers"))
+        };
+        let (index, count) = (number(i)?, number(n)?);
+        if count == 0 || index >= count {
+            return Err(bad("needs 0 ≤ i < n"));
+        }
+        Ok(Shard { index, count })
+    }
+
+    /// The sweep lanes of this shard, in order.
+    pub fn lanes(&self, sweep_lanes: usize) -> impl Iterator<Item = usize> {
+        (self.index..sweep_lanes).step_by(self.count)
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Integration {
+    pub steps_per_period: usize,
+    pub transient: usize,
+    /// The transient's last iterations taken with Jacobians, to align the
+    /// QR frame before the averaging (`method::lane`).
+    pub align: usize,
+    pub iterations: usize,
+    pub initial_state: Vec<f64>,
+    /// δ as the scene gives it; [`Scene::perturbation`] applies the default.
+    pub perturbation: Option<f64>,
+    /// As the scene gives it; [`Scene::difference`] applies the default.
+    pub difference: Option<Difference>,
+    pub impact_location: ImpactLocation,
+    /// Parts per iteration, when the scene fixes them; otherwise each lane
+    /// takes what its fastest contraction needs.
+    pub submaps: Option<usize>,
+}
+
+impl Integration {
+    /// The RK4 trajectory-steps of one lane: the reference over the transient,
+    /// and with its `copies` over the aligning and averaged iterations, at the
+    /// requested steps (lanes may need more).
+    pub fn steps_per_lane(&self, is_flow: bool, copies: usize) -> f64 {
+        let steps = if is_flow {
+            self.steps_per_period as f64
+        } else {
+            1.0
+        };
+        let i = self;
+        let plain = (i.transient - i.align) as f64;
+        let with_copies = (i.align + i.iterations) as f64 * (1 + copies) as f64;
+        (plain + with_copies) * steps
+    }
+}
+
+impl Scene {
+    /// The difference scheme: the scene's, or central. Central differences
+    /// are what lets a column switch sides when a copy crosses a grazing
+    /// boundary the reference does not: with the paper's forward differences
+    /// the seed's 4096-value sweep missed the sum rule by up to 8e-4 at 6
+    /// values in the chaotic window (1.2e-4 over 401 values of [0.70, 0.74]),
+    /// with central ones by at most 2.3e-6, for 1.3 times the work (δ = 1e-8).
+    /// In f32 the O(δ²) error also lets δ be large against rounding.
+    pub fn difference(&self) -> Difference {
+        self.integration.difference.unwrap_or(Difference::Central)
+    }
+
+    /// δ of the perturbed copies: the scene's, or the default for its precision.
+    pub fn perturbation(&self) -> f64 {
+        self.integration
+            .perturbation
+            .unwrap_or(match self.precision {
+                Precision::F64 => DEFAULT_PERTURBATION_F64,
+                Precision::F32 => DEFAULT_PERTURBATION_F32,
+            })
+    }
+
+    /// Lanes this run computes: the sweep's, or its shard's, or of the
+    /// batch being computed.
+    pub fn lane_count(&self) -> usize {
+        self.batch
+            .as_ref()
+            .map_or(self.run_lane_count(), |b| b.len())
+    }
+
+    /// Lanes of the whole run: the sweep's, or its shard's (batches aside).
+    pub fn run_lane_count(&self) -> usize {
+        let all = self.sweep.lanes();
+        self.shard.map_or(all, |s| s.lanes(all).count())
+    }
+
+    /// The sweep lane of this run's lane `j`.
+    pub fn sweep_lane(&self, j: usize) -> usize {
+        let j = self.batch.as_ref().map_or(j, |b| b.start + j);
+        self.shard.map_or(j, |s| s.index + j * s.count)
+    }
+
+    /// This scene restricted to lanes `range` of its run (of the shard,
+    /// when sharded): a batch of a run streamed in parts. Every lane is
+    /// computed as in the whole run.
+    pub fn batch(&self, range: std::ops::Range<usize>) -> Scene {
+        Scene {
+            batch: Some(range),
+            ..self.clone()
+        }
+    }
+
+    /// The parameter values of sweep lane `k` (of the whole sweep).
+    pub fn params_at(&self, k: usize) -> Params {
+        let mut p = self.params.clone();
+        for (axis, value) in self.sweep.axes().zip(self.sweep.values_at(k)) {
+            p.set(axis.index, value);
+        }
+        p
+    }
+
+    /// The parameter values of this run's lane `j`.
+    pub fn lane_params(&self, j: usize) -> Params {
+        self.params_at(self.sweep_lane(j))
+    }
+
+    /// The swept values of this run's lane `j`, one per axis.
+    pub fn lane_values(&self, j: usize) -> Vec<f64> {
+        self.sweep.values_at(self.sweep_lane(j))
+    }
+
+    /// "eta = 0.7" or "eta = 0.7, f = 2": where sweep lane `k` is.
+    pub fn describe(&self, k: usize) -> String {
+        self.sweep
+            .axes()
+            .zip(self.sweep.values_at(k))
+            .map(|(axis, v)| format!("{} = {v}", axis.parameter))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// The `[integration]` keys the scene sets that `backend` does not use
+    /// (the exact backend propagates in closed form; a system without a
+    /// wall locates no impacts), for the summary to say so.
+    pub fn unused_keys(&self, backend: Backend) -> Vec<String> {
+        let set: Vec<String> = self
+            .source
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("integration").and_then(|i| i.as_table()).cloned())
+            .map(|i| i.keys().cloned().collect())
+            .unwrap_or_default();
+        let mut unused: Vec<&str> = Vec::new();
+        if backend == Backend::Exact {
+            unused.extend([
+                "steps_per_period",
+                "perturbation",
+                "difference",
+                "impact_location",
+            ]);
+        }
+        if self.system.wall_reachable.is_none() || !self.system.is_flow {
+            unused.push("impact_location");
+        }
+        if !self.system.is_flow {
+            unused.push("steps_per_period");
+        }
+        unused.sort_unstable();
+        unused.dedup();
+        unused
+            .into_iter()
+            .filter(|k| set.iter().any(|s| s == k))
+            .map(|k| format!("integration.{k}"))
+            .collect()
+    }
+
+    /// This scene restricted to `shard` (checked against the sweep's size).
+    pub fn sharded(mut self, shard: Shard) -> Result<Scene> {
+        let lanes = self.sweep.lanes();
+        if shard.count > lanes {
+            return Err(Error::invalid(
+                "--shard",
+                format!(
+                    "{}/{}: the sweep has {lanes} lanes, so it splits into at most {lanes} shards (shards {lanes} to {} of {} would be empty)",
+                    shard.index,
+                    shard.count,
+                    shard.count - 1,
+                    shard.count
+                ),
+            ));
+        }
+        self.shard = Some(shard);
+        Ok(self)
+    }
+}
