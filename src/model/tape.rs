@@ -621,6 +621,32 @@ mod tests {
     }
 
     #[test]
+    fn a_tape_that_reads_its_parameters_computes_the_tree_to_the_bit() {
+        let names = names();
+        let e = Expr::parse("-2*zeta*v - x + f*cos(eta*t) + (zeta + 1)/f", &names).unwrap();
+        let tape = Tape::compile_reading_parameters([&e], 2).unwrap();
+        // Every lane constant is a parameter read as it is; every operation
+        // on them, -2·ζ and (ζ + 1)/f among them, is an instruction.
+        // (η is read by the clock alone.)
+        assert_eq!(
+            tape.lane_constants,
+            [Expr::Var(Var::Param(0)), Expr::Var(Var::Param(1))],
+            "{tape:?}"
+        );
+        assert_eq!(tape.frequency, Some(Expr::Var(Var::Param(2))));
+        let hoisted = Tape::compile([&e], 2, None).unwrap();
+        assert!(tape.instructions.len() > hoisted.instructions.len());
+        let params = [0.05, 1.2, 0.8];
+        let lane = tape.lane_values(&params);
+        for (x, v, t) in [(0.3, -0.7, 0.0_f64), (1.9, 0.4, 2.5)] {
+            let phase = [(0.8 * t).cos(), (0.8 * t).sin()];
+            let out: [[f64; 1]; 1] = tape.eval(|j| [lane.constants[j]], &[phase], &[[x], [v]]);
+            let tree = e.eval(&[x, v], &params, t);
+            assert_eq!(out[0][0].to_bits(), tree.to_bits(), "at {x}, {v}, {t}");
+        }
+    }
+
+    #[test]
     fn time_outside_a_forcing_is_refused() {
         let names = names();
         for text in [
