@@ -429,12 +429,15 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
             }
         }
     }
-    // The seed as a model: the retired hand-written file's tree
-    // (`(-2ζ)·v - x + f·cos`, which the model matched to the bit), fully
-    // bracketed, its wall from the stop.
+    // The seed as a model: the retired hand-written file's operations
+    // (`(-2ζ)·v - x + f·cos`, which the model matched to the bit), one per
+    // line as the tape orders them, its wall from the stop.
     let seed = system("impact-oscillator.toml").wgsl.unwrap().source;
     assert!(
-        seed.contains("((((-real(2.0)) * p.p_zeta) * y.y) - y.x) + (p.p_f * phase.x)"),
+        seed.contains(
+            "let v7: real = -real(2.0);\n    let v8: real = v7 * p.p_zeta;\n    \
+             let v9: real = v8 * y.y - y.x;\n    let v10: real = p.p_f * phase.x + v9;"
+        ),
         "{seed}"
     );
     assert!(seed.contains("fn wall_position(p: Params)"), "{seed}");

@@ -4,20 +4,24 @@
 //! The expression tree ([`expr`]), with its parser, evaluation, symbolic
 //! derivatives (for the sum rule) and text form; the `[model]` table
 //! checked and parsed into a [`Model`] ([`table`]); the CPU's compiled
-//! evaluator ([`tape`], and its native code, [`c_loop`] as [`native`]
-//! describes it) and the GPU's
-//! generated system file ([`wgsl`]), both built from those trees, with
+//! evaluator ([`tape`], and its native code as [`native`] describes it:
+//! its C text [`c_source`], built by [`c_compiler`], loaded by [`c_loop`])
+//! and the GPU's generated system file ([`wgsl`]), both printed from the
+//! lowered tapes by one printer ([`print`]), with
 //! sin, cos and tan computed by the same arithmetic on both ([`math64`]); and
 //! `model check`'s report ([`describe`]). `system::model` and
 //! `system::section` make a compiled model a system like the hand-written
 //! one (Hénon's map).
 
+pub mod c_compiler;
 pub mod c_loop;
+pub mod c_source;
 pub mod code;
 pub mod describe;
 pub mod expr;
 pub mod math64;
 pub mod native;
+pub mod print;
 pub mod table;
 pub mod tape;
 pub mod wgsl;

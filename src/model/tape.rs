@@ -104,26 +104,25 @@ impl Tape {
         states: usize,
         frequency: Option<Expr>,
     ) -> Result<Tape, (usize, CompileError)> {
-        let mut compiler = Compiler {
-            tape: Tape {
-                frequency,
-                states,
-                ..Tape::default()
-            },
-            seen: HashMap::new(),
-        };
-        for (i, e) in exprs.into_iter().enumerate() {
-            let out = compiler.compile(e).map_err(|err| (i, err))?;
-            compiler.tape.outputs.push(out);
-            let n = compiler.tape.instructions.len();
-            if n > MAX_INSTRUCTIONS {
-                return Err((i, CompileError::TooLong(n)));
-            }
-        }
-        let mut tape = compiler.tape;
-        let n = tape.instructions.len();
-        tape.lower().map_err(|e| (n.saturating_sub(1), e))?;
-        Ok(tape)
+        Compiler::new(states, frequency, true).tape_of(exprs)
+    }
+
+    /// Compiles `exprs` for a target that reads the parameters where it
+    /// runs, as the GPU's system file does (`model::wgsl`): every parameter
+    /// and switch side the expressions read is a lane constant of its own
+    /// (`Expr::Var`), and every operation on them, numbers' included, an
+    /// instruction, in the tree's order. Hoisting them would need a second
+    /// tape per function, and the GPU would still compute each one per
+    /// call: read in place, the printed code computes what the tree says,
+    /// the operations [`Expr::eval`] does for the CPU's lane constants, so
+    /// an f64 kernel keeps the CPU's bits. Such a tape is printed
+    /// (`model::print`), never run: the interpreter's register-file limits
+    /// do not apply.
+    pub fn compile_reading_parameters<'a>(
+        exprs: impl IntoIterator<Item = &'a Expr>,
+        states: usize,
+    ) -> Result<Tape, (usize, CompileError)> {
+        Compiler::new(states, None, false).tape_of(exprs)
     }
 
     /// The lane constants and clock frequency at parameter values `params`.
@@ -254,8 +253,9 @@ impl Tape {
 
     /// Rewrites the instructions over register-file slots (see
     /// [`Tape::run`]), fusing each product used once, by a sum or a
-    /// difference, into it. Fails when the file would not fit.
-    fn lower(&mut self) -> Result<(), CompileError> {
+    /// difference, into it. Fails when the file would need more than
+    /// `limit` slots.
+    fn lower(&mut self, limit: usize) -> Result<(), CompileError> {
         let d = self.states;
         let constants = d + 2;
         let mut uses = vec![0usize; self.instructions.len()];
@@ -340,7 +340,7 @@ impl Tape {
                 next += 1;
             }
         }
-        if next > MAX_FILE {
+        if next > limit {
             return Err(CompileError::TooLong(self.instructions.len()));
         }
         let slot = |src: Src| -> u16 {
@@ -431,9 +431,51 @@ struct Compiler {
     tape: Tape,
     /// Subexpressions already compiled, by their printed tree.
     seen: HashMap<String, Src>,
+    /// Whether parameter-only subexpressions become lane constants (the
+    /// CPU's tapes), or the parameters and sides themselves do
+    /// ([`Tape::compile_reading_parameters`]).
+    hoist: bool,
 }
 
 impl Compiler {
+    fn new(states: usize, frequency: Option<Expr>, hoist: bool) -> Compiler {
+        Compiler {
+            tape: Tape {
+                frequency,
+                states,
+                ..Tape::default()
+            },
+            seen: HashMap::new(),
+            hoist,
+        }
+    }
+
+    /// The tape of `exprs`, lowered; an error comes with the index of the
+    /// expression it is in.
+    fn tape_of<'a>(
+        mut self,
+        exprs: impl IntoIterator<Item = &'a Expr>,
+    ) -> Result<Tape, (usize, CompileError)> {
+        // A printed tape has no register file: only the slots' u16 bound.
+        let (instructions, file) = if self.hoist {
+            (MAX_INSTRUCTIONS, MAX_FILE)
+        } else {
+            (usize::from(u16::MAX), usize::from(u16::MAX))
+        };
+        for (i, e) in exprs.into_iter().enumerate() {
+            let out = self.compile(e).map_err(|err| (i, err))?;
+            self.tape.outputs.push(out);
+            let n = self.tape.instructions.len();
+            if n > instructions {
+                return Err((i, CompileError::TooLong(n)));
+            }
+        }
+        let mut tape = self.tape;
+        let n = tape.instructions.len();
+        tape.lower(file).map_err(|e| (n.saturating_sub(1), e))?;
+        Ok(tape)
+    }
+
     fn compile(&mut self, e: &Expr) -> Result<Src, CompileError> {
         if let Expr::Num(v) = e {
             return Ok(Src::Num(*v));
@@ -448,7 +490,8 @@ impl Compiler {
     }
 
     fn compile_new(&mut self, e: &Expr) -> Result<Src, CompileError> {
-        if !reads_state_or_time(e) {
+        let read = !self.hoist && matches!(e, Expr::Var(Var::Param(_) | Var::Side(_)));
+        if read || (self.hoist && !reads_state_or_time(e)) {
             self.tape.lane_constants.push(e.clone());
             return Ok(Src::Lane(self.tape.lane_constants.len() as u32 - 1));
         }
@@ -457,9 +500,10 @@ impl Compiler {
             Expr::Var(Var::State(i)) => return Ok(Src::State(*i as u32)),
             Expr::Var(Var::Param(_)) => unreachable!("parameters are lane constants"),
             Expr::Var(Var::Time) => return Err(time_outside_clock()),
-            Expr::Var(Var::Side(_)) => {
-                unreachable!("each region's tape has its switches' sides substituted")
-            }
+            Expr::Var(Var::Side(_)) => unreachable!(
+                "each region's tape has its switches' sides substituted, and a tape that \
+                 reads its parameters reads the sides too"
+            ),
             Expr::Call(f @ (Func::Cos | Func::Sin), args) if args[0].uses(Var::Time) => {
                 return self.clock(*f, &args[0]);
             }
@@ -573,6 +617,32 @@ mod tests {
                 let tree = e.eval(&[x, v], &params, t);
                 assert_eq!(o[0].to_bits(), tree.to_bits(), "{e:?} at {x}, {v}, {t}");
             }
+        }
+    }
+
+    #[test]
+    fn a_tape_that_reads_its_parameters_computes_the_tree_to_the_bit() {
+        let names = names();
+        let e = Expr::parse("-2*zeta*v - x + f*cos(eta*t) + (zeta + 1)/f", &names).unwrap();
+        let tape = Tape::compile_reading_parameters([&e], 2).unwrap();
+        // Every lane constant is a parameter read as it is; every operation
+        // on them, -2·ζ and (ζ + 1)/f among them, is an instruction.
+        // (η is read by the clock alone.)
+        assert_eq!(
+            tape.lane_constants,
+            [Expr::Var(Var::Param(0)), Expr::Var(Var::Param(1))],
+            "{tape:?}"
+        );
+        assert_eq!(tape.frequency, Some(Expr::Var(Var::Param(2))));
+        let hoisted = Tape::compile([&e], 2, None).unwrap();
+        assert!(tape.instructions.len() > hoisted.instructions.len());
+        let params = [0.05, 1.2, 0.8];
+        let lane = tape.lane_values(&params);
+        for (x, v, t) in [(0.3, -0.7, 0.0_f64), (1.9, 0.4, 2.5)] {
+            let phase = [(0.8 * t).cos(), (0.8 * t).sin()];
+            let out: [[f64; 1]; 1] = tape.eval(|j| [lane.constants[j]], &[phase], &[[x], [v]]);
+            let tree = e.eval(&[x, v], &params, t);
+            assert_eq!(out[0][0].to_bits(), tree.to_bits(), "at {x}, {v}, {t}");
         }
     }
 

@@ -1,26 +1,29 @@
 //! Models compiled for the GPU: the system file the kernels include
-//! (`SystemInfo::wgsl`), generated from the model's expression trees, the
+//! (`SystemInfo::wgsl`), generated from the model's lowered tapes, the
 //! twin of a hand-written `shaders/system/<kind>.wgsl` (Hénon's).
 //!
 //! The file has the hand-written files' shape: `struct Params` (every parameter, in
-//! the model's order), `fn rhs(p, phase, y) -> State` (one expression per
+//! the model's order), `fn rhs(p, phase, y) -> State` (one value per
 //! state) and, for a model with stops, what `shaders/shared/impact.wgsl`
 //! reads of them: `WALLS`, each stop's coordinate, velocity and side
 //! (`WALL_COORDINATE`, `WALL_VELOCITY`, `WALL_SIDE`, constants, so that the
 //! kernels' per-stop code folds to the seed's `y.x > X_w` for a stop on
 //! the first state from below), and its position and restitution as the
-//! components of `wall_position(p)` and `wall_restitution(p)`. It is
-//! emitted from the same trees the CPU tape is compiled from
-//! (`model::tape`), so that the equations exist once:
+//! components of `wall_position(p)` and `wall_restitution(p)`. Every
+//! function's body is a tape of its expressions printed by the printer
+//! that prints the CPU's native code (`model::print`), with WGSL's syntax,
+//! so that the equations are lowered once:
 //!
-//! - every operation keeps the tree's association, fully parenthesised
-//!   (`((-2*zeta)*v - x) + f*phase.x`), so in f64 the GPU rounds where the
-//!   CPU does. The CPU computes a parameter-only subexpression once per lane
-//!   with [`Expr::eval`]; the GPU recomputes it per call with the same
-//!   operations in the same order, which gives the same bits. (A driver may
-//!   still fuse a product into the sum that uses it, as lavapipe does: the
-//!   seed oscillator as a model was the retired hand-written kernel to the
-//!   bit, and the CPU path to rounding.)
+//! - one `let` per operation, in the tape's order, each operation as the
+//!   tree associates it (`(-2*zeta)*v - x + f*phase.x` is four), so in f64
+//!   the GPU rounds where the CPU does. The CPU computes a
+//!   parameter-only subexpression once per lane with [`Expr::eval`]; the
+//!   GPU's tape reads the parameters themselves
+//!   (`Tape::compile_reading_parameters`) and recomputes it per call with
+//!   the same operations in the same order, which gives the same bits. (A
+//!   driver may still fuse a product into the sum that uses it, as
+//!   lavapipe does: the seed oscillator as a model was the retired
+//!   hand-written kernel to the bit, and the CPU path to rounding.)
 //! - `cos(w*t)` and `sin(w*t)` read the forcing clock, `phase.x` and
 //!   `phase.y`, exactly where the tape reads its clock (`Tape::compile`);
 //! - numbers are `real(…)` of Rust's shortest round-trip form, so an f64
@@ -41,7 +44,7 @@
 //! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
 //! field in force, the CPU surface tape's sum in its order),
 //! `surface_gradient` and an event's `reset` (the state after it, DR and
-//! ∂R/∂t), all emitted from the CPU's trees. `Params` then ends with the
+//! ∂R/∂t), all printed from tapes of the CPU's trees. `Params` then ends with the
 //! trajectory's `region` (bit b set on the positive side of switch b),
 //! which the kernels set, and `step(s)`/`sign(s)` of a switch read that
 //! bit (`side(p, b)`), never the state: the value 0 or 1 multiplies where
@@ -74,6 +77,8 @@ use std::fmt::{self, Write};
 
 use super::code::Code;
 use super::expr::{Expr, Func, Op, Var, Written};
+use super::print::{self, Inputs, Syntax};
+use super::tape::{CompileError, Tape};
 
 /// The wrappers a generated file may call, defined per precision in
 /// `shaders/shared/model_functions.wgsl`: a system file that calls none of
@@ -107,13 +112,18 @@ pub enum Unsupported {
     /// A switch with a stick limit in a model with several switches, made
     /// to be slid on several at once: the kernels slide on one.
     Sliding(String),
-    /// An expression nested deeper than the WGSL compiler takes.
+    /// An expression nested deeper than the GPU kernels take.
     Depth(usize),
+    /// A function of the system file with more operations than a tape's
+    /// slots number.
+    Length(usize),
 }
 
-/// The deepest expression tree the kernels emit: every level is one
-/// parenthesised operation or call in the WGSL, and naga's parser stops at
-/// 200 levels of recursion, the function around the expression included.
+/// The deepest expression tree the kernels take, the bound docs/models.md
+/// states (naga's parser stops at 200 levels of recursion in one
+/// expression). The system file is printed one operation per line
+/// ([`lines`]), which the parser takes at any depth, so this bound is
+/// stricter than the file needs.
 pub const MAX_DEPTH: usize = 150;
 
 impl fmt::Display for Unsupported {
@@ -135,6 +145,10 @@ impl fmt::Display for Unsupported {
             ),
             Unsupported::Number(v) => write!(f, "the number {v} has no WGSL literal"),
             Unsupported::Time => write!(f, "t appears outside cos(w*t) and sin(w*t)"),
+            Unsupported::Length(n) => write!(
+                f,
+                "a function of the GPU's system file has {n} operations, more than a tape holds"
+            ),
             Unsupported::Depth(depth) => write!(
                 f,
                 "an expression (or its derivative) is {depth} levels deep: the GPU kernels' \
@@ -238,8 +252,8 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
     let w = &mut out;
     let _ = writeln!(
         w,
-        "// Generated by src/model/wgsl.rs from the model '{}' (the twin of its\n\
-         // CPU tape): the same expression trees, the same association.",
+        "// Generated by src/model/wgsl.rs from the model '{}': its tapes, the\n\
+         // CPU's operations in the CPU's order (src/model/print.rs).",
         model.name
     );
     for (state, e) in names.states.iter().zip(&model.equations) {
@@ -260,58 +274,67 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
         let _ = writeln!(w, "    region: u32,");
     }
     let _ = writeln!(w, "}}\n");
-    // With surfaces, the field of p's region is `field`, and `rhs` (what
-    // RK4 steps) is it or, for a motion sliding on a switch, the sliding
-    // field of impact.wgsl built from it.
+    equations(w, code)?;
+    if !code.walls.is_empty() || !code.surfaces.is_empty() {
+        stops(w, code)?;
+    }
+    if !code.surfaces.is_empty() {
+        surfaces(w, code)?;
+        surface_values(w, code)?;
+        gradients_and_resets(w, code)?;
+        stick_limits(w, code)?;
+    }
+    if let Some(section) = &code.section {
+        section_constants(w, code, section);
+    }
+    if !model.angles.is_empty() {
+        wrap_angles(w, code);
+    }
+    Ok(out)
+}
+
+/// The field: with surfaces, the field of p's region is `field`, and
+/// `rhs` (what RK4 steps) is it or, for a motion sliding on a switch, the
+/// sliding field of impact.wgsl built from it ([`surfaces`]).
+fn equations(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
         "// phase = (cos ωt, sin ωt) of the forcing clock.\n\
-         fn {}(p: Params, phase: vec2<real>, y: State) -> State {{\n    return State(",
+         fn {}(p: Params, phase: vec2<real>, y: State) -> State {{",
         if code.surfaces.is_empty() {
             "rhs"
         } else {
             "field"
         }
     );
-    for (i, e) in model.equations.iter().enumerate() {
-        let _ = writeln!(
-            w,
-            "        {}, // {}'",
-            Emit { expr: e, code },
-            names.states[i]
-        );
+    let equations: Vec<&Expr> = code.model.equations.iter().collect();
+    let values = lines(w, code, &equations, &states(code), "    ")?;
+    let _ = writeln!(w, "    return State(");
+    for (value, state) in values.iter().zip(&code.model.names.states) {
+        let _ = writeln!(w, "        {value}, // {state}'");
     }
     let _ = writeln!(w, "    );\n}}");
-    if !code.walls.is_empty() || !code.surfaces.is_empty() {
-        stops(w, code);
-    }
-    if !code.surfaces.is_empty() {
-        surfaces(w, code);
-        stick_limits(w, code);
-    }
-    if let Some(section) = &code.section {
-        section_constants(w, code, section);
-    }
-    if !model.angles.is_empty() {
-        // Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π),
-        // with Rust's π and 2π to the bit.
+    Ok(())
+}
+
+/// Twin of `system::model::wrap_angle`: θ - 2π·floor((θ + π)/2π), with
+/// Rust's π and 2π to the bit.
+fn wrap_angles(w: &mut String, code: &Code) {
+    let _ = writeln!(
+        w,
+        "\n// The angles, into [-π, π) at the end of each map iteration.\n\
+         fn wrap_angles(y: State) -> State {{\n    var w = y;"
+    );
+    for &i in &code.model.angles {
         let _ = writeln!(
             w,
-            "\n// The angles, into [-π, π) at the end of each map iteration.\n\
-             fn wrap_angles(y: State) -> State {{\n    var w = y;"
+            "    w[{i}] = w[{i}] - {tau} * floor((w[{i}] + {pi}) / {tau}); // {}",
+            code.model.names.states[i],
+            tau = literal(std::f64::consts::TAU),
+            pi = literal(std::f64::consts::PI),
         );
-        for &i in &model.angles {
-            let _ = writeln!(
-                w,
-                "    w[{i}] = w[{i}] - {tau} * floor((w[{i}] + {pi}) / {tau}); // {}",
-                names.states[i],
-                tau = literal(std::f64::consts::TAU),
-                pi = literal(std::f64::consts::PI),
-            );
-        }
-        let _ = writeln!(w, "    return w;\n}}");
     }
-    Ok(out)
+    let _ = writeln!(w, "    return w;\n}}");
 }
 
 /// A Poincaré section y_k = at(p), as `shaders/section.wgsl` reads it:
@@ -341,7 +364,7 @@ fn section_constants(w: &mut String, code: &Code, section: &crate::model::code::
 /// The stops of `code` as `shaders/shared/impact.wgsl` reads them: per
 /// stop j, component j of the constants and of the two functions (the
 /// components past `WALLS` are never read, and are 0).
-fn stops(w: &mut String, code: &Code) {
+fn stops(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let names = &code.model.names;
     let walls = &code.walls;
     let _ = writeln!(w, "\n// The stops, in the model's order:");
@@ -360,87 +383,61 @@ fn stops(w: &mut String, code: &Code) {
             names.states[stop.velocity],
         );
     }
-    let vector = |kind: &str, each: &dyn Fn(usize) -> String, zero: &str| {
-        let parts: Vec<String> = (0..crate::integrate::impact::MAX_WALLS)
-            .map(|j| {
-                if j < walls.len() {
-                    each(j)
-                } else {
-                    zero.into()
-                }
-            })
-            .collect();
-        format!("vec4<{kind}>({})", parts.join(", "))
+    let vector = |kind: &str, each: &dyn Fn(usize) -> String| {
+        let zero = if kind == "u32" { "0u" } else { "real(0.0)" };
+        vec4(kind, walls.len(), each, zero)
     };
     let _ = writeln!(w, "const WALLS: u32 = {}u;", walls.len());
     let _ = writeln!(
         w,
         "const WALL_COORDINATE = {};",
-        vector("u32", &|j| format!("{}u", walls[j].coordinate), "0u")
+        vector("u32", &|j| format!("{}u", walls[j].coordinate))
     );
     let _ = writeln!(
         w,
         "const WALL_VELOCITY = {};",
-        vector("u32", &|j| format!("{}u", walls[j].velocity), "0u")
+        vector("u32", &|j| format!("{}u", walls[j].velocity))
     );
     let _ = writeln!(
         w,
         "const WALL_SIDE = {};",
-        vector("real", &|j| literal(walls[j].side), "real(0.0)")
+        vector("real", &|j| literal(walls[j].side))
     );
-    let _ = writeln!(
-        w,
-        "\nfn wall_position(p: Params) -> vec4<real> {{\n    return {};\n}}\n\n\
-         fn wall_restitution(p: Params) -> vec4<real> {{\n    return {};\n}}",
-        vector(
-            "real",
-            &|j| Emit {
-                expr: &walls[j].position,
-                code
-            }
-            .to_string(),
-            "real(0.0)"
-        ),
-        vector(
-            "real",
-            &|j| Emit {
-                expr: &walls[j].restitution,
-                code
-            }
-            .to_string(),
-            "real(0.0)"
-        ),
-    );
+    let positions: Vec<&Expr> = walls.iter().map(|s| &s.position).collect();
+    let restitutions: Vec<&Expr> = walls.iter().map(|s| &s.restitution).collect();
+    for (name, exprs) in [
+        ("wall_position", positions),
+        ("wall_restitution", restitutions),
+    ] {
+        let _ = writeln!(w, "\nfn {name}(p: Params) -> vec4<real> {{");
+        let values = lines(w, code, &exprs, &states(code), "    ")?;
+        let _ = writeln!(
+            w,
+            "    return {};\n}}",
+            vector("real", &|j| values[j].clone())
+        );
+    }
+    Ok(())
+}
+
+/// `vec4<{kind}>(…)` of `each(j)` for the first `n` components, `zero`
+/// past them.
+fn vec4(kind: &str, n: usize, each: &dyn Fn(usize) -> String, zero: &str) -> String {
+    let parts: Vec<String> = (0..crate::integrate::impact::MAX_WALLS)
+        .map(|j| if j < n { each(j) } else { zero.into() })
+        .collect();
+    format!("vec4<{kind}>({})", parts.join(", "))
 }
 
 /// The general surfaces of `code` (events that are not stops, then the
 /// switches: the CPU's order, `Code::surfaces`) as the surface code of
-/// `shaders/shared/impact.wgsl` reads them: their count, each one's switch
-/// bit (or `EVENT`), g, its rate ∇g·F + ∂g/∂t along the field of the
-/// trajectory's region (the CPU's surface tape: the same sum, in the same
-/// order), ∇g, and an event's reset with its Jacobian and ∂R/∂t, all from
-/// the trees the CPU evaluates.
-fn surfaces(w: &mut String, code: &Code) {
+/// `shaders/shared/impact.wgsl` reads them: their count, each one's
+/// switch bit (or `EVENT`), the side of a switch, the field RK4 steps, and
+/// g; their rates ([`surface_values`]), gradients and resets
+/// ([`gradients_and_resets`]) follow.
+fn surfaces(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let names = &code.model.names;
-    let n = names.states.len();
     let surfaces = &code.surfaces;
-    let emit = |e: &Expr| Emit { expr: e, code }.to_string();
-    let state = |exprs: &[Expr]| -> String {
-        let parts: Vec<String> = exprs.iter().map(emit).collect();
-        format!("State({})", parts.join(", "))
-    };
-    let vector = |each: &dyn Fn(usize) -> String, pad: &str| -> String {
-        let parts: Vec<String> = (0..4)
-            .map(|j| {
-                if j < surfaces.len() {
-                    each(j)
-                } else {
-                    pad.into()
-                }
-            })
-            .collect();
-        parts.join(", ")
-    };
     let _ = writeln!(
         w,
         "\n// The events and switches, in the CPU's order (after the stops):"
@@ -461,12 +458,13 @@ fn surfaces(w: &mut String, code: &Code) {
         crate::integrate::Surface::Event => "EVENT".to_owned(),
         crate::integrate::Surface::Switch { bit } => format!("{bit}u"),
     };
+    let bits = vec4("u32", surfaces.len(), &bit, "EVENT");
     let _ = writeln!(
         w,
         "const SURFACES: u32 = {}u;\n\
          // A surface's switch bit, or EVENT for an event.\n\
          const EVENT: u32 = 0xffffffffu;\n\
-         const SURFACE_BIT = vec4<u32>({});\n\n\
+         const SURFACE_BIT = {bits};\n\n\
          // The trajectory's side of switch `bit`: 1 on its positive side.\n\
          fn side(p: Params, bit: u32) -> real {{\n    return real((p.region >> bit) & 1u);\n}}\n\n\
          // The field RK4 steps: the region's, or the sliding field (of the\n\
@@ -476,51 +474,85 @@ fn surfaces(w: &mut String, code: &Code) {
          if (is_sliding(p.region)) {{\n        return sliding_field(p, phase, y);\n    }}\n\
          #endif\n    \
          return field(p, phase, y);\n}}\n\n\
-         fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{\n    return vec4<real>({});\n}}\n\n\
-         struct SurfaceValues {{\n    g: vec4<real>,\n    rate: vec4<real>,\n}}\n",
+         fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{",
         surfaces.len(),
-        vector(&bit, "EVENT"),
-        vector(&|j| emit(&surfaces[j].g), "real(0.0)"),
     );
-    const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
-    let rate = |j: usize| -> String {
-        let s = &surfaces[j];
-        let mut sum = String::new();
-        for (i, (d, c)) in s.gradient.iter().zip(COMPONENTS).enumerate() {
-            let term = format!("({} * f.{c})", emit(d));
-            sum = if i == 0 {
-                term
-            } else {
-                format!("({sum} + {term})")
+    let gs: Vec<&Expr> = surfaces.iter().map(|s| &s.g).collect();
+    let values = lines(w, code, &gs, &states(code), "    ")?;
+    let _ = writeln!(
+        w,
+        "    return {};\n}}\n\n\
+         struct SurfaceValues {{\n    g: vec4<real>,\n    rate: vec4<real>,\n}}\n",
+        vec4("real", surfaces.len(), &|j| values[j].clone(), "real(0.0)")
+    );
+    Ok(())
+}
+
+/// g, and the rate ∇g·F + ∂g/∂t along the field in force (the CPU
+/// surface tape's sum, in its order): the products of ∇g with the field's
+/// components (`f`, read as states past the model's), summed from the
+/// first, then ∂g/∂t added.
+fn surface_values(w: &mut String, code: &Code) -> Result<(), Unsupported> {
+    let n = code.states();
+    let surfaces = &code.surfaces;
+    let rates: Vec<Expr> = surfaces
+        .iter()
+        .map(|s| {
+            let term = |i: usize| {
+                Expr::Bin(
+                    Op::Mul,
+                    Box::new(s.gradient[i].clone()),
+                    Box::new(Expr::Var(Var::State(n + i))),
+                )
             };
-        }
-        format!("({sum} + {})", emit(&s.g.derivative(Var::Time)))
-    };
+            let sum = (1..n).fold(term(0), |sum, i| {
+                Expr::Bin(Op::Add, Box::new(sum), Box::new(term(i)))
+            });
+            Expr::Bin(Op::Add, Box::new(sum), Box::new(s.g.derivative(Var::Time)))
+        })
+        .collect();
     let _ = writeln!(
         w,
         "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region (its\n\
          // sides: a sliding motion's rates are impact.wgsl's).\n\
          fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
-         let f = field(p, phase, y);\n    \
-         return SurfaceValues(surface_g(p, phase, y), vec4<real>({}));\n}}\n",
-        vector(&rate, "real(0.0)"),
+         let f = field(p, phase, y);"
     );
+    let mut inputs = states(code);
+    inputs.extend(COMPONENTS[..n].iter().map(|c| format!("f.{c}")));
+    let rates: Vec<&Expr> = rates.iter().collect();
+    let values = lines(w, code, &rates, &inputs, "    ")?;
+    let _ = writeln!(
+        w,
+        "    return SurfaceValues(surface_g(p, phase, y), {});\n}}\n",
+        vec4("real", surfaces.len(), &|j| values[j].clone(), "real(0.0)")
+    );
+    Ok(())
+}
+
+/// Each surface's gradient ∇g, and an event's reset: the state after it,
+/// its Jacobian DR (rows) and ∂R/∂t; a case of the surface's index each.
+fn gradients_and_resets(w: &mut String, code: &Code) -> Result<(), Unsupported> {
+    let n = code.states();
+    let surfaces = &code.surfaces;
+    let state = |values: &[String]| format!("State({})", values.join(", "));
     let _ = writeln!(
         w,
         "fn surface_gradient(p: Params, phase: vec2<real>, y: State, j: u32) -> State {{\n    \
          switch j {{"
     );
-    for (j, s) in surfaces.iter().enumerate().skip(1) {
-        let _ = writeln!(w, "        case {j}u: {{ return {}; }}", state(&s.gradient));
+    // Surface 0's is the default.
+    let labels = (1..surfaces.len())
+        .map(|j| (format!("case {j}u"), j))
+        .chain([("default".to_owned(), 0)]);
+    for (label, j) in labels {
+        let gradient: Vec<&Expr> = surfaces[j].gradient.iter().collect();
+        case(w, code, &label, &gradient, &|values| state(values))?;
     }
     let _ = writeln!(
         w,
-        "        default: {{ return {}; }}\n    }}\n}}\n",
-        state(&surfaces[0].gradient)
-    );
-    let _ = writeln!(
-        w,
-        "// An event's reset: the state after it, its Jacobian DR (rows) and ∂R/∂t.\n\
+        "    }}\n}}\n\n\
+         // An event's reset: the state after it, its Jacobian DR (rows) and ∂R/∂t.\n\
          struct Reset {{\n    y: State,\n    dr: array<State, DIM>,\n    rate: State,\n}}\n\n\
          fn reset(p: Params, phase: vec2<real>, y: State, j: u32) -> Reset {{\n    switch j {{"
     );
@@ -528,41 +560,141 @@ fn surfaces(w: &mut String, code: &Code) {
         if s.kind != crate::integrate::Surface::Event {
             continue;
         }
-        let rows: Vec<String> = (0..n)
-            .map(|i| state(&s.reset_jacobian[i * n..(i + 1) * n]))
+        let exprs: Vec<&Expr> = s
+            .reset
+            .iter()
+            .chain(&s.reset_jacobian)
+            .chain(&s.reset_rate)
             .collect();
-        let _ = writeln!(
-            w,
-            "        case {j}u: {{\n            return Reset({}, array<State, DIM>({}), {});\n        }}",
-            state(&s.reset),
-            rows.join(", "),
-            state(&s.reset_rate)
-        );
+        case(w, code, &format!("case {j}u"), &exprs, &|values| {
+            let rows: Vec<String> = (1..=n)
+                .map(|i| state(&values[i * n..(i + 1) * n]))
+                .collect();
+            format!(
+                "Reset({}, array<State, DIM>({}), {})",
+                state(&values[..n]),
+                rows.join(", "),
+                state(&values[(n + 1) * n..])
+            )
+        })?;
     }
     let _ = writeln!(
         w,
         "        default: {{}}\n    }}\n    // A switch: no reset.\n    \
          return Reset(y, array<State, DIM>(), State());\n}}"
     );
+    Ok(())
 }
 
 /// A switch's stick limit at y (the CPU evaluates it at t = 0), or
 /// `filippov` (the half jump) for a switch without one.
-fn stick_limits(w: &mut String, code: &Code) {
+fn stick_limits(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
         "\nfn stick_limit(p: Params, y: State, j: u32, filippov: real) -> real {{\n    switch j {{"
     );
     for (j, s) in code.surfaces.iter().enumerate() {
         if let Some(limit) = &s.stick_limit {
-            let _ = writeln!(
-                w,
-                "        case {j}u: {{ return {}; }}",
-                Emit { expr: limit, code }
-            );
+            case(w, code, &format!("case {j}u"), &[limit], &|values| {
+                values[0].clone()
+            })?;
         }
     }
     let _ = writeln!(w, "        default: {{ return filippov; }}\n    }}\n}}");
+    Ok(())
+}
+
+/// A case of a `switch` that returns `value` of `exprs`' values.
+fn case(
+    w: &mut String,
+    code: &Code,
+    label: &str,
+    exprs: &[&Expr],
+    value: &dyn Fn(&[String]) -> String,
+) -> Result<(), Unsupported> {
+    let _ = writeln!(w, "        {label}: {{");
+    let values = lines(w, code, exprs, &states(code), "            ")?;
+    let _ = writeln!(w, "            return {};\n        }}", value(&values));
+    Ok(())
+}
+
+const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
+
+/// The states as WGSL reads them: `y.x`, `y.y`, ...
+fn states(code: &Code) -> Vec<String> {
+    COMPONENTS[..code.states()]
+        .iter()
+        .map(|c| format!("y.{c}"))
+        .collect()
+}
+
+/// `exprs` as WGSL lines at `indent`, one `let` per operation: the tape
+/// that reads its parameters (`Tape::compile_reading_parameters`)
+/// printed by `model::print`, the states read at `states`, the clock at
+/// `phase`, parameter i at `p.<field>` and switch b's side at `side(p,
+/// b)`; gives each expression's value. Each operation on a line of its
+/// own also keeps the WGSL compiler's recursion shallow, however deep the
+/// tree.
+fn lines(
+    w: &mut String,
+    code: &Code,
+    exprs: &[&Expr],
+    states: &[String],
+    indent: &str,
+) -> Result<Vec<String>, Unsupported> {
+    let tape = Tape::compile_reading_parameters(exprs.iter().copied(), states.len()).map_err(
+        |(_, e)| match e {
+            CompileError::Time(_) => Unsupported::Time,
+            CompileError::TooLong(n) => Unsupported::Length(n),
+        },
+    )?;
+    let names = &code.model.names;
+    let lane = |j: usize| match tape.lane_constants[j] {
+        Expr::Var(Var::Param(i)) => format!("p.{}", field(names, i)),
+        // The trajectory's side of switch b: its region's bit b.
+        Expr::Var(Var::Side(b)) => format!("side(p, {b}u)"),
+        _ => unreachable!("a tape that reads its parameters has no other lane constant"),
+    };
+    let inputs = Inputs {
+        states,
+        clock: ("phase.x", "phase.y"),
+        lane: &lane,
+    };
+    Ok(print::print(w, &Wgsl, &tape, &inputs, "v", indent))
+}
+
+/// WGSL's [`Syntax`]: numbers as `real(…)`; `abs`, `sqrt`, `min`, `max`
+/// and `sign` as WGSL's builtins (defined on f64 under Vulkan: docs,
+/// NOTES on WGSL f64); every other function the `*_r` wrapper of
+/// `shaders/shared/model_functions.wgsl`.
+struct Wgsl;
+
+impl Syntax for Wgsl {
+    fn literal(&self, v: f64) -> String {
+        literal(v)
+    }
+
+    fn declare(&self, name: &str, value: &str) -> String {
+        format!("let {name}: real = {value};")
+    }
+
+    fn call(&self, f: Func, a: &str, b: &str) -> String {
+        let name = match f {
+            Func::Abs | Func::Sqrt | Func::Min | Func::Max | Func::Sign => f.name(),
+            Func::Pow => POW,
+            Func::Sin => "sin_r",
+            Func::Cos => "cos_r",
+            Func::Tan => "tan_r",
+            Func::Exp => "exp_r",
+            Func::Log => "log_r",
+            Func::Tanh => "tanh_r",
+            Func::Atan2 => "atan2_r",
+        };
+        match f.arity() {
+            1 => format!("{name}({a})"),
+            _ => format!("{name}({a}, {b})"),
+        }
+    }
 }
 
 /// A system's WGSL file for the kernels, with what the emitter put in it:
@@ -627,85 +759,6 @@ pub fn literal(v: f64) -> String {
     format!("real({v:?})")
 }
 
-/// An expression of `code`'s model as WGSL, fully parenthesised.
-struct Emit<'a> {
-    expr: &'a Expr,
-    code: &'a Code,
-}
-
-impl fmt::Display for Emit<'_> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        emit(f, self.expr, self.code)
-    }
-}
-
-fn emit(f: &mut fmt::Formatter<'_>, e: &Expr, code: &Code) -> fmt::Result {
-    const COMPONENTS: [&str; 4] = ["x", "y", "z", "w"];
-    let args = |f: &mut fmt::Formatter<'_>, args: &[Expr]| -> fmt::Result {
-        for (k, a) in args.iter().enumerate() {
-            if k > 0 {
-                write!(f, ", ")?;
-            }
-            emit(f, a, code)?;
-        }
-        Ok(())
-    };
-    match e {
-        Expr::Num(v) => write!(f, "{}", literal(*v)),
-        Expr::Var(Var::State(i)) => write!(f, "y.{}", COMPONENTS[*i]),
-        Expr::Var(Var::Param(i)) => write!(f, "p.{}", field(&code.model.names, *i)),
-        Expr::Var(Var::Time) => unreachable!("check refuses t outside the clock"),
-        // The trajectory's side of switch j: its region's bit j.
-        Expr::Var(Var::Side(j)) => write!(f, "side(p, {j}u)"),
-        // The forcing clock, as the tape reads it (`Compiler::clock`).
-        Expr::Call(Func::Cos, a) if a[0].uses(Var::Time) => write!(f, "phase.x"),
-        Expr::Call(Func::Sin, a) if a[0].uses(Var::Time) => write!(f, "phase.y"),
-        Expr::Neg(a) => {
-            write!(f, "(-")?;
-            emit(f, a, code)?;
-            write!(f, ")")
-        }
-        Expr::Bin(Op::Pow, a, b) => {
-            write!(f, "{POW}(")?;
-            emit(f, a, code)?;
-            write!(f, ", ")?;
-            emit(f, b, code)?;
-            write!(f, ")")
-        }
-        Expr::Bin(op, a, b) => {
-            let symbol = match op {
-                Op::Add => "+",
-                Op::Sub => "-",
-                Op::Mul => "*",
-                Op::Div => "/",
-                Op::Pow => unreachable!("pow is a call"),
-            };
-            write!(f, "(")?;
-            emit(f, a, code)?;
-            write!(f, " {symbol} ")?;
-            emit(f, b, code)?;
-            write!(f, ")")
-        }
-        Expr::Call(func, a) => {
-            let name = match func {
-                // Defined on f64 under Vulkan (docs: NOTES on WGSL f64).
-                Func::Abs | Func::Sqrt | Func::Min | Func::Max | Func::Sign => func.name(),
-                Func::Pow => POW,
-                Func::Sin => "sin_r",
-                Func::Cos => "cos_r",
-                Func::Tan => "tan_r",
-                Func::Exp => "exp_r",
-                Func::Log => "log_r",
-                Func::Tanh => "tanh_r",
-                Func::Atan2 => "atan2_r",
-            };
-            write!(f, "{name}(")?;
-            args(f, a)?;
-            write!(f, ")")
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -732,7 +785,7 @@ mod tests {
 
     #[test]
     fn every_wrapper_is_named_by_a_function() {
-        // `emit` maps functions to these names by hand; keep them one list.
+        // `Wgsl::call` maps functions to these names by hand; keep them one list.
         for name in WRAPPERS {
             assert!(calls_wrappers(&format!("x = {name}(y);")));
         }

@@ -1,0 +1,829 @@
+//! The C source of a tape's native code (`model::c_loop`): the functions
+//! of a field's tape ([`Kind`]), the step loops between stops, over the
+//! regions of a model with general surfaces too, and the steps of its
+//! slides, each a loop over the slots that the C compiler vectorises.
+//! The tapes themselves are printed by `model::print` with C's
+//! [`Syntax`] (numbers of the same bits, the exact functions as builtins,
+//! every other function a call back into Rust), the text around them
+//! here: the same operations in the same order as the interpreter
+//! (`Tape::run`), `rk4::step_batch` and `integrate::steps`.
+
+use super::expr::Func;
+use super::native::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};
+use super::print::{self, Inputs, Syntax};
+use super::tape::{Code, Tape};
+use crate::integrate::impact::TURN_REACH;
+use crate::integrate::surface::Surface;
+use std::fmt::Write as _;
+
+/// C's [`Syntax`]: `calls` are the functions called back into Rust, by
+/// their index in the source's table.
+struct C<'a> {
+    calls: &'a [Func],
+}
+
+impl Syntax for C<'_> {
+    fn literal(&self, v: f64) -> String {
+        literal(v)
+    }
+
+    fn declare(&self, name: &str, value: &str) -> String {
+        format!("const double {name} = {value};")
+    }
+
+    fn call(&self, f: Func, a: &str, b: &str) -> String {
+        match f {
+            Func::Sqrt => format!("__builtin_sqrt({a})"),
+            Func::Abs => format!("__builtin_fabs({a})"),
+            // The same Rust functions as the interpreter calls.
+            f => {
+                let i = self.calls.iter().position(|&g| g == f).expect("listed");
+                format!("calls[{i}]({a}, {b})")
+            }
+        }
+    }
+}
+
+/// One region's tapes: the field, and where the model has general
+/// surfaces, their values and rates along it.
+pub(super) struct Region<'a> {
+    pub(super) field: &'a Tape,
+    pub(super) surfaces: Option<&'a Tape>,
+}
+
+/// The C source of `regions`' code, and the functions it calls back into
+/// Rust, by their index in its table (the source holds no address, so one
+/// object serves every process): the first region's functions of
+/// `functions`' kinds ([`function`], every width and layout), where
+/// `stops` are given the step loops of `regions` ([`walk`], every width
+/// and layout), and the steps of their slides on the switches of `kinds`.
+pub(super) fn source_of(
+    regions: &[Region],
+    stops: Option<&[StopCode]>,
+    kinds: &[Surface],
+    functions: &[Kind],
+) -> (String, Vec<Func>) {
+    let mut calls: Vec<Func> = Vec::new();
+    let tapes = regions
+        .iter()
+        .flat_map(|r| std::iter::once(r.field).chain(r.surfaces));
+    for tape in tapes {
+        for ins in tape.lowered().0 {
+            if let Code::Call(f) = ins.code {
+                if !matches!(f, Func::Sqrt | Func::Abs) && !calls.contains(&f) {
+                    calls.push(f);
+                }
+            }
+        }
+    }
+    let mut source = format!(
+        "#include <stdint.h>\ntypedef double (*apply)(double, double);\n\
+         static apply calls[{n}];\n\
+         void set_calls(const apply *t) {{ for (int i = 0; i < {n}; i++) calls[i] = t[i]; }}\n",
+        n = calls.len().max(1)
+    );
+    for &kind in functions {
+        for &w in &WIDTHS {
+            for layout in [Layout::Shared, Layout::Each] {
+                function(&mut source, regions[0].field, &calls, kind, w, layout);
+            }
+        }
+    }
+    if let Some(stops) = stops {
+        for &w in &WALK_WIDTHS {
+            for layout in [Layout::Shared, Layout::Each] {
+                walk(&mut source, regions, &calls, stops, kinds, w, layout);
+            }
+        }
+    }
+    for (base, bits) in slides(regions.len(), kinds) {
+        let tapes: Vec<&Tape> = std::iter::once(base)
+            .chain(bits.iter().map(|b| base | 1 << b))
+            .map(|r| regions[r].field)
+            .collect();
+        slide_step(
+            &mut source,
+            &calls,
+            &slide_name(base, &bits),
+            &tapes,
+            sum_start(),
+        );
+    }
+    (source, calls)
+}
+
+/// Appends `{kind:?}{w}{layout:?}`, the [`Function`] of `kind` of `tape`
+/// for batches of `w` in `layout`: a loop over the slots, each the tape's
+/// outputs at one clock phase ([`Kind::Rhs`], `Tape::run`) or one RK4 step
+/// (`rk4::step_batch`, the phases of its three stages in the clock), the
+/// same operations in the same order as the interpreter's and the step
+/// loops'.
+fn function(out: &mut String, tape: &Tape, calls: &[Func], kind: Kind, w: usize, layout: Layout) {
+    let d = tape.states;
+    let each = layout == Layout::Each;
+    // A value per slot (`Each`) or one for all (`Shared`), at row `r`.
+    let row = |base: &str, r: usize| {
+        if each {
+            format!("{base}[{} + k]", r * w)
+        } else {
+            format!("{base}[{r}]")
+        }
+    };
+    let _ = writeln!(
+        out,
+        "void {kind:?}{w}{layout:?}(const double *restrict y, const double *restrict clock, \
+         const double *restrict lane, const double *restrict h, double *restrict out) {{\n  \
+         for (int k = 0; k < {w}; k++) {{"
+    );
+    let state: Vec<String> = (0..d).map(|i| format!("y[{} + k]", i * w)).collect();
+    let lane = |_: &str, j: usize| row("lane", j);
+    let values = match kind {
+        Kind::Rhs => {
+            let _ = writeln!(
+                out,
+                "      const double c = {}, s = {};",
+                row("clock", 0),
+                row("clock", 1)
+            );
+            rhs(out, tape, calls, "v", &state, ("c", "s"), &lane)
+        }
+        Kind::Step => {
+            let names = ["c", "s", "mc", "ms", "ec", "es"];
+            for (r, name) in names.iter().enumerate() {
+                let _ = writeln!(out, "      const double {name} = {};", row("clock", r));
+            }
+            let _ = writeln!(
+                out,
+                "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
+                row("h", 0)
+            );
+            rk4(out, tape, calls, "", &state, &lane)
+        }
+    };
+    for (m, value) in values.iter().enumerate() {
+        let _ = writeln!(out, "      out[{} + k] = {value};", m * w);
+    }
+    out.push_str("  }\n}\n");
+}
+
+/// The slides a model's library has a step for: on one switch or two at
+/// once (their bits, in the order of their surfaces, as
+/// `surface::SlidingSet` lists them), from each base region without
+/// their bits.
+pub(super) fn slides(regions: usize, kinds: &[Surface]) -> Vec<(usize, Vec<usize>)> {
+    let bits: Vec<usize> = kinds
+        .iter()
+        .filter_map(|k| match *k {
+            Surface::Switch { bit } => Some(bit as usize),
+            _ => None,
+        })
+        .collect();
+    let sets = bits.iter().map(|&b| vec![b]).chain(
+        (0..bits.len())
+            .flat_map(|p| (p + 1..bits.len()).map(move |q| (p, q)))
+            .map(|(p, q)| vec![bits[p], bits[q]]),
+    );
+    sets.flat_map(|set| {
+        (0..regions)
+            .filter(|base| set.iter().all(|b| base >> b & 1 == 0))
+            .map(|base| (base, set.clone()))
+            .collect::<Vec<_>>()
+    })
+    .collect()
+}
+
+/// The C name of a slide's step.
+pub(super) fn slide_name(base: usize, bits: &[usize]) -> String {
+    let bits: Vec<String> = bits.iter().map(|b| b.to_string()).collect();
+    format!("slide{base}_{}", bits.join("_"))
+}
+
+/// The value Rust's `f64` sum starts from (-0.0 in recent releases, 0.0
+/// before), which a sum of terms that are all -0.0 shows.
+fn sum_start() -> f64 {
+    std::iter::once(-0.0_f64).sum()
+}
+
+/// Appends `walk{w}{layout:?}`: the step loop (the phase turned, the
+/// RK4 step, the stops detected, as `integrate::steps` does) over `w`
+/// slots, a loop over the slots per step for the compiler to vectorise.
+/// Where the regions have surfaces it is a `c_loop::SwitchWalk`: each slot
+/// steps its own region's field (every region present computed over the
+/// batch, each slot keeping its own's, as `ModelFlow::step_each_in`
+/// does), the surfaces' values and rates are taken at each step's end as
+/// `Flow::surface_values` takes them, and a step that may cross a surface
+/// (`surface::may_cross`) stops the loop.
+fn walk(
+    out: &mut String,
+    regions: &[Region],
+    calls: &[Func],
+    stops: &[StopCode],
+    kinds: &[Surface],
+    w: usize,
+    layout: Layout,
+) {
+    let text = WalkText {
+        regions,
+        calls,
+        stops,
+        kinds,
+        w,
+        each: layout == Layout::Each,
+        d: regions[0].field.states,
+        switching: regions[0].surfaces.is_some(),
+    };
+    text.start(out, layout);
+    text.turn_clock(out);
+    if text.switching {
+        text.step_regions(out);
+    } else {
+        text.step(out);
+    }
+    text.detect(out);
+    text.turn_back(out);
+    text.end(out);
+}
+
+/// What a step loop's text is written from (see [`walk`]).
+struct WalkText<'a> {
+    regions: &'a [Region<'a>],
+    calls: &'a [Func],
+    stops: &'a [StopCode],
+    kinds: &'a [Surface],
+    w: usize,
+    /// Whether the layout is `Each` (a value per slot).
+    each: bool,
+    /// The states.
+    d: usize,
+    /// Whether the regions have surfaces (a `SwitchWalk`).
+    switching: bool,
+}
+
+impl WalkText<'_> {
+    /// A value per slot (`Each`) or one for all (`Shared`), at row `r`.
+    fn row(&self, base: &str, r: usize) -> String {
+        if self.each {
+            format!("{base}[{} + k]", r * self.w)
+        } else {
+            format!("{base}[{r}]")
+        }
+    }
+
+    /// The surfaces' rows of values and rates: g and its rate per surface.
+    fn rows(&self) -> usize {
+        2 * self.kinds.len()
+    }
+
+    /// The signature, the states copied in, and for a model with surfaces
+    /// what its regions' steps and tests read.
+    fn start(&self, out: &mut String, layout: Layout) {
+        let (w, d) = (self.w, self.d);
+        let (lanes, extra) = if self.switching {
+            (
+                "const double *const *restrict lanes",
+                ", const int64_t *restrict region, double *restrict values",
+            )
+        } else {
+            ("const double *restrict lane", "")
+        };
+        let _ = writeln!(
+            out,
+            "uint64_t walk{w}{layout:?}(double *restrict y, double *restrict clock, \
+             {lanes}, const double *restrict h, \
+             const double *restrict walls, const int64_t *restrict live, uint64_t steps{extra}) {{"
+        );
+        for i in 0..d {
+            let _ = writeln!(out, "  double y{i}[{w}];");
+            let _ = writeln!(
+                out,
+                "  for (int k = 0; k < {w}; k++) y{i}[k] = y[{} + k];",
+                i * w
+            );
+        }
+        if self.switching {
+            self.start_regions(out);
+        }
+        out.push_str(
+            "  double c = clock[0], s = clock[1];\n  const double hc = clock[2], hs = clock[3];\n  uint64_t n = 0;\n  for (; n < steps; n++) {\n",
+        );
+    }
+
+    /// Each region's constants: its field's (`lf`) and its surfaces'
+    /// (`ls`); the regions present (fixed while the loop runs: a slot
+    /// changes region only at a crossing, which stops it); each surface's
+    /// orientation in each slot's region (`Surface::orientation`); the
+    /// surfaces' values and rates at the step's start (`sb`) and end
+    /// (`sa`), and the step's end (`z`).
+    fn start_regions(&self, out: &mut String) {
+        let (w, d) = (self.w, self.d);
+        for r in 0..self.regions.len() {
+            let _ = writeln!(
+                out,
+                "  const double *restrict lf{r} = lanes[{}], *restrict ls{r} = lanes[{}];",
+                2 * r,
+                2 * r + 1
+            );
+        }
+        let _ = writeln!(
+            out,
+            "  int64_t present = 0;\n  for (int k = 0; k < {w}; k++) present |= (int64_t)1 << region[k];"
+        );
+        for (j, kind) in self.kinds.iter().enumerate() {
+            let o = match kind {
+                Surface::Switch { bit } => format!("((region[k] >> {bit}) & 1) ? -1.0 : 1.0"),
+                Surface::Event => "1.0".into(),
+            };
+            let _ = writeln!(
+                out,
+                "  double so{j}[{w}];\n  for (int k = 0; k < {w}; k++) so{j}[k] = {o};"
+            );
+        }
+        for m in 0..self.rows() {
+            let _ = writeln!(
+                out,
+                "  double sb{m}[{w}], sa{m}[{w}] = {{0}};\n  \
+                 for (int k = 0; k < {w}; k++) sb{m}[k] = values[{} + k];",
+                m * w
+            );
+        }
+        for i in 0..d {
+            let _ = writeln!(out, "  double z{i}[{w}] = {{0}};");
+        }
+    }
+
+    /// `clock::rotate`, as `rk4::stage_phases` turns it: the phases of the
+    /// step's middle and end.
+    fn turn_clock(&self, out: &mut String) {
+        for (from, to) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
+            let ((c, s), (c1, s1)) = (from, to);
+            let _ = writeln!(
+                out,
+                "    double {c1}_ = {c} * hc - {s} * hs, {s1}_ = {s} * hc + {c} * hs;\n    \
+                 double {c1}n = 1.5 - 0.5 * ({c1}_ * {c1}_ + {s1}_ * {s1}_);\n    \
+                 double {c1} = {c1}_ * {c1}n, {s1} = {s1}_ * {c1}n;"
+            );
+        }
+    }
+
+    fn step_sizes(&self, out: &mut String) {
+        let _ = writeln!(
+            out,
+            "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
+            self.row("h", 0)
+        );
+    }
+
+    fn state(&self) -> Vec<String> {
+        (0..self.d).map(|i| format!("y{i}[k]")).collect()
+    }
+
+    /// The step of a model without surfaces, into `z`, opening the loop
+    /// over the slots that tests it.
+    fn step(&self, out: &mut String) {
+        let w = self.w;
+        for i in 0..self.d {
+            let _ = writeln!(out, "    double z{i}[{w}];");
+        }
+        let _ = writeln!(
+            out,
+            "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
+        );
+        self.step_sizes(out);
+        let lane = |_: &str, j: usize| self.row("lane", j);
+        let end = rk4(
+            out,
+            self.regions[0].field,
+            self.calls,
+            "",
+            &self.state(),
+            &lane,
+        );
+        for (i, end) in end.iter().enumerate() {
+            let _ = writeln!(out, "      z{i}[k] = {end};");
+        }
+    }
+
+    /// Every region present steps the whole batch; each slot keeps its
+    /// own region's step, then its surfaces' values at the step's end;
+    /// then the loop over the slots that tests them opens.
+    fn step_regions(&self, out: &mut String) {
+        let w = self.w;
+        let several = self.regions.len() > 1;
+        let guard = |r: usize| {
+            if several {
+                format!("if (present >> {r} & 1) ")
+            } else {
+                String::new()
+            }
+        };
+        let keep = |r: usize, value: &str, into: &str| {
+            if several {
+                format!("{into} = region[k] == {r} ? {value} : {into};")
+            } else {
+                format!("{into} = {value};")
+            }
+        };
+        let state = self.state();
+        for (r, region) in self.regions.iter().enumerate() {
+            let _ = writeln!(out, "    {}for (int k = 0; k < {w}; k++) {{", guard(r));
+            self.step_sizes(out);
+            let lane = |_: &str, j: usize| self.row(&format!("lf{r}"), j);
+            let end = rk4(
+                out,
+                region.field,
+                self.calls,
+                &format!("r{r}"),
+                &state,
+                &lane,
+            );
+            for (i, end) in end.iter().enumerate() {
+                let _ = writeln!(out, "      {}", keep(r, end, &format!("z{i}[k]")));
+            }
+            out.push_str("    }\n");
+        }
+        let at_end: Vec<String> = (0..self.d).map(|i| format!("z{i}[k]")).collect();
+        for (r, region) in self.regions.iter().enumerate() {
+            let tape = region.surfaces.expect("regions with surfaces");
+            let _ = writeln!(out, "    {}for (int k = 0; k < {w}; k++) {{", guard(r));
+            let lane = |_: &str, j: usize| self.row(&format!("ls{r}"), j);
+            let values = rhs(
+                out,
+                tape,
+                self.calls,
+                &format!("q{r}_"),
+                &at_end,
+                ("ec", "es"),
+                &lane,
+            );
+            for (m, value) in values.iter().enumerate() {
+                let _ = writeln!(out, "      {}", keep(r, value, &format!("sa{m}[k]")));
+            }
+            out.push_str("    }\n");
+        }
+        let _ = writeln!(
+            out,
+            "    int64_t hit = 0;\n    for (int k = 0; k < {w}; k++) {{"
+        );
+    }
+
+    /// The tests, as `integrate::steps` does them, in two passes: the
+    /// plain test in the loop over the slots (at rest on the stop, beyond
+    /// it after the step, or turning back inside it), and where that fires
+    /// (a few steps in a hundred), the turns again, only those within
+    /// reach of the stop (`impact::may_turn_past`). Its arithmetic in
+    /// every step cost the seed's oscillator a fifth of the loop. A
+    /// surface's test (`surface::may_cross`) is the same: the plain one
+    /// first. Breaks out of the loop over the steps where one fires.
+    fn detect(&self, out: &mut String) {
+        let crossing = |j: usize| {
+            let (g, rate) = (2 * j, 2 * j + 1);
+            format!(
+                "(((so{j}[k] * sa{g}[k]) > 0.0) | (((so{j}[k] * sb{rate}[k]) > 0.0) \
+                 & ((so{j}[k] * sa{rate}[k]) < 0.0)))"
+            )
+        };
+        for (j, stop) in self.stops.iter().enumerate() {
+            let (ci, vi) = (stop.coordinate, stop.velocity);
+            let (out_of, into) = if stop.side > 0.0 {
+                (">", "<")
+            } else {
+                ("<", ">")
+            };
+            let _ = writeln!(
+                out,
+                "      {{ const double p = {p};\n        \
+                 hit |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | ((z{ci}[k] - p) {out_of} 0.0) \
+                 | ((y{vi}[k] {out_of} 0.0) & (z{vi}[k] {into} 0.0))) & live[k]; }}",
+                p = self.row("walls", j)
+            );
+        }
+        for j in 0..self.kinds.len() {
+            let _ = writeln!(out, "      hit |= {} & live[k];", crossing(j));
+        }
+        let _ = writeln!(
+            out,
+            "    }}\n    if (hit) {{\n      int64_t near = 0;\n      \
+             for (int k = 0; k < {}; k++) {{\n        const double hh = {};",
+            self.w,
+            self.row("h", 0)
+        );
+        self.detect_near(out);
+        out.push_str("      }\n      if (near) break;\n    }\n");
+    }
+
+    /// The second pass of [`detect`](Self::detect): the gaps and speeds
+    /// side·(x - p) and side·v, exact for a side of ±1; a surface's turn
+    /// counts, as a stop's, only within reach of it (`surface::may_cross`,
+    /// the same operations).
+    fn detect_near(&self, out: &mut String) {
+        for (j, stop) in self.stops.iter().enumerate() {
+            let (ci, vi) = (stop.coordinate, stop.velocity);
+            let _ = writeln!(
+                out,
+                "        {{ const double p = {p}, side = {side};\n          \
+                 const double g0 = side * (y{ci}[k] - p), s0 = side * y{vi}[k];\n          \
+                 const double g1 = side * (z{ci}[k] - p), s1 = side * z{vi}[k];\n          \
+                 near |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | {crosses}) & live[k]; }}",
+                p = self.row("walls", j),
+                side = literal(stop.side),
+                crosses = reaches_across(),
+            );
+        }
+        for j in 0..self.kinds.len() {
+            let (g, rate) = (2 * j, 2 * j + 1);
+            let _ = writeln!(
+                out,
+                "        {{ const double o = so{j}[k];\n          \
+                 const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
+                 const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];\n          \
+                 near |= {crosses} & live[k]; }}",
+                crosses = reaches_across(),
+            );
+        }
+    }
+
+    /// The step taken: its end is the next step's start, the surfaces'
+    /// values with it, and the clock turned on; closes the loop over the
+    /// steps.
+    fn turn_back(&self, out: &mut String) {
+        let w = self.w;
+        for i in 0..self.d {
+            let _ = writeln!(out, "    for (int k = 0; k < {w}; k++) y{i}[k] = z{i}[k];");
+        }
+        for m in 0..self.rows() {
+            let _ = writeln!(
+                out,
+                "    for (int k = 0; k < {w}; k++) sb{m}[k] = sa{m}[k];"
+            );
+        }
+        out.push_str("    c = ec;\n    s = es;\n  }\n");
+    }
+
+    /// The states, the surfaces' values and the phase written back where
+    /// the loop stopped, and the steps taken returned.
+    fn end(&self, out: &mut String) {
+        let w = self.w;
+        for i in 0..self.d {
+            let _ = writeln!(
+                out,
+                "  for (int k = 0; k < {w}; k++) y[{} + k] = y{i}[k];",
+                i * w
+            );
+        }
+        for m in 0..self.rows() {
+            let _ = writeln!(
+                out,
+                "  for (int k = 0; k < {w}; k++) values[{} + k] = sb{m}[k];",
+                m * w
+            );
+        }
+        out.push_str("  clock[0] = c;\n  clock[1] = s;\n  return n;\n}\n");
+    }
+}
+
+/// Whether a step whose oriented distance and rate go from `g0`, `s0` to
+/// `g1`, `s1` (C values in scope, as `hh`) ends across, or turns back
+/// within reach (`impact::may_turn_past`): the same operations, a C
+/// expression of 0 or 1.
+fn reaches_across() -> String {
+    format!(
+        "((g1 > 0.0) | ((s0 > 0.0) & (s1 < 0.0) \
+         & !((g0 + {reach} * hh * (s0 - s1) < 0.0) & (g1 + {reach} * hh * (s0 - s1) < 0.0))))",
+        reach = literal(TURN_REACH)
+    )
+}
+
+/// `rk4::step_batch`'s step of the slot whose states are `state`, with
+/// the field `tape` (its constants from `row`, its values named after
+/// `prefix`), inside a loop over the slots that has set `hh`, `h2` and
+/// `sixth`; gives each state's value after the step as a C expression.
+fn rk4(
+    out: &mut String,
+    tape: &Tape,
+    calls: &[Func],
+    prefix: &str,
+    state: &[String],
+    row: &dyn Fn(&str, usize) -> String,
+) -> Vec<String> {
+    rk4_of(out, prefix, state, &mut |out, prefix, state, clock| {
+        rhs(out, tape, calls, prefix, state, clock, row)
+    })
+}
+
+/// A field's values at a state and clock, written as C values named after
+/// a prefix (`rhs`, or the sliding field of `slide_step`).
+type FieldCode<'a> = dyn FnMut(&mut String, &str, &[String], (&str, &str)) -> Vec<String> + 'a;
+
+/// [`rk4`] with the field given as code.
+fn rk4_of(out: &mut String, prefix: &str, state: &[String], field: &mut FieldCode) -> Vec<String> {
+    let name = |p: &str| format!("{prefix}{p}");
+    let k1 = field(out, &name("a"), state, ("c", "s"));
+    let y2 = axpy(out, &name("b"), state, "h2", &k1);
+    let k2 = field(out, &name("c"), &y2, ("mc", "ms"));
+    let y3 = axpy(out, &name("d"), state, "h2", &k2);
+    let k3 = field(out, &name("e"), &y3, ("mc", "ms"));
+    let y4 = axpy(out, &name("f"), state, "hh", &k3);
+    let k4 = field(out, &name("g"), &y4, ("ec", "es"));
+    // y + h/6·(k1 + 2(k2 + k3) + k4)
+    (0..state.len())
+        .map(|i| {
+            format!(
+                "{y} + sixth * ((({k1} + 2.0 * ({k2} + {k3}))) + {k4})",
+                y = state[i],
+                k1 = k1[i],
+                k2 = k2[i],
+                k3 = k3[i],
+                k4 = k4[i],
+            )
+        })
+        .collect()
+}
+
+/// One RK4 step of one trajectory sliding on the switches `bits` at
+/// once (one or two), from the region `base` (their bits clear), whose
+/// field is F₀, F_m the field with bit m set: `rk4::step_at` of
+/// `surface::Sliding`, whose field is `surface::equivalent_on`'s,
+/// operation for operation. One switch: a = ∇g·F₀ and b = ∇g·F₁ (summed
+/// as Rust's `sum` does, from `zero`), α = a/(a - b), F₀ + α(F₁ - F₀).
+/// Two: `surface::solve`'s elimination with partial pivoting of
+/// (a_j - c_jk) u = a (a_j = ∇g_j·F₀, c_jk = ∇g_j·F_k), then F₀ +
+/// u₀(F₁ - F₀) + u₁(F₂ - F₀). NaN where the control is singular or not
+/// finite. `lc{m}` points to the constants of F_m, `g{m}` to switch m's
+/// constant gradient (the last ones unused with one switch); the clock
+/// holds the three stages' phases.
+fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zero: f64) {
+    let d = tapes[0].states;
+    let n = tapes.len() - 1;
+    assert!((1..=2).contains(&n));
+    let _ = writeln!(
+        out,
+        "void {name}(const double *restrict y, const double *restrict clock, double hh, \
+         const double *restrict lc0, const double *restrict lc1, const double *restrict lc2, \
+         const double *restrict g0, const double *restrict g1, double *restrict out) {{\n  \
+         const double c = clock[0], s = clock[1], mc = clock[2], ms = clock[3], \
+         ec = clock[4], es = clock[5];\n  \
+         const double h2 = 0.5 * hh, sixth = hh / 6.0;"
+    );
+    let state: Vec<String> = (0..d).map(|i| format!("y[{i}]")).collect();
+    let dot = |m: usize, f: &[String]| {
+        (0..d).fold(literal(zero), |sum, i| {
+            format!("({sum} + g{m}[{i}] * {})", f[i])
+        })
+    };
+    let end = rk4_of(out, "", &state, &mut |out, prefix, state, clock| {
+        let f: Vec<Vec<String>> = (0..=n)
+            .map(|m| {
+                let row = move |_: &str, j: usize| format!("lc{m}[{j}]");
+                rhs(
+                    out,
+                    tapes[m],
+                    calls,
+                    &format!("{prefix}f{m}_"),
+                    state,
+                    clock,
+                    &row,
+                )
+            })
+            .collect();
+        let v = |x: &str| format!("{prefix}{x}");
+        // C statements with this stage's names: `$x` is `{prefix}x`.
+        let mut line = |text: &str| {
+            let _ = writeln!(out, "      {}", text.replace('$', prefix));
+        };
+        if n == 1 {
+            line(&format!("const double $p = {};", dot(0, &f[0])));
+            line(&format!("const double $q = {};", dot(0, &f[1])));
+            line("const double $u0 = $p / ($p - $q);");
+            line("const int $ok = __builtin_isfinite($u0);");
+        } else {
+            // a_j, and the matrix M = a_j - c_jk, as equivalent_on.
+            for j in 0..2 {
+                line(&format!("const double $a{j} = {};", dot(j, &f[0])));
+                for k in 0..2 {
+                    line(&format!(
+                        "const double $m{j}{k} = $a{j} - {};",
+                        dot(j, &f[k + 1])
+                    ));
+                }
+            }
+            // The pivot of column 0: the row with the larger |M_j0| in
+            // `total_cmp`'s order (NaN above all), the second on a tie
+            // (`max_by` keeps the last maximum); after the swap the
+            // pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr].
+            line("const double $x0 = __builtin_fabs($m00), $x1 = __builtin_fabs($m10);");
+            line("const int $sw = __builtin_isnan($x1) || (!__builtin_isnan($x0) && $x1 >= $x0);");
+            line("const double $p0 = $sw ? $m10 : $m00, $p1 = $sw ? $m11 : $m01, $pr = $sw ? $a1 : $a0;");
+            line("const double $q0 = $sw ? $m00 : $m10, $q1 = $sw ? $m01 : $m11, $qr = $sw ? $a0 : $a1;");
+            // Elimination, then back-substitution, in solve's order.
+            line("const double $k = $q0 / $p0;");
+            line("const double $e1 = $q1 - $k * $p1, $er = $qr - $k * $pr;");
+            line("const double $u1 = $er / $e1;");
+            line("const double $u0 = ($pr - $p1 * $u1) / $p0;");
+            line(
+                "const int $ok = $p0 != 0.0 && $e1 != 0.0 \
+                 && __builtin_isfinite($u0) && __builtin_isfinite($u1);",
+            );
+        }
+        (0..d)
+            .map(|i| {
+                let name = v(&format!("v{i}"));
+                let mut field = f[0][i].clone();
+                for m in 0..n {
+                    field = format!(
+                        "({field} + {u} * ({} - {}))",
+                        f[m + 1][i],
+                        f[0][i],
+                        u = v(&format!("u{m}"))
+                    );
+                }
+                line(&format!(
+                    "const double $v{i} = $ok ? {field} : {};",
+                    literal(f64::NAN)
+                ));
+                name
+            })
+            .collect()
+    });
+    for (i, v) in end.iter().enumerate() {
+        let _ = writeln!(out, "  out[{i}] = {v};");
+    }
+    let _ = writeln!(out, "}}");
+}
+
+/// y + a·k, named `{prefix}{i}`.
+fn axpy(out: &mut String, prefix: &str, y: &[String], a: &str, k: &[String]) -> Vec<String> {
+    (0..y.len())
+        .map(|i| {
+            let name = format!("{prefix}{i}");
+            let _ = writeln!(
+                out,
+                "      const double {name} = {} + {a} * {};",
+                y[i], k[i]
+            );
+            name
+        })
+        .collect()
+}
+
+/// The tape at `state` and clock `(cos, sin)` (`Tape::run`'s register
+/// file as C values named `{prefix}{slot}`, lane constant j at
+/// `row("lane", j)`); gives its outputs.
+fn rhs(
+    out: &mut String,
+    tape: &Tape,
+    calls: &[Func],
+    prefix: &str,
+    state: &[String],
+    clock: (&str, &str),
+    row: &dyn Fn(&str, usize) -> String,
+) -> Vec<String> {
+    let lane = |j: usize| row("lane", j);
+    let inputs = Inputs {
+        states: state,
+        clock,
+        lane: &lane,
+    };
+    print::print(out, &C { calls }, tape, &inputs, prefix, "      ")
+}
+
+/// `v` as a C expression of the same bits: Rust's shortest round-trip
+/// digits, which C reads back correctly rounded.
+fn literal(v: f64) -> String {
+    if v.is_nan() {
+        "__builtin_nan(\"\")".into()
+    } else if v.is_infinite() {
+        format!("({}__builtin_inf())", if v < 0.0 { "-" } else { "" })
+    } else {
+        format!("({v:?})")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_are_written_with_their_bits() {
+        for v in [
+            0.1,
+            -0.0,
+            1e-310,
+            f64::MAX,
+            1.0 / 3.0,
+            f64::INFINITY,
+            -f64::INFINITY,
+        ] {
+            let text = literal(v);
+            let parsed = if text.contains("inf") {
+                if text.contains('-') {
+                    f64::NEG_INFINITY
+                } else {
+                    f64::INFINITY
+                }
+            } else {
+                text.trim_matches(['(', ')']).parse::<f64>().unwrap()
+            };
+            assert_eq!(parsed.to_bits(), v.to_bits(), "{text}");
+        }
+    }
+}
