@@ -216,129 +216,8 @@ impl Code {
         let equations = Tape::compile(&region_zero, n, None).map_err(|(i, why)| {
             Error::invalid(format!("{key}.equations.{}", states[i]), why.to_string())
         })?;
-        let section = match &model.map {
-            Map::Period(_) => None,
-            Map::Section {
-                state,
-                at,
-                increasing,
-            } => {
-                if equations.frequency.is_some() {
-                    return Err(Error::invalid(
-                        format!("{key}.map.section"),
-                        "a Poincaré section needs an autonomous flow, and the equations read \
-                         the time (cos(w*t) or sin(w*t)): give period = \"...\" instead",
-                    ));
-                }
-                if !model.events.is_empty() || !model.switches.is_empty() {
-                    return Err(Error::invalid(
-                        format!(
-                            "{key}.{}",
-                            if model.events.is_empty() {
-                                "switches"
-                            } else {
-                                "events"
-                            }
-                        ),
-                        "events and switches in a model with a Poincaré section are not \
-                         supported yet",
-                    ));
-                }
-                Some(SectionSpec {
-                    state: *state,
-                    at: at.clone(),
-                    increasing: *increasing,
-                })
-            }
-        };
-        let mut walls = Vec::new();
-        let mut surfaces = Vec::new();
-        for (j, event) in model.events.iter().enumerate() {
-            let column = event_column(&event.name);
-            if model.events[..j]
-                .iter()
-                .any(|e| event_column(&e.name) == column)
-            {
-                return Err(Error::invalid(
-                    format!("{key}.events[{j}].name"),
-                    format!(
-                        "'{}' names the column {column} of an earlier event: give each event its own name",
-                        event.name
-                    ),
-                ));
-            }
-            let event_key = format!("{key}.events[{j}]");
-            match stop(&model, event, &event_key) {
-                Some(stop) => walls.push(stop),
-                None => surfaces.push(general_event(
-                    &model,
-                    event,
-                    &event_key,
-                    equations.frequency.clone(),
-                )?),
-            }
-        }
-        if walls.len() > MAX_WALLS {
-            return Err(Error::invalid(
-                format!("{key}.events"),
-                format!("{} stops: at most {MAX_WALLS} are supported", walls.len()),
-            ));
-        }
-        for (b, switch) in model.switches.iter().enumerate() {
-            let gradient: Vec<Expr> = (0..n)
-                .map(|i| switch.surface.derivative(Var::State(i)))
-                .collect();
-            surfaces.push(GeneralSurface {
-                name: switch.name.clone(),
-                kind: Surface::Switch { bit: b as u32 },
-                g: switch.surface.clone(),
-                gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
-                gradient,
-                reset: Vec::new(),
-                reset_jacobian: Vec::new(),
-                reset_rate: Vec::new(),
-                stick_limit: switch.stick_limit.clone(),
-                hold: None,
-            });
-        }
-        if model.switches.is_empty() {
-            // Sticking on an event is integrated where one smooth field
-            // holds (no switches); elsewhere an accumulation is flagged.
-            for s in surfaces.iter_mut().filter(|s| s.kind == Surface::Event) {
-                s.hold = Some(EventHold::new(
-                    &s.g,
-                    &s.gradient,
-                    &s.reset,
-                    &model.equations,
-                ));
-            }
-        }
-        if surfaces.len() > MAX_SURFACES {
-            return Err(Error::invalid(
-                format!("{key}.events"),
-                format!(
-                    "{} events that are not stops and switches together: at most \
-                     {MAX_SURFACES} are supported",
-                    surfaces.len()
-                ),
-            ));
-        }
-        for (j, s) in surfaces.iter().enumerate() {
-            let column = event_column(&s.name);
-            let earlier = walls
-                .iter()
-                .map(|w| &w.name)
-                .chain(surfaces[..j].iter().map(|s| &s.name));
-            if let Some(other) = earlier.into_iter().find(|o| event_column(o) == column) {
-                return Err(Error::invalid(
-                    format!("{key}.switches"),
-                    format!(
-                        "'{}' and '{other}' name the same column {column}: give each its own name",
-                        s.name
-                    ),
-                ));
-            }
-        }
+        let section = section_of(&model, &equations, key)?;
+        let (walls, surfaces) = events_of(&model, &equations, key)?;
         let kinds: Vec<Surface> = surfaces.iter().map(|s| s.kind).collect();
         // A period map without general surfaces steps in a loop of native
         // code between the steps that meet a stop (`Flow::walk_shared`).
@@ -364,52 +243,13 @@ impl Code {
                 )
             })
             .collect::<Result<Vec<_>>>()?;
-        let whole_divergence = (0..n)
-            .map(|i| model.equations[i].derivative(Var::State(i)))
-            .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
-            .expect("a model has a state");
-        // A divergence that reads the switches' sides is the same
-        // everywhere only when every region's is the same.
-        let whole_divergence = if whole_divergence.reads_sides() {
-            let first = whole_divergence.in_region(0);
-            if regions
-                .iter()
-                .enumerate()
-                .all(|(r, _)| whole_divergence.in_region(r as u32) == first)
-            {
-                Some(first)
-            } else {
-                None
-            }
-        } else {
-            Some(whole_divergence)
-        };
-        let (divergence, divergence_along) = match whole_divergence {
-            None => (None, None),
-            Some(whole_divergence) => {
-                if !reads_state_or_time(&whole_divergence) {
-                    (Some(whole_divergence), None)
-                } else if section.is_some() || walls.is_empty() {
-                    let clock = equations.frequency.clone();
-                    let tape =
-                        Tape::compile([&whole_divergence], n, clock).map_err(|(_, why)| {
-                            Error::invalid(
-                                format!("{key}.equations"),
-                                format!(
-                                    "their divergence {}: {why}",
-                                    Written {
-                                        expr: &whole_divergence,
-                                        names: &model.names
-                                    }
-                                ),
-                            )
-                        })?;
-                    (None, Some(tape))
-                } else {
-                    (None, None)
-                }
-            }
-        };
+        let (divergence, divergence_along) = divergence_of(
+            &model,
+            regions.len(),
+            section.is_some() || walls.is_empty(),
+            equations.frequency.clone(),
+            key,
+        )?;
         let jacobian = (0..n * n)
             .map(|ij| model.equations[ij / n].derivative(Var::State(ij % n)))
             .collect();
@@ -858,4 +698,198 @@ pub fn event_column(event: &str) -> String {
         .map(|c| if c.is_alphanumeric() { c } else { '_' })
         .collect();
     format!("{name}_per_period")
+}
+
+/// The Poincaré section of a model whose map is one: refused where the
+/// flow reads the time or has events or switches.
+fn section_of(model: &Model, equations: &Tape, key: &str) -> Result<Option<SectionSpec>> {
+    let Map::Section {
+        state,
+        at,
+        increasing,
+    } = &model.map
+    else {
+        return Ok(None);
+    };
+    if equations.frequency.is_some() {
+        return Err(Error::invalid(
+            format!("{key}.map.section"),
+            "a Poincaré section needs an autonomous flow, and the equations read \
+             the time (cos(w*t) or sin(w*t)): give period = \"...\" instead",
+        ));
+    }
+    if !model.events.is_empty() || !model.switches.is_empty() {
+        return Err(Error::invalid(
+            format!(
+                "{key}.{}",
+                if model.events.is_empty() {
+                    "switches"
+                } else {
+                    "events"
+                }
+            ),
+            "events and switches in a model with a Poincaré section are not \
+             supported yet",
+        ));
+    }
+    Ok(Some(SectionSpec {
+        state: *state,
+        at: at.clone(),
+        increasing: *increasing,
+    }))
+}
+
+/// The model's events sorted into stops and general surfaces, then its
+/// switches as surfaces after the events (the CPU's and the kernels'
+/// order), each column's name checked to be its own.
+fn events_of(
+    model: &Model,
+    equations: &Tape,
+    key: &str,
+) -> Result<(Vec<Stop>, Vec<GeneralSurface>)> {
+    let n = model.names.states.len();
+    let mut walls = Vec::new();
+    let mut surfaces = Vec::new();
+    for (j, event) in model.events.iter().enumerate() {
+        let column = event_column(&event.name);
+        if model.events[..j]
+            .iter()
+            .any(|e| event_column(&e.name) == column)
+        {
+            return Err(Error::invalid(
+                format!("{key}.events[{j}].name"),
+                format!(
+                    "'{}' names the column {column} of an earlier event: give each event its own name",
+                    event.name
+                ),
+            ));
+        }
+        let event_key = format!("{key}.events[{j}]");
+        match stop(model, event, &event_key) {
+            Some(stop) => walls.push(stop),
+            None => surfaces.push(general_event(
+                model,
+                event,
+                &event_key,
+                equations.frequency.clone(),
+            )?),
+        }
+    }
+    if walls.len() > MAX_WALLS {
+        return Err(Error::invalid(
+            format!("{key}.events"),
+            format!("{} stops: at most {MAX_WALLS} are supported", walls.len()),
+        ));
+    }
+    for (b, switch) in model.switches.iter().enumerate() {
+        let gradient: Vec<Expr> = (0..n)
+            .map(|i| switch.surface.derivative(Var::State(i)))
+            .collect();
+        surfaces.push(GeneralSurface {
+            name: switch.name.clone(),
+            kind: Surface::Switch { bit: b as u32 },
+            g: switch.surface.clone(),
+            gradient_reads_time: gradient.iter().any(|e| e.uses(Var::Time)),
+            gradient,
+            reset: Vec::new(),
+            reset_jacobian: Vec::new(),
+            reset_rate: Vec::new(),
+            stick_limit: switch.stick_limit.clone(),
+            hold: None,
+        });
+    }
+    if model.switches.is_empty() {
+        // Sticking on an event is integrated where one smooth field
+        // holds (no switches); elsewhere an accumulation is flagged.
+        for s in surfaces.iter_mut().filter(|s| s.kind == Surface::Event) {
+            s.hold = Some(EventHold::new(
+                &s.g,
+                &s.gradient,
+                &s.reset,
+                &model.equations,
+            ));
+        }
+    }
+    if surfaces.len() > MAX_SURFACES {
+        return Err(Error::invalid(
+            format!("{key}.events"),
+            format!(
+                "{} events that are not stops and switches together: at most \
+                 {MAX_SURFACES} are supported",
+                surfaces.len()
+            ),
+        ));
+    }
+    for (j, s) in surfaces.iter().enumerate() {
+        let column = event_column(&s.name);
+        let earlier = walls
+            .iter()
+            .map(|w| &w.name)
+            .chain(surfaces[..j].iter().map(|s| &s.name));
+        if let Some(other) = earlier.into_iter().find(|o| event_column(o) == column) {
+            return Err(Error::invalid(
+                format!("{key}.switches"),
+                format!(
+                    "'{}' and '{other}' name the same column {column}: give each its own name",
+                    s.name
+                ),
+            ));
+        }
+    }
+    Ok((walls, surfaces))
+}
+
+/// The divergence of the field, for the sum rule: a constant, or a tape
+/// along the flow where it reads the state or time and the sum rule
+/// integrates it (`along`: a section's map or a flow without stops).
+/// `None` for both where it differs between the switches' `regions`, or
+/// where stops would have to integrate a varying one.
+fn divergence_of(
+    model: &Model,
+    regions: usize,
+    along: bool,
+    clock: Option<Expr>,
+    key: &str,
+) -> Result<(Option<Expr>, Option<Tape>)> {
+    let n = model.names.states.len();
+    let whole_divergence = (0..n)
+        .map(|i| model.equations[i].derivative(Var::State(i)))
+        .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
+        .expect("a model has a state");
+    // A divergence that reads the switches' sides is the same
+    // everywhere only when every region's is the same.
+    let whole_divergence = if whole_divergence.reads_sides() {
+        let first = whole_divergence.in_region(0);
+        if (0..regions).all(|r| whole_divergence.in_region(r as u32) == first) {
+            Some(first)
+        } else {
+            None
+        }
+    } else {
+        Some(whole_divergence)
+    };
+    Ok(match whole_divergence {
+        None => (None, None),
+        Some(whole_divergence) => {
+            if !reads_state_or_time(&whole_divergence) {
+                (Some(whole_divergence), None)
+            } else if along {
+                let tape = Tape::compile([&whole_divergence], n, clock).map_err(|(_, why)| {
+                    Error::invalid(
+                        format!("{key}.equations"),
+                        format!(
+                            "their divergence {}: {why}",
+                            Written {
+                                expr: &whole_divergence,
+                                names: &model.names
+                            }
+                        ),
+                    )
+                })?;
+                (None, Some(tape))
+            } else {
+                (None, None)
+            }
+        }
+    })
 }
