@@ -1,4 +1,4 @@
-// Stops inside an RK4 step, twin of src/integrate/impact.rs: split the step
+// Stops inside an RK4 step, twin of src/integrate/impact/: split the step
 // at the impact, reset V -> -e·V with X = X_w exactly, integrate the rest,
 // look again (several impacts per step, on one stop or several, in the
 // order they happen).
@@ -19,7 +19,7 @@
 // components past WALLS are never read).
 
 const MAX_IMPACTS_PER_STEP: u32 = 64u;
-// See ACCUMULATION_FRACTION in src/integrate/impact.rs.
+// See ACCUMULATION_FRACTION in src/integrate/impact/hold.rs.
 const ACCUMULATION_FRACTION: f32 = 1e-3;
 
 // Twin of integrate::impact::Wall.
@@ -164,7 +164,7 @@ fn pressing(p: Params, w: Stop, phase: vec2<real>, y: State) -> real {
 }
 
 // The flow with a mass held at rest on the stop (Held in
-// src/integrate/impact.rs): its position and velocity do not move.
+// src/integrate/impact/): its position and velocity do not move.
 fn held_rhs(p: Params, w: Stop, phase: vec2<real>, y: State) -> State {
     var f = rhs(p, phase, y);
     f[w.coordinate] = real(0.0);
@@ -194,7 +194,7 @@ fn held_for(p: Params, w: Stop, omega: real, phase: vec2<real>, rest: State, s: 
 // A step of size h from rest on stop j (y moved onto it): the mass stays
 // while the force presses it there (the other coordinates move on) and
 // leaves when the force reverses (bisection for the release). Twin of
-// stuck_step in src/integrate/impact.rs, except that the rest of the step
+// stuck_step in src/integrate/impact/resolve.rs, except that the rest of the step
 // after a release (or a free departure) is one plain RK4 step held off the
 // stops (WGSL has no recursion; the force pulls away right after a release).
 fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {
@@ -794,7 +794,7 @@ fn hermite_first_root(c: vec4<real>, a_in: real, b_in: real) -> real {
 
 #ifdef SURFACES
 // ---- General surfaces: twins of src/integrate/surface.rs and of the
-// surface branch of resolve and cross in src/integrate/impact.rs. The
+// surface branch of resolve and cross in src/integrate/impact/. The
 // system file gives SURFACES, each one's SURFACE_BIT (EVENT for an event),
 // surface_g, surface_values (g and the rate ∇g·F + ∂g/∂t along the field
 // of p.region), surface_gradient and reset. A trajectory's field is that
