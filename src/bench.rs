@@ -553,7 +553,9 @@ fn plot(path: &Path, ms: &[Measurement], subject: &str) -> std::result::Result<(
         (a.min(m.seconds), b.max(m.seconds))
     });
     let e_max = points.iter().fold(floor, |a, m| a.max(m.error()));
-    let root = BitMapBackend::new(path, (1000, 700)).into_drawing_area();
+    const SIZE: (u32, u32) = (1000, 700);
+    let mut pixels = vec![0; SIZE.0 as usize * SIZE.1 as usize * 3];
+    let root = BitMapBackend::with_buffer(&mut pixels, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let mut chart = ChartBuilder::on(&root)
         .caption(
@@ -625,5 +627,8 @@ fn plot(path: &Path, ms: &[Measurement], subject: &str) -> std::result::Result<(
         .label_font(("sans-serif", 16))
         .draw()
         .map_err(|e| e.to_string())?;
-    root.present().map_err(|e| e.to_string())
+    root.present().map_err(|e| e.to_string())?;
+    drop(chart);
+    drop(root);
+    crate::output::plot::write_png(path, &pixels, SIZE).map_err(|e| e.to_string())
 }

@@ -13,6 +13,7 @@
 //! run), [`scene`] (the input contract) and [`output`] (the CSV files and
 //! the figures).
 
+pub mod array;
 pub mod backend;
 pub mod bench;
 pub mod error;

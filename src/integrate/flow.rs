@@ -256,7 +256,7 @@ pub trait Flow<const D: usize>: Sync {
     ) -> [[f64; W]; D] {
         let mut out = [[0.0; W]; D];
         for k in 0..W {
-            let o = rk4::step_at(self, stages, &std::array::from_fn(|i| y[i][k]), h);
+            let o = rk4::step_at(self, stages, &crate::array::from_fn(|i| y[i][k]), h);
             for i in 0..D {
                 out[i][k] = o[i];
             }
@@ -281,7 +281,7 @@ pub trait Flow<const D: usize>: Sync {
             let o = rk4::step_at(
                 flows[k],
                 &stages[k],
-                &std::array::from_fn(|i| y[i][k]),
+                &crate::array::from_fn(|i| y[i][k]),
                 h[k],
             );
             for i in 0..D {
@@ -344,5 +344,5 @@ impl<const D: usize, F: Flow<D>> Flow<D> for InRegion<'_, F> {
 /// Trajectory k of a structure-of-arrays batch.
 #[inline(always)]
 pub(super) fn column<const D: usize, const W: usize>(y: &[[f64; W]; D], k: usize) -> [f64; D] {
-    std::array::from_fn(|i| y[i][k])
+    crate::array::from_fn(|i| y[i][k])
 }

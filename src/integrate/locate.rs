@@ -59,7 +59,7 @@ pub(super) fn locate<const D: usize, F: Flow<D>>(
         let theta = (-start.0 / (end.0 - start.0)).clamp(0.0, 1.0);
         return Some((
             theta * h,
-            std::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
+            crate::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
         ));
     }
     let hermite = Hermite::new(start.0, start.1, end.0, end.1, h);
@@ -179,7 +179,7 @@ pub(super) fn locate_linear<const D: usize>(
     let theta = ((wall.position - y0[c]) / (y1[c] - y0[c])).clamp(0.0, 1.0);
     Some((
         theta * h,
-        std::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
+        crate::array::from_fn(|i| y0[i] + theta * (y1[i] - y0[i])),
     ))
 }
 

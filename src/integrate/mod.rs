@@ -25,7 +25,7 @@ pub use iteration::{FlowSettings, ImpactLocation, IterationStats, Part, MAX_EVEN
 pub use region::{Surface, SurfaceBatch, SurfaceValues};
 pub use wall::Wall;
 
-use avx2::vectorised;
+use avx2::vectorised_or;
 use clock::{half_turn, Phase, ZERO_PHASE};
 use flow::column;
 use wall::may_reach;
@@ -80,10 +80,39 @@ pub fn part_map_many<const D: usize, F: Flow<D>>(
     phase: &mut Phase,
     stats: &mut [IterationStats],
 ) {
-    vectorised(
+    vectorised_or(
+        (ys, phase, stats),
         #[inline(always)]
-        || part_map_many_lanes(flow, ys, period, settings, part, phase, stats),
+        |(ys, phase, stats)| part_map_many_lanes(flow, ys, period, settings, part, phase, stats),
+        |(ys, phase, stats)| {
+            let start = *phase;
+            phase_alone(flow, ys, period, settings, part, phase);
+            for (y, st) in ys.chunks_mut(1).zip(stats.chunks_mut(1)) {
+                let one = One(flow);
+                *phase = steps::<D, 1, _>(&one, y, period, settings, part, [start], st)[0];
+            }
+        },
     );
+}
+
+/// Where there is no trajectory, only the forcing phase goes through the
+/// part's steps, as it would with trajectories (see `reestimate_of`).
+#[inline(always)]
+fn phase_alone<const D: usize, F: Flow<D>>(
+    flow: &F,
+    ys: &[[f64; D]],
+    period: f64,
+    settings: &FlowSettings,
+    part: Part,
+    phase: &mut Phase,
+) {
+    if ys.is_empty() {
+        let h = period / settings.steps_per_period as f64;
+        let half = half_turn(flow.forcing_frequency(), h, settings.steps_per_period);
+        for _ in part.steps(settings.steps_per_period) {
+            *phase = rk4::stage_phases(phase, &half)[2];
+        }
+    }
 }
 
 /// Trajectories of one lane stepped together in one vector batch.
@@ -106,16 +135,7 @@ fn part_map_many_lanes<const D: usize, F: Flow<D>>(
     stats: &mut [IterationStats],
 ) {
     let start = *phase;
-    if ys.is_empty() {
-        // No trajectory: only the forcing phase goes through the part's
-        // steps, as it would with trajectories (see `reestimate_of`).
-        let h = period / settings.steps_per_period as f64;
-        let half = half_turn(flow.forcing_frequency(), h, settings.steps_per_period);
-        for _ in part.steps(settings.steps_per_period) {
-            *phase = rk4::stage_phases(phase, &half)[2];
-        }
-        return;
-    }
+    phase_alone(flow, ys, period, settings, part, phase);
     for (chunk, st) in ys.chunks_mut(BATCH).zip(stats.chunks_mut(BATCH)) {
         let one = One(flow);
         *phase = match chunk.len() {
@@ -140,14 +160,22 @@ pub fn time_map_lanes<const D: usize, F: Flow<D>>(
     settings: &FlowSettings,
     stats: &mut [IterationStats],
 ) {
-    vectorised(
+    vectorised_or(
+        (ys, stats),
         #[inline(always)]
-        || time_map_lanes_portable(flows, ys, periods, settings, stats),
+        |(ys, stats)| time_map_lanes_batched(flows, ys, periods, settings, stats),
+        |(ys, stats)| {
+            let chunks = ys.chunks_mut(1).zip(stats.chunks_mut(1));
+            for ((y, st), (flows, periods)) in chunks.zip(flows.chunks(1).zip(periods.chunks(1))) {
+                let each = Each { flows, periods };
+                steps::<D, 1, _>(&each, y, 0.0, settings, Part::WHOLE, [ZERO_PHASE], st);
+            }
+        },
     );
 }
 
 #[inline(always)]
-fn time_map_lanes_portable<const D: usize, F: Flow<D>>(
+fn time_map_lanes_batched<const D: usize, F: Flow<D>>(
     flows: &[&F],
     ys: &mut [[f64; D]],
     periods: &[f64],
@@ -349,7 +377,7 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        F::step_each(&std::array::from_fn(|k| self.of(k)), each, y, h)
+        F::step_each(&crate::array::from_fn(|k| self.of(k)), each, y, h)
     }
     #[inline(always)]
     fn step_in<const W: usize>(
@@ -360,7 +388,7 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         y: &[[f64; W]; D],
         h: &[f64; W],
     ) -> [[f64; W]; D] {
-        F::step_each_in(&std::array::from_fn(|k| self.of(k)), regions, each, y, h)
+        F::step_each_in(&crate::array::from_fn(|k| self.of(k)), regions, each, y, h)
     }
     #[inline(always)]
     fn surface_values<const W: usize>(
@@ -371,7 +399,13 @@ impl<const D: usize, F: Flow<D>> Flows<D> for Each<'_, F> {
         y: &[[f64; W]; D],
         out: &mut SurfaceBatch<W>,
     ) {
-        F::surface_values_each(&std::array::from_fn(|k| self.of(k)), regions, each, y, out)
+        F::surface_values_each(
+            &crate::array::from_fn(|k| self.of(k)),
+            regions,
+            each,
+            y,
+            out,
+        )
     }
 }
 
@@ -413,12 +447,12 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     const { assert!(W < 32) };
     let n = ys.len();
     let steps = settings.steps_per_period;
-    let h: [f64; W] = std::array::from_fn(|k| flows.period(k, period) / steps as f64);
-    let omega: [f64; W] = std::array::from_fn(|k| flows.of(k).forcing_frequency());
-    let half: [Phase; W] = std::array::from_fn(|k| half_turn(omega[k], h[k], steps));
+    let h: [f64; W] = crate::array::from_fn(|k| flows.period(k, period) / steps as f64);
+    let omega: [f64; W] = crate::array::from_fn(|k| flows.of(k).forcing_frequency());
+    let half: [Phase; W] = crate::array::from_fn(|k| half_turn(omega[k], h[k], steps));
     let walls = WallColumns::of(flows);
     let mut y: [[f64; W]; D] =
-        std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
+        crate::array::from_fn(|i| crate::array::from_fn(|w| ys[w.min(n - 1)][i]));
     // General surfaces: each trajectory's region of the switches, and its
     // surfaces' values and rates at the step's start.
     let surfaces: &[Surface] = if SURFACES {
@@ -455,7 +489,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         // A sliding or held trajectory takes the slow path at every step.
         if !(SURFACES && regions[..n].iter().any(|&r| surface::is_constrained(r))) {
             let switching = SURFACES.then(|| Switching {
-                regions: std::array::from_fn(|k| regions[k.min(n - 1)]),
+                regions: crate::array::from_fn(|k| regions[k.min(n - 1)]),
                 values: &mut values[at_start],
             });
             let phases = (&mut phase, &mut phases);
@@ -467,7 +501,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         left -= 1;
         // The batch's step, then detection. Every slot's sides (unused
         // slots repeat the last trajectory's).
-        let sides: [u32; W] = std::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
+        let sides: [u32; W] = crate::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
         let (mut y1, next_phase, next) = batch_step::<D, W, S, SURFACES>(
             flows,
             &y,
@@ -513,9 +547,9 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         }
     }
     for (k, out) in ys.iter_mut().enumerate() {
-        *out = std::array::from_fn(|i| y[i][k]);
+        *out = crate::array::from_fn(|i| y[i][k]);
     }
-    std::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k))
+    crate::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k))
 }
 
 /// The steps a flow's own step loop takes from y before one meets a wall
@@ -536,7 +570,7 @@ fn walk<const D: usize, const W: usize, S: Flows<D>>(
             .of(0)
             .walk_shared(y, phase, &half[0], h[0], live, left, switching)
     } else {
-        let each = std::array::from_fn(|k| flows.of(k));
+        let each = crate::array::from_fn(|k| flows.of(k));
         S::F::walk_each(&each, y, phases, half, h, live, left, switching)
     };
     walked.unwrap_or(0)
@@ -560,7 +594,7 @@ fn batch_step<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>
     let each: [[Phase; 3]; W] = if S::SHARED {
         *unset
     } else {
-        std::array::from_fn(|k| rk4::stage_phases(&phases[k], &half[k]))
+        crate::array::from_fn(|k| rk4::stage_phases(&phases[k], &half[k]))
     };
     let y1 = if !SURFACES {
         flows.step(&shared, &each, y, h)
@@ -570,7 +604,7 @@ fn batch_step<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>
     let next: [Phase; W] = if S::SHARED {
         *phases
     } else {
-        std::array::from_fn(|k| each[k][2])
+        crate::array::from_fn(|k| each[k][2])
     };
     (y1, shared[2], next)
 }
@@ -620,15 +654,15 @@ struct WallColumns<'a, const W: usize> {
 impl<'a, const W: usize> WallColumns<'a, W> {
     #[inline(always)]
     fn of<const D: usize, S: Flows<D>>(flows: &'a S) -> Self {
-        let walls: [&[Wall]; W] = std::array::from_fn(|k| flows.of(k).walls());
+        let walls: [&[Wall]; W] = crate::array::from_fn(|k| flows.of(k).walls());
         debug_assert!(walls.iter().all(|w| w.len() == walls[0].len()));
         WallColumns {
             walls: walls[0],
-            position: std::array::from_fn(|j| {
-                std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.position))
+            position: crate::array::from_fn(|j| {
+                crate::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.position))
             }),
-            side: std::array::from_fn(|j| {
-                std::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side))
+            side: crate::array::from_fn(|j| {
+                crate::array::from_fn(|k| walls[k].get(j).map_or(0.0, |w| w.side))
             }),
         }
     }

@@ -76,7 +76,7 @@ pub fn step_with_stages<const D: usize, F: Field<D> + ?Sized>(
     let y4 = axpy(y, h, &k3);
     let k4 = flow.rhs(end, &y4);
     let sixth = h / 6.0;
-    let next = std::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
+    let next = crate::array::from_fn(|i| y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]));
     (next, [*y, y2, y3, y4])
 }
 
@@ -123,7 +123,7 @@ pub fn step_batch<const D: usize, const W: usize>(
 /// y + a·k
 #[inline]
 fn axpy<const D: usize>(y: &[f64; D], a: f64, k: &[f64; D]) -> [f64; D] {
-    std::array::from_fn(|i| y[i] + a * k[i])
+    crate::array::from_fn(|i| y[i] + a * k[i])
 }
 
 #[cfg(test)]

@@ -83,7 +83,7 @@ fn batch<const N: usize, const W: usize, F: Flow<N>>(
 ) -> Vec<Crossing<N>> {
     let n = ys.len();
     let mut y: [[f64; W]; N] =
-        std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
+        crate::array::from_fn(|i| crate::array::from_fn(|w| ys[w.min(n - 1)][i]));
     let mut crossed: Vec<Crossing<N>> = vec![None; n];
     let mut open = n;
     let stages: [Phase; 3] = [ZERO_PHASE; 3];
@@ -93,8 +93,8 @@ fn batch<const N: usize, const W: usize, F: Flow<N>>(
             if crossed[k].is_some() {
                 continue;
             }
-            let before: [f64; N] = std::array::from_fn(|i| y[i][k]);
-            let after: [f64; N] = std::array::from_fn(|i| y1[i][k]);
+            let before: [f64; N] = crate::array::from_fn(|i| y[i][k]);
+            let after: [f64; N] = crate::array::from_fn(|i| y1[i][k]);
             if section.crossed(&before, &after) {
                 crossed[k] = Some(crossing_in_step(flow, section, &before, &after, h, step));
                 open -= 1;
@@ -132,13 +132,13 @@ fn advance_batch<const N: usize, const W: usize, F: Flow<N>>(
 ) {
     let n = ys.len();
     let mut y: [[f64; W]; N] =
-        std::array::from_fn(|i| std::array::from_fn(|w| ys[w.min(n - 1)][i]));
+        crate::array::from_fn(|i| crate::array::from_fn(|w| ys[w.min(n - 1)][i]));
     let stages: [Phase; 3] = [ZERO_PHASE; 3];
     for _ in 0..steps {
         y = flow.step_shared(&stages, &y, h);
     }
     for (k, out) in ys.iter_mut().enumerate() {
-        *out = std::array::from_fn(|i| y[i][k]);
+        *out = crate::array::from_fn(|i| y[i][k]);
     }
 }
 

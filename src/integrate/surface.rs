@@ -154,7 +154,7 @@ pub fn equivalent_on<const D: usize, F: Flow<D>>(
             return None;
         }
         let mut out = Equivalent {
-            field: std::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i])),
+            field: crate::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i])),
             margins: [(f64::NAN, f64::NAN); MAX_SURFACES],
         };
         if margins {
@@ -173,9 +173,9 @@ pub fn equivalent_on<const D: usize, F: Flow<D>>(
     let dot = |n: &[f64; D], f: &[f64; D]| -> f64 { (0..D).map(|i| n[i] * f[i]).sum() };
     // a[j] = ∇g_j·F₀, c[j][k] = ∇g_j·F_k.
     let a: [f64; MAX_SLIDING] =
-        std::array::from_fn(|m| if m < n { dot(&gradients[m], &lo) } else { 0.0 });
-    let c: [[f64; MAX_SLIDING]; MAX_SLIDING] = std::array::from_fn(|m| {
-        std::array::from_fn(|k| {
+        crate::array::from_fn(|m| if m < n { dot(&gradients[m], &lo) } else { 0.0 });
+    let c: [[f64; MAX_SLIDING]; MAX_SLIDING] = crate::array::from_fn(|m| {
+        crate::array::from_fn(|k| {
             if m < n && k < n {
                 dot(&gradients[m], &fields[k])
             } else {
@@ -507,7 +507,7 @@ mod tests {
         }
 
         fn surface_gradient(&self, j: usize, _phase: &Phase, _y: &[f64; 4]) -> [f64; 4] {
-            std::array::from_fn(|i| if i == 2 * j + 1 { 1.0 } else { 0.0 })
+            crate::array::from_fn(|i| if i == 2 * j + 1 { 1.0 } else { 0.0 })
         }
 
         fn stick_limit(&self, _j: usize, _y: &[f64; 4]) -> Option<f64> {
@@ -623,7 +623,7 @@ mod tests {
         );
         let (a, b) = (lo[1], hi[1]);
         let alpha = a / (a - b);
-        let filippov: [f64; 4] = std::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i]));
+        let filippov: [f64; 4] = crate::array::from_fn(|i| lo[i] + alpha * (hi[i] - lo[i]));
         let e = equivalent(&flow, region, &ZERO_PHASE, &y, true).expect("solvable");
         assert_eq!(e.field, filippov);
         let half_jump = 0.5 * (a - b);

@@ -87,7 +87,7 @@ impl<const D: usize> Copies<D> {
         // of it) is no perturbation of the reference's motion: the wall throws
         // it back at once, and its column would be O(1) wrong. Like a copy that
         // crossed a grazing boundary, it is differenced on the other side.
-        let admitted = std::array::from_fn(|t| system.admits(&ys[t]));
+        let admitted = crate::array::from_fn(|t| system.admits(&ys[t]));
         Copies {
             starts: ys,
             steps,

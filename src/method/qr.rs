@@ -98,7 +98,7 @@ where
     pub fn push(&mut self, jacobian: &SMatrix<f64, D, D>) -> [f64; D] {
         let (q, r) = qr_positive(jacobian * self.q);
         self.q = q;
-        let diag: [f64; D] = std::array::from_fn(|i| r[(i, i)]);
+        let diag: [f64; D] = crate::array::from_fn(|i| r[(i, i)]);
         for (sum, d) in self.log_r.iter_mut().zip(&diag) {
             *sum += d.ln();
         }
@@ -127,7 +127,7 @@ where
         let mut frame = self.q;
         let (mut q, mut r) = qr_positive(jacobian * frame);
         for _ in 0..at_most {
-            let collapsed: [bool; D] = std::array::from_fn(|i| r[(i, i)] < floor);
+            let collapsed: [bool; D] = crate::array::from_fn(|i| r[(i, i)] < floor);
             let ahead = (0..D).find(|&i| collapsed[i] && collapsed[i + 1..].iter().any(|c| !c));
             let Some(i) = ahead else {
                 break;
@@ -143,7 +143,7 @@ where
             (q, r) = qr_positive(jacobian * frame);
         }
         self.q = q;
-        let diag: [f64; D] = std::array::from_fn(|i| r[(i, i)]);
+        let diag: [f64; D] = crate::array::from_fn(|i| r[(i, i)]);
         for (sum, d) in self.log_r.iter_mut().zip(&diag) {
             *sum += d.ln();
         }

@@ -153,7 +153,7 @@ impl Native {
                 && h.len() >= per_slot
                 && walls.len() >= self.stops * per_slot
         );
-        let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
+        let live: [i64; W] = crate::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
         // SAFETY: the loop reads and writes D·W states in `y` and the
         // phase in `clock`, reads the tape's constants, the step sizes,
         // two rows per stop and W masks, as `layout` lays them out
@@ -582,7 +582,7 @@ impl SwitchLoops {
                 && walls.len() >= self.stops * per_slot
                 && values.len() >= 2 * self.surfaces
         );
-        let live: [i64; W] = std::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
+        let live: [i64; W] = crate::array::from_fn(|k| -i64::from(live >> k & 1 == 1));
         let region: [i64; W] = regions.map(i64::from);
         // SAFETY: the loop reads and writes D·W states in `y`, the phase in
         // `clock` and 2·surfaces rows of W in `values`; reads W regions
@@ -695,9 +695,9 @@ mod tests {
         let per_slot = if each { W } else { 1 };
         let mut registers = Registers::new();
         tape.prepare(&mut registers, |j| {
-            std::array::from_fn(|k| lane[j * per_slot + slot(k)])
+            crate::array::from_fn(|k| lane[j * per_slot + slot(k)])
         });
-        let hs: [f64; W] = std::array::from_fn(|k| h[slot(k)]);
+        let hs: [f64; W] = crate::array::from_fn(|k| h[slot(k)]);
         let half = [clock[2], clock[3]];
         let mut phase = [clock[0], clock[1]];
         let mut taken = steps;
@@ -750,8 +750,8 @@ mod tests {
         let walls = vec![wall; per_slot];
         let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
         let start: [[f64; W]; 2] = [
-            std::array::from_fn(|k| 0.05 * k as f64 - 0.1),
-            std::array::from_fn(|k| 0.02 * k as f64),
+            crate::array::from_fn(|k| 0.05 * k as f64 - 0.1),
+            crate::array::from_fn(|k| 0.02 * k as f64),
         ];
         let bits = |y: &[[f64; W]; 2], clock: &[f64; 4]| {
             let mut b: Vec<u64> = y.as_flattened().iter().map(|v| v.to_bits()).collect();
@@ -854,7 +854,7 @@ mod tests {
             let constants = tape.lane_values(&[0.05, 2.5, 0.8]).constants;
             let h = [std::f64::consts::TAU / 0.8 / 200.0];
             let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
-            let mut y: [[f64; 8]; 2] = [std::array::from_fn(|k| 0.05 * k as f64), [0.0; 8]];
+            let mut y: [[f64; 8]; 2] = [crate::array::from_fn(|k| 0.05 * k as f64), [0.0; 8]];
             let mut clock = [1.0, 0.0, half[0], half[1]];
             let live = [0i64; 8];
             // SAFETY: the loop for 8 slots, shared layout, of this tape's
@@ -1046,11 +1046,11 @@ reset = { v = "-0.9*v" }
             |k: usize| (k % 4) as u32,
             |k: usize| 3 - (k % 3) as u32,
         ] {
-            let region: [u32; W] = std::array::from_fn(region_of);
+            let region: [u32; W] = crate::array::from_fn(region_of);
             for live in [(1u32 << W) - 1, 0b1010] {
                 let start: [[f64; W]; 2] = [
-                    std::array::from_fn(|k| 0.05 * k as f64 - 0.3),
-                    std::array::from_fn(|k| 0.02 * k as f64 - 0.1),
+                    crate::array::from_fn(|k| 0.05 * k as f64 - 0.3),
+                    crate::array::from_fn(|k| 0.02 * k as f64 - 0.1),
                 ];
                 let phase0 = [0.3f64.cos(), 0.3f64.sin()];
                 // The walk, from every stop on by one plain step.
@@ -1200,9 +1200,9 @@ reset = { v = "-0.9*v" }
         fn rhs_in(&self, region: u32, phase: &[f64; 2], y: &[f64; D]) -> [f64; D] {
             let native = self.code.regions[region as usize].native.as_ref().unwrap();
             let c = &self.constants[region as usize];
-            let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+            let y: [[f64; 1]; D] = crate::array::from_fn(|i| [y[i]]);
             let out: [[f64; 1]; D] = native.call(Kind::Rhs, Layout::Shared, &y, phase, c, &[]);
-            std::array::from_fn(|i| out[i][0])
+            crate::array::from_fn(|i| out[i][0])
         }
 
         fn surfaces(&self) -> &[Surface] {
@@ -1210,7 +1210,7 @@ reset = { v = "-0.9*v" }
         }
 
         fn surface_gradient(&self, j: usize, _phase: &[f64; 2], _y: &[f64; D]) -> [f64; D] {
-            std::array::from_fn(|i| self.gradients[j][i])
+            crate::array::from_fn(|i| self.gradients[j][i])
         }
     }
 
@@ -1266,7 +1266,7 @@ reset = { v = "-0.9*v" }
                 let grads: Vec<&[f64]> =
                     set.iter().map(|&j| flow.gradients[j].as_slice()).collect();
                 for k in 0..200 {
-                    let y: [f64; D] = std::array::from_fn(|i| {
+                    let y: [f64; D] = crate::array::from_fn(|i| {
                         0.2 + 0.7 * (0.37 * k as f64 + 1.3 * i as f64).sin()
                     });
                     let h = 0.002 + 0.0007 * (k % 11) as f64;
@@ -1366,11 +1366,11 @@ reset = { v = "-0.9*v" }
         let native = Native::compile(&tape).expect("the C compiler builds it");
         let params = [[0.05, 1.2, 0.8], [0.1, -0.5, 1.3]];
         let lanes = params.map(|p| tape.lane_values(&p));
-        let stages: [[Phase; 3]; 8] = std::array::from_fn(|k| {
+        let stages: [[Phase; 3]; 8] = crate::array::from_fn(|k| {
             let t = 0.37 * k as f64;
             [0.0, 0.05, 0.1].map(|dt| [((t + dt) * 0.8).cos(), ((t + dt) * 0.8).sin()])
         });
-        let h: [f64; 8] = std::array::from_fn(|k| 0.01 * (k + 1) as f64);
+        let h: [f64; 8] = crate::array::from_fn(|k| 0.01 * (k + 1) as f64);
         // One lane, W = 1, 4 and 8.
         fn shared<const W: usize>(
             tape: &Tape,
@@ -1379,7 +1379,8 @@ reset = { v = "-0.9*v" }
             st: &[Phase; 3],
             h: f64,
         ) {
-            let y: [[f64; W]; 2] = std::array::from_fn(|i| std::array::from_fn(|k| STATES[i][k]));
+            let y: [[f64; W]; 2] =
+                crate::array::from_fn(|i| crate::array::from_fn(|k| STATES[i][k]));
             let mut registers = Registers::new();
             tape.prepare(&mut registers, |j| [c[j]; W]);
             let interpreted =
@@ -1398,9 +1399,11 @@ reset = { v = "-0.9*v" }
         let constant = |j: usize, k: usize| lanes[k % 2].constants[j];
         let l = tape.lane_constants.len();
         let mut registers = Registers::new();
-        tape.prepare(&mut registers, |j| std::array::from_fn(|k| constant(j, k)));
+        tape.prepare(&mut registers, |j| {
+            crate::array::from_fn(|k| constant(j, k))
+        });
         let interpreted = rk4::step_batch(
-            |s, y| tape.run(&mut registers, &std::array::from_fn(|k| stages[k][s]), y),
+            |s, y| tape.run(&mut registers, &crate::array::from_fn(|k| stages[k][s]), y),
             &y,
             &h,
         );
@@ -1486,8 +1489,8 @@ reset = { v = "-0.9*v" }
             // Slots from near rest, a little apart; the last one beyond
             // the stop and not live.
             let mut y: [[f64; W]; 2] = [
-                std::array::from_fn(|k| 0.01 * k as f64),
-                std::array::from_fn(|k| -0.003 * k as f64),
+                crate::array::from_fn(|k| 0.01 * k as f64),
+                crate::array::from_fn(|k| -0.003 * k as f64),
             ];
             y[0][W - 1] = wall + 3.0 * side;
             let live = (1u32 << (W - 1)) - 1;
@@ -1531,27 +1534,27 @@ reset = { v = "-0.9*v" }
         }
         // One trajectory of each of 8 lanes: each its own η (so its own
         // constants and step size) and wall, all with the grid's phase.
-        let etas: [f64; 8] = std::array::from_fn(|k| 0.7 + 0.05 * k as f64);
+        let etas: [f64; 8] = crate::array::from_fn(|k| 0.7 + 0.05 * k as f64);
         let lanes = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
         let hs = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
         let halves: [Phase; 8] =
-            std::array::from_fn(|k| crate::integrate::clock::half_turn(etas[k], hs[k], 200));
+            crate::array::from_fn(|k| crate::integrate::clock::half_turn(etas[k], hs[k], 200));
         assert!(halves.iter().all(|h| *h == halves[0]), "one grid turn");
-        let walls: [f64; 8] = std::array::from_fn(|k| 0.8 + 0.1 * k as f64);
+        let walls: [f64; 8] = crate::array::from_fn(|k| 0.8 + 0.1 * k as f64);
         let l = tape.lane_constants.len();
         let lane: Vec<f64> = (0..l)
             .flat_map(|j| lanes.iter().map(move |c| c[j]))
             .collect();
         let live = 0x7f;
         let start: [[f64; 8]; 2] = [
-            std::array::from_fn(|k| 0.01 * k as f64),
-            std::array::from_fn(|k| if k == 7 { 9.0 } else { 0.0 }),
+            crate::array::from_fn(|k| 0.01 * k as f64),
+            crate::array::from_fn(|k| if k == 7 { 9.0 } else { 0.0 }),
         ];
         let (mut expected, mut phases) = (start, [[1.0, 0.0]; 8]);
         let mut taken = steps;
         for n in 0..steps {
             let stages: [[Phase; 3]; 8] =
-                std::array::from_fn(|k| rk4::stage_phases(&phases[k], &halves[k]));
+                crate::array::from_fn(|k| rk4::stage_phases(&phases[k], &halves[k]));
             let clock: Vec<f64> = (0..3)
                 .flat_map(|s| (0..2).flat_map(move |i| (0..8).map(move |k| stages[k][s][i])))
                 .collect();
@@ -1571,7 +1574,7 @@ reset = { v = "-0.9*v" }
                 break;
             }
             expected = y1;
-            phases = std::array::from_fn(|k| stages[k][2]);
+            phases = crate::array::from_fn(|k| stages[k][2]);
         }
         assert!(
             taken > 0 && taken < steps,
@@ -1641,13 +1644,14 @@ reset = { v = "-0.9*v" }
             a.iter().flatten().map(|x| x.to_bits()).collect()
         }
         let lanes = [[0.05, 1.2, 0.8], [0.1, -0.5, 1.3]].map(|p| tape.lane_values(&p).constants);
-        let phases: [Phase; 8] = std::array::from_fn(|k| {
+        let phases: [Phase; 8] = crate::array::from_fn(|k| {
             let t = 0.37 * k as f64;
             [t.cos(), t.sin()]
         });
         // One lane, W = 1, 4 and 8.
         fn shared<const W: usize>(tape: &Tape, native: &Native, c: &[f64], phase: &Phase) {
-            let y: [[f64; W]; 2] = std::array::from_fn(|i| std::array::from_fn(|k| STATES[i][k]));
+            let y: [[f64; W]; 2] =
+                crate::array::from_fn(|i| crate::array::from_fn(|k| STATES[i][k]));
             let mut registers = Registers::new();
             tape.prepare(&mut registers, |j| [c[j]; W]);
             let interpreted: [[f64; W]; 3] = tape.run(&mut registers, &[*phase; W], &y);
@@ -1668,7 +1672,9 @@ reset = { v = "-0.9*v" }
             .flat_map(|i| phases.iter().map(move |p| p[i]))
             .collect();
         let mut registers = Registers::new();
-        tape.prepare(&mut registers, |j| std::array::from_fn(|k| constant(j, k)));
+        tape.prepare(&mut registers, |j| {
+            crate::array::from_fn(|k| constant(j, k))
+        });
         let interpreted: [[f64; 8]; 3] = tape.run(&mut registers, &phases, &STATES);
         let compiled: [[f64; 8]; 3] =
             native.call(Kind::Rhs, Layout::Each, &STATES, &clock, &lane, &[]);

@@ -214,24 +214,24 @@ impl Tape {
         for (i, ins) in self.lowered.iter().enumerate() {
             let (a, b) = (read(file, ins.a), read(file, ins.b));
             let value: [f64; W] = match ins.code {
-                Code::Neg => std::array::from_fn(|k| -a[k]),
-                Code::Add => std::array::from_fn(|k| a[k] + b[k]),
-                Code::Sub => std::array::from_fn(|k| a[k] - b[k]),
-                Code::Mul => std::array::from_fn(|k| a[k] * b[k]),
-                Code::Div => std::array::from_fn(|k| a[k] / b[k]),
+                Code::Neg => crate::array::from_fn(|k| -a[k]),
+                Code::Add => crate::array::from_fn(|k| a[k] + b[k]),
+                Code::Sub => crate::array::from_fn(|k| a[k] - b[k]),
+                Code::Mul => crate::array::from_fn(|k| a[k] * b[k]),
+                Code::Div => crate::array::from_fn(|k| a[k] / b[k]),
                 Code::MulAdd => {
                     let c = read(file, ins.c);
-                    std::array::from_fn(|k| a[k] * b[k] + c[k])
+                    crate::array::from_fn(|k| a[k] * b[k] + c[k])
                 }
                 Code::MulSub => {
                     let c = read(file, ins.c);
-                    std::array::from_fn(|k| a[k] * b[k] - c[k])
+                    crate::array::from_fn(|k| a[k] * b[k] - c[k])
                 }
                 Code::SubMul => {
                     let c = read(file, ins.c);
-                    std::array::from_fn(|k| c[k] - a[k] * b[k])
+                    crate::array::from_fn(|k| c[k] - a[k] * b[k])
                 }
-                Code::Call(f) => std::array::from_fn(|k| f.apply(&[a[k], b[k]])),
+                Code::Call(f) => crate::array::from_fn(|k| f.apply(&[a[k], b[k]])),
             };
             file[results + i] = MaybeUninit::new(value);
         }

@@ -193,11 +193,8 @@ type Chart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoor
 /// temporary names before either is renamed, so a failed drawing leaves
 /// neither a figure nor a temporary behind.
 fn write<F: Figure>(figure: &F, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> {
-    register_font();
     let png = dir.join(format!("{stem}.png"));
     let svg = dir.join(format!("{stem}.svg"));
-    // The temporaries keep their extension: BitMapBackend picks the image
-    // format from it.
     let temporary = |extension: &str| {
         dir.join(format!(
             ".{stem}.{}.partial.{extension}",
@@ -209,17 +206,11 @@ fn write<F: Figure>(figure: &F, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> 
         let path = path.to_owned();
         move |source| Error::Write { path, source }
     };
-    let result = render(
-        figure,
-        BitMapBackend::new(&png_partial, F::SIZE),
-        &png_partial,
-    )
-    .map_err(failed(&png))
-    .and_then(|()| {
-        render(figure, SVGBackend::new(&svg_partial, F::SIZE), &svg_partial).map_err(failed(&svg))
-    })
-    .and_then(|()| fs::rename(&png_partial, &png).map_err(failed(&png)))
-    .and_then(|()| fs::rename(&svg_partial, &svg).map_err(failed(&svg)));
+    let result = write_png(&png_partial, &pixels(figure), F::SIZE)
+        .map_err(failed(&png))
+        .and_then(|()| render_svg(figure, &svg_partial).map_err(failed(&svg)))
+        .and_then(|()| fs::rename(&png_partial, &png).map_err(failed(&png)))
+        .and_then(|()| fs::rename(&svg_partial, &svg).map_err(failed(&svg)));
     if result.is_err() {
         for partial in [&png_partial, &svg_partial] {
             let _ = fs::remove_file(partial);
@@ -228,15 +219,33 @@ fn write<F: Figure>(figure: &F, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> 
     result.map(|()| vec![png, svg])
 }
 
-/// Draws `figure` on `backend`, which writes `file`, and flushes that file to
-/// disk so that the rename that follows never exposes an empty figure.
-fn render<F: Figure, DB: DrawingBackend>(figure: &F, backend: DB, file: &Path) -> io::Result<()> {
-    let root = backend.into_drawing_area();
+/// Draws `figure` as SVG into `file`, and flushes that file to disk so that
+/// the rename that follows never exposes an empty figure.
+fn render_svg<F: Figure>(figure: &F, file: &Path) -> io::Result<()> {
+    register_font();
+    let root = SVGBackend::new(file, F::SIZE).into_drawing_area();
     figure
         .draw(&root)
         .and_then(|()| root.present())
         .map_err(|e| io::Error::other(e.to_string()))?;
+    drop(root);
     fs::File::open(file)?.sync_all()
+}
+
+/// Writes RGB `pixels` of `size` as a PNG file, flushed to disk. (Encoded
+/// here with the `png` crate rather than by plotters' bitmap encoder, which
+/// brings the whole `image` crate and its decoders into the build.)
+pub fn write_png(file: &Path, pixels: &[u8], (width, height): (u32, u32)) -> io::Result<()> {
+    let mut encoded = Vec::new();
+    let mut encoder = png::Encoder::new(&mut encoded, width, height);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(io::Error::other)?;
+    writer.write_image_data(pixels).map_err(io::Error::other)?;
+    writer.finish().map_err(io::Error::other)?;
+    let mut out = fs::File::create(file)?;
+    io::Write::write_all(&mut out, &encoded)?;
+    out.sync_all()
 }
 
 /// Draws `figure` into memory as RGB pixels.

@@ -131,7 +131,7 @@ pub trait System<const D: usize>: Sized + Send + Sync {
     /// itself, or for a Poincaré map the first crossing of its section from
     /// a point of the flow (NaN where there is none).
     fn start(&self, initial: &[f64], _flow: &FlowSettings) -> [f64; D] {
-        std::array::from_fn(|i| initial[i])
+        crate::array::from_fn(|i| initial[i])
     }
 
     /// The stiffness and contraction ([`stiffness`](Self::stiffness),

@@ -352,12 +352,12 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     fn rhs_in(&self, region: u32, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         let field = &self.code.regions[region as usize];
         let constants = &self.constants[region as usize];
-        let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+        let y: [[f64; 1]; D] = crate::array::from_fn(|i| [y[i]]);
         let out: [[f64; 1]; D] = match &field.native {
             Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, constants, &[]),
             None => field.equations.eval(|j| [constants[j]], &[*phase], &y),
         };
-        std::array::from_fn(|i| out[i][0])
+        crate::array::from_fn(|i| out[i][0])
     }
 
     #[inline(always)]
@@ -365,9 +365,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         // One native call for the step (the stages' four calls of
         // `rhs_in` each paid the call's marshalling: a tenth of the seed's
         // 200-step sweep, in the impacts' re-steps).
-        let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+        let y: [[f64; 1]; D] = crate::array::from_fn(|i| [y[i]]);
         let out = self.step_shared_in::<1>(region, stages, &y, h);
-        std::array::from_fn(|i| out[i][0])
+        crate::array::from_fn(|i| out[i][0])
     }
 
     fn slide_step(
@@ -409,14 +409,14 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         // store buffer.
         let field = &self.code.regions[region as usize];
         let constants = &self.surface_constants[region as usize];
-        let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+        let y: [[f64; 1]; D] = crate::array::from_fn(|i| [y[i]]);
         let out: [[f64; 1]; 2 * MAX_SURFACES] = match &field.surfaces_native {
             Some(native) => native.call(Kind::Rhs, Layout::Shared, &y, phase, constants, &[]),
             None => field.surfaces.eval(|j| [constants[j]], &[*phase], &y),
         };
         SurfaceValues {
-            g: std::array::from_fn(|j| out[2 * j][0]),
-            rate: std::array::from_fn(|j| out[2 * j + 1][0]),
+            g: crate::array::from_fn(|j| out[2 * j][0]),
+            rate: crate::array::from_fn(|j| out[2 * j + 1][0]),
         }
     }
 
@@ -471,7 +471,7 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
     #[inline(always)]
     fn surface_gradient(&self, j: usize, phase: &Phase, y: &[f64; D]) -> [f64; D] {
         if let Some(gradient) = &self.constant_gradients[j] {
-            return std::array::from_fn(|i| gradient[i]);
+            return crate::array::from_fn(|i| gradient[i]);
         }
         let s = &self.code.surfaces[j];
         // (A gradient that does not read t is the same at any t.)
@@ -480,7 +480,7 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         } else {
             0.0
         };
-        std::array::from_fn(|i| s.gradient[i].eval(y, &self.params, t))
+        crate::array::from_fn(|i| s.gradient[i].eval(y, &self.params, t))
     }
 
     fn stick_limit(&self, j: usize, y: &[f64; D]) -> Option<f64> {
@@ -505,11 +505,11 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         let at = |e: &Expr| e.eval(y, &self.params, t);
         Some(crate::integrate::EventHoldValues {
             g: at(&s.g),
-            gradient: std::array::from_fn(|i| at(&s.gradient[i])),
+            gradient: crate::array::from_fn(|i| at(&s.gradient[i])),
             rate: at(&hold.rate),
-            rate_gradient: std::array::from_fn(|i| at(&hold.rate_gradient[i])),
+            rate_gradient: crate::array::from_fn(|i| at(&hold.rate_gradient[i])),
             pressing: at(&hold.pressing),
-            pushed: std::array::from_fn(|i| hold.pushed[i]),
+            pushed: crate::array::from_fn(|i| hold.pushed[i]),
         })
     }
 
@@ -517,11 +517,11 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         let s = &self.code.surfaces[j];
         let t = self.time_at(phase);
         (
-            std::array::from_fn(|i| s.reset[i].eval(y, &self.params, t)),
-            std::array::from_fn(|i| {
-                std::array::from_fn(|k| s.reset_jacobian[i * D + k].eval(y, &self.params, t))
+            crate::array::from_fn(|i| s.reset[i].eval(y, &self.params, t)),
+            crate::array::from_fn(|i| {
+                crate::array::from_fn(|k| s.reset_jacobian[i * D + k].eval(y, &self.params, t))
             }),
-            std::array::from_fn(|i| s.reset_rate[i].eval(y, &self.params, t)),
+            crate::array::from_fn(|i| s.reset_rate[i].eval(y, &self.params, t)),
         )
     }
 
@@ -622,7 +622,8 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
         let taken = match switching {
             None => {
                 let native = flows[0].code.regions[0].native.as_ref()?;
-                let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[0].as_slice());
+                let slots: [&[f64]; W] =
+                    crate::array::from_fn(|k| flows[k].constants[0].as_slice());
                 if slots[0].len() > EACH_CONSTANTS {
                     return None;
                 }
@@ -653,9 +654,9 @@ impl<const D: usize> Flow<D> for ModelFlow<D> {
                         continue;
                     }
                     let field: [&[f64]; W] =
-                        std::array::from_fn(|k| flows[k].constants[r].as_slice());
+                        crate::array::from_fn(|k| flows[k].constants[r].as_slice());
                     let surfaces: [&[f64]; W] =
-                        std::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
+                        crate::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
                     if field[0].len().max(surfaces[0].len()) > EACH_CONSTANTS {
                         return None;
                     }
@@ -776,7 +777,7 @@ fn side_by_side<'s, const W: usize>(
 ) -> &'s [[f64; W]] {
     let l = slots[0].len();
     for (j, row) in scratch[..l].iter_mut().enumerate() {
-        row.write(std::array::from_fn(|k| slots[k][j]));
+        row.write(crate::array::from_fn(|k| slots[k][j]));
     }
     // SAFETY: rows 0..l were written just above; MaybeUninit<T> has T's
     // layout.
@@ -816,7 +817,7 @@ impl<const D: usize> ModelFlow<D> {
     ) -> [[f64; W]; D] {
         let r = region as usize;
         // Each slot's constants of this region, looked up once per step.
-        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].constants[r].as_slice());
+        let slots: [&[f64]; W] = crate::array::from_fn(|k| flows[k].constants[r].as_slice());
         let l = slots[0].len();
         if let Some(native) = flows[0].native::<W>(region).filter(|_| l <= EACH_CONSTANTS) {
             // The slots' constants and stage phases side by side.
@@ -834,10 +835,10 @@ impl<const D: usize> ModelFlow<D> {
         }
         let tape = &flows[0].code.regions[r].equations;
         let mut registers = Registers::new();
-        tape.prepare(&mut registers, |j| std::array::from_fn(|k| slots[k][j]));
+        tape.prepare(&mut registers, |j| crate::array::from_fn(|k| slots[k][j]));
         rk4::step_batch(
             #[inline(always)]
-            |s, y| tape.run(&mut registers, &std::array::from_fn(|k| stages[k][s]), y),
+            |s, y| tape.run(&mut registers, &crate::array::from_fn(|k| stages[k][s]), y),
             y,
             h,
         )
@@ -854,7 +855,8 @@ impl<const D: usize> ModelFlow<D> {
         out: &mut SurfaceBatch<W>,
     ) {
         let r = region as usize;
-        let slots: [&[f64]; W] = std::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
+        let slots: [&[f64]; W] =
+            crate::array::from_fn(|k| flows[k].surface_constants[r].as_slice());
         let l = slots[0].len();
         let field = &flows[0].code.regions[r];
         match &field.surfaces_native {
@@ -871,9 +873,10 @@ impl<const D: usize> ModelFlow<D> {
                 native.call_into(Kind::Rhs, Layout::Each, y, clock, lane, &[], &mut out.rows)
             }
             _ => {
-                out.rows = field
-                    .surfaces
-                    .eval(|j| std::array::from_fn(|k| slots[k][j]), phases, y)
+                out.rows =
+                    field
+                        .surfaces
+                        .eval(|j| crate::array::from_fn(|k| slots[k][j]), phases, y)
             }
         }
     }
@@ -973,7 +976,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
                 stats.crossings[0] += it.impacts;
                 stats.rank_loss = stats.rank_loss.max(it.rank_loss);
                 stats.chattering |= it.status != ExactStatus::Ok;
-                let state: [f64; D] = std::array::from_fn(|i| it.state[i]);
+                let state: [f64; D] = crate::array::from_fn(|i| it.state[i]);
                 return Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())));
             }
         };
@@ -1011,7 +1014,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             PiecewiseStatus::Chattering | PiecewiseStatus::Sticking => stats.chattering = true,
             PiecewiseStatus::Diverged => {}
         }
-        let state: [f64; D] = std::array::from_fn(|i| it.state[i]);
+        let state: [f64; D] = crate::array::from_fn(|i| it.state[i]);
         Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())))
     }
 
@@ -1052,7 +1055,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             let steps = part.steps(flow.steps_per_period).len();
             let constants = tape.lane_values(&self.params).constants;
             let density = |phase: &Phase, y: &[f64; D]| -> f64 {
-                let y: [[f64; 1]; D] = std::array::from_fn(|i| [y[i]]);
+                let y: [[f64; 1]; D] = crate::array::from_fn(|i| [y[i]]);
                 let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[*phase], &y);
                 out[0][0]
             };
@@ -1099,7 +1102,7 @@ impl<const D: usize> System<D> for ModelFlow<D> {
         if constant || initial.len() != D {
             return at_origin;
         }
-        let mut y: [f64; D] = std::array::from_fn(|i| initial[i]);
+        let mut y: [f64; D] = crate::array::from_fn(|i| initial[i]);
         let mut scales = at_origin;
         let mut stats = [IterationStats::default()];
         for _ in 0..PILOT_PERIODS {

@@ -81,7 +81,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
     /// The point of the flow on the section with map coordinates x.
     pub fn lift(&self, x: &[f64; D]) -> [f64; N] {
         let k = self.section.state;
-        std::array::from_fn(|i| match i.cmp(&k) {
+        crate::array::from_fn(|i| match i.cmp(&k) {
             std::cmp::Ordering::Less => x[i],
             std::cmp::Ordering::Equal => self.section.at,
             std::cmp::Ordering::Greater => x[i - 1],
@@ -91,7 +91,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
     /// The map coordinates of a point of the flow (on the section).
     fn project(&self, y: &[f64; N]) -> [f64; D] {
         let k = self.section.state;
-        std::array::from_fn(|i| if i < k { y[i] } else { y[i + 1] })
+        crate::array::from_fn(|i| if i < k { y[i] } else { y[i + 1] })
     }
 
     pub fn flow(&self) -> &ModelFlow<N> {
@@ -188,7 +188,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
     pub fn part_divergence(&self, part: &TangentParts<N>) -> Option<f64> {
         let (tape, constants) = self.divergence.as_ref()?;
         let density = |_: &Phase, y: &[f64; N]| -> f64 {
-            let y: [[f64; 1]; N] = std::array::from_fn(|i| [y[i]]);
+            let y: [[f64; 1]; N] = crate::array::from_fn(|i| [y[i]]);
             let out: [[f64; 1]; 1] = tape.eval(|j| [constants[j]], &[ZERO_PHASE], &y);
             out[0][0]
         };
@@ -343,7 +343,7 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
 
     /// From a point of the flow (all N states) to its first crossing.
     fn start(&self, initial: &[f64], flow: &FlowSettings) -> [f64; D] {
-        let y: [f64; N] = std::array::from_fn(|i| initial[i]);
+        let y: [f64; N] = crate::array::from_fn(|i| initial[i]);
         self.returns(&[y], flow)[0].image
     }
 

@@ -412,7 +412,7 @@ impl<'a> Stepper<'a> {
             .enumerate()
             .map(|(k, j)| {
                 let state = |offset: usize| -> [f64; N] {
-                    std::array::from_fn(|i| states[2 * N * k + offset + i])
+                    crate::array::from_fn(|i| states[2 * N * k + offset + i])
                 };
                 match j[1] {
                     CROSSED => {
@@ -600,7 +600,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let count = lanes.len();
-    let initial: [f64; N] = std::array::from_fn(|i| settings.initial_state[i]);
+    let initial: [f64; N] = crate::array::from_fn(|i| settings.initial_state[i]);
     returns(stepper, lanes, |_| initial)?;
     for lane in lanes.iter_mut().filter(|l| l.active()) {
         lane.x = lane.back.take().expect("a return").image;

@@ -622,7 +622,7 @@ where
         let reals = read_back(&gpu.device, &readable, |b| reals_from(b, self.precision))?;
         let per_lane = self.layout.traj * self.layout.traj_stride;
         Ok((0..self.count)
-            .map(|lane| std::array::from_fn(|k| reals[lane * per_lane + k]))
+            .map(|lane| crate::array::from_fn(|k| reals[lane * per_lane + k]))
             .collect())
     }
 
@@ -800,7 +800,7 @@ where
                 point = self
                     .points
                     .is_some()
-                    .then(|| std::array::from_fn(|k| chunk.points[s * D + k]));
+                    .then(|| crate::array::from_fn(|k| chunk.points[s * D + k]));
                 *x_n = point;
                 // The size of the iteration's image, as on the CPU.
                 scale = f64::from(f32::from_bits(scale_bits));
@@ -861,7 +861,7 @@ fn part_stats<const D: usize>(chunk: &Readback, stride: usize, s: usize) -> Iter
     };
     IterationStats {
         impacts,
-        crossings: std::array::from_fn(|j| per_stop.get(j).copied().unwrap_or(0)),
+        crossings: crate::array::from_fn(|j| per_stop.get(j).copied().unwrap_or(0)),
         // After a motion the kernels flagged sliding
         // (sticky: FLAG_STICKY), whatever else they
         // report comes from a state they did not

@@ -73,7 +73,7 @@ fn onto_hold<const D: usize, F: Flow<D>>(
 ) -> Option<[f64; D]> {
     let mut y = *y;
     let v = base.event_hold(j, phase, &y)?;
-    let w: [f64; D] = std::array::from_fn(|i| if v.pushed[i] { 0.0 } else { v.gradient[i] });
+    let w: [f64; D] = crate::array::from_fn(|i| if v.pushed[i] { 0.0 } else { v.gradient[i] });
     let ww: f64 = w.iter().map(|a| a * a).sum();
     if ww > 0.0 {
         for i in 0..D {
@@ -95,7 +95,7 @@ fn onto_hold<const D: usize, F: Flow<D>>(
 /// The direction the constraint force of a hold pushes in: ∇ġ on the
 /// states the reset changes (for a ball on a table, its velocity).
 fn pushing<const D: usize>(v: &EventHoldValues<D>) -> [f64; D] {
-    std::array::from_fn(|i| if v.pushed[i] { v.rate_gradient[i] } else { 0.0 })
+    crate::array::from_fn(|i| if v.pushed[i] { v.rate_gradient[i] } else { 0.0 })
 }
 
 /// The flow of a motion held on event j's surface: the free field plus
@@ -115,7 +115,7 @@ impl<const D: usize, F: Flow<D>> Flow<D> for HeldOnEvent<'_, F> {
         let u = pushing(&v);
         let uu: f64 = u.iter().zip(&v.rate_gradient).map(|(a, b)| a * b).sum();
         let lambda = -v.pressing / uu;
-        std::array::from_fn(|i| f[i] + lambda * u[i])
+        crate::array::from_fn(|i| f[i] + lambda * u[i])
     }
 
     fn forcing_frequency(&self) -> f64 {

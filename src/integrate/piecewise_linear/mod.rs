@@ -295,7 +295,7 @@ mod tests {
             let k2 = rhs(t + 0.5 * h, add(y, k1, 0.5 * h), stiff);
             let k3 = rhs(t + 0.5 * h, add(y, k2, 0.5 * h), stiff);
             let k4 = rhs(t + h, add(y, k3, h), stiff);
-            std::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+            crate::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
         };
         let h = TAU / eta / n as f64;
         let (mut y, mut stiff, mut crossings) = (y0, y0[0] > gap, 0);
@@ -484,7 +484,7 @@ mod tests {
             let k2 = rhs(t + 0.5 * h, add(y, k1, 0.5 * h), hi);
             let k3 = rhs(t + 0.5 * h, add(y, k2, 0.5 * h), hi);
             let k4 = rhs(t + h, add(y, k3, h), hi);
-            std::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
+            crate::array::from_fn(|i| y[i] + h / 6.0 * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i]))
         };
         let period = TAU / eta;
         let h = period / n as f64;

@@ -35,7 +35,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let (_, r) = crate::method::qr::qr_positive(*j);
-    let log_r: [f64; D] = std::array::from_fn(|i| r[(i, i)].ln());
+    let log_r: [f64; D] = crate::array::from_fn(|i| r[(i, i)].ln());
     let log_columns: f64 = (0..D).map(|i| j.column(i).norm().ln()).sum();
     (log_r, log_columns - log_r.iter().sum::<f64>())
 }
@@ -203,7 +203,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let system = S::new(params);
-    let x: [f64; D] = std::array::from_fn(|i| x[i]);
+    let x: [f64; D] = crate::array::from_fn(|i| x[i]);
     let mut stats = IterationStats::default();
     // The forcing phase at the part's start, advanced through the earlier
     // parts exactly as the reference's was (no trajectory rides along).
