@@ -138,9 +138,12 @@ fn part_map_many_lanes<const D: usize, F: Flow<D>>(
     phase_alone(flow, ys, period, settings, part, phase);
     for (chunk, st) in ys.chunks_mut(BATCH).zip(stats.chunks_mut(BATCH)) {
         let one = One(flow);
+        // No batch of four: a lane's own trajectories are 1 + 2D with
+        // central differences, five or more for any flow but a
+        // one-dimensional one (compiling a third width for those was a
+        // tenth of the crate's build).
         *phase = match chunk.len() {
             1 => steps::<D, 1, _>(&one, chunk, period, settings, part, [start; 1], st)[0],
-            2..=4 => steps::<D, 4, _>(&one, chunk, period, settings, part, [start; 4], st)[0],
             _ => steps::<D, BATCH, _>(&one, chunk, period, settings, part, [start; BATCH], st)[0],
         };
     }
