@@ -44,6 +44,7 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         },
         lyapunov: scene.lyapunov,
         bifurcation_points: scene.bifurcation_points,
+        max_period: scene.sweep.max_period(),
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.

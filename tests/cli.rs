@@ -263,7 +263,7 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
     let mut lines = spectrum.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,status"
+        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,period,status"
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 3);
@@ -277,7 +277,9 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
         assert_eq!(row[4], "-0.1");
         assert_eq!(row[6], "0", "no grazing iteration at a periodic point");
         assert_eq!(row[7], "0");
-        assert_eq!(row[8], "ok");
+        // The period: a whole number, or empty when none closes.
+        assert!(row[8].is_empty() || row[8].parse::<usize>().is_ok_and(|p| (1..=12).contains(&p)));
+        assert_eq!(row[9], "ok");
     }
     let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
     assert!(bifurcation.starts_with("eta,x,v\n"));

@@ -43,6 +43,7 @@ fn assert_the_regions_loop_changes_nothing(name: &str, overrides: &[&str]) {
                 values: lane.params.values.clone(),
             },
             settings: &settings,
+            initial_state: lane.initial_state.clone(),
         })
         .collect();
     let run = |lanes: &[Lane], info| -> Vec<String> {

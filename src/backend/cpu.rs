@@ -24,6 +24,7 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                 .map(|&k| Lane {
                     params: scene.lane_params(k),
                     settings,
+                    initial_state: scene.lane_initial_state(k).to_vec(),
                 })
                 .collect();
             let results = (crate::method::runner(scene.system).run_lanes)(&lanes);

@@ -268,21 +268,24 @@ fn no_kernels(scene: &Scene) -> Option<String> {
 pub fn variant(scene: &Scene, precision: Precision) -> Variant {
     // Over the whole sweep, so that every shard compiles the same kernels.
     let wall = scene.system.wall_reachable.is_some_and(|reachable| {
-        (0..scene.sweep.lanes())
-            .any(|k| reachable(&scene.params_at(k), &scene.integration.initial_state))
+        (0..scene.sweep.lanes()).any(|k| {
+            let state = scene
+                .sweep
+                .initial_state_at(k, &scene.integration.initial_state);
+            reachable(&scene.params_at(k), state)
+        })
     });
-    let mut variant = Variant {
+    Variant {
         system: scene.system,
         precision,
         lyapunov: scene.lyapunov,
         difference: scene.difference(),
         wall,
-        points: scene.bifurcation_points > 0,
+        // The host needs every reference point: for the orbit's period,
+        // the re-estimations and the bifurcation points.
+        points: true,
         impact_location: scene.integration.impact_location,
-    };
-    // The GPU host re-estimates from the reference's points.
-    variant.points |= variant.reestimates();
-    variant
+    }
 }
 
 /// The GPU integrates every lane of a sweep with the same plan: the most
@@ -679,6 +682,7 @@ fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<
             let lane = crate::method::Lane {
                 params: scene.lane_params(k),
                 settings,
+                initial_state: scene.lane_initial_state(k).to_vec(),
             };
             (crate::method::runner(scene.system).run_lane)(&lane)
         })
@@ -718,6 +722,7 @@ fn validate(
         let lane = crate::method::Lane {
             params: scene.lane_params(k),
             settings: &settings,
+            initial_state: scene.lane_initial_state(k).to_vec(),
         };
         let cpu = (crate::method::runner(scene.system).run_lane)(&lane);
         let finished = |l: &LaneResult| l.exponents.iter().all(|e| e.is_finite());

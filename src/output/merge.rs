@@ -296,7 +296,10 @@ fn check_rows(scene: &Scene, table: &Table, dirs: &[&Path]) -> Result<()> {
                     }
                 }
                 for c in axes..numeric {
-                    if record[c].parse::<f64>().is_err() {
+                    // An aperiodic orbit's period is empty.
+                    let empty_period =
+                        &table.header[c] == super::PERIOD_COLUMN && record[c].is_empty();
+                    if !empty_period && record[c].parse::<f64>().is_err() {
                         return Err(at(format!(
                             "{} is not a number: {:?}",
                             &table.header[c], &record[c]

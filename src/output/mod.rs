@@ -36,22 +36,39 @@ pub use set::Staging;
 
 /// The header of `spectrum.csv` (`grid.csv`): the swept parameters, then
 /// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period`, for a
-/// model one `<event>_per_period` column per event, then `grazing,grazing_bound,status`:
-/// `grazing` counts the averaging iterations re-estimated near grazing and
-/// `grazing_bound` their estimated exponent error per unit time.
+/// model one `<event>_per_period` column per event, then
+/// `grazing,grazing_bound`, with `[attractors]` `start`, then
+/// `period,status`: `grazing` counts the averaging iterations re-estimated
+/// near grazing and `grazing_bound` their estimated exponent error per unit
+/// time, `start` is the lane's start among its value's, `period` its
+/// orbit's period in map iterations (empty when aperiodic or longer than
+/// `max_period`).
 pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
     header.extend(["lambda_sum", "expected_sum", "impacts_per_period"].map(String::from));
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
-    header.extend(["grazing", "grazing_bound", "status"].map(String::from));
+    header.extend(["grazing", "grazing_bound"].map(String::from));
+    if scene.sweep.starts.is_some() {
+        header.push(START_COLUMN.into());
+    }
+    header.extend([PERIOD_COLUMN, "status"].map(String::from));
     header
 }
 
-/// The header of `bifurcation.csv`: the swept parameters, then the state.
+/// The column of a lane's start among its value's (with `[attractors]`).
+pub const START_COLUMN: &str = "start";
+/// The column of a lane orbit's period.
+pub const PERIOD_COLUMN: &str = "period";
+
+/// The header of `bifurcation.csv`: the swept parameters, then the state,
+/// with `[attractors]` then the lane's start.
 pub fn bifurcation_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
+    if scene.sweep.starts.is_some() {
+        header.push(START_COLUMN.into());
+    }
     header
 }
 
@@ -205,6 +222,10 @@ fn spectrum_rows<'a>(
         );
         row.push(lane.grazing.to_string());
         row.push(number(lane.grazing_bound));
+        if scene.sweep.starts.is_some() {
+            row.push(scene.lane_start(j).to_string());
+        }
+        row.push(lane.orbit_period.map_or(String::new(), |p| p.to_string()));
         row.push(lane.status.to_string());
         row
     })
@@ -213,12 +234,18 @@ fn spectrum_rows<'a>(
 /// The `bifurcation.csv` rows of the run's lane `j`.
 fn bifurcation_rows(scene: &Scene, report: &Report, j: usize) -> Vec<Vec<String>> {
     let parameters: Vec<String> = scene.lane_values(j).into_iter().map(number).collect();
+    let start = scene
+        .sweep
+        .starts
+        .is_some()
+        .then(|| scene.lane_start(j).to_string());
     report.lanes[j]
         .bifurcation
         .chunks_exact(scene.system.dimension())
         .map(|point| {
             let mut row = parameters.clone();
             row.extend(point.iter().map(|&x| number(x)));
+            row.extend(start.clone());
             row
         })
         .collect()

@@ -51,6 +51,7 @@ mod model_file;
 mod overrides;
 mod raw;
 mod resolve;
+mod starts;
 mod sweep;
 mod types;
 
@@ -63,7 +64,9 @@ pub use defaults::{
     DEFAULT_PERTURBATION_F64, DEFAULT_STEPS_PER_PERIOD, DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 pub use model_file::model_path;
-pub use types::{Axis, Backend, Integration, Lyapunov, Precision, Scene, Shard, Sweep};
+pub use types::{
+    Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Shard, Starts, Sweep,
+};
 
 /// Reads and checks a scene file, applying `--set key.path=value` overrides first.
 pub fn load(path: &Path, overrides: &[String]) -> Result<Scene> {

@@ -4,6 +4,7 @@
 use serde::Deserialize;
 
 use super::overrides::set_key;
+use super::starts::RawAttractors;
 use super::types::{Backend, Lyapunov, Precision};
 use crate::error::{clip, clip_quoted, Error, Result};
 use crate::integrate::ImpactLocation;
@@ -26,6 +27,7 @@ pub(super) struct RawScene {
     pub(super) run: RawRun,
     #[serde(default)]
     pub(super) output: RawOutput,
+    pub(super) attractors: Option<RawAttractors>,
 }
 
 // The first axis's keys are spelled out rather than flattened from

@@ -7,6 +7,7 @@ use super::defaults::{
     DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 use super::raw::{RawAxis, RawIntegration, RawOutput, RawScene, RawSweep};
+use super::starts::resolve_starts;
 use super::sweep::resolve_sweep;
 use super::types::{Integration, Lyapunov, Precision, Scene, Shard, Sweep};
 use crate::error::{clip, Error, Result};
@@ -25,8 +26,17 @@ pub(super) fn resolve(
     let (info, params) = resolve_kind(&raw)?;
     let integration = resolve_integration(info, raw.integration)?;
     let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
-    check_size(info, &raw.sweep, &raw.output, &integration, lyapunov, shard)?;
-    let sweep = resolve_sweep(info, &params, raw.sweep)?;
+    let starts = raw.attractors.as_ref().map(|a| (a.key(), a.count()));
+    check_size(
+        info,
+        &raw.sweep,
+        starts,
+        &raw.output,
+        &integration,
+        lyapunov,
+        shard,
+    )?;
+    let mut sweep = resolve_sweep(info, &params, raw.sweep)?;
     if let Some(delta) = integration
         .perturbation
         .filter(|d| !(d.is_finite() && *d > 0.0))
@@ -37,6 +47,18 @@ pub(super) fn resolve(
         ));
     }
     check_initial_state(info, &params, &sweep, &integration.initial_state)?;
+    if let Some(attractors) = raw.attractors {
+        let starts = resolve_starts(attractors, info, &integration.initial_state)?;
+        for (s, state) in starts.states.iter().enumerate() {
+            check_state_at_every_value(info, &params, &sweep, state).map_err(|reason| {
+                Error::invalid(
+                    starts.layout.key(),
+                    format!("start {s} ({}): {reason}", numbers(state)),
+                )
+            })?;
+        }
+        sweep.starts = Some(starts);
+    }
     let bifurcation_points = check_output(&raw.output, &integration, lyapunov)?;
     let name = check_name(raw.name, default_name)?;
     let precision = raw.run.precision.unwrap_or_default();
@@ -123,6 +145,7 @@ fn resolve_integration(info: &'static SystemInfo, i: RawIntegration) -> Result<I
 fn check_size(
     info: &'static SystemInfo,
     sweep: &RawSweep,
+    starts: Option<(&'static str, usize)>,
     output: &RawOutput,
     integration: &Integration,
     lyapunov: bool,
@@ -131,6 +154,9 @@ fn check_size(
     let mut counts = vec![("sweep.count".to_owned(), axis_len(&sweep.first()))];
     if let Some(second) = &sweep.second {
         counts.push(("sweep.second.count".to_owned(), axis_len(second)));
+    }
+    if let Some((key, n)) = starts {
+        counts.push((key.to_owned(), n));
     }
     let copies = if lyapunov {
         integration
@@ -181,6 +207,18 @@ fn check_initial_state(
             format!("must be finite, got {v}"),
         ));
     }
+    check_state_at_every_value(info, params, sweep, state)
+        .map_err(|reason| Error::invalid("integration.initial_state", reason))
+}
+
+/// Whether `state` is admissible at every swept value: the reason it is
+/// not, with the value, if it is not.
+fn check_state_at_every_value(
+    info: &'static SystemInfo,
+    params: &Params,
+    sweep: &Sweep,
+    state: &[f64],
+) -> std::result::Result<(), String> {
     // One copy of the parameters per axis, not per value: a sweep may have
     // 10^9 values.
     for axis in sweep.axes() {
@@ -193,11 +231,17 @@ fn check_initial_state(
                 } else {
                     String::new()
                 };
-                Error::invalid("integration.initial_state", format!("{reason}{at}"))
+                format!("{reason}{at}")
             })?;
         }
     }
     Ok(())
+}
+
+/// "[1, -0.5]": a state as a message shows it.
+fn numbers(state: &[f64]) -> String {
+    let parts: Vec<String> = state.iter().map(|v| v.to_string()).collect();
+    format!("[{}]", parts.join(", "))
 }
 
 /// `[output]`: at most one point per averaged iteration, and something to

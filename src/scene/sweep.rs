@@ -54,7 +54,11 @@ pub(super) fn resolve_sweep(
             }
         }
     }
-    Ok(Sweep { first, second })
+    Ok(Sweep {
+        first,
+        second,
+        starts: None,
+    })
 }
 
 /// One axis of `[sweep]` (`table` names it in messages: "sweep" or

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use serde::Deserialize;
 
 use super::defaults::{DEFAULT_PERTURBATION_F32, DEFAULT_PERTURBATION_F64};
+pub use super::starts::{Layout, Starts};
 use crate::error::{clip, Error, Result};
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
@@ -113,18 +114,52 @@ pub struct Axis {
 }
 
 /// What a scene sweeps: one parameter, or two (`[sweep.second]`) for a map
-/// over their grid. Lanes run over the grid with the first axis fastest:
-/// lane k is (first[k % n₁], second[k / n₁]).
+/// over their grid, each point of the grid from one start or from many
+/// (`[attractors]`). Lanes run over the starts fastest, then the grid with
+/// its first axis fastest: with S starts, lane k is start k % S of the
+/// point g = k / S, (first[g % n₁], second[g / n₁]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sweep {
     pub first: Axis,
     pub second: Option<Axis>,
+    /// Many starts per point of the grid, if the scene asks for them.
+    pub starts: Option<Starts>,
 }
 
 impl Sweep {
     /// Lanes in the whole sweep.
     pub fn lanes(&self) -> usize {
+        self.points() * self.starts_per_point()
+    }
+
+    /// Points of the parameter grid (values of a one-parameter sweep).
+    pub fn points(&self) -> usize {
         self.first.values.len() * self.second.as_ref().map_or(1, |a| a.values.len())
+    }
+
+    /// Lanes per point of the grid: its starts (1 without `[attractors]`).
+    pub fn starts_per_point(&self) -> usize {
+        self.starts.as_ref().map_or(1, |s| s.states.len())
+    }
+
+    /// The longest orbit period a lane is tested for (`attractors.max_period`).
+    pub fn max_period(&self) -> usize {
+        self.starts
+            .as_ref()
+            .map_or(super::starts::DEFAULT_MAX_PERIOD, |s| s.max_period)
+    }
+
+    /// The start of lane `k` among its point's (0 without `[attractors]`).
+    pub fn start_index(&self, k: usize) -> usize {
+        k % self.starts_per_point()
+    }
+
+    /// The state lane `k` starts from: its start's, or `initial_state`.
+    pub fn initial_state_at<'a>(&'a self, k: usize, initial_state: &'a [f64]) -> &'a [f64] {
+        match &self.starts {
+            Some(starts) => &starts.states[self.start_index(k)],
+            None => initial_state,
+        }
     }
 
     /// The axes, first then second.
@@ -134,6 +169,7 @@ impl Sweep {
 
     /// The swept values of lane `k`, one per axis.
     pub fn values_at(&self, k: usize) -> Vec<f64> {
+        let k = k / self.starts_per_point();
         let n = self.first.values.len();
         let mut values = vec![self.first.values[k % n]];
         values.extend(self.second.as_ref().map(|a| a.values[k / n]));
@@ -277,19 +313,35 @@ impl Scene {
         self.params_at(self.sweep_lane(j))
     }
 
+    /// The state this run's lane `j` starts from.
+    pub fn lane_initial_state(&self, j: usize) -> &[f64] {
+        self.sweep
+            .initial_state_at(self.sweep_lane(j), &self.integration.initial_state)
+    }
+
+    /// The start of this run's lane `j` among its point's.
+    pub fn lane_start(&self, j: usize) -> usize {
+        self.sweep.start_index(self.sweep_lane(j))
+    }
+
     /// The swept values of this run's lane `j`, one per axis.
     pub fn lane_values(&self, j: usize) -> Vec<f64> {
         self.sweep.values_at(self.sweep_lane(j))
     }
 
-    /// "eta = 0.7" or "eta = 0.7, f = 2": where sweep lane `k` is.
+    /// "eta = 0.7" or "eta = 0.7, f = 2" (", start 3" with many starts):
+    /// where sweep lane `k` is.
     pub fn describe(&self, k: usize) -> String {
-        self.sweep
+        let mut at: Vec<String> = self
+            .sweep
             .axes()
             .zip(self.sweep.values_at(k))
             .map(|(axis, v)| format!("{} = {v}", axis.parameter))
-            .collect::<Vec<_>>()
-            .join(", ")
+            .collect();
+        if self.sweep.starts.is_some() {
+            at.push(format!("start {}", self.sweep.start_index(k)));
+        }
+        at.join(", ")
     }
 
     /// The `[integration]` keys the scene sets that `backend` does not use

@@ -20,6 +20,7 @@ pub fn cpu_lanes<'a>(
         .map(|k| lyapsweep::method::Lane {
             params: scene.lane_params(k),
             settings,
+            initial_state: scene.lane_initial_state(k).to_vec(),
         })
         .collect()
 }

@@ -437,6 +437,8 @@ impl<'a> Stepper<'a> {
 /// A lane through its iterations.
 struct Lane<const D: usize, const N: usize> {
     system: SectionFlow<D, N>,
+    /// The state of the flow the lane starts from.
+    initial: [f64; N],
     flow: FlowSettings,
     x: [f64; D],
     accumulator: LaneAccumulator<D>,
@@ -573,9 +575,11 @@ where
                 ..settings.flow
             };
             let result = (!plan.affordable()).then(|| not_run(settings, D, system.period(), plan));
+            let start = scene.lane_initial_state(k);
             Lane {
                 accumulator: LaneAccumulator::new(settings, system.period(), plan),
                 system,
+                initial: crate::array::from_fn(|i| start[i]),
                 flow,
                 x: [f64::NAN; D],
                 result,
@@ -600,8 +604,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let count = lanes.len();
-    let initial: [f64; N] = crate::array::from_fn(|i| settings.initial_state[i]);
-    returns(stepper, lanes, |_| initial)?;
+    returns(stepper, lanes, |lane| lane.initial)?;
     for lane in lanes.iter_mut().filter(|l| l.active()) {
         lane.x = lane.back.take().expect("a return").image;
         if !lane.x.iter().all(|v| v.is_finite()) {

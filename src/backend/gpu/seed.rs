@@ -62,9 +62,6 @@ impl Seeds {
         count: usize,
     ) -> Seeds {
         let info = scene.system;
-        // with the perturbation actually taken in the variant's precision.
-        let x0 = &settings.initial_state;
-        let delta = crate::method::lane::perturbation_at(settings.perturbation, x0);
         let mut traj_data = Vec::with_capacity(count * traj * traj_stride);
         let mut deltas = Vec::with_capacity(count * D);
         // Per trajectory: step 0, no impacts, FLAG_BEHIND_WALL for a copy
@@ -72,8 +69,12 @@ impl Seeds {
         let mut counts_data: Vec<[u32; 4]> = Vec::with_capacity(count * traj);
         for k in first..first + count {
             let params = scene.lane_params(k);
+            // Each lane from its start, with the perturbation actually
+            // taken in the variant's precision.
+            let x0 = scene.lane_initial_state(k);
+            let delta = crate::method::lane::perturbation_at(settings.perturbation, x0);
             for t in 0..traj {
-                let mut y = x0.clone();
+                let mut y = x0.to_vec();
                 if t > 0 {
                     // Copies 1..=D at x + δe_i, then (central) D+1..=2D at x - δe_i.
                     let i = (t - 1) % D;

@@ -1,6 +1,7 @@
 //! The sums a lane keeps over its aligning and averaging iterations, and
 //! the statuses they decide, whichever backend produced the iterations.
 
+use super::orbit::RecentPoints;
 use nalgebra::{Const, DimMin, SMatrix};
 
 use super::plan::LanePlan;
@@ -64,6 +65,8 @@ pub struct LaneAccumulator<const D: usize> {
     /// Σ ln of the finite difference's rounding noise over the Jacobians taken.
     log_noise: f64,
     bifurcation: Vec<f64>,
+    /// The last averaged points, for the orbit's period.
+    recent: RecentPoints<D>,
     jacobians: Option<Vec<f64>>,
     pub(super) failed_at: Option<usize>,
     /// Whether the failure was a Poincaré map's trajectory not coming back
@@ -113,6 +116,7 @@ where
             noise_squares: 0.0,
             log_noise: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
+            recent: RecentPoints::new(settings.max_period, settings.rounding_unit),
             jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
             no_return: false,
@@ -218,8 +222,11 @@ where
         self.sliding += usize::from(stats.sliding);
         self.grazing += usize::from(stats.grazing);
         self.grazing_error += stats.grazing_error;
-        if let (true, Some(point)) = (n >= self.first_kept, point) {
-            self.bifurcation.extend_from_slice(point);
+        if let Some(point) = point {
+            self.recent.push(point);
+            if n >= self.first_kept {
+                self.bifurcation.extend_from_slice(point);
+            }
         }
         self.done += 1;
         true
@@ -268,6 +275,7 @@ where
                 impacts_per_period: f64::NAN,
                 crossings_per_period: [f64::NAN; MAX_EVENTS],
                 period: self.period,
+                orbit_period: None,
                 orbit_term: f64::NAN,
                 bifurcation: self.bifurcation,
                 jacobians: self.jacobians.unwrap_or_default(),
@@ -351,6 +359,7 @@ where
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
             crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
+            orbit_period: self.recent.period(),
             orbit_term,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),

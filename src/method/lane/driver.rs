@@ -11,11 +11,14 @@ use super::settings::{MethodSettings, Tangent};
 use crate::integrate::clock::ZERO_PHASE;
 use crate::system::{FlowSettings, IterationStats, Params, Part, System};
 
-/// One parameter value of a sweep.
+/// One parameter value of a sweep, from one start.
 #[derive(Clone, Debug)]
 pub struct Lane<'a> {
     pub params: Params,
     pub settings: &'a MethodSettings,
+    /// The state the lane starts from (the scene's `initial_state`, or
+    /// one of its `[attractors]` starts).
+    pub initial_state: Vec<f64>,
 }
 
 /// Runs the method for one lane on system `S` of dimension `D`.
@@ -33,7 +36,7 @@ where
         steps_per_period: plan.steps_per_period,
         ..settings.flow
     };
-    let mut x = system.start(&settings.initial_state, flow);
+    let mut x = system.start(&lane.initial_state, flow);
     if !all_finite(&x) {
         let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
         acc.fail_at(0, &x);

@@ -46,7 +46,8 @@ where
     };
     let mut xs: Vec<[f64; D]> = systems
         .iter()
-        .map(|s| s.start(&settings.initial_state, flow))
+        .zip(lanes)
+        .map(|(s, lane)| s.start(&lane.initial_state, flow))
         .collect();
     let each: Vec<&S> = systems.iter().collect();
     let mut discard = vec![IterationStats::default(); lanes.len()];

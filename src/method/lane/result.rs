@@ -140,6 +140,10 @@ pub struct LaneResult {
     pub crossings_per_period: [f64; MAX_EVENTS],
     /// The map period T (of a Poincaré map, the mean return time).
     pub period: f64,
+    /// The period of the orbit in map iterations, from its last points
+    /// (see [`RecentPoints`](super::orbit::RecentPoints)): `None` when
+    /// aperiodic, or when its period exceeds the settings' `max_period`.
+    pub orbit_period: Option<usize>,
     /// A term of the sum rule that depends on the orbit, per unit time: a
     /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0
     /// for a period map).
@@ -182,6 +186,7 @@ pub fn not_run(
         impacts_per_period: f64::NAN,
         crossings_per_period: [f64::NAN; MAX_EVENTS],
         period,
+        orbit_period: None,
         orbit_term: f64::NAN,
         bifurcation: Vec::new(),
         jacobians: Vec::new(),

@@ -36,6 +36,8 @@ pub struct MethodSettings {
     pub lyapunov: bool,
     /// How many of the last reference points to keep.
     pub bifurcation_points: usize,
+    /// The longest orbit period (in map iterations) a lane is tested for.
+    pub max_period: usize,
     /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
     pub submaps: Option<usize>,
     /// Whether rounding accumulates over the RK4 steps of an iteration (f64),

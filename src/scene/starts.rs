@@ -1,0 +1,286 @@
+//! `[attractors]`: many starts per swept value, so that every attractor a
+//! value holds can be found, not only the one a single start falls into.
+//!
+//! The starts are states, the same at every value: `starts = N` drawn
+//! uniformly in a `box` over some states (reproducibly, from `seed`; the
+//! states the box does not name keep `integration.initial_state`),
+//! `grid = [n, …]`, a regular grid over the box with its corners (numpy's
+//! `linspace` on each named state, in the model's order of states), or
+//! `list`, whole states given one by one.
+
+use std::collections::BTreeMap;
+
+use serde::Deserialize;
+
+use crate::error::{Error, Result};
+use crate::system::SystemInfo;
+
+/// The default longest period a lane's orbit is tested for.
+pub const DEFAULT_MAX_PERIOD: usize = 12;
+
+/// `[attractors]` as the file gives it.
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawAttractors {
+    pub(super) starts: Option<usize>,
+    pub(super) seed: Option<u64>,
+    #[serde(rename = "box")]
+    pub(super) bounds: Option<BTreeMap<String, Vec<f64>>>,
+    pub(super) grid: Option<Vec<usize>>,
+    pub(super) list: Option<Vec<Vec<f64>>>,
+    pub(super) max_period: Option<usize>,
+}
+
+/// How the starts were chosen (the basin fractions of random and grid
+/// starts estimate how much of the box leads to each attractor).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Layout {
+    Random { seed: u64 },
+    Grid { counts: Vec<usize> },
+    List,
+}
+
+/// The starts of every swept value: lane k of the sweep starts from
+/// `states[k % states.len()]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Starts {
+    pub layout: Layout,
+    /// Whole states, one per start.
+    pub states: Vec<Vec<f64>>,
+    /// The longest period a lane's orbit is tested for.
+    pub max_period: usize,
+}
+
+/// Starts per value that a scene may ask for (a start is a lane at every
+/// value; the run's size is checked against the budget as a whole).
+const MAX_STARTS: usize = 1 << 20;
+
+impl Layout {
+    /// The key that chose the starts, for messages.
+    pub fn key(&self) -> &'static str {
+        match self {
+            Layout::Random { .. } => "attractors.starts",
+            Layout::Grid { .. } => "attractors.grid",
+            Layout::List => "attractors.list",
+        }
+    }
+}
+
+impl RawAttractors {
+    /// The key that chooses the starts (for the size check's message).
+    pub(super) fn key(&self) -> &'static str {
+        match (&self.starts, &self.grid) {
+            (Some(_), _) => "attractors.starts",
+            (None, Some(_)) => "attractors.grid",
+            _ => "attractors.list",
+        }
+    }
+
+    /// The number of starts the table asks for, before anything is
+    /// generated (for the size check).
+    pub(super) fn count(&self) -> usize {
+        match (&self.starts, &self.grid, &self.list) {
+            (Some(n), _, _) => *n,
+            (None, Some(grid), _) => grid
+                .iter()
+                .try_fold(1usize, |a, &n| a.checked_mul(n))
+                .unwrap_or(usize::MAX),
+            (None, None, Some(list)) => list.len(),
+            _ => 1,
+        }
+    }
+}
+
+/// The table checked against the system, and its starts generated.
+pub(super) fn resolve_starts(
+    raw: RawAttractors,
+    info: &SystemInfo,
+    initial_state: &[f64],
+) -> Result<Starts> {
+    let max_period = raw.max_period.unwrap_or(DEFAULT_MAX_PERIOD);
+    if max_period == 0 {
+        return Err(Error::invalid(
+            "attractors.max_period",
+            "must be at least 1",
+        ));
+    }
+    let given = [raw.starts.is_some(), raw.grid.is_some(), raw.list.is_some()];
+    if given.iter().filter(|&&g| g).count() != 1 {
+        return Err(Error::invalid(
+            "attractors",
+            "give exactly one of starts = N (random in a box), grid = [n, …] (a grid over the box) or list = [[…], …]",
+        ));
+    }
+    let names: Vec<String> = info.state_names.iter().map(|s| s.to_string()).collect();
+    if let Some(list) = raw.list {
+        if raw.bounds.is_some() || raw.seed.is_some() {
+            return Err(Error::invalid(
+                "attractors.list",
+                "gives whole states: box and seed do not apply to it",
+            ));
+        }
+        for (s, state) in list.iter().enumerate() {
+            if state.len() != initial_state.len() {
+                return Err(Error::invalid(
+                    "attractors.list",
+                    format!(
+                        "start {s} has {} numbers; a state has {} ({})",
+                        state.len(),
+                        initial_state.len(),
+                        names.join(", ")
+                    ),
+                ));
+            }
+            if let Some(v) = state.iter().find(|v| !v.is_finite()) {
+                return Err(Error::invalid(
+                    "attractors.list",
+                    format!("start {s} must be finite, got {v}"),
+                ));
+            }
+        }
+        check_count(list.len(), "attractors.list")?;
+        return Ok(Starts {
+            layout: Layout::List,
+            states: list,
+            max_period,
+        });
+    }
+    let bounds = box_of(raw.bounds, &names, initial_state.len())?;
+    if let Some(n) = raw.starts {
+        check_count(n, "attractors.starts")?;
+        let seed = raw.seed.unwrap_or(1);
+        let mut rng = fastrand::Rng::with_seed(seed);
+        let states = (0..n)
+            .map(|_| {
+                let mut state = initial_state.to_vec();
+                for &(i, lo, hi) in &bounds {
+                    state[i] = lo + (hi - lo) * rng.f64();
+                }
+                state
+            })
+            .collect();
+        return Ok(Starts {
+            layout: Layout::Random { seed },
+            states,
+            max_period,
+        });
+    }
+    let counts = raw.grid.unwrap_or_default();
+    if raw.seed.is_some() {
+        return Err(Error::invalid(
+            "attractors.seed",
+            "applies to random starts (starts = N), not to a grid",
+        ));
+    }
+    if counts.len() != bounds.len() {
+        return Err(Error::invalid(
+            "attractors.grid",
+            format!(
+                "needs one count per state of the box ({} states), got {}",
+                bounds.len(),
+                counts.len()
+            ),
+        ));
+    }
+    if let Some(n) = counts.iter().find(|&&n| n == 0) {
+        return Err(Error::invalid(
+            "attractors.grid",
+            format!("counts must be at least 1, got {n}"),
+        ));
+    }
+    let total = RawAttractors {
+        grid: Some(counts.clone()),
+        ..RawAttractors::default()
+    }
+    .count();
+    check_count(total, "attractors.grid")?;
+    // The first state of the box varies fastest.
+    let states = (0..total)
+        .map(|mut g| {
+            let mut state = initial_state.to_vec();
+            for (&(i, lo, hi), &n) in bounds.iter().zip(&counts) {
+                let j = g % n;
+                g /= n;
+                state[i] = linspace(lo, hi, n, j);
+            }
+            state
+        })
+        .collect();
+    Ok(Starts {
+        layout: Layout::Grid { counts },
+        states,
+        max_period,
+    })
+}
+
+/// numpy's `linspace(lo, hi, n)[j]`: `lo + j·step`, the last point `hi`
+/// exactly (one point: `lo`).
+fn linspace(lo: f64, hi: f64, n: usize, j: usize) -> f64 {
+    if j + 1 == n && n > 1 {
+        return hi;
+    }
+    let step = if n > 1 {
+        (hi - lo) / (n - 1) as f64
+    } else {
+        0.0
+    };
+    lo + j as f64 * step
+}
+
+fn check_count(n: usize, key: &str) -> Result<()> {
+    if n == 0 || n > MAX_STARTS {
+        return Err(Error::invalid(
+            key,
+            format!("asks for {n} starts per value: between 1 and {MAX_STARTS}"),
+        ));
+    }
+    Ok(())
+}
+
+/// The box's (state index, low, high), in the order of the states.
+fn box_of(
+    bounds: Option<BTreeMap<String, Vec<f64>>>,
+    names: &[String],
+    states: usize,
+) -> Result<Vec<(usize, f64, f64)>> {
+    let bounds = bounds.ok_or_else(|| {
+        Error::invalid(
+            "attractors.box",
+            format!(
+                "is required with starts or grid: a range per state, e.g. box = {{ {} = [-3, 3] }}",
+                names.first().map_or("x", |s| s.as_str())
+            ),
+        )
+    })?;
+    if bounds.is_empty() {
+        return Err(Error::invalid(
+            "attractors.box",
+            "names no state: give a range for at least one",
+        ));
+    }
+    let mut out = Vec::new();
+    for (name, range) in bounds {
+        let key = format!("attractors.box.{name}");
+        let i = names
+            .iter()
+            .take(states)
+            .position(|n| *n == name)
+            .ok_or_else(|| {
+                Error::invalid(
+                    &key,
+                    format!("is not a state (the states: {})", names.join(", ")),
+                )
+            })?;
+        match range[..] {
+            [lo, hi] if lo.is_finite() && hi.is_finite() && lo < hi => out.push((i, lo, hi)),
+            _ => {
+                return Err(Error::invalid(
+                    &key,
+                    format!("must be [low, high], finite with low < high, got {range:?}"),
+                ))
+            }
+        }
+    }
+    out.sort_by_key(|&(i, _, _)| i);
+    Ok(out)
+}
