@@ -131,6 +131,12 @@ fn strs(args: &[String]) -> Vec<&str> {
     args.iter().map(String::as_str).collect()
 }
 
+/// The run's pause before each step of its write phase. Long against the
+/// scheduling delays of a loaded 2-core machine: at 60 ms, with the other
+/// tests of this file running beside it, kills meant for a step before the
+/// swap sometimes landed after it.
+const PAUSE_MS: u64 = 250;
+
 #[test]
 fn a_run_killed_anywhere_in_its_write_phase_leaves_one_complete_set() {
     let dir = tempfile::tempdir().unwrap();
@@ -158,7 +164,7 @@ fn a_run_killed_anywhere_in_its_write_phase_leaves_one_complete_set() {
                 ok(lyapsweep(&strs(&with_out(&previous, &out)), &[]));
                 let mut child = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
                     .args(strs(&with_out(&new, &out)))
-                    .env("LYAPSWEEP_TEST_WRITE_PAUSE_MS", "60")
+                    .env("LYAPSWEEP_TEST_WRITE_PAUSE_MS", PAUSE_MS.to_string())
                     .stdout(Stdio::null())
                     .stderr(Stdio::piped())
                     .spawn()
@@ -169,7 +175,7 @@ fn a_run_killed_anywhere_in_its_write_phase_leaves_one_complete_set() {
                     .filter(|l| l.starts_with("writing: "));
                 let reached = steps.nth(step).is_some();
                 if reached && after_pause {
-                    std::thread::sleep(std::time::Duration::from_millis(65));
+                    std::thread::sleep(std::time::Duration::from_millis(PAUSE_MS + 5));
                 }
                 // SAFETY: kill(2) on our own child's pid.
                 unsafe { libc::kill(child.id() as i32, signal) };
