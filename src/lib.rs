@@ -14,6 +14,7 @@
 //! the figures).
 
 pub mod array;
+pub mod attractor;
 pub mod backend;
 pub mod bench;
 pub mod error;
@@ -27,6 +28,7 @@ pub mod plan;
 pub mod scene;
 pub mod system;
 
-pub use backend::{run, run_streaming, run_with, Progress, Report, RunOptions, Summary};
+pub use attractor::{run_streaming, Attractors};
+pub use backend::{run, run_with, Progress, Report, RunOptions, Summary};
 pub use error::{Error, Result};
 pub use scene::Scene;

@@ -215,15 +215,15 @@ fn run(
         ..Default::default()
     };
     let batch = lyapsweep::plan::batch_lanes(&scene);
-    let summary = lyapsweep::run_streaming(&scene, &options, batch, |batch, report| {
+    let outcome = lyapsweep::run_streaming(&scene, &options, batch, |batch, report| {
         writer.append(batch, report)
     });
     if let Some(w) = watcher {
         w.finish();
     }
-    let summary = summary?;
-    let written = writer.finish()?;
-    print_summary(&scene, &summary, &written);
+    let (summary, attractors) = outcome?;
+    let written = writer.finish(attractors.as_ref())?;
+    print_summary(&scene, &summary, attractors.as_ref(), &written);
     if summary.all_failed() {
         let reasons: Vec<String> = summary
             .failures
@@ -253,7 +253,12 @@ fn merge(out: &std::path::Path, shards: &[PathBuf]) -> Result<(), Error> {
 
 /// The summary a run prints: what ran where, on what, how, what was
 /// adjusted, how long it took and what came out.
-fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
+fn print_summary(
+    scene: &Scene,
+    report: &Summary,
+    attractors: Option<&lyapsweep::Attractors>,
+    written: &[PathBuf],
+) {
     println!("lyapsweep: {} ({})", scene.name, scene.system.kind);
     if let Some(choice) = &report.choice {
         println!("  {choice}");
@@ -264,7 +269,27 @@ fn print_summary(scene: &Scene, report: &Summary, written: &[PathBuf]) {
     print_adjustments(scene, report);
     println!("  time         {:.3} s", report.elapsed.as_secs_f64());
     print_gpu_run(report);
+    if let Some(found) = attractors {
+        print_attractors(scene, found);
+    }
     print_outcome(report, written);
+}
+
+/// What the many starts found: attractors, branches, continuation.
+fn print_attractors(scene: &Scene, found: &lyapsweep::Attractors) {
+    let total: usize = found.values.iter().map(|v| v.count()).sum();
+    println!(
+        "  attractors   {total} over {} values in {} branches; {} values hold more than one",
+        scene.sweep.points(),
+        found.branches,
+        found.several()
+    );
+    if found.passes > 0 {
+        println!(
+            "  continued    {} lanes in {} passes from the neighbours' attractors",
+            found.continued_lanes, found.passes
+        );
+    }
 }
 
 /// The backend and precision, and for the GPU its adapter and kernels.
@@ -325,7 +350,12 @@ fn print_lanes(scene: &Scene) {
             scene.sweep.lanes()
         )
     });
-    println!("  lanes        {}{shard}", ranges.join(" × "));
+    let starts = scene
+        .sweep
+        .starts
+        .as_ref()
+        .map_or(String::new(), |s| format!(" × {} starts", s.states.len()));
+    println!("  lanes        {}{starts}{shard}", ranges.join(" × "));
 }
 
 /// The method's settings as this backend uses them.

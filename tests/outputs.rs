@@ -406,12 +406,13 @@ fn a_run_streamed_in_batches_writes_the_bytes_of_one_batch() {
             .join(format!("batches-{batch}-{}", shard.is_some()));
         let mut writer = SetWriter::new(&scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
         let mut sizes = Vec::new();
-        let summary = lyapsweep::run_streaming(&scene, &Default::default(), batch, |b, r| {
-            sizes.push(r.lanes.len());
-            writer.append(b, r)
-        })
-        .unwrap();
-        writer.finish().unwrap();
+        let (summary, attractors) =
+            lyapsweep::run_streaming(&scene, &Default::default(), batch, |b, r| {
+                sizes.push(r.lanes.len());
+                writer.append(b, r)
+            })
+            .unwrap();
+        writer.finish(attractors.as_ref()).unwrap();
         let lanes = scene.run_lane_count();
         assert_eq!(sizes.iter().sum::<usize>(), lanes);
         assert_eq!(sizes.len(), lanes.div_ceil(batch));

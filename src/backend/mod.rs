@@ -352,17 +352,9 @@ pub fn run(scene: &Scene) -> Result<Report> {
 
 /// [`run`] with options that are not part of the scene.
 pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
-    let prepared = prepare(scene, options)?;
-    start_progress(scene, options);
-    run_batch(&prepared, scene, options)
-}
-
-/// The work of a run, in lane-iterations, on its progress.
-fn start_progress(scene: &Scene, options: &RunOptions) -> Progress {
-    let progress = options.progress.clone().unwrap_or_default();
-    let i = &scene.integration;
-    progress.start((scene.run_lane_count() * (i.transient + i.iterations)) as u64);
-    progress
+    let runner = Runner::new(scene, options)?;
+    runner.progress.start(runner.work(scene));
+    runner.run(scene)
 }
 
 /// [`run_with`] streamed: the run's lanes in batches of at most
@@ -374,144 +366,177 @@ pub fn run_streaming(
     scene: &Scene,
     options: &RunOptions,
     batch_lanes: usize,
-    mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
+    sink: impl FnMut(&Scene, &Report) -> Result<()>,
 ) -> Result<Summary> {
-    let prepared = prepare(scene, options)?;
-    start_progress(scene, options);
-    let lanes = scene.run_lane_count();
-    let mut summary: Option<Summary> = None;
-    for start in (0..lanes).step_by(batch_lanes.max(1)) {
-        let batch = scene.batch(start..(start + batch_lanes).min(lanes));
-        let report = run_batch(&prepared, &batch, options)?;
-        sink(&batch, &report)?;
-        match &mut summary {
-            Some(s) => s.absorb(&report),
-            None => summary = Some(Summary::of(scene, &report)),
-        }
-    }
+    let runner = Runner::new(scene, options)?;
+    runner.progress.start(runner.work(scene));
+    let mut summary = None;
+    runner.stream(scene, batch_lanes, &mut summary, sink)?;
     Ok(summary.expect("a scene has at least one lane"))
 }
 
-/// A run's backend, chosen and opened, with the settings every lane follows.
-struct Prepared {
+/// A run's backend, chosen and opened once, with the settings every lane
+/// follows: the lanes of the scene it was made for, or of scenes derived
+/// from it at the same values (a continuation pass), run on it alike.
+pub struct Runner {
     precision: Precision,
     choice: Option<String>,
     backend: Backend,
     settings: MethodSettings,
     gpu: Option<(context::Gpu, Variant)>,
+    options: RunOptions,
+    progress: Progress,
 }
 
-fn prepare(scene: &Scene, options: &RunOptions) -> Result<Prepared> {
-    let (plan, precision, choice) = plan(scene, options.device)?;
-    let (backend, settings, gpu) = match plan {
-        Plan::Cpu | Plan::Exact => {
-            let backend = if matches!(plan, Plan::Exact) {
-                Backend::Exact
-            } else {
-                Backend::Cpu
-            };
-            let mut settings = method_settings(scene, backend, Precision::F64);
-            settings.keep_jacobians = options.keep_jacobians;
-            (backend, settings, None)
-        }
-        Plan::Gpu(adapter, summary) => {
-            let mut settings = method_settings(scene, Backend::Gpu, precision);
-            settings.keep_jacobians = options.keep_jacobians;
-            follow_gpu_plan(scene, &mut settings)?;
-            let variant = variant(scene, precision);
-            let gpu = context::open(adapter, summary, precision)?;
-            (Backend::Gpu, settings, Some((gpu, variant)))
-        }
-    };
-    Ok(Prepared {
-        precision,
-        choice,
-        backend,
-        settings,
-        gpu,
-    })
-}
-
-/// The lanes of `scene` (a batch of the run, or all of it) on the prepared
-/// backend.
-fn run_batch(prepared: &Prepared, scene: &Scene, options: &RunOptions) -> Result<Report> {
-    let start = Instant::now();
-    let progress = options.progress.clone().unwrap_or_default();
-    let settings = &prepared.settings;
-    let precision = prepared.precision;
-    let (mut lanes, gpu_report) = match &prepared.gpu {
-        None => (cpu::sweep(scene, settings, &progress), None),
-        Some((gpu, variant)) => {
-            let mut run = gpu::run(gpu, scene, variant, settings, options)?;
-            // The kernels ran every lane with the sweep's plan; a lane whose
-            // own plan is beyond reach is not to be trusted (the CPU path
-            // does not run it at all).
-            for (k, lane) in run.lanes.iter_mut().enumerate() {
-                let own =
-                    (crate::method::runner(scene.system).plan)(&scene.lane_params(k), settings);
-                if !own.affordable() {
-                    *lane = crate::method::lane::not_run(
-                        settings,
-                        scene.system.dimension(),
-                        lane.period,
-                        own,
-                    );
-                }
+impl Runner {
+    /// Chooses and opens the backend `scene` asks for, and plans its lanes.
+    pub fn new(scene: &Scene, options: &RunOptions) -> Result<Runner> {
+        let (plan, precision, choice) = plan(scene, options.device)?;
+        let (backend, settings, gpu) = match plan {
+            Plan::Cpu | Plan::Exact => {
+                let backend = if matches!(plan, Plan::Exact) {
+                    Backend::Exact
+                } else {
+                    Backend::Cpu
+                };
+                let mut settings = method_settings(scene, backend, Precision::F64);
+                settings.keep_jacobians = options.keep_jacobians;
+                (backend, settings, None)
             }
-            let report = GpuReport {
-                adapter: gpu.summary.name.clone(),
-                adapter_backend: gpu.summary.backend.clone(),
-                variant: variant.name(),
-                kernel_sources: gpu::shader::source_dir(),
-                timings: run.timings,
-                batches: run.batches,
-                chunk_steps: run.chunk_steps,
-                retries: run.retries,
-                bytes_per_lane: run.bytes_per_lane,
-                validation: None,
-                recomputed: Vec::new(),
-            };
-            (run.lanes, Some(report))
-        }
-    };
-    let elapsed = start.elapsed();
-
-    let gpu_report = gpu_report.map(|mut report| {
-        report.recomputed = recompute_sliding(scene, &prepared.settings, &mut lanes);
-        date_transient_failures(scene, &mut lanes);
-        report.validation = validate(scene, precision, &prepared.settings, &mut lanes);
-        report
-    });
-    // The period-map kernels do not integrate a state-dependent divergence
-    // along the reference: on the GPU such a model's sum rule is unknown,
-    // not 0. (A section's host integrates it, as the CPU does.)
-    let orbit_unknown = gpu_report.is_some()
-        && scene
-            .system
-            .model
-            .is_some_and(|code| code.divergence_along.is_some() && code.section.is_none());
-    let expected_sums: Vec<f64> = lanes
-        .iter()
-        .enumerate()
-        .map(|(k, lane)| {
-            if orbit_unknown {
-                return f64::NAN;
+            Plan::Gpu(adapter, summary) => {
+                let mut settings = method_settings(scene, Backend::Gpu, precision);
+                settings.keep_jacobians = options.keep_jacobians;
+                follow_gpu_plan(scene, &mut settings)?;
+                let variant = variant(scene, precision);
+                let gpu = context::open(adapter, summary, precision)?;
+                (Backend::Gpu, settings, Some((gpu, variant)))
             }
-            let rates = lane.crossings_per_period.map(|c| c / lane.period);
-            (scene.system.expected_sum)(&scene.lane_params(k), &rates) + lane.orbit_term
+        };
+        Ok(Runner {
+            precision,
+            choice,
+            backend,
+            settings,
+            gpu,
+            options: options.clone(),
+            progress: options.progress.clone().unwrap_or_default(),
         })
-        .collect();
-    flag_sum_rule(&mut lanes, &expected_sums, precision);
-    Ok(Report {
-        backend: prepared.backend,
-        precision,
-        choice: prepared.choice.clone(),
-        lanes,
-        expected_sums,
-        elapsed,
-        threads: rayon::current_num_threads(),
-        gpu: gpu_report,
-    })
+    }
+
+    /// The work of `scene`'s lanes, in lane-iterations, for the progress.
+    pub fn work(&self, scene: &Scene) -> u64 {
+        let i = &scene.integration;
+        (scene.run_lane_count() * (i.transient + i.iterations)) as u64
+    }
+
+    /// The run's progress (a continuation pass extends its total).
+    pub fn progress(&self) -> &Progress {
+        &self.progress
+    }
+
+    /// Runs `scene`'s lanes in batches of at most `batch_lanes`, handing
+    /// each to `sink` and adding it to `summary`.
+    pub fn stream(
+        &self,
+        scene: &Scene,
+        batch_lanes: usize,
+        summary: &mut Option<Summary>,
+        mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
+    ) -> Result<()> {
+        let lanes = scene.run_lane_count();
+        for start in (0..lanes).step_by(batch_lanes.max(1)) {
+            let batch = scene.batch(start..(start + batch_lanes).min(lanes));
+            let report = self.run(&batch)?;
+            sink(&batch, &report)?;
+            match summary {
+                Some(s) => s.absorb(&report),
+                None => *summary = Some(Summary::of(scene, &report)),
+            }
+        }
+        Ok(())
+    }
+
+    /// The lanes of `scene` (a batch of the run, or all of it).
+    pub fn run(&self, scene: &Scene) -> Result<Report> {
+        let start = Instant::now();
+        let options = &self.options;
+        let progress = self.progress.clone();
+        let settings = &self.settings;
+        let precision = self.precision;
+        let (mut lanes, gpu_report) = match &self.gpu {
+            None => (cpu::sweep(scene, settings, &progress), None),
+            Some((gpu, variant)) => {
+                let mut run = gpu::run(gpu, scene, variant, settings, options)?;
+                // The kernels ran every lane with the sweep's plan; a lane whose
+                // own plan is beyond reach is not to be trusted (the CPU path
+                // does not run it at all).
+                for (k, lane) in run.lanes.iter_mut().enumerate() {
+                    let own =
+                        (crate::method::runner(scene.system).plan)(&scene.lane_params(k), settings);
+                    if !own.affordable() {
+                        *lane = crate::method::lane::not_run(
+                            settings,
+                            scene.system.dimension(),
+                            lane.period,
+                            own,
+                        );
+                    }
+                }
+                let report = GpuReport {
+                    adapter: gpu.summary.name.clone(),
+                    adapter_backend: gpu.summary.backend.clone(),
+                    variant: variant.name(),
+                    kernel_sources: gpu::shader::source_dir(),
+                    timings: run.timings,
+                    batches: run.batches,
+                    chunk_steps: run.chunk_steps,
+                    retries: run.retries,
+                    bytes_per_lane: run.bytes_per_lane,
+                    validation: None,
+                    recomputed: Vec::new(),
+                };
+                (run.lanes, Some(report))
+            }
+        };
+        let elapsed = start.elapsed();
+
+        let gpu_report = gpu_report.map(|mut report| {
+            report.recomputed = recompute_sliding(scene, &self.settings, &mut lanes);
+            date_transient_failures(scene, &mut lanes);
+            report.validation = validate(scene, precision, &self.settings, &mut lanes);
+            report
+        });
+        // The period-map kernels do not integrate a state-dependent divergence
+        // along the reference: on the GPU such a model's sum rule is unknown,
+        // not 0. (A section's host integrates it, as the CPU does.)
+        let orbit_unknown = gpu_report.is_some()
+            && scene
+                .system
+                .model
+                .is_some_and(|code| code.divergence_along.is_some() && code.section.is_none());
+        let expected_sums: Vec<f64> = lanes
+            .iter()
+            .enumerate()
+            .map(|(k, lane)| {
+                if orbit_unknown {
+                    return f64::NAN;
+                }
+                let rates = lane.crossings_per_period.map(|c| c / lane.period);
+                (scene.system.expected_sum)(&scene.lane_params(k), &rates) + lane.orbit_term
+            })
+            .collect();
+        flag_sum_rule(&mut lanes, &expected_sums, precision);
+        Ok(Report {
+            backend: self.backend,
+            precision,
+            choice: self.choice.clone(),
+            lanes,
+            expected_sums,
+            elapsed,
+            threads: rayon::current_num_threads(),
+            gpu: gpu_report,
+        })
+    }
 }
 
 /// What a run did over all its batches: what the command prints.

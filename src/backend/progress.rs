@@ -22,6 +22,11 @@ impl Progress {
         self.0.total.store(total, Ordering::Relaxed);
     }
 
+    /// `n` more lane-iterations join the run (a continuation pass).
+    pub fn extend(&self, n: u64) {
+        self.0.total.fetch_add(n, Ordering::Relaxed);
+    }
+
     /// `n` more lane-iterations are done.
     pub fn advance(&self, n: u64) {
         self.0.done.fetch_add(n, Ordering::Relaxed);

@@ -15,6 +15,8 @@ pub const SHARD_FILE: &str = "shard.toml";
 pub const SPECTRUM_FILE: &str = "spectrum.csv";
 pub const GRID_FILE: &str = "grid.csv";
 pub const BIFURCATION_FILE: &str = "bifurcation.csv";
+pub const ATTRACTORS_FILE: &str = "attractors.csv";
+pub const BRANCH_COLUMN: &str = "branch";
 
 /// `spectrum.csv` for one swept parameter, `grid.csv` for two.
 pub fn spectrum_file(scene: &Scene) -> &'static str {

@@ -13,6 +13,7 @@
 //! lanes finish, and swapped in whole when complete, so the output folder
 //! holds one run's files or the previous run's, never a mix.
 
+pub mod attractor_table;
 pub mod figure;
 pub mod files;
 pub mod merge;
@@ -23,26 +24,28 @@ pub mod set;
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use crate::attractor::{self, Attractors};
 use crate::backend::Report;
 use crate::error::{Error, Result};
 use crate::model::code::event_column;
 use crate::scene::Scene;
 use files::{csv_to_io, number, write_text};
 pub use files::{
-    spectrum_file, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE,
-    SWEEP_FIGURE,
+    spectrum_file, ATTRACTORS_FILE, BIFURCATION_FILE, BRANCH_COLUMN, GRID_FILE, HEAT_MAP,
+    SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
 };
 pub use set::Staging;
 
 /// The header of `spectrum.csv` (`grid.csv`): the swept parameters, then
 /// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period`, for a
 /// model one `<event>_per_period` column per event, then
-/// `grazing,grazing_bound`, with `[attractors]` `start`, then
+/// `grazing,grazing_bound`, with `[attractors]` `start,branch`, then
 /// `period,status`: `grazing` counts the averaging iterations re-estimated
 /// near grazing and `grazing_bound` their estimated exponent error per unit
-/// time, `start` is the lane's start among its value's, `period` its
-/// orbit's period in map iterations (empty when aperiodic or longer than
-/// `max_period`).
+/// time, `start` is the lane's start among its value's (the scene's starts,
+/// then the continuation seeds), `branch` the branch of the attractor it
+/// ended on (empty for a lone failed lane), `period` its orbit's period in
+/// map iterations (empty when aperiodic or longer than `max_period`).
 pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
@@ -50,7 +53,7 @@ pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
     header.extend(["grazing", "grazing_bound"].map(String::from));
     if scene.sweep.starts.is_some() {
-        header.push(START_COLUMN.into());
+        header.extend([START_COLUMN, BRANCH_COLUMN].map(String::from));
     }
     header.extend([PERIOD_COLUMN, "status"].map(String::from));
     header
@@ -62,19 +65,20 @@ pub const START_COLUMN: &str = "start";
 pub const PERIOD_COLUMN: &str = "period";
 
 /// The header of `bifurcation.csv`: the swept parameters, then the state,
-/// with `[attractors]` then the lane's start.
+/// with `[attractors]` then the lane's start and branch.
 pub fn bifurcation_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
     if scene.sweep.starts.is_some() {
-        header.push(START_COLUMN.into());
+        header.extend([START_COLUMN, BRANCH_COLUMN].map(String::from));
     }
     header
 }
 
 /// Writes a run's set: `scene.toml` first, then the rows of each batch of
-/// lanes as it finishes ([`append`](Self::append)), then `shard.toml` or the
-/// figures, and the swap ([`finish`](Self::finish)).
+/// lanes as it finishes ([`append`](Self::append)), then with many starts
+/// `attractors.csv` and the rows' branches, `shard.toml` or the figures,
+/// and the swap ([`finish`](Self::finish)).
 pub struct SetWriter {
     staging: Staging,
     scene: Scene,
@@ -82,6 +86,9 @@ pub struct SetWriter {
     bifurcation: Option<csv::Writer<fs::File>>,
     /// Rows of `bifurcation.csv` per lane so far (a shard lists them).
     bifurcation_rows: Vec<usize>,
+    /// With `[attractors]`, each lane's (grid point, start) so far, in the
+    /// order of its rows: their branches are filled in at the end.
+    lanes: Vec<(u32, u32)>,
 }
 
 fn write_error(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
@@ -119,6 +126,7 @@ impl SetWriter {
             spectrum,
             bifurcation,
             bifurcation_rows: Vec::new(),
+            lanes: Vec::new(),
         })
     }
 
@@ -132,6 +140,12 @@ impl SetWriter {
                 w.write_record(&row)
                     .map_err(|e| write_error(&path)(csv_to_io(e)))?;
             }
+        }
+        if batch.sweep.starts.is_some() {
+            self.lanes.extend((0..report.lanes.len()).map(|j| {
+                let point = batch.sweep.point_of(batch.sweep_lane(j));
+                (point as u32, batch.lane_start(j) as u32)
+            }));
         }
         for j in 0..report.lanes.len() {
             let rows = bifurcation_rows(batch, report, j);
@@ -147,9 +161,11 @@ impl SetWriter {
         Ok(())
     }
 
-    /// Completes the set (shard.toml for a shard, the figures otherwise) and
-    /// swaps it into the output folder; returns the paths written there.
-    pub fn finish(self) -> Result<Vec<PathBuf>> {
+    /// Completes the set (with many starts `attractors.csv` and the rows'
+    /// branches from `attractors`; shard.toml for a shard, the figures
+    /// otherwise) and swaps it into the output folder; returns the paths
+    /// written there.
+    pub fn finish(self, attractors: Option<&Attractors>) -> Result<Vec<PathBuf>> {
         let dir = self.staging.dir().to_owned();
         for (writer, name) in [
             (self.spectrum, spectrum_file(&self.scene)),
@@ -164,6 +180,21 @@ impl SetWriter {
             }
         }
         let scene = &self.scene;
+        if let Some(found) = attractors {
+            set::pause(ATTRACTORS_FILE);
+            attractor_table::write_attractors(scene, found, &dir)?;
+            let lanes = || self.lanes.iter().map(|&(g, s)| (g as usize, s as usize));
+            if scene.lyapunov {
+                attractor_table::fill_branches(&dir.join(spectrum_file(scene)), found, lanes())?;
+            }
+            if scene.bifurcation_points > 0 {
+                let rows = self.bifurcation_rows.iter();
+                let per_row = lanes()
+                    .zip(rows)
+                    .flat_map(|(lane, &n)| std::iter::repeat_n(lane, n));
+                attractor_table::fill_branches(&dir.join(BIFURCATION_FILE), found, per_row)?;
+            }
+        }
         if let Some(shard) = scene.shard {
             let rows: Vec<String> = self
                 .bifurcation_rows
@@ -195,12 +226,14 @@ impl SetWriter {
     }
 }
 
-/// Writes the whole set of one report into `dir` (a run in one batch; the
+/// Writes the whole set of one report into `dir` (a run in one batch,
+/// its attractors told apart from its own lanes, without continuation; the
 /// command streams batches through [`SetWriter`] itself); returns the paths.
 pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut writer = SetWriter::new(scene, Staging::prepare(dir, &scene.files)?)?;
     writer.append(scene, report)?;
-    writer.finish()
+    let found = attractor::found_in(scene, report);
+    writer.finish(found.as_ref())
 }
 
 /// The `spectrum.csv` rows of the run's lanes, in order.
@@ -223,7 +256,8 @@ fn spectrum_rows<'a>(
         row.push(lane.grazing.to_string());
         row.push(number(lane.grazing_bound));
         if scene.sweep.starts.is_some() {
-            row.push(scene.lane_start(j).to_string());
+            // The branch is filled in when the set is finished.
+            row.extend([scene.lane_start(j).to_string(), String::new()]);
         }
         row.push(lane.orbit_period.map_or(String::new(), |p| p.to_string()));
         row.push(lane.status.to_string());
@@ -234,18 +268,19 @@ fn spectrum_rows<'a>(
 /// The `bifurcation.csv` rows of the run's lane `j`.
 fn bifurcation_rows(scene: &Scene, report: &Report, j: usize) -> Vec<Vec<String>> {
     let parameters: Vec<String> = scene.lane_values(j).into_iter().map(number).collect();
+    // The branch is filled in when the set is finished.
     let start = scene
         .sweep
         .starts
         .is_some()
-        .then(|| scene.lane_start(j).to_string());
+        .then(|| [scene.lane_start(j).to_string(), String::new()]);
     report.lanes[j]
         .bifurcation
         .chunks_exact(scene.system.dimension())
         .map(|point| {
             let mut row = parameters.clone();
             row.extend(point.iter().map(|&x| number(x)));
-            row.extend(start.clone());
+            row.extend(start.clone().into_iter().flatten());
             row
         })
         .collect()

@@ -24,8 +24,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::files::{
-    write_text, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE,
-    SWEEP_FIGURE,
+    write_text, ATTRACTORS_FILE, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE,
+    SPECTRUM_FILE, SWEEP_FIGURE,
 };
 use crate::error::{Error, Result};
 
@@ -34,12 +34,13 @@ pub const MANIFEST_FILE: &str = "manifest.toml";
 
 /// The data files a set may hold (the figures are drawn from them and are
 /// not part of the manifest: `plot` redraws them in place).
-const DATA_FILES: [&str; 5] = [
+const DATA_FILES: [&str; 6] = [
     SCENE_FILE,
     SHARD_FILE,
     SPECTRUM_FILE,
     GRID_FILE,
     BIFURCATION_FILE,
+    ATTRACTORS_FILE,
 ];
 const FIGURE_STEMS: [&str; 2] = [SWEEP_FIGURE, HEAT_MAP];
 

@@ -64,8 +64,9 @@ pub use defaults::{
     DEFAULT_PERTURBATION_F64, DEFAULT_STEPS_PER_PERIOD, DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 pub use model_file::model_path;
+pub use starts::Continuation;
 pub use types::{
-    Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Shard, Starts, Sweep,
+    Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Seed, Shard, Starts, Sweep,
 };
 
 /// Reads and checks a scene file, applying `--set key.path=value` overrides first.

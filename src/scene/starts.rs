@@ -29,6 +29,32 @@ pub(super) struct RawAttractors {
     pub(super) grid: Option<Vec<usize>>,
     pub(super) list: Option<Vec<Vec<f64>>>,
     pub(super) max_period: Option<usize>,
+    pub(super) continuation: Option<Continuation>,
+}
+
+/// Which neighbours each value is also started from: the attractors found
+/// at the value below (`up`, following branches as the parameter grows),
+/// above (`down`), both, or neither.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Continuation {
+    #[default]
+    None,
+    Up,
+    Down,
+    Both,
+}
+
+impl Continuation {
+    /// Whether value i is started from value i - 1's attractors.
+    pub fn up(self) -> bool {
+        matches!(self, Continuation::Up | Continuation::Both)
+    }
+
+    /// Whether value i is started from value i + 1's attractors.
+    pub fn down(self) -> bool {
+        matches!(self, Continuation::Down | Continuation::Both)
+    }
 }
 
 /// How the starts were chosen (the basin fractions of random and grid
@@ -49,6 +75,7 @@ pub struct Starts {
     pub states: Vec<Vec<f64>>,
     /// The longest period a lane's orbit is tested for.
     pub max_period: usize,
+    pub continuation: Continuation,
 }
 
 /// Starts per value that a scene may ask for (a start is a lane at every
@@ -98,6 +125,13 @@ pub(super) fn resolve_starts(
     initial_state: &[f64],
 ) -> Result<Starts> {
     let max_period = raw.max_period.unwrap_or(DEFAULT_MAX_PERIOD);
+    let continuation = raw.continuation.unwrap_or_default();
+    if continuation != Continuation::None && info.model.is_some_and(|m| m.section.is_some()) {
+        return Err(Error::invalid(
+            "attractors.continuation",
+            "needs a period map or a map: a Poincaré section's points are not whole states to start a flow from",
+        ));
+    }
     if max_period == 0 {
         return Err(Error::invalid(
             "attractors.max_period",
@@ -143,6 +177,7 @@ pub(super) fn resolve_starts(
             layout: Layout::List,
             states: list,
             max_period,
+            continuation,
         });
     }
     let bounds = box_of(raw.bounds, &names, initial_state.len())?;
@@ -163,6 +198,7 @@ pub(super) fn resolve_starts(
             layout: Layout::Random { seed },
             states,
             max_period,
+            continuation,
         });
     }
     let counts = raw.grid.unwrap_or_default();
@@ -210,6 +246,7 @@ pub(super) fn resolve_starts(
         layout: Layout::Grid { counts },
         states,
         max_period,
+        continuation,
     })
 }
 

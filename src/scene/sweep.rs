@@ -58,6 +58,7 @@ pub(super) fn resolve_sweep(
         first,
         second,
         starts: None,
+        seeds: None,
     })
 }
 

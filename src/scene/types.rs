@@ -124,12 +124,36 @@ pub struct Sweep {
     pub second: Option<Axis>,
     /// Many starts per point of the grid, if the scene asks for them.
     pub starts: Option<Starts>,
+    /// Lanes given one by one instead of points × starts: a continuation
+    /// pass, each lane a neighbouring value's attractor carried over.
+    pub seeds: Option<Vec<Seed>>,
+}
+
+/// A lane of a continuation pass: point `point` of the grid started from
+/// `state`, numbered `start` among its point's lanes (after the scene's
+/// own starts).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Seed {
+    pub point: usize,
+    pub start: usize,
+    pub state: Vec<f64>,
 }
 
 impl Sweep {
     /// Lanes in the whole sweep.
     pub fn lanes(&self) -> usize {
-        self.points() * self.starts_per_point()
+        match &self.seeds {
+            Some(seeds) => seeds.len(),
+            None => self.points() * self.starts_per_point(),
+        }
+    }
+
+    /// The point of the grid lane `k` runs at.
+    pub fn point_of(&self, k: usize) -> usize {
+        match &self.seeds {
+            Some(seeds) => seeds[k].point,
+            None => k / self.starts_per_point(),
+        }
     }
 
     /// Points of the parameter grid (values of a one-parameter sweep).
@@ -151,14 +175,18 @@ impl Sweep {
 
     /// The start of lane `k` among its point's (0 without `[attractors]`).
     pub fn start_index(&self, k: usize) -> usize {
-        k % self.starts_per_point()
+        match &self.seeds {
+            Some(seeds) => seeds[k].start,
+            None => k % self.starts_per_point(),
+        }
     }
 
     /// The state lane `k` starts from: its start's, or `initial_state`.
     pub fn initial_state_at<'a>(&'a self, k: usize, initial_state: &'a [f64]) -> &'a [f64] {
-        match &self.starts {
-            Some(starts) => &starts.states[self.start_index(k)],
-            None => initial_state,
+        match (&self.seeds, &self.starts) {
+            (Some(seeds), _) => &seeds[k].state,
+            (None, Some(starts)) => &starts.states[self.start_index(k)],
+            (None, None) => initial_state,
         }
     }
 
@@ -169,10 +197,14 @@ impl Sweep {
 
     /// The swept values of lane `k`, one per axis.
     pub fn values_at(&self, k: usize) -> Vec<f64> {
-        let k = k / self.starts_per_point();
+        self.values_at_point(self.point_of(k))
+    }
+
+    /// The swept values at point `g` of the grid, one per axis.
+    pub fn values_at_point(&self, g: usize) -> Vec<f64> {
         let n = self.first.values.len();
-        let mut values = vec![self.first.values[k % n]];
-        values.extend(self.second.as_ref().map(|a| a.values[k / n]));
+        let mut values = vec![self.first.values[g % n]];
+        values.extend(self.second.as_ref().map(|a| a.values[g / n]));
         values
     }
 }
@@ -301,11 +333,31 @@ impl Scene {
 
     /// The parameter values of sweep lane `k` (of the whole sweep).
     pub fn params_at(&self, k: usize) -> Params {
+        self.params_at_point(self.sweep.point_of(k))
+    }
+
+    /// The parameter values at point `g` of the grid.
+    pub fn params_at_point(&self, g: usize) -> Params {
         let mut p = self.params.clone();
-        for (axis, value) in self.sweep.axes().zip(self.sweep.values_at(k)) {
+        for (axis, value) in self.sweep.axes().zip(self.sweep.values_at_point(g)) {
             p.set(axis.index, value);
         }
         p
+    }
+
+    /// This scene's lanes replaced by `seeds` (a continuation pass): the
+    /// same system, values and settings, each lane started where its seed
+    /// says.
+    pub fn continued(&self, seeds: Vec<Seed>) -> Scene {
+        Scene {
+            sweep: std::sync::Arc::new(Sweep {
+                seeds: Some(seeds),
+                ..(*self.sweep).clone()
+            }),
+            shard: None,
+            batch: None,
+            ..self.clone()
+        }
     }
 
     /// The parameter values of this run's lane `j`.
@@ -381,6 +433,14 @@ impl Scene {
 
     /// This scene restricted to `shard` (checked against the sweep's size).
     pub fn sharded(mut self, shard: Shard) -> Result<Scene> {
+        if self.sweep.starts.is_some() {
+            // A value's attractors are told apart from all its lanes, and
+            // branches from its neighbours': a shard holds neither whole.
+            return Err(Error::invalid(
+                "--shard",
+                "a scene with [attractors] runs whole: a value's starts and its neighbours are compared with each other",
+            ));
+        }
         let lanes = self.sweep.lanes();
         if shard.count > lanes {
             return Err(Error::invalid(

@@ -276,6 +276,7 @@ where
                 crossings_per_period: [f64::NAN; MAX_EVENTS],
                 period: self.period,
                 orbit_period: None,
+                orbit: Vec::new(),
                 orbit_term: f64::NAN,
                 bifurcation: self.bifurcation,
                 jacobians: self.jacobians.unwrap_or_default(),
@@ -354,12 +355,14 @@ where
         } else {
             LaneStatus::Ok
         };
+        let orbit_period = self.recent.period();
         LaneResult {
             exponents,
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
             crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
-            orbit_period: self.recent.period(),
+            orbit_period,
+            orbit: self.recent.orbit(orbit_period),
             orbit_term,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),

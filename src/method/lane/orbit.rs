@@ -62,6 +62,15 @@ impl<const D: usize> RecentPoints<D> {
             .find(|&p| (0..p).all(|i| self.close(self.back(i), self.back(i + p))))
     }
 
+    /// The orbit's last points, oldest first, D numbers each: its `period`
+    /// points when it has one, else every point held (up to
+    /// 2·max_period). The last is the lane's final state.
+    pub fn orbit(&self, period: Option<usize>) -> Vec<f64> {
+        let held = self.points.len().min(self.seen);
+        let n = period.unwrap_or(held).min(held);
+        (0..n).rev().flat_map(|i| *self.back(i)).collect()
+    }
+
     fn close(&self, a: &[f64; D], b: &[f64; D]) -> bool {
         let scale = a.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
         a.iter()
@@ -91,6 +100,21 @@ mod tests {
         assert_eq!(period_of(&three, 40, 2), None);
         assert_eq!(period_of(&three, 6, 12), Some(3));
         assert_eq!(period_of(&three, 5, 12), None);
+    }
+
+    #[test]
+    fn the_orbit_ends_on_the_last_point() {
+        let three = [[1.0, 0.0], [0.5, 2.0], [-1.0, 3.0]];
+        let mut recent = RecentPoints::<2>::new(12, f64::EPSILON);
+        for n in 0..40 {
+            recent.push(&three[n % 3]);
+        }
+        // The 40th point is three[0]; the period's points end there.
+        assert_eq!(recent.orbit(Some(3)), vec![0.5, 2.0, -1.0, 3.0, 1.0, 0.0]);
+        assert_eq!(recent.orbit(None).len(), 2 * 12 * 2);
+        let mut few = RecentPoints::<2>::new(12, f64::EPSILON);
+        few.push(&[4.0, 5.0]);
+        assert_eq!(few.orbit(None), vec![4.0, 5.0]);
     }
 
     #[test]

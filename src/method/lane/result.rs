@@ -144,6 +144,11 @@ pub struct LaneResult {
     /// (see [`RecentPoints`](super::orbit::RecentPoints)): `None` when
     /// aperiodic, or when its period exceeds the settings' `max_period`.
     pub orbit_period: Option<usize>,
+    /// The orbit's last points, oldest first, D numbers each: its
+    /// `orbit_period` points, or when it has none the last 2·max_period
+    /// (fewer if fewer were taken). The last point is the lane's final
+    /// state: what a neighbouring value is continued from.
+    pub orbit: Vec<f64>,
     /// A term of the sum rule that depends on the orbit, per unit time: a
     /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0
     /// for a period map).
@@ -187,6 +192,7 @@ pub fn not_run(
         crossings_per_period: [f64::NAN; MAX_EVENTS],
         period,
         orbit_period: None,
+        orbit: Vec::new(),
         orbit_term: f64::NAN,
         bifurcation: Vec::new(),
         jacobians: Vec::new(),

@@ -1,0 +1,215 @@
+//! Every attractor at every value: a sweep with many starts per value
+//! (`[attractors]`) has its lanes told apart into attractors at each value
+//! ([`group`]), each value also started from its neighbours' attractors
+//! (continuation), and the attractors matched across values into branches
+//! ([`branch`]).
+//!
+//! Continuation runs in passes over all values at once, so that the lanes
+//! of a pass fill the backend together: pass 0 is the scene's own starts;
+//! each later pass starts every value from the final states of the
+//! attractors that appeared at its neighbours in the pass before, until a
+//! pass finds nothing new. A branch that only continuation reaches takes a
+//! pass per value it extends over; one the starts already found costs one
+//! pass of a lane per neighbour.
+
+pub mod branch;
+pub mod group;
+
+use crate::backend::{Report, RunOptions, Runner, Summary};
+use crate::error::Result;
+use crate::scene::{Scene, Seed};
+use group::{Member, Rule, ValueAttractors};
+
+/// The attractors of a whole sweep.
+#[derive(Clone, Debug)]
+pub struct Attractors {
+    /// Per point of the grid (first axis fastest), its attractors.
+    pub values: Vec<ValueAttractors>,
+    /// The scene's starts per value (the continuation seeds come after).
+    pub starts: usize,
+    /// Branches found.
+    pub branches: usize,
+    /// Continuation passes run after the scene's starts, and their lanes.
+    pub passes: usize,
+    pub continued_lanes: usize,
+}
+
+impl Attractors {
+    /// Values that hold more than one attractor.
+    pub fn several(&self) -> usize {
+        self.values.iter().filter(|v| v.count() > 1).count()
+    }
+
+    /// The branch of the lane that started from `start` at grid point
+    /// `point` (`None` for a lone failed lane).
+    pub fn branch_of(&self, point: usize, start: usize) -> Option<usize> {
+        let value = &self.values[point];
+        value
+            .of_start
+            .get(start)
+            .copied()
+            .flatten()
+            .and_then(|a| value.attractors[a].branch)
+    }
+}
+
+/// [`backend::run_streaming`](crate::backend::run_streaming) with the
+/// scene's attractors found, continued and matched into branches when it
+/// has `[attractors]`: every pass's batches go to `sink` as they finish;
+/// the attractors come back with the summary.
+pub fn run_streaming(
+    scene: &Scene,
+    options: &RunOptions,
+    batch_lanes: usize,
+    mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
+) -> Result<(Summary, Option<Attractors>)> {
+    let runner = Runner::new(scene, options)?;
+    runner.progress().start(runner.work(scene));
+    let mut summary = None;
+    let Some(starts) = &scene.sweep.starts else {
+        runner.stream(scene, batch_lanes, &mut summary, sink)?;
+        return Ok((summary.expect("a scene has at least one lane"), None));
+    };
+    let mut found = Found::new(scene).expect("a scene with starts");
+    let mut frontier = Vec::new();
+    runner.stream(scene, batch_lanes, &mut summary, |batch, report| {
+        frontier.extend(found.absorb(batch, report));
+        sink(batch, report)
+    })?;
+    let (mut passes, mut continued_lanes) = (0, 0);
+    loop {
+        let seeds = found.seeds(scene, &frontier, starts.continuation);
+        if seeds.is_empty() {
+            break;
+        }
+        continued_lanes += seeds.len();
+        passes += 1;
+        let pass = scene.continued(seeds);
+        runner.progress().extend(runner.work(&pass));
+        frontier.clear();
+        runner.stream(&pass, batch_lanes, &mut summary, |batch, report| {
+            frontier.extend(found.absorb(batch, report));
+            sink(batch, report)
+        })?;
+    }
+    Ok((
+        summary.expect("a scene has at least one lane"),
+        Some(found.into_attractors(scene, passes, continued_lanes)),
+    ))
+}
+
+/// The attractors of a run held in one report (its own lanes, no
+/// continuation): `None` for a scene without `[attractors]`.
+pub fn found_in(scene: &Scene, report: &Report) -> Option<Attractors> {
+    let mut found = Found::new(scene)?;
+    found.absorb(scene, report);
+    Some(found.into_attractors(scene, 0, 0))
+}
+
+/// The attractors found so far, value by value.
+struct Found {
+    values: Vec<ValueAttractors>,
+    starts: usize,
+    dim: usize,
+    /// The attractor each continuation lane was started from, by the
+    /// lane's (grid point, start).
+    sources: std::collections::HashMap<(usize, usize), (usize, usize)>,
+}
+
+impl Found {
+    fn new(scene: &Scene) -> Option<Found> {
+        Some(Found {
+            values: vec![ValueAttractors::default(); scene.sweep.points()],
+            starts: scene.sweep.starts.as_ref()?.states.len(),
+            dim: scene.system.dimension(),
+            sources: Default::default(),
+        })
+    }
+
+    /// The attractors found, matched into branches.
+    fn into_attractors(
+        mut self,
+        scene: &Scene,
+        passes: usize,
+        continued_lanes: usize,
+    ) -> Attractors {
+        let n1 = scene.sweep.first.values.len();
+        let branches = branch::assign(&mut self.values, n1, self.dim);
+        Attractors {
+            values: self.values,
+            starts: self.starts,
+            branches,
+            passes,
+            continued_lanes,
+        }
+    }
+
+    /// Adds a batch's lanes to their values' attractors; returns the
+    /// attractors that are new, as (grid point, index).
+    fn absorb(&mut self, batch: &Scene, report: &Report) -> Vec<(usize, usize)> {
+        let rule = Rule::new(self.dim, report.precision.rounding_unit());
+        let mut new = Vec::new();
+        for (j, lane) in report.lanes.iter().enumerate() {
+            let point = batch.sweep.point_of(batch.sweep_lane(j));
+            let start = batch.lane_start(j);
+            let member = Member {
+                start,
+                lane: crate::method::LaneResult {
+                    bifurcation: Vec::new(),
+                    jacobians: Vec::new(),
+                    ..lane.clone()
+                },
+                expected_sum: report.expected_sums[j],
+            };
+            let (index, is_new) = self.values[point].join(member, start < self.starts, rule);
+            if let Some(&(from, attractor)) = self.sources.get(&(point, start)) {
+                self.values[point].links.push((index, from, attractor));
+            }
+            if is_new && !self.values[point].attractors[index].is_lone() {
+                new.push((point, index));
+            }
+        }
+        new
+    }
+
+    /// The lanes of the next continuation pass: each attractor of
+    /// `frontier` started at its neighbours along the first axis (the next
+    /// value up, the one before down) from its final state, where that
+    /// state may start a lane there.
+    fn seeds(
+        &mut self,
+        scene: &Scene,
+        frontier: &[(usize, usize)],
+        continuation: crate::scene::Continuation,
+    ) -> Vec<Seed> {
+        let n1 = scene.sweep.first.values.len();
+        let states = scene.integration.initial_state.len();
+        let mut next_start: Vec<usize> = self.values.iter().map(|v| v.of_start.len()).collect();
+        let mut seeds = Vec::new();
+        for &(point, index) in frontier {
+            let orbit = &self.values[point].attractors[index].first.lane.orbit;
+            if orbit.len() < states {
+                continue;
+            }
+            let state = orbit[orbit.len() - states..].to_vec();
+            let i = point % n1;
+            let up = (continuation.up() && i + 1 < n1).then_some(point + 1);
+            let down = (continuation.down() && i > 0).then(|| point - 1);
+            for target in up.into_iter().chain(down) {
+                let params = scene.params_at_point(target);
+                if (scene.system.check_state)(&params, &state).is_err() {
+                    continue;
+                }
+                let start = next_start[target].max(self.starts);
+                next_start[target] = start + 1;
+                self.sources.insert((target, start), (point, index));
+                seeds.push(Seed {
+                    point: target,
+                    start,
+                    state: state.clone(),
+                });
+            }
+        }
+        seeds
+    }
+}

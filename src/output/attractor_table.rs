@@ -1,0 +1,130 @@
+//! `attractors.csv`, one row per (value, attractor) of a sweep with many
+//! starts, and the `branch` column of `spectrum.csv` and
+//! `bifurcation.csv`, filled in once the branches are known (after the
+//! last continuation pass, so after the rows were streamed).
+
+use std::path::Path;
+
+use super::files::{number, write_atomically, BRANCH_COLUMN};
+use crate::attractor::Attractors;
+use crate::error::{Error, Result};
+use crate::model::code::event_column;
+use crate::scene::Scene;
+
+/// The header of `attractors.csv`: the swept parameters, `branch` (empty
+/// for a lone failed lane), `period` (empty when aperiodic),
+/// `impacts_per_period` and for a model one `<event>_per_period` column
+/// per event, with exponents `lambda_1..N,lambda_sum,expected_sum`, then
+/// `basin_fraction` (the share of the value's starts that end on it),
+/// `starts` (their count), the final state of the lane that found it, and
+/// its `status`.
+pub fn attractors_header(scene: &Scene) -> Vec<String> {
+    let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
+    header.extend([BRANCH_COLUMN, "period", "impacts_per_period"].map(String::from));
+    header.extend(scene.system.events.iter().map(|e| event_column(e)));
+    if scene.lyapunov {
+        header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
+        header.extend(["lambda_sum", "expected_sum"].map(String::from));
+    }
+    header.extend(["basin_fraction", "starts"].map(String::from));
+    header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
+    header.push("status".into());
+    header
+}
+
+/// The rows of `attractors.csv`, value by value in the grid's order.
+pub fn attractor_rows<'a>(
+    scene: &'a Scene,
+    found: &'a Attractors,
+) -> impl Iterator<Item = Vec<String>> + 'a {
+    let dim = scene.system.dimension();
+    let events = scene.system.events.len();
+    found
+        .values
+        .iter()
+        .enumerate()
+        .flat_map(move |(point, value)| {
+            let at: Vec<String> = scene
+                .sweep
+                .values_at_point(point)
+                .into_iter()
+                .map(number)
+                .collect();
+            value.attractors.iter().map(move |a| {
+                let lane = &a.first.lane;
+                let mut row = at.clone();
+                row.push(a.branch.map_or(String::new(), |b| b.to_string()));
+                row.push(lane.orbit_period.map_or(String::new(), |p| p.to_string()));
+                row.push(number(lane.impacts_per_period));
+                row.extend(
+                    lane.crossings_per_period[..events]
+                        .iter()
+                        .map(|&c| number(c)),
+                );
+                if scene.lyapunov {
+                    row.extend(lane.exponents.iter().map(|&e| number(e)));
+                    row.push(number(lane.exponent_sum()));
+                    row.push(number(a.first.expected_sum));
+                }
+                row.push(number(a.starts as f64 / found.starts as f64));
+                row.push(a.starts.to_string());
+                let last = lane.orbit.len().saturating_sub(dim);
+                match lane.orbit.get(last..).filter(|p| p.len() == dim) {
+                    Some(point) => row.extend(point.iter().map(|&x| number(x))),
+                    None => row.extend((0..dim).map(|_| String::new())),
+                }
+                row.push(lane.status.to_string());
+                row
+            })
+        })
+}
+
+/// Writes `attractors.csv` into `dir`.
+pub fn write_attractors(scene: &Scene, found: &Attractors, dir: &Path) -> Result<()> {
+    write_atomically(&dir.join(super::ATTRACTORS_FILE), |w| {
+        w.write_record(attractors_header(scene))?;
+        for row in attractor_rows(scene, found) {
+            w.write_record(&row)?;
+        }
+        Ok(())
+    })
+}
+
+/// Fills the `branch` column of the CSV file `path` (written with the
+/// column empty): record r gets the branch of lane `lane_of[r]`, a
+/// (grid point, start) pair.
+pub fn fill_branches(
+    path: &Path,
+    found: &Attractors,
+    lane_of: impl Iterator<Item = (usize, usize)>,
+) -> Result<()> {
+    let bad = |reason: String| Error::Results {
+        path: path.to_owned(),
+        reason,
+    };
+    let mut reader = csv::Reader::from_path(path).map_err(|e| bad(e.to_string()))?;
+    let header = reader.headers().map_err(|e| bad(e.to_string()))?.clone();
+    let column = header
+        .iter()
+        .position(|h| h == BRANCH_COLUMN)
+        .ok_or_else(|| bad(format!("has no {BRANCH_COLUMN} column")))?;
+    let mut lanes = lane_of;
+    write_atomically(path, |w| {
+        w.write_record(&header)?;
+        for record in reader.records() {
+            let record = record?;
+            let (point, start) = lanes.next().expect("a lane for every row");
+            let branch = found
+                .branch_of(point, start)
+                .map_or(String::new(), |b| b.to_string());
+            w.write_record(record.iter().enumerate().map(|(k, field)| {
+                if k == column {
+                    branch.as_str()
+                } else {
+                    field
+                }
+            }))?;
+        }
+        Ok(())
+    })
+}
