@@ -425,7 +425,8 @@ fn main() {
     }
     if wanted("attractors") {
         // At most 5 rounds: a round runs 2 × 262 144 lanes on each of three
-        // paths, about a minute on 2 cores, and 7 would take 8 minutes.
+        // paths, 74 s on the 2-core machine under a compile's load, and the
+        // warm-up and 7 rounds would take ten minutes.
         attractors(repeats.min(5));
     }
 }
