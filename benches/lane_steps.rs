@@ -26,12 +26,15 @@
 //! 8. the CPU path's native code built by the host's C compiler (the
 //!    default) against the tape's interpreter alone
 //!    (`LYAPSWEEP_STEP_LOOPS=interpreter`), whole runs alternated, on the
-//!    impacts section's sweep and on the seed's at 1800 steps.
+//!    impacts section's sweep and on the seed's at 1800 steps;
+//! 9. attractors: 4096 values × 64 starts (`[attractors]`) against 262 144
+//!    values × one start, the same lane count, through the command's
+//!    streaming entry, on the CPU path and the GPU adapter (f64, f32).
 //!
 //! GPU rows also give the device time of the compute passes where the
 //! adapter has timestamp queries. Name sections to run only those:
 //! `-- --quick paper cost` (first, paper, scaling, cost, workgroups, impacts,
-//! models, loops).
+//! models, loops, attractors).
 
 use std::time::Instant;
 
@@ -419,6 +422,12 @@ fn main() {
     }
     if wanted("loops") {
         loops(repeats);
+    }
+    if wanted("attractors") {
+        // At most 5 rounds: a round runs 2 × 262 144 lanes on each of three
+        // paths, 74 s on the 2-core machine under a compile's load, and the
+        // warm-up and 7 rounds would take ten minutes.
+        attractors(repeats.min(5));
     }
 }
 
@@ -857,5 +866,129 @@ fn workgroups(quick: bool) {
             }
         };
         println!("| {size} | {} | {} |", cells("f64"), cells("f32"));
+    }
+}
+
+/// Section 9: many starts per value (`[attractors]`) against one start per
+/// value, at the same lane count: 4096 values of η × a grid of 8 × 8 starts
+/// over x ∈ [-3, 1.9], v ∈ [-3, 3] (A), and 262 144 values of η over the
+/// same [0.5, 1.5] from the one default start (B). Both run through
+/// `lyapsweep::run_streaming`, the command's entry, in its batches, with a
+/// sink that only counts lanes (and their impacts): whatever that entry does per value beyond
+/// the lanes themselves lands in A's time and not in B's, and the ratio
+/// shows it.
+fn attractors(repeats: usize) {
+    let (values, grid) = (4096, [8, 8]);
+    let starts = grid[0] * grid[1];
+    // 200 steps per period, the other sections' short sweeps': above the
+    // plan's period / 0.1 (126 at η = 0.5), so no lane's steps are raised
+    // and the lane-steps are the scene's. No transient and 2 iterations, the
+    // `scaling` section's: 2.6e5 lanes at the defaults (450 steps,
+    // transient 500, iterations 1000) would take hours on 2 cores. So no
+    // lane settles on its orbit, and no lane's period is found (that needs
+    // 2 · max_period = 24 points).
+    let (steps, transient, iterations) = (200, 0, 2);
+    let text = |backend: &str, precision: &str, sweep: &str| {
+        format!(
+            "[system]\nkind = \"impact-oscillator\"\n{sweep}[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
+        )
+    };
+    let many = format!(
+        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[attractors]\ngrid = [{}, {}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\n",
+        grid[0], grid[1]
+    );
+    let single = format!(
+        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {}\n",
+        values * starts
+    );
+    println!(
+        "\nMany starts per value ({values} values × {starts} starts (A) against {} values × 1 start (B); {steps} steps/period, transient {transient}, iterations {iterations}, validation off; whole runs of `run_streaming` in its batches; medians of {repeats} rounds of A and B in turn after a warm-up, the ratio the median of the rounds' ratios; {} CPU threads)\n",
+        values * starts,
+        rayon::current_num_threads()
+    );
+    println!(
+        "| path | sweep | lanes | impacts/period | run s | device s | lanes/s | lane-steps/s | A / B |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let options = lyapsweep::RunOptions::default();
+    for (backend, precision) in [("cpu", "f64"), ("gpu", "f64"), ("gpu", "f32")] {
+        let scenes = [&many, &single].map(|sweep| {
+            scene::parse(&text(backend, precision, sweep), "bench", "bench", &[]).expect("scene")
+        });
+        // One whole run through the command's entry: wall seconds, device
+        // seconds summed over the batches (adapters with timestamp
+        // queries), the lanes the sink saw, and their mean impacts per
+        // period (which differ between A and B: A's starts reach the wall
+        // from anywhere in the box).
+        let timed = |scene: &lyapsweep::Scene| {
+            let (mut lanes, mut device, mut impacts) = (0, None, (0.0, 0));
+            let start = Instant::now();
+            let batch = lyapsweep::plan::batch_lanes(scene);
+            lyapsweep::run_streaming(scene, &options, batch, |_, report| {
+                lanes += report.lanes.len();
+                if let Some(d) = device_seconds(report) {
+                    *device.get_or_insert(0.0) += d;
+                }
+                for lane in report
+                    .lanes
+                    .iter()
+                    .filter(|l| l.impacts_per_period.is_finite())
+                {
+                    impacts.0 += lane.impacts_per_period;
+                    impacts.1 += 1;
+                }
+                Ok(())
+            })
+            .map(|_| {
+                let impacts = impacts.0 / impacts.1.max(1) as f64;
+                (start.elapsed().as_secs_f64(), device, lanes, impacts)
+            })
+        };
+        let path = format!("{backend} {precision}");
+        if let Err(e) = timed(&scenes[0]).and_then(|_| timed(&scenes[1])) {
+            println!("| {path} | – | – | – | – | – | – | – | – |");
+            eprintln!("attractors, {path}: skipped ({e})");
+            continue;
+        }
+        let mut seconds = [Vec::new(), Vec::new()];
+        let mut devices = [Vec::new(), Vec::new()];
+        let mut ratios = Vec::new();
+        let mut impacts = [0.0; 2];
+        for round in 0..repeats {
+            // A then B, B then A: a drift of the shared machine's load
+            // within a round falls on each side in turn.
+            let order = if round % 2 == 0 { [0, 1] } else { [1, 0] };
+            let mut round_seconds = [0.0; 2];
+            for i in order {
+                let (s, device, lanes, mean_impacts) = timed(&scenes[i]).expect("runs");
+                assert_eq!(lanes, values * starts, "the sink saw every lane");
+                impacts[i] = mean_impacts;
+                round_seconds[i] = s;
+                seconds[i].push(s);
+                devices[i].extend(device);
+            }
+            // Equal lane counts: the ratio of lanes per second is B's time
+            // over A's.
+            ratios.push(round_seconds[1] / round_seconds[0]);
+        }
+        let ratio = median(ratios);
+        for (i, name) in ["A: many starts", "B: one start"].into_iter().enumerate() {
+            let scene = &scenes[i];
+            let s = median(std::mem::take(&mut seconds[i]));
+            let device = (!devices[i].is_empty()).then(|| median(std::mem::take(&mut devices[i])));
+            println!(
+                "| {path} | {name} | {} | {:.2} | {s:.3} | {} | {:.3e} | {:.3e} | {} |",
+                scene.lane_count(),
+                impacts[i],
+                device.map_or("–".into(), |d| format!("{d:.3}")),
+                scene.lane_count() as f64 / s,
+                lyapsweep::plan::lane_steps(scene) / s,
+                if i == 0 {
+                    format!("{ratio:.2}×")
+                } else {
+                    "1.00×".into()
+                }
+            );
+        }
     }
 }
