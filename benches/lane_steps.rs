@@ -424,10 +424,9 @@ fn main() {
         loops(repeats);
     }
     if wanted("attractors") {
-        // At most 5 rounds: a round runs 2 × 262 144 lanes on each of three
-        // paths, 74 s on the 2-core machine under a compile's load, and the
-        // warm-up and 7 rounds would take ten minutes.
-        attractors(repeats.min(5));
+        // At most 3 rounds: a round runs 2 × 262 144 lanes of 12 iterations
+        // on each of three paths, about 5 minutes on the 2-core machine.
+        attractors(repeats.min(3));
     }
 }
 
@@ -882,27 +881,34 @@ fn attractors(repeats: usize) {
     let starts = grid[0] * grid[1];
     // 200 steps per period, the other sections' short sweeps': above the
     // plan's period / 0.1 (126 at η = 0.5), so no lane's steps are raised
-    // and the lane-steps are the scene's. No transient and 2 iterations, the
-    // `scaling` section's: 2.6e5 lanes at the defaults (450 steps,
-    // transient 500, iterations 1000) would take hours on 2 cores. So no
-    // lane settles on its orbit, and no lane's period is found (that needs
-    // 2 · max_period = 24 points).
-    let (steps, transient, iterations) = (200, 0, 2);
+    // and the lane-steps are the scene's. A transient of 4 and 8 averaging
+    // iterations, with max_period = 4, so that every lane's period is
+    // tested (that needs 2 · max_period points) and every value's lanes are
+    // grouped as in a real run: 2.6e5 lanes at the defaults (450 steps,
+    // transient 500, iterations 1000) would take hours on 2 cores. Few
+    // lanes settle on their orbit in so few iterations; most are grouped
+    // as aperiodic, by the region their points cover.
+    let (steps, transient, iterations, max_period) = (200, 4, 8, 4);
     let text = |backend: &str, precision: &str, sweep: &str| {
         format!(
             "[system]\nkind = \"impact-oscillator\"\n{sweep}[integration]\nsteps_per_period = {steps}\ntransient = {transient}\niterations = {iterations}\n[run]\nbackend = \"{backend}\"\nprecision = \"{precision}\"\nvalidate = 0\n"
         )
     };
-    let many = format!(
-        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {values}\n[attractors]\ngrid = [{}, {}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\n",
-        grid[0], grid[1]
-    );
-    let single = format!(
-        "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {}\n",
-        values * starts
-    );
+    // A at `count` values, or B at `count` × 64 values.
+    let many = |count: usize| {
+        format!(
+            "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {count}\n[attractors]\ngrid = [{}, {}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nmax_period = {max_period}\n",
+            grid[0], grid[1]
+        )
+    };
+    let single = |count: usize| {
+        format!(
+            "[sweep]\nparameter = \"eta\"\nfrom = 0.5\nto = 1.5\ncount = {}\n",
+            count * starts
+        )
+    };
     println!(
-        "\nMany starts per value ({values} values × {starts} starts (A) against {} values × 1 start (B); {steps} steps/period, transient {transient}, iterations {iterations}, validation off; whole runs of `run_streaming` in its batches; medians of {repeats} rounds of A and B in turn after a warm-up, the ratio the median of the rounds' ratios; {} CPU threads)\n",
+        "\nMany starts per value ({values} values × {starts} starts (A) against {} values × 1 start (B); {steps} steps/period, transient {transient}, iterations {iterations}, max_period {max_period}, validation off; whole runs of `run_streaming` in its batches; medians of {repeats} rounds of A and B in turn after a warm-up on 64 values, the ratio the median of the rounds' ratios; {} CPU threads)\n",
         values * starts,
         rayon::current_num_threads()
     );
@@ -912,9 +918,13 @@ fn attractors(repeats: usize) {
     println!("|---|---|---|---|---|---|---|---|---|");
     let options = lyapsweep::RunOptions::default();
     for (backend, precision) in [("cpu", "f64"), ("gpu", "f64"), ("gpu", "f32")] {
-        let scenes = [&many, &single].map(|sweep| {
-            scene::parse(&text(backend, precision, sweep), "bench", "bench", &[]).expect("scene")
-        });
+        let scenes_of = |count: usize| {
+            [many(count), single(count)].map(|sweep| {
+                scene::parse(&text(backend, precision, &sweep), "bench", "bench", &[])
+                    .expect("scene")
+            })
+        };
+        let scenes = scenes_of(values);
         // One whole run through the command's entry: wall seconds, device
         // seconds summed over the batches (adapters with timestamp
         // queries), the lanes the sink saw, and their mean impacts per
@@ -939,13 +949,16 @@ fn attractors(repeats: usize) {
                 }
                 Ok(())
             })
-            .map(|_| {
+            .map(|(_, _attractors)| {
                 let impacts = impacts.0 / impacts.1.max(1) as f64;
                 (start.elapsed().as_secs_f64(), device, lanes, impacts)
             })
         };
         let path = format!("{backend} {precision}");
-        if let Err(e) = timed(&scenes[0]).and_then(|_| timed(&scenes[1])) {
+        // The warm-up (kernels compiled, threads started) on 64 values:
+        // whole runs take minutes.
+        let warm = scenes_of(64);
+        if let Err(e) = timed(&warm[0]).and_then(|_| timed(&warm[1])) {
             println!("| {path} | – | – | – | – | – | – | – | – |");
             eprintln!("attractors, {path}: skipped ({e})");
             continue;
