@@ -275,6 +275,11 @@ fn bad_attractors_tables_name_their_key() {
             "attractors",
             "colour",
         ),
+        (
+            "list = [[0, 0]]\ncontinuation = \"sideways\"",
+            "attractors.continuation",
+            "unknown variant `sideways`",
+        ),
     ];
     for (table, key, reason) in cases {
         let text = format!("{COEXISTING}[attractors]\n{table}\n");
@@ -299,4 +304,316 @@ fn bad_attractors_tables_name_their_key() {
     )
     .unwrap_err();
     assert!(error.to_string().contains("attractors.starts"), "{error}");
+    // A shard would split a value's starts from each other.
+    let whole = parse(&format!("{COEXISTING}[attractors]\nlist = [[0, 0]]\n"), &[]).unwrap();
+    let error = whole
+        .sharded(scene::Shard { index: 0, count: 1 })
+        .unwrap_err();
+    assert!(error.to_string().contains("--shard"), "{error}");
+    // A section's points are not whole states to continue a flow from.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/lorenz-section.toml");
+    let error = scene::load(
+        &path,
+        &[
+            "attractors.list=[[1, 1, 1]]".into(),
+            "attractors.continuation=\"up\"".into(),
+        ],
+    )
+    .unwrap_err();
+    assert!(
+        error
+            .to_string()
+            .contains("attractors.continuation: needs a period map"),
+        "{error}"
+    );
+}
+
+/// A sweep's attractors, through the command's entry (continuation
+/// included).
+fn attractors_of(scene: &lyapsweep::Scene) -> lyapsweep::Attractors {
+    let batch = lyapsweep::plan::batch_lanes(scene);
+    let (_, found) = lyapsweep::run_streaming(scene, &Default::default(), batch, |_, _| Ok(()))
+        .expect("the sweep runs");
+    found.expect("a scene with [attractors]")
+}
+
+/// The attractors of one value as (period, impacts per period, final
+/// point) for comparisons between runs.
+fn final_point(a: &lyapsweep::attractor::group::Attractor) -> [f64; 2] {
+    let orbit = &a.first.lane.orbit;
+    [orbit[orbit.len() - 2], orbit[orbit.len() - 1]]
+}
+
+/// Whether two runs' attractors are one orbit: the same period and
+/// impacts, and the one's final point on the other's orbit.
+fn same_orbit(
+    a: &lyapsweep::attractor::group::Attractor,
+    b: &lyapsweep::attractor::group::Attractor,
+    tolerance: f64,
+) -> bool {
+    let (x, y) = (&a.first.lane, &b.first.lane);
+    let p = final_point(a);
+    x.orbit_period == y.orbit_period
+        && x.impacts_per_period == y.impacts_per_period
+        && y.orbit
+            .chunks_exact(2)
+            .any(|q| (q[0] - p[0]).abs().max((q[1] - p[1]).abs()) < tolerance)
+}
+
+/// Where the seed's oscillator holds two period-1 orbits (η = 0.58 to
+/// 0.615), a 6 × 6 grid of starts finds both at each value: each one's
+/// exponents within 1e-8 of the exact backend started on its final point,
+/// and each start's attractor (so the basin fractions) the same as the
+/// exact backend's from the same start.
+#[test]
+fn the_window_s_attractors_and_basins_match_the_exact_backend() {
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [6, 6]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\n"
+    )
+    .replace("values = [0.6]", "values = [0.58, 0.6, 0.61]");
+    let cpu = attractors_of(&common::scene(&text, &[]));
+    let exact = attractors_of(&common::scene(
+        &text.replace("backend = \"cpu\"", "backend = \"exact\""),
+        &[],
+    ));
+    for (v, eta) in [0.58, 0.6, 0.61].into_iter().enumerate() {
+        let (found, truth) = (&cpu.values[v], &exact.values[v]);
+        assert_eq!(found.count(), 2, "η = {eta}: {found:?}");
+        assert_eq!(truth.count(), 2, "η = {eta}");
+        let impacts: Vec<f64> = found
+            .attractors
+            .iter()
+            .map(|a| a.first.lane.impacts_per_period)
+            .collect();
+        assert!(
+            impacts.contains(&0.0) && impacts.contains(&1.0),
+            "{impacts:?}"
+        );
+        for a in &found.attractors {
+            assert_eq!(a.first.lane.orbit_period, Some(1));
+            let p = final_point(a);
+            let alone = common::run(&common::scene(
+                &format!("{COEXISTING}[attractors]\nlist = [[{}, {}]]\n", p[0], p[1])
+                    .replace("values = [0.6]", &format!("values = [{eta}]"))
+                    .replace("backend = \"cpu\"", "backend = \"exact\""),
+                &[],
+            ));
+            for (x, y) in a.first.lane.exponents.iter().zip(&alone.lanes[0].exponents) {
+                assert!((x - y).abs() < 1e-8, "η = {eta}: {x} against the exact {y}");
+            }
+        }
+        // Start by start, the same attractor: the same basins.
+        for s in 0..36 {
+            let mine = &found.attractors[found.of_start[s].unwrap()];
+            let theirs = &truth.attractors[truth.of_start[s].unwrap()];
+            assert!(same_orbit(mine, theirs, 1e-6), "η = {eta}, start {s}");
+        }
+        for a in &found.attractors {
+            let b = truth
+                .attractors
+                .iter()
+                .find(|b| same_orbit(a, b, 1e-6))
+                .unwrap();
+            assert_eq!(a.starts, b.starts, "η = {eta}");
+        }
+    }
+    assert_eq!(cpu.several(), 3);
+    // Three values far apart, without continuation: branches by distance
+    // alone; each value's two attractors on two different ones.
+    for value in &cpu.values {
+        let ids: Vec<_> = value.attractors.iter().map(|a| a.branch.unwrap()).collect();
+        assert_ne!(ids[0], ids[1]);
+    }
+}
+
+/// The same on the GPU path, with its CPU validation lanes: the
+/// attractors of each value and each start's attractor as the CPU path
+/// finds them, the exponents within the precision's validation tolerance.
+#[test]
+fn the_window_s_attractors_on_the_gpu_are_the_cpu_s() {
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [6, 6]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\n"
+    )
+    .replace("values = [0.6]", "values = [0.58, 0.6, 0.61]");
+    let cpu = attractors_of(&common::scene(&text, &[]));
+    for (precision, name) in [(Precision::F64, "f64"), (Precision::F32, "f32")] {
+        if !gpu_or_skip(
+            "the_window_s_attractors_on_the_gpu_are_the_cpu_s",
+            precision,
+        ) {
+            continue;
+        }
+        let gpu_text = text.replace(
+            "backend = \"cpu\"",
+            &format!("backend = \"gpu\"\nprecision = \"{name}\"\nvalidate = 4"),
+        );
+        let gpu = attractors_of(&common::scene(&gpu_text, &[]));
+        let tolerance = lyapsweep::backend::validation_tolerance(precision);
+        let points = if precision == Precision::F64 {
+            1e-6
+        } else {
+            1e-3
+        };
+        for v in 0..3 {
+            let (found, truth) = (&gpu.values[v], &cpu.values[v]);
+            assert_eq!(found.count(), truth.count(), "{name}, value {v}");
+            for s in 0..36 {
+                let mine = &found.attractors[found.of_start[s].unwrap()];
+                let theirs = &truth.attractors[truth.of_start[s].unwrap()];
+                assert!(
+                    same_orbit(mine, theirs, points),
+                    "{name}, value {v}, start {s}"
+                );
+                for (x, y) in mine
+                    .first
+                    .lane
+                    .exponents
+                    .iter()
+                    .zip(&theirs.first.lane.exponents)
+                {
+                    assert!((x - y).abs() < tolerance, "{name}: {x} against {y}");
+                }
+            }
+            assert!(found
+                .attractors
+                .iter()
+                .all(|a| !matches!(a.first.lane.status, LaneStatus::Mismatch { .. })));
+        }
+    }
+}
+
+/// From one start at rest, continuation finds what the grid does: going
+/// up from the values where the start falls on the non-impacting orbit it
+/// follows that orbit through the window where the start falls on the
+/// impacting one; going down it follows the impacting orbit to its fold.
+/// The branch ids stay the same along each.
+#[test]
+fn continuation_follows_both_orbits_through_the_window() {
+    let text = format!("{COEXISTING}[attractors]\nlist = [[0.0, 0.0]]\ncontinuation = \"both\"\n")
+        .replace("values = [0.6]", "from = 0.55\nto = 0.65\ncount = 21")
+        .replace("steps_per_period = 1800", "steps_per_period = 600")
+        .replace("transient = 300", "transient = 200")
+        .replace("iterations = 300", "iterations = 100");
+    let value = |found: &lyapsweep::Attractors, eta: f64| {
+        found.values[((eta - 0.55) / 0.005_f64).round() as usize].clone()
+    };
+    let both = attractors_of(&common::scene(&text, &[]));
+    let grid = attractors_of(&common::scene(
+        &text.replace(
+            "list = [[0.0, 0.0]]\ncontinuation = \"both\"",
+            "grid = [4, 4]\nbox = { x = [-3, 1.9], v = [-3, 3] }",
+        ),
+        &[],
+    ));
+    assert!(both.passes > 1, "{} passes", both.passes);
+    for v in 0..21 {
+        let (found, truth) = (&both.values[v], &grid.values[v]);
+        assert_eq!(found.count(), truth.count(), "value {v}");
+        for a in &found.attractors {
+            assert!(
+                truth.attractors.iter().any(|b| same_orbit(a, b, 1e-5)),
+                "value {v}"
+            );
+        }
+    }
+    // Two attractors from η = 0.575 to 0.615, one outside.
+    assert_eq!(both.several(), 9);
+    let branch = |found: &lyapsweep::Attractors, eta: f64, impacts: f64| {
+        value(found, eta)
+            .attractors
+            .iter()
+            .find(|a| a.first.lane.impacts_per_period == impacts)
+            .and_then(|a| a.branch)
+    };
+    let free = branch(&both, 0.55, 0.0).unwrap();
+    let impacting = branch(&both, 0.6, 1.0).unwrap();
+    assert_ne!(free, impacting);
+    for k in 0..21 {
+        let eta = 0.55 + 0.005 * k as f64;
+        assert_eq!(branch(&both, eta, 0.0), Some(free), "η = {eta}");
+        if (0.5725..0.6175).contains(&eta) {
+            assert_eq!(branch(&both, eta, 1.0), Some(impacting), "η = {eta}");
+        }
+    }
+    // One way only: up never finds the impacting orbit below the values
+    // the start falls on it; down finds it there.
+    let up = attractors_of(&common::scene(&text.replace("\"both\"", "\"up\""), &[]));
+    let down = attractors_of(&common::scene(&text.replace("\"both\"", "\"down\""), &[]));
+    assert_eq!(branch(&up, 0.575, 1.0), None);
+    assert!(branch(&down, 0.575, 1.0).is_some());
+    assert!(branch(&up, 0.6, 0.0).is_some());
+}
+
+/// attractors.csv has one row per (value, attractor) with the basins
+/// summing to 1 at each value, and every lane's row in spectrum.csv and
+/// bifurcation.csv names the branch of the attractor it ended on.
+#[test]
+fn attractors_csv_and_the_branch_columns_agree() {
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [4, 4]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\n"
+    )
+    .replace("values = [0.6]", "values = [0.56, 0.6]");
+    let scene = common::scene(&text, &[]);
+    let report = common::run(&scene);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    lyapsweep::output::write(&scene, &report, &out).unwrap();
+    let read = |name: &str| {
+        let mut reader = csv::Reader::from_path(out.join(name)).unwrap();
+        let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+        let rows: Vec<Vec<String>> = reader
+            .records()
+            .map(|r| r.unwrap().iter().map(String::from).collect())
+            .collect();
+        (header, rows)
+    };
+    let (header, rows) = read("attractors.csv");
+    assert_eq!(
+        header,
+        [
+            "eta",
+            "branch",
+            "period",
+            "impacts_per_period",
+            "lambda_1",
+            "lambda_2",
+            "lambda_sum",
+            "expected_sum",
+            "basin_fraction",
+            "starts",
+            "x",
+            "v",
+            "status"
+        ]
+    );
+    // η = 0.56: the non-impacting orbit alone; η = 0.6: both.
+    let at = |eta: &str| rows.iter().filter(|r| r[0] == eta).collect::<Vec<_>>();
+    assert_eq!(at("0.56").len(), 1);
+    assert_eq!(at("0.6").len(), 2);
+    for eta in ["0.56", "0.6"] {
+        let basins: f64 = at(eta).iter().map(|r| r[8].parse::<f64>().unwrap()).sum();
+        let starts: usize = at(eta).iter().map(|r| r[9].parse::<usize>().unwrap()).sum();
+        assert!((basins - 1.0).abs() < 1e-12);
+        assert_eq!(starts, 16);
+    }
+    let (header, lanes) = read("spectrum.csv");
+    let branch = header.iter().position(|h| h == "branch").unwrap();
+    let impacts = header
+        .iter()
+        .position(|h| h == "impacts_per_period")
+        .unwrap();
+    assert_eq!(header[branch - 1], "start");
+    assert_eq!(lanes.len(), 32);
+    for lane in &lanes {
+        let row = rows
+            .iter()
+            .find(|r| r[0] == lane[0] && r[1] == lane[branch])
+            .unwrap_or_else(|| panic!("{lane:?}: no attractor of its branch"));
+        assert_eq!(row[3], lane[impacts], "{lane:?}");
+    }
+    let (header, points) = read("bifurcation.csv");
+    assert_eq!(header, ["eta", "x", "v", "start", "branch"]);
+    for (point, lane) in points.iter().zip(&lanes) {
+        assert_eq!(point[4], lane[branch]);
+    }
 }
