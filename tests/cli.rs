@@ -458,3 +458,37 @@ fn a_shader_folder_without_the_kernels_is_a_clear_error() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!dir.path().join("out").exists());
 }
+
+/// With `[attractors]` and continuation, the summary says how many values
+/// hold more than one attractor, the set holds attractors.csv, and a shard
+/// is refused (a value's starts are compared with each other).
+#[test]
+fn a_run_with_many_starts_counts_its_values_with_several_attractors() {
+    let scene = format!(
+        "{BASE}[sweep]\nfrom = 0.55\nto = 0.65\ncount = 21\n[output]\nbifurcation_points = 2\n[attractors]\nlist = [[0.0, 0.0]]\ncontinuation = \"both\"\n"
+    )
+    .replace("steps_per_period = 200", "steps_per_period = 600")
+    .replace("transient = 5", "transient = 200")
+    .replace("iterations = 10", "iterations = 100");
+    let dir = tempfile::tempdir().unwrap();
+    let out = lyapsweep(dir.path(), &scene, &[]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("21 values of eta in [0.55, 0.65] × 1 starts"),
+        "{stdout}"
+    );
+    assert!(
+        stdout
+            .contains("attractors   30 over 21 values in 2 branches; 9 values hold more than one"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("continued "), "{stdout}");
+    let attractors = std::fs::read_to_string(dir.path().join("out/attractors.csv")).unwrap();
+    assert_eq!(attractors.lines().count(), 1 + 30);
+    refused(&scene, &["--shard", "0/2"], "--shard");
+}
