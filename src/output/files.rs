@@ -15,7 +15,10 @@ pub const SHARD_FILE: &str = "shard.toml";
 pub const SPECTRUM_FILE: &str = "spectrum.csv";
 pub const GRID_FILE: &str = "grid.csv";
 pub const BIFURCATION_FILE: &str = "bifurcation.csv";
+/// With `[attractors]`: one row per attractor found at a swept value.
 pub const ATTRACTORS_FILE: &str = "attractors.csv";
+/// The column naming the branch an attractor (or a lane's) belongs to: one
+/// attractor followed across the swept values.
 pub const BRANCH_COLUMN: &str = "branch";
 
 /// `spectrum.csv` for one swept parameter, `grid.csv` for two.
@@ -30,6 +33,8 @@ pub fn spectrum_file(scene: &Scene) -> &'static str {
 /// The figures' file stems (each drawn as .png and .svg).
 pub const SWEEP_FIGURE: &str = "figure";
 pub const HEAT_MAP: &str = "heat-map";
+/// With `[attractors]` over two parameters: the attractors found per cell.
+pub const ATTRACTOR_MAP: &str = "attractors-map";
 
 /// Rust's `{}` for f64 is the shortest text that reads back to the same
 /// number: full precision without trailing noise.

@@ -31,8 +31,8 @@ use crate::model::code::event_column;
 use crate::scene::Scene;
 use files::{csv_to_io, number, write_text};
 pub use files::{
-    spectrum_file, ATTRACTORS_FILE, BIFURCATION_FILE, BRANCH_COLUMN, GRID_FILE, HEAT_MAP,
-    SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
+    spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, GRID_FILE,
+    HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
 };
 pub use set::Staging;
 

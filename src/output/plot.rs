@@ -1,7 +1,9 @@
 //! Figures of a sweep, each written as a PNG and an SVG of the same size: the
 //! bifurcation diagram above the Lyapunov exponents, both against the swept
 //! parameter (the layout of the seed paper's Fig. 3), and the heat map of λ₁
-//! over a two-parameter grid.
+//! over a two-parameter grid. With many starts per value (`[attractors]`)
+//! the sweep figure colours each attractor by its branch and adds the
+//! basins, and a grid gets a second map: how many attractors each point has.
 //!
 //! Each figure is drawn by one function generic over plotters'
 //! `DrawingBackend`, so the PNG, the SVG and the in-memory pixels the tests
@@ -28,8 +30,12 @@ use crate::output::figure::register_font;
 /// The sweep figure's size in pixels (the SVG's logical size too).
 pub const SWEEP_SIZE: (u32, u32) = (1600, 1200);
 
-/// The heat map's size in pixels (the SVG's logical size too).
+/// The heat map's size in pixels (the SVG's logical size too), and the
+/// attractor map's.
 pub const HEAT_MAP_SIZE: (u32, u32) = (1500, 1200);
+
+/// The sweep figure with `[attractors]`: taller, for its third panel.
+pub const ATTRACTOR_SWEEP_SIZE: (u32, u32) = (1600, 1500);
 
 /// The colour of the bifurcation points and of λ₁: a dark blue that stays
 /// legible as single pixels.
@@ -53,8 +59,45 @@ const SUM_COLOUR: RGBColor = BLACK;
 /// The zero line and the grid: light enough to stay behind the data.
 const GUIDE_COLOUR: RGBColor = RGBColor(200, 200, 200);
 
-/// A heat-map cell whose lane failed.
+/// A heat-map cell whose lane failed, and a point of a lane that found no
+/// attractor.
 const FAILED_COLOUR: RGBColor = RGBColor(150, 150, 150);
+
+/// The branches' colours, cycled by branch id: the dark blue of a single
+/// start's figure, then the Okabe–Ito palette (which colour-blind readers
+/// can tell apart) without its yellow, too pale on white, and a brown. No
+/// grey: grey is a failed lane's.
+const BRANCH_COLOURS: [RGBColor; 8] = [
+    DATA_COLOUR,
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    BLACK,
+    RGBColor(140, 81, 10),
+];
+
+/// The most branches the legend names (it names fewer where they do not fit
+/// on its row); the colours repeat beyond the palette anyway.
+const LEGEND_BRANCHES: usize = 8;
+
+/// A marker's radius in pixels: large enough to tell a filled one from an
+/// open one, small enough that neighbouring values stay apart.
+const MARKER_RADIUS: i32 = 4;
+
+/// ColorBrewer's YlGnBu without its palest stop (too close to the page), for
+/// the attractor counts: one attractor light, many dark.
+const COUNT_SCALE: [RGBColor; 8] = [
+    RGBColor(237, 248, 177),
+    RGBColor(199, 233, 180),
+    RGBColor(127, 205, 187),
+    RGBColor(65, 182, 196),
+    RGBColor(29, 145, 192),
+    RGBColor(34, 94, 168),
+    RGBColor(37, 52, 148),
+    RGBColor(8, 29, 88),
+];
 
 /// ColorBrewer's RdBu (C. Brewer, colorbrewer2.org) from -1 to +1: blue for
 /// negative λ₁, near-white at zero, red for positive, evenly spaced stops.
@@ -143,6 +186,61 @@ pub struct GridData {
     pub per_unit_time: bool,
 }
 
+/// A one-parameter sweep with many starts per value (`[attractors]`): the
+/// attractors found at each value, each on its branch (one attractor
+/// followed across the values).
+pub struct AttractorSweepData {
+    /// The figure's title.
+    pub title: String,
+    /// The swept parameter's name.
+    pub parameter: String,
+    /// The swept values, in any order: the x axis spans them.
+    pub values: Vec<f64>,
+    /// The bifurcation diagram: (sweep value, first state coordinate, the
+    /// branch of the lane the point is from) triples, the branch `None` for
+    /// a failed lane's (drawn grey). Empty: no diagram panel.
+    pub bifurcation: Vec<(f64, f64, Option<u64>)>,
+    /// The branches, in the order they are drawn (the later on top).
+    pub branches: Vec<Branch>,
+    /// Flows: exponents per unit time; maps: per iteration.
+    pub per_unit_time: bool,
+    /// The first state coordinate's name.
+    pub state_name: String,
+}
+
+/// One branch of attractors: where it has one, and that attractor's
+/// exponents and basin there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Branch {
+    /// The branch's id (its colour is chosen by it).
+    pub id: u64,
+    /// The swept values it has an attractor at, ascending.
+    pub values: Vec<f64>,
+    /// Per value: λ₁ … λ_N, empty when the run computed no exponents (then
+    /// the figure has no exponent panel).
+    pub exponents: Vec<Vec<f64>>,
+    /// Per value: the fraction of the value's starts that end on it.
+    pub basin: Vec<f64>,
+}
+
+/// A two-parameter sweep with `[attractors]`: how many attractors each grid
+/// point has.
+pub struct CountData {
+    /// The figure's title.
+    pub title: String,
+    /// The name of the parameter along the x axis.
+    pub x_name: String,
+    /// The name of the parameter along the y axis.
+    pub y_name: String,
+    /// The grid's x values (nx of them, in any order).
+    pub x: Vec<f64>,
+    /// The grid's y values (ny of them, in any order).
+    pub y: Vec<f64>,
+    /// The attractors at (x\[i\], y\[j\]) are `counts[j * nx + i]` (x
+    /// fastest); 0, where every start failed, is drawn grey.
+    pub counts: Vec<usize>,
+}
+
 /// Draws the sweep figure (bifurcation diagram above, exponents below,
 /// sharing the x axis) as `<dir>/<stem>.png` and `<dir>/<stem>.svg`; returns
 /// both paths. `dir` must exist.
@@ -174,6 +272,38 @@ pub fn heat_map(data: &GridData, dir: &Path, stem: &str) -> Result<Vec<PathBuf>>
 /// # Panics
 /// If `lambda1` does not hold one value per grid point.
 pub fn heat_map_pixels(data: &GridData) -> Vec<u8> {
+    pixels(data)
+}
+
+/// Draws the sweep figure of many starts per value: the bifurcation diagram,
+/// the exponents and the basin fractions, one above the other over the
+/// swept parameter, each attractor in its branch's colour, as
+/// `<dir>/<stem>.png` and `<dir>/<stem>.svg`; returns both paths. `dir` must
+/// exist.
+pub fn attractor_figure(data: &AttractorSweepData, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> {
+    write(data, dir, stem)
+}
+
+/// The attractor sweep figure as RGB pixels, `ATTRACTOR_SWEEP_SIZE` of them.
+pub fn attractor_pixels(data: &AttractorSweepData) -> Vec<u8> {
+    pixels(data)
+}
+
+/// Draws the map of the attractors found per grid point, with its colour
+/// bar, as `<dir>/<stem>.png` and `<dir>/<stem>.svg`; returns both paths.
+/// `dir` must exist.
+///
+/// # Panics
+/// If `counts` does not hold one count per grid point.
+pub fn attractor_map(data: &CountData, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> {
+    write(data, dir, stem)
+}
+
+/// The attractor map as RGB pixels, `HEAT_MAP_SIZE` of them.
+///
+/// # Panics
+/// If `counts` does not hold one count per grid point.
+pub fn attractor_map_pixels(data: &CountData) -> Vec<u8> {
     pixels(data)
 }
 
@@ -268,11 +398,13 @@ impl Figure for SweepData {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Drawn<DB> {
         root.fill(&WHITE)?;
         let body = root.titled(&self.title, (FONT, TITLE_PX))?;
+        let diagram = || self.bifurcation.iter().map(|&(x, y)| (x, y, DATA_COLOUR));
+        let axes = (self.parameter.as_str(), self.state_name.as_str());
         if self.exponents.is_empty() {
             // A run without exponents (`lyapunov = "none"`): the diagram
             // alone, over the values its points lie at.
             let x_range = padded(extent(self.bifurcation.iter().map(|p| p.0)), X_PAD);
-            return draw_bifurcation(&body, self, x_range, true);
+            return draw_points(&body, diagram, axes, x_range, true);
         }
         // The legend has a row of its own, where it can hide no data.
         let (_, height) = body.dim_in_pixel();
@@ -282,12 +414,9 @@ impl Figure for SweepData {
         if self.bifurcation.is_empty() {
             return draw_exponents(&panels, self, x_range);
         }
-        // Plots of equal height: the lower panel also holds the labels of
-        // the shared x axis.
-        let (_, height) = panels.dim_in_pixel();
-        let (top, bottom) = panels.split_vertically((height + TICKS_ONLY_AREA - X_LABEL_AREA) / 2);
-        draw_bifurcation(&top, self, x_range.clone(), false)?;
-        draw_exponents(&bottom, self, x_range)
+        let areas = stacked(&panels, 2);
+        draw_points(&areas[0], diagram, axes, x_range.clone(), false)?;
+        draw_exponents(&areas[1], self, x_range)
     }
 }
 
@@ -310,6 +439,25 @@ impl SweepData {
     }
 }
 
+/// `n` panels stacked over a shared x axis, with plots of equal height: the
+/// lowest also holds the axis's labels, the others its ticks only.
+fn stacked<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    n: usize,
+) -> Vec<DrawingArea<DB, Shift>> {
+    let (_, height) = area.dim_in_pixel();
+    let plot = (height + TICKS_ONLY_AREA - X_LABEL_AREA) / n as u32 - TICKS_ONLY_AREA;
+    let mut panels = Vec::with_capacity(n);
+    let mut rest = area.clone();
+    for _ in 1..n {
+        let (panel, below) = rest.split_vertically(plot + TICKS_ONLY_AREA);
+        panels.push(panel);
+        rest = below;
+    }
+    panels.push(rest);
+    panels
+}
+
 /// What a legend entry shows beside its name.
 #[derive(Clone, Copy)]
 enum Sample {
@@ -319,6 +467,46 @@ enum Sample {
     Sum,
     /// The sum the volume law expects.
     Expected,
+    /// A marker of the figure with attractors: filled or open.
+    Marker { colour: RGBColor, filled: bool },
+    /// Nothing: the entry is its text.
+    Text,
+}
+
+impl Sample {
+    /// The width the sample takes before its name, with its gap.
+    fn width(self) -> i32 {
+        const GAP: i32 = 10;
+        match self {
+            Sample::Text => 0,
+            // A marker needs no line's length.
+            Sample::Marker { .. } => 4 * MARKER_RADIUS + GAP,
+            _ => SAMPLE_WIDTH + GAP,
+        }
+    }
+}
+
+/// The space between legend entries.
+const LEGEND_SPACE: i32 = 40;
+
+/// The legend's width in pixels, its entries in one row.
+fn legend_width<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    entries: &[(String, Sample)],
+) -> std::result::Result<i32, DrawingAreaErrorKind<DB::ErrorType>> {
+    let mut total = -LEGEND_SPACE;
+    for (name, sample) in entries {
+        let (text, _) = area.estimate_text_size(name, &legend_style())?;
+        total += sample.width() + text as i32 + LEGEND_SPACE;
+    }
+    Ok(total.max(0))
+}
+
+/// The legend's names: beside their samples, centred on the row.
+fn legend_style() -> TextStyle<'static> {
+    TextStyle::from((FONT, TICK_LABEL_PX))
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Left, VPos::Center))
 }
 
 /// The legend as one centred row: each entry's sample, then its name.
@@ -326,19 +514,11 @@ fn draw_legend<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     entries: &[(String, Sample)],
 ) -> Drawn<DB> {
-    let style = TextStyle::from((FONT, TICK_LABEL_PX))
-        .color(&BLACK)
-        .pos(Pos::new(HPos::Left, VPos::Center));
-    let (gap, space) = (10, 40);
-    let mut widths = Vec::with_capacity(entries.len());
-    for (name, _) in entries {
-        let (text, _) = area.estimate_text_size(name, &style)?;
-        widths.push(SAMPLE_WIDTH + gap + text as i32);
-    }
-    let total = widths.iter().sum::<i32>() + space * (entries.len() as i32 - 1);
+    let style = legend_style();
+    let total = legend_width(area, entries)?;
     let (width, height) = area.dim_in_pixel();
     let (mut x, y) = ((width as i32 - total) / 2, height as i32 / 2);
-    for ((name, sample), entry_width) in entries.iter().zip(widths) {
+    for (name, sample) in entries {
         let line = [(x, y), (x + SAMPLE_WIDTH, y)];
         match *sample {
             Sample::Exponent(i) => {
@@ -353,34 +533,39 @@ fn draw_legend<DB: DrawingBackend>(
                 4,
                 EXPECTED_COLOUR.stroke_width(EXPECTED_WIDTH),
             ))?,
+            Sample::Marker { colour, filled } => {
+                // Twice the figure's size: a legend's marker is read alone.
+                let centre = (x + 2 * MARKER_RADIUS, y);
+                area.draw(&marker(centre, 2 * MARKER_RADIUS, colour, filled))?;
+            }
+            Sample::Text => {}
         }
-        area.draw_text(name, &style, (x + SAMPLE_WIDTH + gap, y))?;
-        x += entry_width + space;
+        area.draw_text(name, &style, (x + sample.width(), y))?;
+        let (text, _) = area.estimate_text_size(name, &style)?;
+        x += sample.width() + text as i32 + LEGEND_SPACE;
     }
     Ok(())
 }
 
-/// The bifurcation diagram: every point one pixel of `DATA_COLOUR`.
-///
-/// The points are first gathered on the panel's pixel grid and each column's
-/// runs of lit pixels drawn as one rectangle, so that the SVG holds a few
-/// thousand rectangles rather than one per point (hundreds of thousands),
-/// and the PNG is the same drawing.
-/// The bifurcation diagram; `labelled`: with the x axis's labels (when no
-/// exponent panel below carries them).
-fn draw_bifurcation<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    data: &SweepData,
-    x_range: Range<f64>,
-    labelled: bool,
-) -> Drawn<DB> {
-    let points = || {
-        data.bifurcation
-            .iter()
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
+/// A round marker, filled or open.
+fn marker<C>(centre: C, radius: i32, colour: RGBColor, filled: bool) -> Circle<C, i32> {
+    let style = if filled {
+        colour.filled()
+    } else {
+        colour.stroke_width(2)
     };
-    let y_range = padded(extent(points().map(|p| p.1)), Y_PAD);
-    let mut chart = ChartBuilder::on(area)
+    Circle::new(centre, radius, style)
+}
+
+/// A panel's chart over `x_range` and `y_range`; `labelled`: with room for
+/// the x axis's labels (when no panel below carries them).
+fn panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    x_range: Range<f64>,
+    y_range: Range<f64>,
+    labelled: bool,
+) -> std::result::Result<Chart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
+    ChartBuilder::on(area)
         .margin(MARGIN)
         .x_label_area_size(if labelled {
             X_LABEL_AREA
@@ -388,43 +573,72 @@ fn draw_bifurcation<DB: DrawingBackend>(
             TICKS_ONLY_AREA
         })
         .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(x_range, y_range)?;
-    let mut axes = mesh(&mut chart);
-    axes.y_desc(&data.state_name);
+        .build_cartesian_2d(x_range, y_range)
+}
+
+/// A panel's axes: the y axis named `y_name`, the x axis the swept
+/// `parameter` where `labelled`, ticks only otherwise.
+fn draw_axes<DB: DrawingBackend>(
+    chart: &mut Chart<'_, DB>,
+    parameter: &str,
+    y_name: &str,
+    labelled: bool,
+) -> Drawn<DB> {
+    let mut axes = mesh(chart);
+    axes.y_desc(y_name);
     if labelled {
-        axes.x_desc(pretty(&data.parameter));
+        axes.x_desc(pretty(parameter));
     } else {
         axes.x_label_formatter(&|_| String::new());
     }
-    axes.draw()?;
+    axes.draw()
+}
+
+/// A bifurcation diagram: every point one pixel of its colour, the later
+/// point's where two share a pixel. `axes` names the swept parameter and the
+/// state.
+///
+/// The points are first gathered on the panel's pixel grid and each column's
+/// runs of pixels of one colour drawn as one rectangle, so that the SVG holds
+/// a few thousand rectangles rather than one per point (hundreds of
+/// thousands), and the PNG is the same drawing.
+fn draw_points<DB: DrawingBackend, P: Iterator<Item = (f64, f64, RGBColor)>>(
+    area: &DrawingArea<DB, Shift>,
+    points: impl Fn() -> P,
+    (parameter, state_name): (&str, &str),
+    x_range: Range<f64>,
+    labelled: bool,
+) -> Drawn<DB> {
+    let finite = || points().filter(|(x, y, _)| x.is_finite() && y.is_finite());
+    let y_range = padded(extent(finite().map(|p| p.1)), Y_PAD);
+    let mut chart = panel(area, x_range, y_range, labelled)?;
+    draw_axes(&mut chart, parameter, state_name, labelled)?;
 
     let plot = chart.plotting_area();
     let (width, height) = plot.dim_in_pixel();
     let (width, height) = (width as i32, height as i32);
     let (left, top) = plot.get_base_pixel();
     // Column by column, so that each column's runs lie together.
-    let mut lit = vec![false; (width * height) as usize];
-    for point in points() {
-        let (x, y) = chart.backend_coord(point);
+    let mut lit: Vec<Option<RGBColor>> = vec![None; (width * height) as usize];
+    for (x, y, colour) in finite() {
+        let (x, y) = chart.backend_coord(&(x, y));
         let (column, row) = (x - left, y - top);
         if (0..width).contains(&column) && (0..height).contains(&row) {
-            lit[(column * height + row) as usize] = true;
+            lit[(column * height + row) as usize] = Some(colour);
         }
     }
     let canvas = plot.strip_coord_spec();
     for (column, rows) in lit.chunks_exact(height as usize).enumerate() {
         let column = column as i32;
-        let mut start = None;
-        // One row past the bottom, to close a run that reaches it.
-        for row in 0..=height {
-            match (start, rows.get(row as usize).copied().unwrap_or(false)) {
-                (None, true) => start = Some(row),
-                (Some(first), false) => {
-                    let corners = [(column, first), (column + 1, row)];
-                    canvas.draw(&Rectangle::new(corners, DATA_COLOUR.filled()))?;
-                    start = None;
-                }
-                _ => {}
+        let mut row = 0;
+        while let Some(&pixel) = rows.get(row) {
+            let first = row;
+            while rows.get(row) == Some(&pixel) {
+                row += 1;
+            }
+            if let Some(colour) = pixel {
+                let corners = [(column, first as i32), (column + 1, row as i32)];
+                canvas.draw(&Rectangle::new(corners, colour.filled()))?;
             }
         }
     }
@@ -450,14 +664,9 @@ fn draw_exponents<DB: DrawingBackend>(
         .x_label_area_size(X_LABEL_AREA)
         .y_label_area_size(Y_LABEL_AREA)
         .build_cartesian_2d(x_range.clone(), y_range.clone())?;
-    let unit = if data.per_unit_time {
-        "per unit time"
-    } else {
-        "per iteration"
-    };
     mesh(&mut chart)
         .x_desc(pretty(&data.parameter))
-        .y_desc(format!("λ ({unit})"))
+        .y_desc(format!("λ ({})", unit(data.per_unit_time)))
         .draw()?;
     if y_range.contains(&0.0) {
         let zero = [(x_range.start, 0.0), (x_range.end, 0.0)];
@@ -492,6 +701,191 @@ fn draw_exponents<DB: DrawingBackend>(
     frame(&chart)
 }
 
+/// The panels of the figure with attractors, top to bottom.
+#[derive(Clone, Copy)]
+enum AttractorPanel {
+    Diagram,
+    Exponents,
+    Basins,
+}
+
+impl Figure for AttractorSweepData {
+    const SIZE: (u32, u32) = ATTRACTOR_SWEEP_SIZE;
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Drawn<DB> {
+        root.fill(&WHITE)?;
+        let body = root.titled(&self.title, (FONT, TITLE_PX))?;
+        let (_, height) = body.dim_in_pixel();
+        let (panels, legend) = body.split_vertically(height - LEGEND_ROW);
+        draw_legend(&legend, &self.legend(&legend)?)?;
+        let x_range = padded(extent(self.values.iter().copied()), X_PAD);
+        let mut shown = Vec::new();
+        if !self.bifurcation.is_empty() {
+            shown.push(AttractorPanel::Diagram);
+        }
+        if self.dimension() > 0 {
+            shown.push(AttractorPanel::Exponents);
+        }
+        shown.push(AttractorPanel::Basins);
+        let areas = stacked(&panels, shown.len());
+        for (k, (kind, area)) in shown.iter().zip(&areas).enumerate() {
+            let labelled = k + 1 == shown.len();
+            let x_range = x_range.clone();
+            match kind {
+                AttractorPanel::Diagram => {
+                    // A failed lane's points first, so that an attractor's
+                    // own are drawn over them.
+                    let diagram = || {
+                        let failed = self.bifurcation.iter().filter(|p| p.2.is_none());
+                        let found = self.bifurcation.iter().filter(|p| p.2.is_some());
+                        failed.chain(found).map(|&(x, y, branch)| {
+                            (x, y, branch.map_or(FAILED_COLOUR, branch_colour))
+                        })
+                    };
+                    let axes = (self.parameter.as_str(), self.state_name.as_str());
+                    draw_points(area, diagram, axes, x_range, labelled)?;
+                }
+                AttractorPanel::Exponents => self.draw_exponents(area, x_range, labelled)?,
+                AttractorPanel::Basins => self.draw_basins(area, x_range, labelled)?,
+            }
+        }
+        Ok(())
+    }
+}
+
+impl AttractorSweepData {
+    /// The number of exponents per attractor.
+    fn dimension(&self) -> usize {
+        self.branches
+            .iter()
+            .flat_map(|b| &b.exponents)
+            .map(Vec::len)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The legend: the branches' colours (the first ones, as many as fit
+    /// on the row beside the other entries), which marker is which exponent,
+    /// and grey where a lane failed.
+    fn legend<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+    ) -> std::result::Result<Vec<(String, Sample)>, DrawingAreaErrorKind<DB::ErrorType>> {
+        let mut others = Vec::new();
+        let dimension = self.dimension();
+        if dimension > 0 {
+            let filled = |filled| Sample::Marker {
+                colour: BLACK,
+                filled,
+            };
+            others.push(("λ₁".to_owned(), filled(true)));
+            match dimension {
+                1 => {}
+                2 => others.push(("λ₂".to_owned(), filled(false))),
+                n => others.push((format!("λ₂ … λ{}", subscript(n)), filled(false))),
+            }
+        }
+        if self.bifurcation.iter().any(|p| p.2.is_none()) {
+            let colour = FAILED_COLOUR;
+            others.push((
+                "failed lane".to_owned(),
+                Sample::Marker {
+                    colour,
+                    filled: true,
+                },
+            ));
+        }
+        let (width, _) = area.dim_in_pixel();
+        let mut named = self.branches.len().min(LEGEND_BRANCHES);
+        loop {
+            let mut entries: Vec<(String, Sample)> = self.branches[..named]
+                .iter()
+                .map(|b| {
+                    let colour = branch_colour(b.id);
+                    (
+                        format!("branch {}", b.id),
+                        Sample::Marker {
+                            colour,
+                            filled: true,
+                        },
+                    )
+                })
+                .collect();
+            if named < self.branches.len() {
+                entries.push((format!("… {} in all", self.branches.len()), Sample::Text));
+            }
+            entries.extend(others.iter().cloned());
+            if named <= 1 || legend_width(area, &entries)? <= width as i32 - 2 * MARGIN as i32 {
+                return Ok(entries);
+            }
+            named -= 1;
+        }
+    }
+
+    /// Each attractor's exponents at its value in its branch's colour: λ₁
+    /// filled, the others open, so that coexisting attractors show as
+    /// colours side by side and hysteresis as two colours over one
+    /// interval.
+    fn draw_exponents<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        x_range: Range<f64>,
+        labelled: bool,
+    ) -> Drawn<DB> {
+        let finite = self
+            .branches
+            .iter()
+            .flat_map(|b| b.exponents.iter().flatten());
+        let y_range = padded(extent(finite.copied()), Y_PAD);
+        let mut chart = panel(area, x_range.clone(), y_range.clone(), labelled)?;
+        let y_name = format!("λ ({})", unit(self.per_unit_time));
+        draw_axes(&mut chart, &self.parameter, &y_name, labelled)?;
+        if y_range.contains(&0.0) {
+            let zero = [(x_range.start, 0.0), (x_range.end, 0.0)];
+            chart.draw_series([PathElement::new(zero, GUIDE_COLOUR.stroke_width(2))])?;
+        }
+        for branch in &self.branches {
+            let colour = branch_colour(branch.id);
+            let markers = branch
+                .values
+                .iter()
+                .zip(&branch.exponents)
+                .flat_map(|(&v, l)| {
+                    l.iter()
+                        .enumerate()
+                        .filter(move |&(_, e)| v.is_finite() && e.is_finite())
+                        .map(move |(i, &e)| marker((v, e), MARKER_RADIUS, colour, i == 0))
+                });
+            chart.draw_series(markers)?;
+        }
+        frame(&chart)
+    }
+
+    /// Each attractor's basin fraction at its value, in its branch's colour.
+    fn draw_basins<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        x_range: Range<f64>,
+        labelled: bool,
+    ) -> Drawn<DB> {
+        let mut chart = panel(area, x_range, padded(Some((0.0, 1.0)), Y_PAD), labelled)?;
+        draw_axes(&mut chart, &self.parameter, "basin fraction", labelled)?;
+        for branch in &self.branches {
+            let colour = branch_colour(branch.id);
+            let points = branch.values.iter().zip(&branch.basin);
+            let finite = points.filter(|(v, b)| v.is_finite() && b.is_finite());
+            chart
+                .draw_series(finite.map(|(&v, &b)| marker((v, b), MARKER_RADIUS, colour, true)))?;
+        }
+        frame(&chart)
+    }
+}
+
+/// A branch's colour: the palette cycled by its id.
+fn branch_colour(id: u64) -> RGBColor {
+    BRANCH_COLOURS[(id % BRANCH_COLOURS.len() as u64) as usize]
+}
+
 impl Figure for GridData {
     const SIZE: (u32, u32) = HEAT_MAP_SIZE;
 
@@ -502,62 +896,22 @@ impl Figure for GridData {
             nx * ny,
             "λ1 holds one value per grid point ({nx} × {ny})"
         );
-        root.fill(&WHITE)?;
-        let body = root.titled(&self.title, (FONT, TITLE_PX))?;
-        let (_, height) = body.dim_in_pixel();
-        let (panels, caption) = body.split_vertically(height - LEGEND_ROW);
-        let (width, _) = panels.dim_in_pixel();
-        let (map, bar) = panels.split_horizontally(width - COLOUR_BAR_AREA);
+        let (map, bar, caption) = map_layout(root, &self.title)?;
         let (limit, chosen_as) = colour_limit(&self.lambda1);
-        let unit = if self.per_unit_time {
-            "per unit time"
-        } else {
-            "per iteration"
-        };
-
-        let (x_cells, y_cells) = (cells(&self.x), cells(&self.y));
-        let mut chart = ChartBuilder::on(&map)
-            .margin(MARGIN)
-            .x_label_area_size(X_LABEL_AREA)
-            .y_label_area_size(Y_LABEL_AREA)
-            .build_cartesian_2d(span(&x_cells), span(&y_cells))?;
-        // Grid lines over a heat map are noise: axes only.
-        mesh(&mut chart)
-            .disable_mesh()
-            .x_desc(pretty(&self.x_name))
-            .y_desc(pretty(&self.y_name))
-            .draw()?;
-        let grid = y_cells.iter().enumerate().flat_map(|(j, ys)| {
-            x_cells
-                .iter()
-                .enumerate()
-                .map(move |(i, xs)| (i, j, xs, ys))
-        });
-        chart.draw_series(grid.map(|(i, j, xs, ys)| {
-            let colour = diverging(self.lambda1[j * nx + i], limit);
-            Rectangle::new([(xs.start, ys.start), (xs.end, ys.end)], colour.filled())
-        }))?;
-        frame(&chart)?;
+        let axes = (self.x_name.as_str(), self.y_name.as_str());
+        draw_cells(&map, axes, (&self.x, &self.y), |k| {
+            diverging(self.lambda1[k], limit)
+        })?;
 
         // The colour bar: the same height as the map, its scale on the right.
         const BANDS: usize = 256;
-        let mut chart = ChartBuilder::on(&bar)
-            .margin(MARGIN)
-            .x_label_area_size(X_LABEL_AREA)
-            .right_y_label_area_size(COLOUR_BAR_AREA - 2 * MARGIN - BAR_WIDTH)
-            .build_cartesian_2d(0.0..1.0, -limit..limit)?;
-        mesh(&mut chart)
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc(format!("λ₁ ({unit})"))
-            .draw()?;
-        chart.draw_series((0..BANDS).map(|band| {
+        let bands = (0..BANDS).map(|band| {
             let edge = |b: usize| limit * (2.0 * b as f64 / BANDS as f64 - 1.0);
             let (low, high) = (edge(band), edge(band + 1));
-            let colour = diverging((low + high) / 2.0, limit);
-            Rectangle::new([(0.0, low), (1.0, high)], colour.filled())
-        }))?;
-        frame(&chart)?;
+            (low..high, diverging((low + high) / 2.0, limit))
+        });
+        let name = format!("λ₁ ({})", unit(self.per_unit_time));
+        draw_colour_bar(&bar, -limit..limit, &name, &tick, bands)?;
 
         // Under the map, where the colours end and, if any lane failed, what
         // grey means.
@@ -565,12 +919,143 @@ impl Figure for GridData {
         if self.lambda1.iter().any(|v| v.is_nan()) {
             note.push_str("; grey: failed lane");
         }
-        let style = TextStyle::from((FONT, TICK_LABEL_PX))
-            .color(&BLACK)
-            .pos(Pos::new(HPos::Center, VPos::Center));
-        let (width, height) = caption.dim_in_pixel();
-        caption.draw_text(&note, &style, (width as i32 / 2, height as i32 / 2))
+        draw_caption(&caption, &note)
     }
+}
+
+impl Figure for CountData {
+    const SIZE: (u32, u32) = HEAT_MAP_SIZE;
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Drawn<DB> {
+        let (nx, ny) = (self.x.len(), self.y.len());
+        assert_eq!(
+            self.counts.len(),
+            nx * ny,
+            "one attractor count per grid point ({nx} × {ny})"
+        );
+        let (map, bar, caption) = map_layout(root, &self.title)?;
+        let most = self.counts.iter().copied().max().unwrap_or(0).max(1);
+        let axes = (self.x_name.as_str(), self.y_name.as_str());
+        draw_cells(&map, axes, (&self.x, &self.y), |k| {
+            count_colour(self.counts[k], most)
+        })?;
+
+        // One band per count, from the fewest to the most, each labelled
+        // with its whole number (the ticks between them unlabelled).
+        let fewest = self.counts.iter().copied().min().unwrap_or(1).min(most);
+        let bands = (fewest..=most).map(|n| {
+            let n_f64 = n as f64;
+            (n_f64 - 0.5..n_f64 + 0.5, count_colour(n, most))
+        });
+        let whole = |v: &f64| {
+            let n = v.round();
+            if (v - n).abs() < 1e-9 {
+                format!("{n}")
+            } else {
+                String::new()
+            }
+        };
+        let range = fewest as f64 - 0.5..most as f64 + 0.5;
+        draw_colour_bar(&bar, range, "attractors", &whole, bands)?;
+
+        let mut note = "attractors found at each point, over all its starts".to_owned();
+        if fewest == 0 {
+            note.push_str("; grey: none (every start failed)");
+        }
+        draw_caption(&caption, &note)
+    }
+}
+
+/// The layout the two maps share: the title above, a caption's row below,
+/// the colour bar right of the map. Returns (map, bar, caption).
+#[allow(clippy::type_complexity)]
+fn map_layout<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    title: &str,
+) -> std::result::Result<
+    (
+        DrawingArea<DB, Shift>,
+        DrawingArea<DB, Shift>,
+        DrawingArea<DB, Shift>,
+    ),
+    DrawingAreaErrorKind<DB::ErrorType>,
+> {
+    root.fill(&WHITE)?;
+    let body = root.titled(title, (FONT, TITLE_PX))?;
+    let (_, height) = body.dim_in_pixel();
+    let (panels, caption) = body.split_vertically(height - LEGEND_ROW);
+    let (width, _) = panels.dim_in_pixel();
+    let (map, bar) = panels.split_horizontally(width - COLOUR_BAR_AREA);
+    Ok((map, bar, caption))
+}
+
+/// A map's cells over the grid `(x, y)`, cell (i, j) filled with
+/// `colour(j * nx + i)` (x fastest); `axes` names x and y.
+fn draw_cells<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    (x_name, y_name): (&str, &str),
+    (x, y): (&[f64], &[f64]),
+    colour: impl Fn(usize) -> RGBColor,
+) -> Drawn<DB> {
+    let nx = x.len();
+    let (x_cells, y_cells) = (cells(x), cells(y));
+    let mut chart = ChartBuilder::on(area)
+        .margin(MARGIN)
+        .x_label_area_size(X_LABEL_AREA)
+        .y_label_area_size(Y_LABEL_AREA)
+        .build_cartesian_2d(span(&x_cells), span(&y_cells))?;
+    // Grid lines over a heat map are noise: axes only.
+    mesh(&mut chart)
+        .disable_mesh()
+        .x_desc(pretty(x_name))
+        .y_desc(pretty(y_name))
+        .draw()?;
+    let grid = y_cells.iter().enumerate().flat_map(|(j, ys)| {
+        x_cells
+            .iter()
+            .enumerate()
+            .map(move |(i, xs)| (i, j, xs, ys))
+    });
+    chart.draw_series(grid.map(|(i, j, xs, ys)| {
+        let corners = [(xs.start, ys.start), (xs.end, ys.end)];
+        Rectangle::new(corners, colour(j * nx + i).filled())
+    }))?;
+    frame(&chart)
+}
+
+/// A colour bar over `range`, its scale on the right named `name` and
+/// labelled by `label`: each band a (range, colour) pair.
+fn draw_colour_bar<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    range: Range<f64>,
+    name: &str,
+    label: &dyn Fn(&f64) -> String,
+    bands: impl Iterator<Item = (Range<f64>, RGBColor)>,
+) -> Drawn<DB> {
+    let mut chart = ChartBuilder::on(area)
+        .margin(MARGIN)
+        .x_label_area_size(X_LABEL_AREA)
+        .right_y_label_area_size(COLOUR_BAR_AREA - 2 * MARGIN - BAR_WIDTH)
+        .build_cartesian_2d(0.0..1.0, range)?;
+    mesh(&mut chart)
+        .disable_mesh()
+        .disable_x_axis()
+        .y_label_formatter(label)
+        .y_desc(name)
+        .draw()?;
+    chart.draw_series(bands.map(|(band, colour)| {
+        Rectangle::new([(0.0, band.start), (1.0, band.end)], colour.filled())
+    }))?;
+    frame(&chart)
+}
+
+/// One line of text, centred in `area`.
+fn draw_caption<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, text: &str) -> Drawn<DB> {
+    let style = TextStyle::from((FONT, TICK_LABEL_PX))
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Center, VPos::Center));
+    let (width, height) = area.dim_in_pixel();
+    area.draw_text(text, &style, (width as i32 / 2, height as i32 / 2))
 }
 
 /// The mesh every panel shares: readable labels, a light grid of major ticks.
@@ -739,11 +1224,36 @@ fn diverging(value: f64, limit: f64) -> RGBColor {
     if value.is_nan() {
         return FAILED_COLOUR;
     }
-    let stops = RED_BLUE.len() - 1;
-    let position = ((value / limit).clamp(-1.0, 1.0) + 1.0) / 2.0 * stops as f64;
-    let below = (position.floor() as usize).min(stops - 1);
+    along(&RED_BLUE, ((value / limit).clamp(-1.0, 1.0) + 1.0) / 2.0)
+}
+
+/// The colour of `n` attractors on the sequential scale up to `most`; none
+/// is grey (every start failed).
+fn count_colour(n: usize, most: usize) -> RGBColor {
+    match n {
+        0 => FAILED_COLOUR,
+        _ if most <= 1 => COUNT_SCALE[0],
+        _ => along(&COUNT_SCALE, (n - 1) as f64 / (most - 1) as f64),
+    }
+}
+
+/// The colour at `t` in [0, 1] along evenly spaced `stops`, mixed linearly
+/// between the two nearest.
+fn along(stops: &[RGBColor], t: f64) -> RGBColor {
+    let last = stops.len() - 1;
+    let position = t.clamp(0.0, 1.0) * last as f64;
+    let below = (position.floor() as usize).min(last - 1);
     let t = position - below as f64;
-    let (RGBColor(r0, g0, b0), RGBColor(r1, g1, b1)) = (RED_BLUE[below], RED_BLUE[below + 1]);
+    let (RGBColor(r0, g0, b0), RGBColor(r1, g1, b1)) = (stops[below], stops[below + 1]);
     let mix = |a: u8, b: u8| (a as f64 + t * (b as f64 - a as f64)).round() as u8;
     RGBColor(mix(r0, r1), mix(g0, g1), mix(b0, b1))
+}
+
+/// The unit of the exponents.
+fn unit(per_unit_time: bool) -> &'static str {
+    if per_unit_time {
+        "per unit time"
+    } else {
+        "per iteration"
+    }
 }

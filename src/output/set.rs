@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::files::{
-    write_text, ATTRACTORS_FILE, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE,
+    write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE,
     SPECTRUM_FILE, SWEEP_FIGURE,
 };
 use crate::error::{Error, Result};
@@ -42,7 +42,7 @@ const DATA_FILES: [&str; 6] = [
     BIFURCATION_FILE,
     ATTRACTORS_FILE,
 ];
-const FIGURE_STEMS: [&str; 2] = [SWEEP_FIGURE, HEAT_MAP];
+const FIGURE_STEMS: [&str; 3] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP];
 
 /// Pauses before writing each file and before the swap, naming the step on
 /// stderr, for tests that kill a run in its write phase.
