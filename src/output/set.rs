@@ -24,8 +24,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::files::{
-    write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE,
-    SPECTRUM_FILE, SWEEP_FIGURE,
+    write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE,
+    SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
 };
 use crate::error::{Error, Result};
 
