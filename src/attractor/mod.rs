@@ -53,10 +53,14 @@ impl Attractors {
     }
 }
 
-/// [`backend::run_streaming`](crate::backend::run_streaming) with the
-/// scene's attractors found, continued and matched into branches when it
-/// has `[attractors]`: every pass's batches go to `sink` as they finish;
-/// the attractors come back with the summary.
+/// Runs a whole sweep streamed: its lanes in batches of at most
+/// `batch_lanes`, each handed to `sink` (with the scene restricted to it,
+/// see `Scene::batch`) and dropped, so that the results held at once stay
+/// bounded; the backend is chosen and opened once, and every batch runs
+/// with the whole run's plan. With `[attractors]`, each value's lanes are
+/// told apart into attractors as they come, the continuation passes follow
+/// (their batches to `sink` too), and the attractors, matched into
+/// branches, come back with the summary.
 pub fn run_streaming(
     scene: &Scene,
     options: &RunOptions,

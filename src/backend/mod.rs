@@ -357,24 +357,6 @@ pub fn run_with(scene: &Scene, options: &RunOptions) -> Result<Report> {
     runner.run(scene)
 }
 
-/// [`run_with`] streamed: the run's lanes in batches of at most
-/// `batch_lanes`, each handed to `sink` (with the scene restricted to it,
-/// see `Scene::batch`) and dropped, so that the results held at once stay
-/// bounded. The backend is chosen and opened once, and every batch runs
-/// with the whole run's plan.
-pub fn run_streaming(
-    scene: &Scene,
-    options: &RunOptions,
-    batch_lanes: usize,
-    sink: impl FnMut(&Scene, &Report) -> Result<()>,
-) -> Result<Summary> {
-    let runner = Runner::new(scene, options)?;
-    runner.progress.start(runner.work(scene));
-    let mut summary = None;
-    runner.stream(scene, batch_lanes, &mut summary, sink)?;
-    Ok(summary.expect("a scene has at least one lane"))
-}
-
 /// A run's backend, chosen and opened once, with the settings every lane
 /// follows: the lanes of the scene it was made for, or of scenes derived
 /// from it at the same values (a continuation pass), run on it alike.
