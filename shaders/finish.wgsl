@@ -184,11 +184,9 @@ fn reseed_copies(lane: u32, r: u32, y: State, phase: vec2<real>, comp: State, cr
 // Σ ln |det S| (what the CPU's IterationStats and points hold; read back
 // by src/backend/gpu/sweep.rs).
 fn write_summary(r: u32, slot: u32, y: State, impacts: u32, flags: u32, nonlinearity: f32) {
-#ifdef POINTS
     for (var k = 0u; k < DIM; k = k + 1u) {
         points[slot * DIM + k] = y[k];
     }
-#endif
     var scale = real(0.0);
     for (var k = 0u; k < DIM; k = k + 1u) {
         scale = max(scale, abs(y[k]));

@@ -94,25 +94,22 @@ fn all_variants() -> Vec<Variant> {
     for system in gpu_systems() {
         for precision in [Precision::F64, Precision::F32] {
             for lyapunov in [true, false] {
-                for points in [true, false] {
-                    let walls: &[bool] = if system.wall_reachable.is_some() {
-                        &[true, false]
-                    } else {
-                        &[false]
-                    };
-                    for &wall in walls {
-                        for impact_location in [ImpactLocation::Newton, ImpactLocation::Linear] {
-                            for difference in [Difference::Forward, Difference::Central] {
-                                variants.push(Variant {
-                                    system,
-                                    precision,
-                                    lyapunov,
-                                    difference,
-                                    wall,
-                                    points,
-                                    impact_location,
-                                });
-                            }
+                let walls: &[bool] = if system.wall_reachable.is_some() {
+                    &[true, false]
+                } else {
+                    &[false]
+                };
+                for &wall in walls {
+                    for impact_location in [ImpactLocation::Newton, ImpactLocation::Linear] {
+                        for difference in [Difference::Forward, Difference::Central] {
+                            variants.push(Variant {
+                                system,
+                                precision,
+                                lyapunov,
+                                difference,
+                                wall,
+                                impact_location,
+                            });
                         }
                     }
                 }
@@ -225,7 +222,6 @@ fn variants_leave_out_what_the_scene_does_not_need() {
         lyapunov: true,
         difference: Difference::Forward,
         wall: true,
-        points: true,
         impact_location: ImpactLocation::Newton,
     };
     let integrate = module(&full, Kernel::Integrate);
@@ -283,13 +279,6 @@ fn variants_leave_out_what_the_scene_does_not_need() {
     let m = module(&reference_only, Kernel::Finish);
     assert!(!has_global(&m, "jac") && !has_global(&m, "deltas"));
 
-    // No bifurcation points: no point buffer.
-    let no_points = Variant {
-        points: false,
-        ..full
-    };
-    assert!(!has_global(&module(&no_points, Kernel::Finish), "points"));
-
     // f32 compensates the state update; f64 does not need to.
     assert!(Variant {
         precision: Precision::F32,
@@ -307,13 +296,12 @@ fn a_scene_picks_only_the_parts_it_needs() {
         let text = format!("[system]\nkind = \"impact-oscillator\"\n{extra}");
         lyapsweep::scene::parse(&text, "test", "test", &[]).unwrap()
     };
-    // The seed's wall at 2 is within reach of the forced response; the
-    // points come along so that the host can re-estimate grazing iterations.
+    // The seed's wall at 2 is within reach of the forced response.
     let seed = variant(
         &scene("[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),
         Precision::F64,
     );
-    assert!(seed.wall && seed.lyapunov && seed.points);
+    assert!(seed.wall && seed.lyapunov);
     // A wall beyond |X_p| + √(u² + u'²) for every swept η is never reached.
     let far = variant(
         &scene("wall = 30.0\n[sweep]\nfrom = 0.5\nto = 1.5\ncount = 11"),
@@ -331,7 +319,7 @@ fn a_scene_picks_only_the_parts_it_needs() {
         &scene("[output]\nlyapunov = \"none\"\nbifurcation_points = 10"),
         Precision::F32,
     );
-    assert!(!bifurcation_only.lyapunov && bifurcation_only.points);
+    assert!(!bifurcation_only.lyapunov);
     assert_eq!(bifurcation_only.trajectories(), 1);
 }
 
@@ -392,7 +380,6 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
         lyapunov: true,
         difference: Difference::Central,
         wall: system.wall_reachable.is_some(),
-        points: true,
         impact_location: ImpactLocation::Newton,
     };
     let pendulum = system("forced-pendulum.toml");
@@ -482,7 +469,6 @@ fn a_section_model_runs_the_section_kernel_alone_and_period_maps_never_do() {
             lyapunov: true,
             difference: Difference::Central,
             wall: false,
-            points: true,
             impact_location: ImpactLocation::Newton,
         };
         assert!(v.section(), "{name}");

@@ -115,11 +115,10 @@ const SUMMARY_STRIDE: u32 = 1u;
 // row-major.
 @group(0) @binding(6) var<storage, read_write> jac: array<real>;
 #endif
-#ifdef POINTS
 // Per ring slot (a part of an iteration) and lane: the reference's state at
-// the part's end; the last part's is the Poincaré point.
+// the part's end; the last part's is the Poincaré point (the host's orbit
+// periods, bifurcation points and grazing re-estimates start from it).
 @group(0) @binding(7) var<storage, read_write> points: array<real>;
-#endif
 
 fn load_state(base: u32) -> State {
     var y: State;

@@ -281,9 +281,6 @@ pub fn variant(scene: &Scene, precision: Precision) -> Variant {
         lyapunov: scene.lyapunov,
         difference: scene.difference(),
         wall,
-        // The host needs every reference point: for the orbit's period,
-        // the re-estimations and the bifurcation points.
-        points: true,
         impact_location: scene.integration.impact_location,
     }
 }

@@ -86,8 +86,6 @@ pub struct Variant {
     pub difference: Difference,
     /// Impact code: the system has a wall the sweep can reach.
     pub wall: bool,
-    /// The Poincaré point buffer (`bifurcation_points > 0`).
-    pub points: bool,
     pub impact_location: ImpactLocation,
 }
 
@@ -129,7 +127,7 @@ impl Variant {
         }
     }
 
-    /// A short name for the summary, e.g. `impact-oscillator/f64/wall+newton/jacobian/points`.
+    /// A short name for the summary, e.g. `impact-oscillator/f64/wall+newton/jacobian-central`.
     pub fn name(&self) -> String {
         let mut parts = vec![
             self.system.kind.to_owned(),
@@ -149,9 +147,6 @@ impl Variant {
         } else {
             "reference-only".into()
         });
-        if self.points {
-            parts.push("points".into());
-        }
         parts.join("/")
     }
 
@@ -172,9 +167,6 @@ impl Variant {
             if self.surfaces() {
                 d.insert("SURFACES");
             }
-        }
-        if self.points {
-            d.insert("POINTS");
         }
         if !self.system.is_flow {
             d.insert("MAP");

@@ -108,7 +108,7 @@ impl Layout {
             } else {
                 0
             },
-            point: if variant.points { dim as u64 * real } else { 0 },
+            point: dim as u64 * real,
             flux: if variant.surfaces() { real } else { 0 },
             parts: settings.submaps.unwrap_or(1),
         }
@@ -228,7 +228,6 @@ struct Pipelines {
     integrate: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     lyapunov: bool,
-    points: bool,
     /// The per-stop impact counts (binding 8) of a variant with stops.
     wall: bool,
     /// The fluxes (binding 9) of a variant with general surfaces.
@@ -255,9 +254,7 @@ impl Pipelines {
         if variant.lyapunov {
             entries.extend([storage_entry(5, false), storage_entry(6, false)]);
         }
-        if variant.points {
-            entries.push(storage_entry(7, false));
-        }
+        entries.push(storage_entry(7, false));
         if variant.wall {
             entries.push(storage_entry(8, false));
         }
@@ -277,7 +274,6 @@ impl Pipelines {
             finish: pipeline(Kernel::Finish),
             layout,
             lyapunov: variant.lyapunov,
-            points: variant.points,
             wall: variant.wall,
             surfaces: variant.surfaces(),
             workgroup,
@@ -317,7 +313,7 @@ struct Batch<'a, const D: usize> {
     averaging_control: wgpu::BindGroup,
     summary: wgpu::Buffer,
     jac: Option<wgpu::Buffer>,
-    points: Option<wgpu::Buffer>,
+    points: wgpu::Buffer,
     fluxes: Option<wgpu::Buffer>,
     staging: [wgpu::Buffer; 2],
     /// Where the staging buffers hold the chunk's pass timestamps.
@@ -644,9 +640,7 @@ where
         if let Some(jac) = &self.jac {
             copy(jac, self.layout.jacobian * lanes);
         }
-        if let Some(points) = &self.points {
-            copy(points, self.layout.point * lanes);
-        }
+        copy(&self.points, self.layout.point * lanes);
         if let Some(fluxes) = &self.fluxes {
             copy(fluxes, self.layout.flux * lanes);
         }
@@ -797,10 +791,7 @@ where
                     ));
                 }
                 stats.merge(&part);
-                point = self
-                    .points
-                    .is_some()
-                    .then(|| crate::array::from_fn(|k| chunk.points[s * D + k]));
+                point = Some(crate::array::from_fn(|k| chunk.points[s * D + k]));
                 *x_n = point;
                 // The size of the iteration's image, as on the CPU.
                 scale = f64::from(f32::from_bits(scale_bits));
@@ -915,7 +906,7 @@ struct Buffers {
     summary: wgpu::Buffer,
     deltas: Option<wgpu::Buffer>,
     jac: Option<wgpu::Buffer>,
-    points: Option<wgpu::Buffer>,
+    points: wgpu::Buffer,
     fluxes: Option<wgpu::Buffer>,
     staging: [wgpu::Buffer; 2],
     transient_ticks: Option<wgpu::Buffer>,
@@ -989,9 +980,7 @@ impl Buffers {
         let jac = pipelines
             .lyapunov
             .then(|| empty("jacobians", layout.jacobian * slots, storage));
-        let points = pipelines
-            .points
-            .then(|| empty("points", layout.point * slots, storage));
+        let points = empty("points", layout.point * slots, storage);
         let fluxes = pipelines
             .surfaces
             .then(|| empty("fluxes", layout.flux * slots, storage));
@@ -1023,7 +1012,7 @@ impl Buffers {
             .chain(&self.deltas)
             .chain(&self.crossings)
             .chain(&self.jac)
-            .chain(&self.points)
+            .chain([&self.points])
             .chain(&self.fluxes)
             .chain(&self.staging)
             .map(|b| b.size())
@@ -1069,12 +1058,10 @@ impl Buffers {
                 resource: j.as_entire_binding(),
             });
         }
-        if let Some(p) = &self.points {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 7,
-                resource: p.as_entire_binding(),
-            });
-        }
+        entries.push(wgpu::BindGroupEntry {
+            binding: 7,
+            resource: self.points.as_entire_binding(),
+        });
         if let Some(c) = &self.crossings {
             entries.push(wgpu::BindGroupEntry {
                 binding: 8,
