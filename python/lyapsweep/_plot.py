@@ -36,12 +36,20 @@ def draw(plt, run):
 
 
 def _grid(plt, spectrum):
+    import numpy
+    from matplotlib.colors import TwoSlopeNorm
+
     first = spectrum.columns[0]
     second = spectrum.columns[1]
     # Many starts give a point several rows: its largest exponent.
     largest = spectrum.groupby([second, first])["lambda_1"].max().unstack(first)
     fig, ax = plt.subplots(figsize=(7, 5))
-    mesh = ax.pcolormesh(largest.columns, largest.index, largest.values, shading="nearest", cmap="RdBu_r")
+    # Chaos red, order blue, zero white where both are there.
+    low, high = numpy.nanmin(largest.values), numpy.nanmax(largest.values)
+    norm = TwoSlopeNorm(0.0, low, high) if low < 0 < high else None
+    mesh = ax.pcolormesh(
+        largest.columns, largest.index, largest.values, shading="nearest", cmap="RdBu_r", norm=norm
+    )
     fig.colorbar(mesh, ax=ax, label="λ1 (largest)")
     ax.set_xlabel(first)
     ax.set_ylabel(second)
