@@ -261,7 +261,7 @@ fn summary<'py>(
     let s = &outcome.summary;
     let d = PyDict::new(py);
     d.set_item("name", &scene.name)?;
-    d.set_item("system", &scene.system.kind)?;
+    d.set_item("system", scene.system.kind)?;
     d.set_item("backend", s.backend.name())?;
     d.set_item(
         "precision",
