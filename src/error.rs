@@ -16,9 +16,15 @@ pub enum Error {
         path: PathBuf,
         source: std::io::Error,
     },
-    /// The scene is not valid TOML, or a key has the wrong type or is unknown.
+    /// The scene is not valid TOML, or a key has the wrong type or is
+    /// unknown. `key` is that key, when the message names one (it also
+    /// heads `message`); TOML that does not parse has none.
     #[error("scene {path}: {message}")]
-    Syntax { path: String, message: String },
+    Syntax {
+        path: String,
+        key: Option<String>,
+        message: String,
+    },
     /// A key is present and well typed but its value is impossible. Both
     /// are cut to a length a message can show when written (either may
     /// quote the input), and kept whole for code that matches keys.
@@ -64,6 +70,19 @@ impl Error {
         Error::Invalid {
             key: key.into(),
             reason: reason.into(),
+        }
+    }
+
+    /// The scene key (or flag) the error is about, as it heads the
+    /// message: for code that points at it, such as the Python package's
+    /// exceptions.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            Error::Syntax { key, .. } => key.as_deref(),
+            Error::Invalid { key, .. } => Some(key),
+            Error::TooLarge { keys, .. } => Some(keys),
+            Error::Backend { .. } => Some("run.backend"),
+            _ => None,
         }
     }
 

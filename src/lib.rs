@@ -11,12 +11,14 @@
 //! (RK4, impact location, the closed-form propagator), [`method`] (the
 //! perturbation Jacobian and the QR accumulation), [`backend`] (where lanes
 //! run), [`scene`] (the input contract) and [`output`] (the CSV files and
-//! the figures).
+//! the figures); [`command`] is what the command line and the Python
+//! package do with them.
 
 pub mod array;
 pub mod attractor;
 pub mod backend;
 pub mod bench;
+pub mod command;
 pub mod error;
 pub mod integrate;
 pub mod limits;

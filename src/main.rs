@@ -3,9 +3,8 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-mod progress_bar;
-
 use clap::{Parser, Subcommand};
+use lyapsweep::command::{self, progress_bar};
 use lyapsweep::scene::{self, Backend, Precision};
 use lyapsweep::{output, Error, Scene, Summary};
 
@@ -128,43 +127,18 @@ fn main() -> ExitCode {
     }
 }
 
-/// `lyapsweep model check FILE`. A scene file given instead is told
-/// apart: one naming its model file (`model = "file.toml"`) has that file
-/// checked, saying so on stderr; one with a built-in `[system]` has no
-/// model to check, and is refused saying so.
+/// `lyapsweep model check FILE`, saying on stderr when FILE was a scene
+/// whose model file was checked.
 fn check_model(file: &std::path::Path) -> Result<(), Error> {
-    let mut table = lyapsweep::model::read_table(file)?;
-    if let toml::Value::String(named) = &table {
-        let path = scene::model_path(named, file.parent());
+    let check = lyapsweep::command::check_model(file)?;
+    if let Some(path) = &check.named {
         eprintln!(
-            "lyapsweep: {} is a scene file (model = {named:?}): checking the model file it names, {}",
+            "lyapsweep: {} is a scene file: checked the model file it names, {}",
             file.display(),
             path.display()
         );
-        table = lyapsweep::model::read_table(&path)?;
     }
-    // Keys a scene has and a model does not.
-    let scene_keys = ["system", "sweep", "integration", "run", "output"];
-    if let Some(key) = scene_keys.iter().find(|k| table.get(k).is_some()) {
-        let reason = match table.get("system").and_then(|s| s.get("kind")) {
-            Some(kind) => format!(
-                "is a scene file whose [system] is built into lyapsweep (kind = {}), not a model: it names no model file to check; `model check` reads a model file (a [model] table, or the whole file as one), or a scene with model = \"file.toml\"",
-                lyapsweep::error::clip(&kind.to_string())
-            ),
-            None => format!(
-                "is a scene file (it has [{key}]) with no [model] and no model = \"file.toml\": there is no model in it to check; `model check` reads a model file (a [model] table, or the whole file as one)"
-            ),
-        };
-        return Err(Error::NotAModel {
-            path: file.to_owned(),
-            reason,
-        });
-    }
-    let model = lyapsweep::model::Model::parse(&table, "model")?;
-    // A run checks the period at every swept value; at the defaults, here.
-    model.check_period(&model.defaults, "model", "the model's defaults")?;
-    let code = lyapsweep::model::code::Code::compile(model, "model")?;
-    print!("{}", lyapsweep::model::describe::describe(&code));
+    print!("{}", check.description);
     Ok(())
 }
 
@@ -200,11 +174,8 @@ fn run(
         }
         None => PathBuf::from("out").join(&scene.name),
     });
-    // Everything that can refuse the run does so before the first step:
-    // its size, then the output folder.
-    let large = lyapsweep::plan::large_run(&scene);
-    let mut writer = output::SetWriter::new(&scene, output::Staging::prepare(&dir, &scene.files)?)?;
-    if let Some(line) = large.filter(|_| !how.quiet) {
+    let prepared = command::prepare(&scene, &dir)?;
+    if let Some(line) = prepared.large().filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
     }
     let progress = lyapsweep::Progress::default();
@@ -214,27 +185,18 @@ fn run(
         device: how.device,
         ..Default::default()
     };
-    let batch = lyapsweep::plan::batch_lanes(&scene);
-    let outcome = lyapsweep::run_streaming(&scene, &options, batch, |batch, report| {
-        writer.append(batch, report)
-    });
+    let outcome = prepared.run(&options);
     if let Some(w) = watcher {
         w.finish();
     }
-    let (summary, attractors) = outcome?;
-    let written = writer.finish(attractors.as_ref())?;
-    print_summary(&scene, &summary, attractors.as_ref(), &written);
-    if summary.all_failed() {
-        let reasons: Vec<String> = summary
-            .failures
-            .iter()
-            .map(|(name, n)| format!("{n} {name}"))
-            .collect();
-        return Err(Error::AllLanesFailed {
-            reasons: reasons.join(", "),
-        });
-    }
-    Ok(())
+    let outcome = outcome?;
+    print_summary(
+        &scene,
+        &outcome.summary,
+        outcome.attractors.as_ref(),
+        &outcome.written,
+    );
+    outcome.result()
 }
 
 fn plot(dir: &std::path::Path, into: &std::path::Path) -> Result<(), Error> {
@@ -480,8 +442,7 @@ fn print_outcome(report: &Summary, written: &[PathBuf]) {
 }
 
 fn print_devices() -> Result<(), Error> {
-    lyapsweep::backend::gpu::context::backends_from_env()?;
-    let adapters = lyapsweep::backend::gpu::context::list();
+    let adapters = command::devices()?;
     if adapters.is_empty() {
         println!("no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
         return Ok(());

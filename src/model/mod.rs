@@ -31,9 +31,14 @@ pub use table::{Event, Map, Model};
 /// A model file's `[model]` table (or, without one, the whole file as the
 /// model table), unparsed: what a scene's `model = "file"` stands for.
 pub fn read_table(path: &std::path::Path) -> crate::Result<toml::Value> {
-    let bad =
-        |reason: String| crate::Error::invalid("model", format!("{}: {reason}", path.display()));
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| crate::Error::invalid("model", format!("{}: {e}", path.display())))?;
+    table_of_text(&text, &path.display().to_string())
+}
+
+/// [`read_table`] of a model file's text; `origin` names it in messages.
+pub fn table_of_text(text: &str, origin: &str) -> crate::Result<toml::Value> {
+    let bad = |reason: String| crate::Error::invalid("model", format!("{origin}: {reason}"));
     let mut read: toml::Table = text.parse().map_err(|e: toml::de::Error| {
         let line = e
             .span()

@@ -285,6 +285,37 @@ impl Drop for Staging {
     }
 }
 
+/// Writes the set in `from` (checked against its manifest first) as the
+/// set of `to`, staged and swapped in whole like a run's own; returns the
+/// paths of its files in `to`. A front end that ran into a scratch folder
+/// keeps its results there and copies them out when asked.
+pub fn copy(from: &Path, to: &Path) -> Result<Vec<PathBuf>> {
+    verify(from)?;
+    let staging = Staging::prepare(to, &[from.to_owned()])?;
+    let read_error = |source| Error::Write {
+        path: from.to_owned(),
+        source,
+    };
+    for entry in fs::read_dir(from).map_err(read_error)? {
+        let name = entry.map_err(read_error)?.file_name();
+        let name = name.to_string_lossy();
+        // The manifest is written anew by the commit.
+        if name == MANIFEST_FILE || name.starts_with('.') || !is_ours(&name) {
+            continue;
+        }
+        let target = staging.dir().join(&*name);
+        let write_error = |source| Error::Write {
+            path: target.clone(),
+            source,
+        };
+        fs::copy(from.join(&*name), &target).map_err(write_error)?;
+        fs::File::open(&target)
+            .and_then(|f| f.sync_all())
+            .map_err(write_error)?;
+    }
+    staging.commit()
+}
+
 /// Before writing `what`, the pause tests ask for (see [`PAUSE_VARIABLE`]).
 pub(crate) fn pause(what: &str) {
     if let Some(ms) = std::env::var(PAUSE_VARIABLE)

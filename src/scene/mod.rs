@@ -129,6 +129,7 @@ fn parse_in(
         });
         Error::Syntax {
             path: origin.to_owned(),
+            key: None,
             message: format!(
                 "{}{}",
                 at.unwrap_or_default(),

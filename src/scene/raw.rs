@@ -126,6 +126,7 @@ pub(super) fn deserialize(
             }
             None => Error::Syntax {
                 path: origin.to_owned(),
+                key: (path != ".").then(|| path.clone()),
                 message: format!("{key}{first_line}"),
             },
         }

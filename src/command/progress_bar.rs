@@ -1,6 +1,7 @@
-//! The command's progress display on stderr: a bar with rate and time left
-//! when stderr is a terminal; otherwise (CI logs, Slurm output files) a
-//! plain line every ten seconds, once a run has lasted that long.
+//! The progress display on stderr, the command line's and the Python
+//! package's: a bar with rate and time left when stderr is a terminal;
+//! otherwise (CI logs, Slurm output files) a plain line every ten seconds,
+//! once a run has lasted that long.
 
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -8,8 +9,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use crate::backend::Progress;
 use indicatif::{ProgressBar, ProgressStyle};
-use lyapsweep::Progress;
 
 /// How often a plain line is printed.
 const LINE_EVERY: Duration = Duration::from_secs(10);

@@ -1,0 +1,340 @@
+//! The extension module of the Python package: the library's `command`
+//! functions called from Python, with the conversions between the two
+//! (dicts and TOML, errors and the package's exceptions). The package's
+//! Python files (`lyapsweep/`) wrap these functions; nothing here decides
+//! what a run does, so that Python runs exactly what the command line runs.
+
+use std::path::{Path, PathBuf};
+
+use lyapsweep::command::{self, progress_bar};
+use lyapsweep::scene::{self, Precision, Scene};
+use lyapsweep::{Error, Progress, RunOptions};
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+
+/// The compiled part of the `lyapsweep` package; its functions are
+/// called by the package's Python files, which document them.
+#[pymodule]
+mod _lyapsweep {
+    #[pymodule_export]
+    use super::{check_model, copy_set, devices, run};
+}
+
+/// Runs `scene` (a `pathlib.Path`, TOML text or a dict) with `overrides`
+/// (pairs of a dotted key and a value, applied in order as the command
+/// line's `--set`) into the output folder `out`, which must be new, empty
+/// or a lyapsweep output folder. Returns a dict: `summary`, `scene` (the
+/// resolved scene as written to scene.toml) and `written` (the paths).
+#[pyfunction]
+fn run<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyAny>,
+    overrides: Vec<(String, Bound<'py, PyAny>)>,
+    out: PathBuf,
+    progress: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let source = SceneSource::of(scene)?;
+    let overrides = overrides
+        .iter()
+        .map(|(key, value)| Ok(format!("{key}={}", to_toml(value, key)?)))
+        .collect::<PyResult<Vec<String>>>()?;
+    // The GIL is released while the lanes run, so that other Python
+    // threads go on.
+    let ran = py.detach(|| {
+        let scene = source.load(&overrides)?;
+        let prepared = command::prepare(&scene, &out)?;
+        if let Some(line) = prepared.large().filter(|_| progress) {
+            eprintln!("lyapsweep: {line}");
+        }
+        let counts = Progress::default();
+        let watcher = progress.then(|| progress_bar::watch(&counts));
+        let options = RunOptions {
+            progress: Some(counts.clone()),
+            ..Default::default()
+        };
+        let outcome = prepared.run(&options);
+        if let Some(w) = watcher {
+            w.finish();
+        }
+        let outcome = outcome?;
+        // Every lane failed: the files are written, but hold no result.
+        outcome.result()?;
+        Ok((scene, outcome))
+    });
+    let (scene, outcome) = ran.map_err(|e| to_exception(py, e))?;
+    let result = PyDict::new(py);
+    result.set_item("summary", summary(py, &scene, &outcome)?)?;
+    result.set_item("scene", resolved(py, &scene)?)?;
+    result.set_item("written", outcome.written)?;
+    Ok(result)
+}
+
+/// Writes the set in the folder `from` as the set of `to`, staged and
+/// swapped in whole like a run's; returns the paths written.
+#[pyfunction]
+fn copy_set(py: Python<'_>, from: PathBuf, to: PathBuf) -> PyResult<Vec<PathBuf>> {
+    py.detach(|| lyapsweep::output::set::copy(&from, &to))
+        .map_err(|e| to_exception(py, e))
+}
+
+/// What `lyapsweep model check` prints of `model` (a `pathlib.Path`, TOML
+/// text or a dict), and the model file it named when it was a scene.
+#[pyfunction]
+fn check_model(py: Python<'_>, model: &Bound<'_, PyAny>) -> PyResult<(String, Option<PathBuf>)> {
+    let source = SceneSource::of(model)?;
+    let checked = py.detach(|| match &source {
+        SceneSource::Path(path) => command::check_model(path),
+        SceneSource::Text { text, origin } => {
+            let table = lyapsweep::model::table_of_text(text, origin)?;
+            command::check_model_table(table, Path::new(origin), None)
+        }
+    });
+    let checked = checked.map_err(|e| to_exception(py, e))?;
+    Ok((checked.description, checked.named))
+}
+
+/// The GPU adapters, as `lyapsweep devices` lists them: one dict each.
+#[pyfunction]
+fn devices(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
+    let adapters = py
+        .detach(command::devices)
+        .map_err(|e| to_exception(py, e))?;
+    adapters
+        .into_iter()
+        .map(|a| {
+            let d = PyDict::new(py);
+            d.set_item("name", a.name)?;
+            d.set_item("backend", a.backend)?;
+            d.set_item("device_type", a.device_type)?;
+            d.set_item("f64", a.f64)?;
+            d.set_item("timestamps", a.timestamps)?;
+            d.set_item("exact_rounding", a.exact_rounding)?;
+            d.set_item("max_storage_binding", a.max_storage_binding)?;
+            d.set_item("max_buffer", a.max_buffer)?;
+            d.set_item("max_workgroups", a.max_workgroups)?;
+            Ok(d)
+        })
+        .collect()
+}
+
+/// Where a scene (or a model) comes from. A dict becomes TOML text, so that
+/// it goes through the same parser as text and as a file.
+enum SceneSource {
+    Path(PathBuf),
+    Text { text: String, origin: String },
+}
+
+impl SceneSource {
+    fn of(scene: &Bound<'_, PyAny>) -> PyResult<SceneSource> {
+        if let Ok(text) = scene.cast::<PyString>() {
+            return Ok(SceneSource::Text {
+                text: text.to_cow()?.into_owned(),
+                origin: "<string>".into(),
+            });
+        }
+        if scene.is_instance_of::<PyDict>() {
+            let toml::Value::Table(table) = to_toml(scene, "")? else {
+                unreachable!("a dict converts to a table")
+            };
+            return Ok(SceneSource::Text {
+                text: toml::to_string(&table).map_err(|e| PyTypeError::new_err(e.to_string()))?,
+                origin: "<dict>".into(),
+            });
+        }
+        Ok(SceneSource::Path(scene.extract()?))
+    }
+
+    /// The scene, checked, with the overrides applied. A file's model path
+    /// is relative to the file, text's and a dict's to the working folder.
+    fn load(&self, overrides: &[String]) -> lyapsweep::Result<Scene> {
+        match self {
+            SceneSource::Path(path) => scene::load(path, overrides),
+            SceneSource::Text { text, origin } => scene::parse(text, origin, "scene", overrides),
+        }
+    }
+}
+
+/// A Python value as TOML: dicts are tables (with string keys), lists and
+/// tuples arrays, and str, int, float and bool themselves. `key` names the
+/// value in the error for anything else (None has no TOML value).
+fn to_toml(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
+    let at = |inner: &str| match (key, inner) {
+        ("", _) => inner.to_owned(),
+        (_, "") => key.to_owned(),
+        _ => format!("{key}.{inner}"),
+    };
+    // bool before int: Python's bools are ints.
+    if let Ok(b) = value.cast::<PyBool>() {
+        return Ok(toml::Value::Boolean(b.is_true()));
+    }
+    if value.is_instance_of::<PyInt>() {
+        return value
+            .extract::<i64>()
+            .map(toml::Value::Integer)
+            .map_err(|_| PyTypeError::new_err(format!("{}: an integer beyond 64 bits", at(""))));
+    }
+    if value.is_instance_of::<PyFloat>() {
+        return Ok(toml::Value::Float(value.extract()?));
+    }
+    if let Ok(text) = value.cast::<PyString>() {
+        return Ok(toml::Value::String(text.to_cow()?.into_owned()));
+    }
+    if let Ok(dict) = value.cast::<PyDict>() {
+        let mut table = toml::Table::new();
+        for (k, v) in dict.iter() {
+            let name: String = k.extract().map_err(|_| {
+                PyTypeError::new_err(format!(
+                    "{}: a key that is not a string ({})",
+                    at(""),
+                    k.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+                ))
+            })?;
+            let inner = to_toml(&v, &at(&name))?;
+            table.insert(name, inner);
+        }
+        return Ok(toml::Value::Table(table));
+    }
+    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        let items = value.try_iter()?;
+        let array = items
+            .enumerate()
+            .map(|(i, item)| to_toml(&item?, &format!("{}[{i}]", at(""))))
+            .collect::<PyResult<Vec<_>>>()?;
+        return Ok(toml::Value::Array(array));
+    }
+    // numpy's scalars: its integers convert through __index__, its floats
+    // through __float__.
+    if let Ok(i) = value.extract::<i64>() {
+        return Ok(toml::Value::Integer(i));
+    }
+    if let Ok(x) = value.extract::<f64>() {
+        return Ok(toml::Value::Float(x));
+    }
+    let kind = value.get_type().name()?;
+    Err(PyTypeError::new_err(format!(
+        "{}: a {kind} has no TOML value (str, int, float, bool, list or dict)",
+        at("")
+    )))
+}
+
+/// A TOML value as Python's: tables are dicts, arrays lists, a date its text.
+fn to_python<'py>(py: Python<'py>, value: &toml::Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        toml::Value::String(s) => s.into_pyobject(py)?.into_any(),
+        toml::Value::Integer(i) => i.into_pyobject(py)?.into_any(),
+        toml::Value::Float(x) => x.into_pyobject(py)?.into_any(),
+        toml::Value::Boolean(b) => b.into_pyobject(py)?.to_owned().into_any(),
+        toml::Value::Datetime(d) => d.to_string().into_pyobject(py)?.into_any(),
+        toml::Value::Array(items) => {
+            let list = PyList::empty(py);
+            for item in items {
+                list.append(to_python(py, item)?)?;
+            }
+            list.into_any()
+        }
+        toml::Value::Table(table) => {
+            let dict = PyDict::new(py);
+            for (k, v) in table {
+                dict.set_item(k, to_python(py, v)?)?;
+            }
+            dict.into_any()
+        }
+    })
+}
+
+/// The scene as run (scene.toml's text) as a dict.
+fn resolved<'py>(py: Python<'py>, scene: &Scene) -> PyResult<Bound<'py, PyAny>> {
+    let table: toml::Table = scene
+        .source
+        .parse()
+        .expect("the written scene is the library's own TOML");
+    to_python(py, &toml::Value::Table(table))
+}
+
+/// The summary the command line prints, as a dict.
+fn summary<'py>(
+    py: Python<'py>,
+    scene: &Scene,
+    outcome: &command::Outcome,
+) -> PyResult<Bound<'py, PyDict>> {
+    let s = &outcome.summary;
+    let d = PyDict::new(py);
+    d.set_item("name", &scene.name)?;
+    d.set_item("system", scene.system.kind)?;
+    d.set_item("backend", s.backend.name())?;
+    d.set_item(
+        "precision",
+        match s.precision {
+            Precision::F64 => "f64",
+            Precision::F32 => "f32",
+        },
+    )?;
+    d.set_item("choice", s.choice.as_deref())?;
+    d.set_item("adapter", s.gpu.as_ref().map(|g| g.adapter.as_str()))?;
+    d.set_item("threads", s.threads)?;
+    d.set_item("lanes", s.lanes)?;
+    d.set_item("time", s.elapsed.as_secs_f64())?;
+    d.set_item("max_sum_error", s.max_sum_error)?;
+    d.set_item("flagged", s.flagged)?;
+    let failures = PyDict::new(py);
+    for (status, n) in &s.failures {
+        failures.set_item(status, n)?;
+    }
+    d.set_item("failures", failures)?;
+    if let Some(found) = &outcome.attractors {
+        let total: usize = found.values.iter().map(|v| v.count()).sum();
+        d.set_item("attractors", total)?;
+        d.set_item("branches", found.branches)?;
+    }
+    Ok(d)
+}
+
+/// The library's error as the package's exception (`lyapsweep._errors`),
+/// with the command line's message: a model's as `ModelError` with its
+/// column, the rest of the input's as `SceneError`, both with the key;
+/// the machine's (a write failed, every lane failed) as `RunError`.
+fn to_exception(py: Python<'_>, error: Error) -> PyErr {
+    let message = error.to_string();
+    let key = error.key().map(dotted_key);
+    let class = if !error.is_input_error() {
+        "RunError"
+    } else if matches!(error, Error::NotAModel { .. })
+        || key
+            .as_deref()
+            .is_some_and(|k| k == "model" || k.starts_with("model.") || k.starts_with("model["))
+    {
+        "ModelError"
+    } else {
+        "SceneError"
+    };
+    let raised = (|| {
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("key", key.as_deref())?;
+        kwargs.set_item("column", column(&message))?;
+        let exception = py
+            .import("lyapsweep._errors")?
+            .getattr(class)?
+            .call((message.as_str(),), Some(&kwargs))?;
+        Ok::<_, PyErr>(PyErr::from_value(exception))
+    })();
+    raised.unwrap_or_else(|e| e)
+}
+
+/// The dotted key of an error's key: an override's (`--set a.b=1`) is the
+/// key it set, a model file's (`model.equations.v in models/x.toml`) the
+/// key without the file.
+fn dotted_key(key: &str) -> String {
+    match key.strip_prefix("--set ") {
+        Some(assignment) => assignment.split('=').next().unwrap_or_default(),
+        None => key.split(" in ").next().unwrap_or_default(),
+    }
+    .trim()
+    .to_owned()
+}
+
+/// The column a model's message points at: "... (column 6)".
+fn column(message: &str) -> Option<usize> {
+    let (_, after) = message.rsplit_once("(column ")?;
+    after.split(')').next()?.parse().ok()
+}
