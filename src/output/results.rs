@@ -451,7 +451,7 @@ mod tests {
     use std::fs;
 
     use super::*;
-    use crate::model::code::event_column;
+    use crate::output::attractor_table::attractors_header;
     use crate::output::files::GRID_FILE;
     use crate::output::plot::{attractor_pixels, ATTRACTOR_SWEEP_SIZE, HEAT_MAP_SIZE};
     use crate::output::spectrum_header;
@@ -503,21 +503,6 @@ box = { x = [-3, 1.9], v = [-3, 3] }
             lines.push(fields.join(","));
         }
         fs::write(dir.join(name), lines.join("\n") + "\n").unwrap();
-    }
-
-    /// `attractors.csv`'s header for `scene`, as the run writes it.
-    fn attractors_header(scene: &Scene) -> Vec<String> {
-        let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
-        header.extend(["branch", "period", "impacts_per_period"].map(String::from));
-        header.extend(scene.system.events.iter().map(|e| event_column(e)));
-        if scene.lyapunov {
-            header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-            header.extend(["lambda_sum", "expected_sum"].map(String::from));
-        }
-        header.extend(["basin_fraction", "starts"].map(String::from));
-        header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
-        header.push("status".into());
-        header
     }
 
     /// An `attractors.csv` row at `at` (the swept values), on `branch`
