@@ -56,6 +56,10 @@ pub enum Error {
     /// with each lane's status, but the run is not a result.
     #[error("every lane failed ({reasons}): see the status column of the output")]
     AllLanesFailed { reasons: String },
+    /// The run was asked to stop (see [`crate::method::Stop`]) before it
+    /// ended: its lanes are not results, and nothing was written.
+    #[error("the run was stopped before it ended; nothing was written")]
+    Stopped,
     /// Writing the output failed.
     #[error("cannot write {path}: {source}")]
     Write {
@@ -88,7 +92,10 @@ impl Error {
 
     /// Whether the error is the user's input (exit code 2) rather than the machine's.
     pub fn is_input_error(&self) -> bool {
-        !matches!(self, Error::Write { .. } | Error::AllLanesFailed { .. })
+        !matches!(
+            self,
+            Error::Write { .. } | Error::AllLanesFailed { .. } | Error::Stopped
+        )
     }
 }
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Mapping, Optional, Union
+from typing import Any, Callable, Mapping, Optional, Union
 
 import pandas
 
@@ -27,7 +27,7 @@ def run(
     backend: Optional[str] = None,
     precision: Optional[str] = None,
     out: Union[str, "os.PathLike[str]", None] = None,
-    progress: bool = True,
+    progress: Union[bool, Callable[[int, int], Any]] = True,
 ) -> "Run":
     """Runs a scene as ``lyapsweep run`` does and returns its results.
 
@@ -46,12 +46,18 @@ def run(
     The run writes the command line's output set: into ``out`` when given
     (a new or empty folder, or a lyapsweep output folder, replaced whole),
     otherwise into a temporary folder that lasts as long as the ``Run``.
-    With ``progress``, the command line's progress display goes to stderr.
+
+    ``progress=True`` shows a progress bar: tqdm's (``tqdm.auto``, a widget
+    in a notebook) when tqdm is installed, else the command line's display
+    on stderr. A callable is called with ``(done, total)`` lane-iterations
+    a few times a second instead; ``False`` shows nothing.
 
     Raises ``SceneError`` (``ModelError`` for the model) with the command
     line's message before anything is written, and ``RunError`` when the
     files cannot be written or every lane failed. The GIL is released while
-    the lanes run.
+    the lanes run. Ctrl-C (or any exception from the progress callable)
+    stops the run within about a second and is raised once it has stopped;
+    nothing is then written.
     """
     overrides = list((set or {}).items())
     if backend is not None:
@@ -64,13 +70,48 @@ def run(
         folder = Path(scratch.name) / "set"
     else:
         folder = Path(out)
+    bar = _Bar() if progress is True and _tqdm() is not None else None
     try:
-        ran = _lyapsweep.run(_source(scene), overrides, folder, progress)
+        ran = _lyapsweep.run(_source(scene), overrides, folder, bar or progress)
     except BaseException:
         if scratch is not None:
             scratch.cleanup()
         raise
+    finally:
+        if bar is not None:
+            bar.close()
     return Run(folder, ran["summary"], ran["scene"], scratch)
+
+
+def _tqdm() -> Optional[type]:
+    """tqdm's bar for this front end (a notebook's widget, or a
+    terminal's), or None when tqdm is not installed."""
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None
+    return tqdm
+
+
+class _Bar:
+    """A tqdm bar following a run's ``(done, total)`` lane-iterations; it
+    appears once the run has counted its work."""
+
+    def __init__(self):
+        self._bar = None
+
+    def __call__(self, done: int, total: int) -> None:
+        if self._bar is None:
+            self._bar = _tqdm()(total=total, unit="lane-it", unit_scale=True, dynamic_ncols=True)
+        # A continuation pass adds lanes to the run as it goes.
+        if total != self._bar.total:
+            self._bar.total = total
+            self._bar.refresh()
+        self._bar.update(done - self._bar.n)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
 
 
 def _source(scene: Scene) -> Any:

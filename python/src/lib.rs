@@ -5,6 +5,8 @@
 //! what a run does, so that Python runs exactly what the command line runs.
 
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::time::Duration;
 
 use lyapsweep::command::{self, progress_bar};
 use lyapsweep::scene::{self, Precision, Scene};
@@ -24,51 +26,104 @@ mod _lyapsweep {
 /// Runs `scene` (a `pathlib.Path`, TOML text or a dict) with `overrides`
 /// (pairs of a dotted key and a value, applied in order as the command
 /// line's `--set`) into the output folder `out`, which must be new, empty
-/// or a lyapsweep output folder. Returns a dict: `summary`, `scene` (the
-/// resolved scene as written to scene.toml) and `written` (the paths).
+/// or a lyapsweep output folder. `progress` is False (no display), True
+/// (the command line's display on stderr) or a callable given
+/// `(done, total)` lane-iterations a few times a second. Returns a dict:
+/// `summary`, `scene` (the resolved scene as written to scene.toml) and
+/// `written` (the paths).
+///
+/// The run has a thread of its own and the GIL is released while it runs,
+/// so that other Python threads go on; the calling thread wakes every
+/// [`TICK`] to run Python's signal handlers (Ctrl-C raises
+/// `KeyboardInterrupt` there) and the callable. An exception from either
+/// stops the run, which then writes nothing, and is raised once it has.
 #[pyfunction]
 fn run<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
     overrides: Vec<(String, Bound<'py, PyAny>)>,
     out: PathBuf,
-    progress: bool,
+    progress: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let source = SceneSource::of(scene)?;
     let overrides = overrides
         .iter()
         .map(|(key, value)| Ok(format!("{key}={}", to_toml(value, key)?)))
         .collect::<PyResult<Vec<String>>>()?;
-    // The GIL is released while the lanes run, so that other Python
-    // threads go on.
-    let ran = py.detach(|| {
+    let report: Option<Py<PyAny>> = progress.is_callable().then(|| progress.clone().unbind());
+    let own_display = report.is_none() && progress.is_truthy()?;
+    let options = RunOptions {
+        progress: Some(Progress::default()),
+        ..Default::default()
+    };
+    let counts = options.progress.clone().expect("set above");
+    let stop = options.stop.clone();
+    let work = || {
         let scene = source.load(&overrides)?;
         let prepared = command::prepare(&scene, &out)?;
-        if let Some(line) = prepared.large().filter(|_| progress) {
+        if let Some(line) = prepared.large().filter(|_| own_display) {
             eprintln!("lyapsweep: {line}");
         }
-        let counts = Progress::default();
-        let watcher = progress.then(|| progress_bar::watch(&counts));
-        let options = RunOptions {
-            progress: Some(counts.clone()),
-            ..Default::default()
-        };
-        let outcome = prepared.run(&options);
-        if let Some(w) = watcher {
-            w.finish();
-        }
-        let outcome = outcome?;
+        let outcome = prepared.run(&options)?;
         // Every lane failed: the files are written, but hold no result.
         outcome.result()?;
         Ok((scene, outcome))
+    };
+    let (ran, raised) = py.detach(|| {
+        std::thread::scope(|threads| {
+            let (done, finished) = mpsc::channel();
+            threads.spawn(move || done.send(work()));
+            let watcher = own_display.then(|| progress_bar::watch(&counts));
+            let mut raised: Option<PyErr> = None;
+            let ran = loop {
+                match finished.recv_timeout(TICK) {
+                    Ok(ran) => break ran,
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => {
+                        panic!("the run's thread ended without its result")
+                    }
+                }
+                if raised.is_some() {
+                    continue;
+                }
+                raised = Python::attach(|py| {
+                    py.check_signals()?;
+                    match &report {
+                        Some(f) if counts.total() > 0 => {
+                            f.call1(py, (counts.done(), counts.total())).map(drop)
+                        }
+                        _ => Ok(()),
+                    }
+                })
+                .err();
+                if raised.is_some() {
+                    stop.request();
+                }
+            };
+            if let Some(w) = watcher {
+                w.finish();
+            }
+            (ran, raised)
+        })
     });
+    if let Some(e) = raised {
+        return Err(e);
+    }
     let (scene, outcome) = ran.map_err(|e| to_exception(py, e))?;
+    if let Some(f) = &report {
+        f.call1(py, (counts.done(), counts.total()))?;
+    }
     let result = PyDict::new(py);
     result.set_item("summary", summary(py, &scene, &outcome)?)?;
     result.set_item("scene", resolved(py, &scene)?)?;
     result.set_item("written", outcome.written)?;
     Ok(result)
 }
+
+/// How often a running scene's calling thread looks at Python's signals and
+/// reports progress: Ctrl-C stops a run within about this, plus the time a
+/// lane takes to finish the iteration it is in.
+const TICK: Duration = Duration::from_millis(100);
 
 /// Writes the set in the folder `from` as the set of `to`, staged and
 /// swapped in whole like a run's; returns the paths written.

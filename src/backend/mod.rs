@@ -380,11 +380,13 @@ impl Runner {
                 };
                 let mut settings = method_settings(scene, backend, Precision::F64);
                 settings.keep_jacobians = options.keep_jacobians;
+                settings.stop = options.stop.clone();
                 (backend, settings, None)
             }
             Plan::Gpu(adapter, summary) => {
                 let mut settings = method_settings(scene, Backend::Gpu, precision);
                 settings.keep_jacobians = options.keep_jacobians;
+                settings.stop = options.stop.clone();
                 follow_gpu_plan(scene, &mut settings)?;
                 let variant = variant(scene, precision);
                 let gpu = context::open(adapter, summary, precision)?;
@@ -478,6 +480,10 @@ impl Runner {
             }
         };
         let elapsed = start.elapsed();
+        // A stopped run's lanes ended part way: they are not results.
+        if self.settings.stop.requested() {
+            return Err(Error::Stopped);
+        }
 
         let gpu_report = gpu_report.map(|mut report| {
             report.recomputed = recompute_sliding(scene, &self.settings, &mut lanes);

@@ -1,7 +1,8 @@
 //! What a caller asks of a run beyond its scene: batch limits, a progress
-//! display, the adapter, the workgroup and dispatch sizes.
+//! display, the adapter, the workgroup and dispatch sizes, a way to stop it.
 
 use super::progress::Progress;
+use crate::method::Stop;
 
 /// Options of a run that are not part of a scene.
 #[derive(Clone, Debug, Default)]
@@ -23,4 +24,7 @@ pub struct RunOptions {
     /// software adapter with stops, else a whole period); tests set it to
     /// run lavapipe as a hardware GPU runs.
     pub dispatch_steps: Option<usize>,
+    /// Ends the run early when requested: it then returns
+    /// [`crate::Error::Stopped`], and a front end writes nothing.
+    pub stop: Stop,
 }

@@ -8,4 +8,6 @@ pub mod lane;
 pub mod qr;
 
 pub use dispatch::{runner, Runner};
-pub use lane::{run_lane, Lane, LaneAccumulator, LaneResult, LaneStatus, MethodSettings, Tangent};
+pub use lane::{
+    run_lane, Lane, LaneAccumulator, LaneResult, LaneStatus, MethodSettings, Stop, Tangent,
+};

@@ -36,7 +36,7 @@ use super::pipeline::{
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
 use crate::backend::progress::Progress;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::integrate::section::{crossing_in_step, Crossing};
 use crate::method::lane::{not_run, plan_lane};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
@@ -614,6 +614,9 @@ where
         }
     }
     for n in 0..settings.transient {
+        if settings.stop.requested() {
+            return Err(Error::Stopped);
+        }
         returns(stepper, lanes, |lane| lane.system.lift(&lane.x))?;
         for lane in lanes.iter_mut().filter(|l| l.active()) {
             lane.x = lane.back.take().expect("a return").image;
@@ -642,6 +645,9 @@ where
 {
     let count = lanes.len();
     for _ in 0..settings.iterations {
+        if settings.stop.requested() {
+            return Err(Error::Stopped);
+        }
         for lane in lanes.iter_mut() {
             lane.stats = IterationStats::default();
             lane.factors.clear();

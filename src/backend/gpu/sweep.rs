@@ -512,6 +512,9 @@ where
         let per_submit = (SUBMIT_LANE_STEPS / (self.count * self.steps).max(1)).max(1);
         let mut done = 0;
         while done < settings.transient {
+            if settings.stop.requested() {
+                return Err(Error::Stopped);
+            }
             let n = per_submit.min(settings.transient - done);
             let mut encoder = device.create_command_encoder(&Default::default());
             let slot = stopwatch::TRANSIENT_SLOT;
@@ -554,6 +557,13 @@ where
         // Chunk c computes while the host reads and accumulates chunk c - 1.
         let mut pending: Option<Pending> = None;
         for (c, &(_, n)) in chunks.iter().enumerate() {
+            if settings.stop.requested() {
+                // Let the chunk in flight finish before its buffers go.
+                if let Some(in_flight) = pending {
+                    wait_for(device, in_flight.index)?;
+                }
+                return Err(Error::Stopped);
+            }
             let mut encoder = device.create_command_encoder(&Default::default());
             let slot = (c % 2) as u32;
             self.encode_iterations(&mut encoder, pipelines, false, n, slot);

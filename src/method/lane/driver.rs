@@ -44,6 +44,9 @@ where
     }
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
+        if settings.stop.requested() {
+            break;
+        }
         // The exact backend's transient is exact too: it is the ground truth.
         x = match settings.tangent {
             Tangent::FiniteDifference => system.iterate(&x, flow, &mut discard),
@@ -81,6 +84,9 @@ where
     let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
     let mut jacobians = Vec::with_capacity(plan.parts);
     for _ in 0..settings.iterations {
+        if settings.stop.requested() {
+            break;
+        }
         let mut stats = IterationStats::default();
         jacobians.clear();
         let mut next = step::<D, S>(system, flow, settings, plan, &x, &mut stats, &mut jacobians);

@@ -58,6 +58,9 @@ where
         .map(|x| (!all_finite(x)).then(|| (0, crate::system::is_no_return(x))))
         .collect();
     for n in 0..settings.transient {
+        if settings.stop.requested() {
+            break;
+        }
         discard.fill(IterationStats::default());
         S::iterate_lanes(&each, &mut xs, flow, &mut discard);
         for (system, x) in systems.iter().zip(xs.iter_mut()) {
@@ -123,7 +126,7 @@ where
     let (mut owners, mut ys, mut st) = (Vec::new(), Vec::new(), Vec::new());
     let mut copies = Vec::with_capacity(live.len());
     for _ in 0..settings.iterations {
-        if live.is_empty() {
+        if live.is_empty() || settings.stop.requested() {
             break;
         }
         copies.clear();

@@ -37,4 +37,4 @@ pub use lockstep::run_lanes;
 pub use orbit::{return_tolerance, RecentPoints};
 pub use plan::{plan_lane, plan_of, LanePlan, MAX_STEPS_PER_PERIOD, MAX_STEP_RATE};
 pub use result::{not_run, LaneResult, LaneStatus};
-pub use settings::{difference_noise, MethodSettings, Tangent};
+pub use settings::{difference_noise, MethodSettings, Stop, Tangent};
