@@ -427,7 +427,20 @@ fn print_outcome(report: &Summary, written: &[PathBuf]) {
     if let Some(err) = report.max_sum_error {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }
-    println!("  flagged lanes {} of {}", report.flagged, report.lanes);
+    let by_status: Vec<String> = report
+        .flagged_by_status
+        .iter()
+        .map(|(name, n)| format!("{n} {name}"))
+        .collect();
+    let (flagged, lanes) = (report.flagged, report.lanes);
+    if by_status.is_empty() {
+        println!("  flagged lanes {flagged} of {lanes}");
+    } else {
+        println!(
+            "  flagged lanes {flagged} of {lanes} ({})",
+            by_status.join(", ")
+        );
+    }
     if !report.failures.is_empty() {
         let failures: Vec<String> = report
             .failures

@@ -595,7 +595,10 @@ fn a_lane_beyond_any_step_budget_says_so_and_a_run_of_only_such_lanes_fails() {
 
     let output = ok(run("[1e-9, 0.8]"));
     let summary = String::from_utf8_lossy(&output.stdout);
-    assert!(summary.contains("flagged lanes 1 of 2"), "{summary}");
+    assert!(
+        summary.contains("flagged lanes 1 of 2 (1 too-many-steps)"),
+        "{summary}"
+    );
     let rows = std::fs::read_to_string(out.join("spectrum.csv")).unwrap();
     let last: Vec<&str> = rows.lines().nth(2).unwrap().split(',').collect();
     assert_eq!(last[0], "0.8");

@@ -72,7 +72,10 @@ fn run<'py>(
     let (ran, raised) = py.detach(|| {
         std::thread::scope(|threads| {
             let (done, finished) = mpsc::channel();
-            threads.spawn(move || done.send(work()));
+            threads.spawn(move || {
+                // The receiver waits below until this is sent.
+                let _ = done.send(work());
+            });
             let watcher = own_display.then(|| progress_bar::watch(&counts));
             let mut raised: Option<PyErr> = None;
             let ran = loop {
@@ -337,6 +340,11 @@ fn summary<'py>(
         failures.set_item(status, n)?;
     }
     d.set_item("failures", failures)?;
+    let flagged = PyDict::new(py);
+    for (status, n) in &s.flagged_by_status {
+        flagged.set_item(status, n)?;
+    }
+    d.set_item("flagged_by_status", flagged)?;
     if let Some(found) = &outcome.attractors {
         let total: usize = found.values.iter().map(|v| v.count()).sum();
         d.set_item("attractors", total)?;

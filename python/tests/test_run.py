@@ -85,9 +85,22 @@ def test_exponents_are_the_command_lines_to_the_bit(tmp_path):
     assert run.summary["lanes"] == 9
     assert run.summary["flagged"] == 0
     assert run.summary["failures"] == {}
+    assert run.summary["flagged_by_status"] == {}
     assert run.summary["max_sum_error"] < 1e-6
     assert run.scene["sweep"] == {"parameter": "eta", "from": 0.4, "to": 2.0, "count": 9}
     assert run.attractors is None
+
+
+def test_flagged_lanes_are_counted_by_status():
+    # η = 1e-9: a forcing period beyond any step budget; its lane alone fails.
+    sets = {**SMALL, "sweep": {"parameter": "eta", "values": [1e-9, 0.8]}}
+    run = lyapsweep.run(SCENE, set=sets, progress=False)
+    assert run.summary["flagged"] == 1
+    assert run.summary["flagged_by_status"] == {"too-many-steps": 1}
+    assert run.summary["failures"] == {"too-many-steps": 1}
+    assert run.spectrum["status"].iloc[0].startswith("too-many-steps(")
+    assert run.spectrum["status"].iloc[1] == "ok"
+    assert numpy.isfinite(run.spectrum["lambda_1"].iloc[1])
 
 
 def test_write_is_the_command_lines_set(tmp_path):

@@ -538,6 +538,8 @@ pub struct Summary {
     pub lanes: usize,
     /// Lanes whose status is not `ok`.
     pub flagged: usize,
+    /// Those lanes by status name.
+    pub flagged_by_status: std::collections::BTreeMap<&'static str, usize>,
     /// Lanes that gave no exponents at all (see [`LaneStatus::is_failure`]),
     /// by status name.
     pub failures: std::collections::BTreeMap<&'static str, usize>,
@@ -562,6 +564,7 @@ impl Summary {
             gpu: None,
             lanes: 0,
             flagged: 0,
+            flagged_by_status: Default::default(),
             failures: Default::default(),
             max_sum_error: None,
             raised: (0, 0),
@@ -581,7 +584,11 @@ impl Summary {
         self.elapsed += report.elapsed;
         self.lanes += report.lanes.len();
         self.flagged += report.flagged();
-        for lane in &report.lanes {
+        for lane in report.lanes.iter().filter(|l| l.status != LaneStatus::Ok) {
+            *self
+                .flagged_by_status
+                .entry(lane.status.name())
+                .or_default() += 1;
             if lane.status.is_failure() {
                 *self.failures.entry(lane.status.name()).or_default() += 1;
             }
