@@ -2,7 +2,8 @@
 //! folder holds one run's complete set or the previous one's, whenever the
 //! run is killed; bad output folders, oversized sweeps and bad merges are
 //! refused (exit code 2, the key or path named, nothing written); lanes that
-//! cannot be run say so, and a run in which every lane failed exits with 1.
+//! cannot be run say so, and a run in which every lane failed exits with 1;
+//! a run stopped part way writes nothing.
 
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
@@ -11,6 +12,8 @@ use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
 use sha2::{Digest, Sha256};
+
+mod common;
 
 /// The issue's `base.toml`: the seed's sweep cut to 5 values, 200 steps,
 /// transient 50, iterations 100, on the CPU.
@@ -438,6 +441,55 @@ fn a_run_streamed_in_batches_writes_the_bytes_of_one_batch() {
             assert_eq!(shard_rows[1..], [2, 4, 6, 8].map(|k| rows[k].clone()));
             assert!(read(&out, "shard.toml").contains("bifurcation_rows = [3, 3, 3, 3]"));
         }
+    }
+}
+
+#[test]
+fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
+    use lyapsweep::scene::Precision;
+    use lyapsweep::{command, Error, RunOptions};
+    // Half a minute of lanes on the CPU path (longer on lavapipe).
+    let text = BASE
+        .replace("count = 5", "count = 64")
+        .replace("iterations = 100", "iterations = 200000");
+    for (backend, precision) in [
+        ("cpu", Precision::F64),
+        ("gpu", Precision::F64),
+        ("gpu", Precision::F32),
+    ] {
+        if backend == "gpu" && !common::gpu_or_skip("stopping a GPU run", precision) {
+            continue;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let precision_key = format!("run.precision=\"{}\"", precision.name());
+        let backend_key = format!("run.backend=\"{backend}\"");
+        let scene = common::scene(&text, &[&backend_key, &precision_key]);
+        let options = RunOptions::default();
+        let stop = options.stop.clone();
+        let prepared = command::prepare(&scene, &out).unwrap();
+        let started = std::time::Instant::now();
+        let asked = std::thread::scope(|s| {
+            let asked = s.spawn(|| {
+                std::thread::sleep(std::time::Duration::from_millis(300));
+                stop.request();
+                std::time::Instant::now()
+            });
+            let ran = prepared.run(&options);
+            assert!(
+                matches!(ran, Err(Error::Stopped)),
+                "{backend} {precision:?}"
+            );
+            asked.join().unwrap()
+        });
+        let stopped = started.elapsed().saturating_sub(asked - started);
+        assert!(
+            stopped < std::time::Duration::from_secs(1),
+            "{backend} {precision:?}: {stopped:?} after the request"
+        );
+        // Nothing in the output folder, nothing staged beside it.
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty(), "{backend} {precision:?}: {left:?}");
     }
 }
 

@@ -9,7 +9,7 @@ use std::sync::mpsc::{self, RecvTimeoutError};
 use std::time::Duration;
 
 use lyapsweep::command::{self, progress_bar};
-use lyapsweep::scene::{self, Precision, Scene};
+use lyapsweep::scene::{self, Scene};
 use lyapsweep::{Error, Progress, RunOptions};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
@@ -321,13 +321,7 @@ fn summary<'py>(
     d.set_item("name", &scene.name)?;
     d.set_item("system", scene.system.kind)?;
     d.set_item("backend", s.backend.name())?;
-    d.set_item(
-        "precision",
-        match s.precision {
-            Precision::F64 => "f64",
-            Precision::F32 => "f32",
-        },
-    )?;
+    d.set_item("precision", s.precision.name())?;
     d.set_item("choice", s.choice.as_deref())?;
     d.set_item("adapter", s.gpu.as_ref().map(|g| g.adapter.as_str()))?;
     d.set_item("threads", s.threads)?;
