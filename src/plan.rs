@@ -46,6 +46,7 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         lyapunov: scene.lyapunov,
         bifurcation_points: scene.bifurcation_points,
         max_period: scene.sweep.max_period(),
+        keep_orbit: scene.sweep.starts.is_some(),
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.
@@ -73,9 +74,16 @@ pub const BATCH_BYTES: usize = 1 << 30;
 /// Bytes of results one lane holds until its batch is written.
 pub fn lane_bytes(scene: &Scene) -> usize {
     let dim = scene.system.dimension();
+    // Kept with `[attractors]` alone (`MethodSettings::keep_orbit`): at
+    // most 2·max_period points when the orbit has no period.
+    let orbit = match scene.sweep.starts {
+        Some(_) => 8 * dim * 2 * scene.sweep.max_period(),
+        None => 0,
+    };
     std::mem::size_of::<LaneResult>()
         + 8 * (dim + 1) // exponents, expected sum
         + 8 * dim * scene.bifurcation_points
+        + orbit
 }
 
 /// Lanes per batch of the streamed run (all of them for most runs).

@@ -15,13 +15,16 @@ const NEIGHBOURS: usize = crate::integrate::LANE_BATCH;
 /// Runs every lane of `scene` (of its shard, when sharded), in parallel,
 /// results in sweep order.
 pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> Vec<LaneResult> {
-    let lanes: Vec<usize> = (0..scene.lane_count()).collect();
-    lanes
-        .par_chunks(NEIGHBOURS)
-        .flat_map_iter(|chunk| {
-            let lanes: Vec<Lane> = chunk
-                .iter()
-                .map(|&k| Lane {
+    // Each chunk's results go straight into their slots: collecting a
+    // parallel iterator of unknown length would hold them twice at its end.
+    let mut slots: Vec<Option<LaneResult>> = (0..scene.lane_count()).map(|_| None).collect();
+    slots
+        .par_chunks_mut(NEIGHBOURS)
+        .enumerate()
+        .for_each(|(c, slots)| {
+            let first = c * NEIGHBOURS;
+            let lanes: Vec<Lane> = (first..first + slots.len())
+                .map(|k| Lane {
                     params: scene.lane_params(k),
                     settings,
                     initial_state: scene.lane_initial_state(k).to_vec(),
@@ -29,7 +32,12 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                 .collect();
             let results = (crate::method::runner(scene.system).run_lanes)(&lanes);
             progress.advance((lanes.len() * (settings.transient + settings.iterations)) as u64);
-            results
-        })
+            for (slot, result) in slots.iter_mut().zip(results) {
+                *slot = Some(result);
+            }
+        });
+    slots
+        .into_iter()
+        .map(|r| r.expect("every chunk fills its slots"))
         .collect()
 }

@@ -664,9 +664,11 @@ where
         receiver
     }
 
-    /// Waits for a submitted chunk's staging copy, reads it and accumulates
-    /// QR for every lane; false (nothing accumulated) when a dispatch ran
-    /// past the adapter's loop cap.
+    /// Waits for a submitted chunk's staging copy, then accumulates QR for
+    /// every lane straight from the mapped buffer, the lanes spread over
+    /// the host's cores (each reads and converts its own slots, so the
+    /// read-back is no serial step before them); false (nothing
+    /// accumulated) when a dispatch ran past the adapter's loop cap.
     fn collect(
         &self,
         gpu: &Gpu,
@@ -677,31 +679,6 @@ where
         timings: &mut Timings,
     ) -> Result<bool> {
         let (first_iteration, n) = chunks[pending.chunk];
-        let Some(chunk) = self.read_back(gpu, pending, n, timings)? else {
-            return Ok(false);
-        };
-        let start = Instant::now();
-        accumulators
-            .par_iter_mut()
-            .zip(previous.par_iter_mut())
-            .enumerate()
-            .for_each(|(lane, (acc, x_n))| {
-                self.accumulate(&chunk, lane, first_iteration, n, acc, x_n);
-            });
-        timings.host_qr += start.elapsed();
-        Ok(true)
-    }
-
-    /// The results of a submitted chunk of `n` iterations, once the device
-    /// is done and the staging buffer mapped; `None` when a dispatch ran
-    /// past the adapter's loop cap.
-    fn read_back(
-        &self,
-        gpu: &Gpu,
-        pending: Pending,
-        n: usize,
-        timings: &mut Timings,
-    ) -> Result<Option<Readback>> {
         let start = Instant::now();
         wait_for(&gpu.device, pending.index)?;
         timings.gpu_wait += start.elapsed();
@@ -712,39 +689,54 @@ where
             .map_err(|_| gpu_error("readback was cancelled".into()))?
             .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
         let staging = &self.staging[pending.chunk % 2];
-        let lanes = (n * self.layout.parts * self.count) as u64;
-        let chunk = {
-            let view = staging
-                .get_mapped_range(..)
-                .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
-            let bytes: &[u8] = &view;
-            if let Some(s) = self.stopwatch {
-                let busy = s.elapsed(&bytes[self.ticks_offset as usize..]);
-                *timings.gpu_busy.get_or_insert_default() += busy;
-            }
-            let s_end = (self.layout.summary * lanes) as usize;
-            let j_end = s_end + (self.layout.jacobian * lanes) as usize;
-            let p_end = j_end + (self.layout.point * lanes) as usize;
-            let f_end = p_end + (self.layout.flux * lanes) as usize;
-            Readback {
-                summary: bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(&bytes[..s_end]),
-                jac: reals_from(&bytes[s_end..j_end], self.precision),
-                points: reals_from(&bytes[j_end..p_end], self.precision),
-                fluxes: reals_from(&bytes[p_end..f_end], self.precision),
-            }
-        };
-        staging.unmap();
-        timings.readback += start.elapsed();
-        let stride = self.layout.summary_stride;
-        if chunk
-            .summary
-            .iter()
-            .step_by(stride)
-            .any(|s| s[1] & FLAG_TRUNCATED != 0)
-        {
-            return Ok(None);
+        let view = staging
+            .get_mapped_range(..)
+            .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
+        let chunk = self.readback(&view, n);
+        if let Some(s) = self.stopwatch {
+            let busy = s.elapsed(&view[self.ticks_offset as usize..]);
+            *timings.gpu_busy.get_or_insert_default() += busy;
         }
-        Ok(Some(chunk))
+        let stride = self.layout.summary_stride;
+        let truncated =
+            (0..chunk.slots).any(|slot| chunk.summary(stride * slot)[1] & FLAG_TRUNCATED != 0);
+        timings.readback += start.elapsed();
+        if !truncated {
+            let start = Instant::now();
+            accumulators
+                .par_iter_mut()
+                .zip(previous.par_iter_mut())
+                .enumerate()
+                .for_each(|(lane, (acc, x_n))| {
+                    self.accumulate(&chunk, lane, first_iteration, n, acc, x_n);
+                });
+            timings.host_qr += start.elapsed();
+        }
+        drop(view);
+        staging.unmap();
+        Ok(!truncated)
+    }
+
+    /// The parts of a mapped staging buffer holding a chunk of `n`
+    /// iterations (see `copy_to_staging`).
+    fn readback<'b>(&self, bytes: &'b [u8], n: usize) -> Readback<'b> {
+        let slots = n * self.layout.parts * self.count;
+        let lanes = slots as u64;
+        let s_end = (self.layout.summary * lanes) as usize;
+        let j_end = s_end + (self.layout.jacobian * lanes) as usize;
+        let p_end = j_end + (self.layout.point * lanes) as usize;
+        let f_end = p_end + (self.layout.flux * lanes) as usize;
+        let reals = |range: std::ops::Range<usize>| Reals {
+            bytes: &bytes[range],
+            precision: self.precision,
+        };
+        Readback {
+            slots,
+            summary: &bytes[..s_end],
+            jac: reals(s_end..j_end),
+            points: reals(j_end..p_end),
+            fluxes: reals(p_end..f_end),
+        }
     }
 
     /// Lane `lane`'s `n` iterations of a chunk starting at averaging
@@ -761,13 +753,12 @@ where
     ) {
         let parts = self.layout.parts;
         let stride = self.layout.summary_stride;
-        let summary = &chunk.summary;
         let mut jacobians: Vec<SMatrix<f64, D, D>> = Vec::with_capacity(parts);
         for j in 0..n {
             let slot = |part: usize| (j * parts + part) * self.count + lane;
             // A failed reference reports in its iteration's last
             // part; the earlier slots may hold an older iteration.
-            if (0..parts).any(|p| summary[stride * slot(p)][1] & FLAG_NONFINITE != 0) {
+            if (0..parts).any(|p| chunk.summary(stride * slot(p))[1] & FLAG_NONFINITE != 0) {
                 acc.fail(self.settings.transient + first_iteration + j);
                 break;
             }
@@ -777,7 +768,7 @@ where
             jacobians.clear();
             for p in 0..parts {
                 let s = slot(p);
-                let [_, _, scale_bits, nonlinearity_bits] = summary[stride * s];
+                let [_, _, scale_bits, nonlinearity_bits] = chunk.summary(stride * s);
                 let mut part = part_stats::<D>(chunk, stride, s);
                 // A flagged part's trajectories stopped at the flag,
                 // not at the part's end: its columns are no
@@ -785,7 +776,7 @@ where
                 // the reference at another gave a singular one,
                 // which failed the lane as non-finite).
                 if self.jac.is_some() && !part.sliding {
-                    let jacobian = SMatrix::from_row_slice(&chunk.jac[s * D * D..(s + 1) * D * D]);
+                    let jacobian = SMatrix::from_fn(|r, c| chunk.jac.get(s * D * D + r * D + c));
                     let nonlinearity = f64::from(f32::from_bits(nonlinearity_bits));
                     let part_of = Part {
                         index: p,
@@ -801,7 +792,7 @@ where
                     ));
                 }
                 stats.merge(&part);
-                point = Some(crate::array::from_fn(|k| chunk.points[s * D + k]));
+                point = Some(crate::array::from_fn(|k| chunk.points.get(s * D + k)));
                 *x_n = point;
                 // The size of the iteration's image, as on the CPU.
                 scale = f64::from(f32::from_bits(scale_bits));
@@ -840,23 +831,56 @@ where
     }
 }
 
-/// A chunk's results as read back, per slot (iteration × part × lane).
-struct Readback {
-    summary: Vec<[u32; 4]>,
-    jac: Vec<f64>,
-    points: Vec<f64>,
-    fluxes: Vec<f64>,
+/// A chunk's results in the mapped staging buffer, per slot (iteration ×
+/// part × lane), read where they lie.
+struct Readback<'a> {
+    slots: usize,
+    summary: &'a [u8],
+    jac: Reals<'a>,
+    points: Reals<'a>,
+    fluxes: Reals<'a>,
+}
+
+impl Readback<'_> {
+    /// Summary entry `i` (a slot has `summary_stride` of them).
+    fn summary(&self, i: usize) -> [u32; 4] {
+        bytemuck::pod_read_unaligned(&self.summary[16 * i..16 * (i + 1)])
+    }
+}
+
+/// Reals of the kernels' precision, read as f64 one at a time (the mapped
+/// bytes need not be aligned for a cast).
+struct Reals<'a> {
+    bytes: &'a [u8],
+    precision: Precision,
+}
+
+impl Reals<'_> {
+    fn len(&self) -> usize {
+        match self.precision {
+            Precision::F64 => self.bytes.len() / 8,
+            Precision::F32 => self.bytes.len() / 4,
+        }
+    }
+
+    fn get(&self, i: usize) -> f64 {
+        match self.precision {
+            Precision::F64 => bytemuck::pod_read_unaligned(&self.bytes[8 * i..8 * (i + 1)]),
+            Precision::F32 => f64::from(bytemuck::pod_read_unaligned::<f32>(
+                &self.bytes[4 * i..4 * (i + 1)],
+            )),
+        }
+    }
 }
 
 /// The statistics the kernels report for slot `s` (its summary's flags and
 /// counts, `stride` summary entries a slot, and its flux term).
 fn part_stats<const D: usize>(chunk: &Readback, stride: usize, s: usize) -> IterationStats {
-    let summary = &chunk.summary;
-    let [impacts, flags, _, _] = summary[stride * s];
+    let [impacts, flags, _, _] = chunk.summary(stride * s);
     // With stops, the impacts on each follow (their sum
     // is `impacts`); without, there are none.
     let per_stop = if stride > 1 {
-        summary[stride * s + 1]
+        chunk.summary(stride * s + 1)
     } else {
         [0; 4]
     };
@@ -872,7 +896,11 @@ fn part_stats<const D: usize>(chunk: &Readback, stride: usize, s: usize) -> Iter
         sliding: flags & FLAG_SLIDING != 0,
         // Counted in the flags' high half.
         sliding_phases: flags >> 16,
-        log_flux: chunk.fluxes.get(s).copied().unwrap_or(0.0),
+        log_flux: if s < chunk.fluxes.len() {
+            chunk.fluxes.get(s)
+        } else {
+            0.0
+        },
         // Sticking collapses the mass's position and
         // velocity (all of a 2-state system).
         rank_loss: if flags & FLAG_RANK_TWO != 0 {

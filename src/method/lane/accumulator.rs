@@ -67,6 +67,8 @@ pub struct LaneAccumulator<const D: usize> {
     bifurcation: Vec<f64>,
     /// The last averaged points, for the orbit's period.
     recent: RecentPoints<D>,
+    /// Whether the result keeps them (see [`MethodSettings::keep_orbit`]).
+    keep_orbit: bool,
     jacobians: Option<Vec<f64>>,
     pub(super) failed_at: Option<usize>,
     /// Whether the failure was a Poincaré map's trajectory not coming back
@@ -117,6 +119,7 @@ where
             log_noise: 0.0,
             bifurcation: Vec::with_capacity(kept * D),
             recent: RecentPoints::new(settings.max_period, settings.rounding_unit),
+            keep_orbit: settings.keep_orbit,
             jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
             no_return: false,
@@ -362,7 +365,11 @@ where
             crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
             orbit_period,
-            orbit: self.recent.orbit(orbit_period),
+            orbit: if self.keep_orbit {
+                self.recent.orbit(orbit_period)
+            } else {
+                Vec::new()
+            },
             orbit_term,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),

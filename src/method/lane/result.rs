@@ -147,7 +147,8 @@ pub struct LaneResult {
     /// The orbit's last points, oldest first, D numbers each: its
     /// `orbit_period` points, or when it has none the last 2·max_period
     /// (fewer if fewer were taken). The last point is the lane's final
-    /// state: what a neighbouring value is continued from.
+    /// state: what a neighbouring value is continued from. Empty unless the
+    /// settings keep it (`keep_orbit`: runs with `[attractors]`).
     pub orbit: Vec<f64>,
     /// A term of the sum rule that depends on the orbit, per unit time: a
     /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0

@@ -41,6 +41,11 @@ pub struct MethodSettings {
     pub bifurcation_points: usize,
     /// The longest orbit period (in map iterations) a lane is tested for.
     pub max_period: usize,
+    /// Whether a lane's result keeps its orbit's last points
+    /// ([`LaneResult::orbit`](super::LaneResult)): attractors are told apart
+    /// and continued by them; other runs need only the period, and at a
+    /// million lanes the points would be most of the memory held.
+    pub keep_orbit: bool,
     /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
     pub submaps: Option<usize>,
     /// Whether rounding accumulates over the RK4 steps of an iteration (f64),
