@@ -493,6 +493,37 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
     }
 }
 
+#[test]
+fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
+    use lyapsweep::output::{SetWriter, Staging};
+    let dir = tempfile::tempdir().unwrap();
+    // The million-lane map's scene at 8 × 6.
+    let scene = common::committed_scene(
+        "million-map.toml",
+        &[
+            "sweep.count=8",
+            "sweep.second.count=6",
+            "run.backend=\"cpu\"",
+        ],
+    );
+    let write = |batch: usize| {
+        let out = dir.path().join(format!("batches-of-{batch}"));
+        let mut writer = SetWriter::new(&scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
+        let (summary, _) = lyapsweep::run_streaming(&scene, &Default::default(), batch, |b, r| {
+            writer.append(b, r)
+        })
+        .unwrap();
+        writer.finish(None).unwrap();
+        assert_eq!(summary.lanes, 48);
+        std::fs::read(out.join("grid.csv")).unwrap()
+    };
+    let whole = write(48);
+    assert_eq!(whole.iter().filter(|&&b| b == b'\n').count(), 49);
+    for batch in [1, 5, 13] {
+        assert!(write(batch) == whole, "grid.csv in batches of {batch}");
+    }
+}
+
 /// Rewrites a folder's manifest after a test edited its files, as if
 /// lyapsweep had written them (so the checks behind the manifest's are
 /// reached).

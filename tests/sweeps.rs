@@ -289,6 +289,20 @@ fn every_committed_scene_is_valid() {
             assert_eq!(scene.sweep.lanes(), 512 * 512);
             assert!(scene.lyapunov && scene.plot);
         }
+        if scene.name == "million-map" {
+            // A million lanes, whose results fit one batch of the budget.
+            assert_eq!(scene.sweep.lanes(), 1024 * 1024);
+            let i = &scene.integration;
+            assert_eq!(
+                (i.steps_per_period, i.transient, i.iterations),
+                (200, 50, 50)
+            );
+            assert!(
+                scene.sweep.lanes() * lyapsweep::plan::lane_bytes(&scene)
+                    < lyapsweep::plan::BATCH_BYTES
+            );
+            assert!(scene.lyapunov && scene.plot);
+        }
     }
     names.sort();
     assert_eq!(
@@ -304,6 +318,7 @@ fn every_committed_scene_is_valid() {
             "impact-pair",
             "lorenz",
             "lorenz-section",
+            "million-map",
             "rossler-section",
             "seed-fig3",
             "soft-stop",
