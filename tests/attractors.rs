@@ -148,6 +148,16 @@ fn assert_starts_are_single_runs(backend: &str, precision: &str) {
             if matches!(expected.status, LaneStatus::Mismatch { .. }) {
                 expected.status = lane.status;
             }
+            // Only a run with [attractors] keeps the orbit's points: its
+            // last is the lane's final state, the single run's last point.
+            assert!(expected.orbit.is_empty());
+            let dim = 2;
+            assert_eq!(
+                lane.orbit[lane.orbit.len() - dim..],
+                expected.bifurcation[expected.bifurcation.len() - dim..],
+                "{backend} {precision}: value {v}, start {s}"
+            );
+            expected.orbit = lane.orbit.clone();
             assert_eq!(
                 format!("{lane:?}"),
                 format!("{expected:?}"),

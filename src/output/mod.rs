@@ -22,14 +22,17 @@ pub mod results;
 pub mod set;
 
 use std::fs;
+use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
 
 use crate::attractor::{self, Attractors};
 use crate::backend::Report;
 use crate::error::{Error, Result};
 use crate::model::code::event_column;
 use crate::scene::Scene;
-use files::{csv_to_io, number, write_text};
+use files::{number, write_text};
 pub use files::{
     spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, GRID_FILE,
     HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
@@ -82,8 +85,8 @@ pub fn bifurcation_header(scene: &Scene) -> Vec<String> {
 pub struct SetWriter {
     staging: Staging,
     scene: Scene,
-    spectrum: Option<csv::Writer<fs::File>>,
-    bifurcation: Option<csv::Writer<fs::File>>,
+    spectrum: Option<fs::File>,
+    bifurcation: Option<fs::File>,
     /// Rows of `bifurcation.csv` per lane so far (a shard lists them).
     bifurcation_rows: Vec<usize>,
     /// With `[attractors]`, each lane's (grid point, start) so far, in the
@@ -103,15 +106,12 @@ impl SetWriter {
     pub fn new(scene: &Scene, staging: Staging) -> Result<SetWriter> {
         set::pause(SCENE_FILE);
         write_text(&staging.dir().join(SCENE_FILE), &scene.source)?;
-        let open = |name: &str, header: Vec<String>| -> Result<csv::Writer<fs::File>> {
+        let open = |name: &str, header: Vec<String>| -> Result<fs::File> {
             set::pause(name);
             let path = staging.dir().join(name);
-            let file = fs::File::create(&path).map_err(write_error(&path))?;
-            let mut writer = csv::Writer::from_writer(file);
-            writer
-                .write_record(header)
-                .map_err(|e| write_error(&path)(csv_to_io(e)))?;
-            Ok(writer)
+            let mut file = fs::File::create(&path).map_err(write_error(&path))?;
+            write_rows(&mut file, 1, |_| [header.clone()]).map_err(write_error(&path))?;
+            Ok(file)
         };
         let spectrum = scene
             .lyapunov
@@ -134,29 +134,25 @@ impl SetWriter {
     /// the batch's lanes (see `Scene::batch`), `report` its results.
     pub fn append(&mut self, batch: &Scene, report: &Report) -> Result<()> {
         let dir = self.staging.dir().to_owned();
+        let lanes = report.lanes.len();
         if let Some(w) = &mut self.spectrum {
             let path = dir.join(spectrum_file(batch));
-            for row in spectrum_rows(batch, report) {
-                w.write_record(&row)
-                    .map_err(|e| write_error(&path)(csv_to_io(e)))?;
-            }
+            write_rows(w, lanes, |j| [spectrum_row(batch, report, j)])
+                .map_err(write_error(&path))?;
         }
         if batch.sweep.starts.is_some() {
-            self.lanes.extend((0..report.lanes.len()).map(|j| {
+            self.lanes.extend((0..lanes).map(|j| {
                 let point = batch.sweep.point_of(batch.sweep_lane(j));
                 (point as u32, batch.lane_start(j) as u32)
             }));
         }
-        for j in 0..report.lanes.len() {
-            let rows = bifurcation_rows(batch, report, j);
-            self.bifurcation_rows.push(rows.len());
-            if let Some(w) = &mut self.bifurcation {
-                let path = dir.join(BIFURCATION_FILE);
-                for row in rows {
-                    w.write_record(&row)
-                        .map_err(|e| write_error(&path)(csv_to_io(e)))?;
-                }
-            }
+        let dim = batch.system.dimension();
+        self.bifurcation_rows
+            .extend(report.lanes.iter().map(|lane| lane.bifurcation.len() / dim));
+        if let Some(w) = &mut self.bifurcation {
+            let path = dir.join(BIFURCATION_FILE);
+            write_rows(w, lanes, |j| bifurcation_rows(batch, report, j))
+                .map_err(write_error(&path))?;
         }
         Ok(())
     }
@@ -171,11 +167,8 @@ impl SetWriter {
             (self.spectrum, spectrum_file(&self.scene)),
             (self.bifurcation, BIFURCATION_FILE),
         ] {
-            if let Some(w) = writer {
+            if let Some(file) = writer {
                 let path = dir.join(name);
-                let file = w
-                    .into_inner()
-                    .map_err(|e| write_error(&path)(e.into_error()))?;
                 file.sync_all().map_err(write_error(&path))?;
             }
         }
@@ -236,33 +229,67 @@ pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>>
     writer.finish(found.as_ref())
 }
 
-/// The `spectrum.csv` rows of the run's lanes, in order.
-fn spectrum_rows<'a>(
-    scene: &'a Scene,
-    report: &'a Report,
-) -> impl Iterator<Item = Vec<String>> + 'a {
-    report.lanes.iter().enumerate().map(move |(j, lane)| {
-        let mut row: Vec<String> = scene.lane_values(j).into_iter().map(number).collect();
-        row.extend(lane.exponents.iter().map(|&e| number(e)));
-        row.push(number(lane.exponent_sum()));
-        row.push(number(report.expected_sums[j]));
-        row.push(number(lane.impacts_per_period));
-        let events = scene.system.events.len();
-        row.extend(
-            lane.crossings_per_period[..events]
-                .iter()
-                .map(|&c| number(c)),
-        );
-        row.push(lane.grazing.to_string());
-        row.push(number(lane.grazing_bound));
-        if scene.sweep.starts.is_some() {
-            // The branch is filled in when the set is finished.
-            row.extend([scene.lane_start(j).to_string(), String::new()]);
-        }
-        row.push(lane.orbit_period.map_or(String::new(), |p| p.to_string()));
-        row.push(lane.status.to_string());
-        row
-    })
+/// Lanes whose rows one thread formats at a time.
+const LANES_PER_TASK: usize = 2048;
+
+/// Appends the CSV records of lanes `0..lanes` (`rows(j)`: lane j's) to
+/// `file`, in order. Pieces of lanes are formatted over the host's cores,
+/// a few per core at a time, then written: at a million lanes the numbers'
+/// formatting would otherwise be a serial step of seconds, and formatting
+/// all of them first would hold the whole file's text. Each piece is what
+/// a `csv::Writer` of the default settings writes.
+fn write_rows<R>(
+    file: &mut fs::File,
+    lanes: usize,
+    rows: impl Fn(usize) -> R + Sync,
+) -> std::io::Result<()>
+where
+    R: IntoIterator<Item = Vec<String>>,
+{
+    let tasks = lanes.div_ceil(LANES_PER_TASK);
+    let at_once = 4 * rayon::current_num_threads();
+    for group in (0..tasks).step_by(at_once) {
+        let pieces: Vec<Vec<u8>> = (group..tasks.min(group + at_once))
+            .into_par_iter()
+            .map(|task| {
+                let mut w = csv::Writer::from_writer(Vec::new());
+                let first = task * LANES_PER_TASK;
+                for j in first..lanes.min(first + LANES_PER_TASK) {
+                    for row in rows(j) {
+                        w.write_record(&row).expect("a record goes into memory");
+                    }
+                }
+                w.into_inner().expect("a record goes into memory")
+            })
+            .collect();
+        pieces.iter().try_for_each(|piece| file.write_all(piece))?;
+    }
+    Ok(())
+}
+
+/// The `spectrum.csv` row of the run's lane `j`.
+fn spectrum_row(scene: &Scene, report: &Report, j: usize) -> Vec<String> {
+    let lane = &report.lanes[j];
+    let mut row: Vec<String> = scene.lane_values(j).into_iter().map(number).collect();
+    row.extend(lane.exponents.iter().map(|&e| number(e)));
+    row.push(number(lane.exponent_sum()));
+    row.push(number(report.expected_sums[j]));
+    row.push(number(lane.impacts_per_period));
+    let events = scene.system.events.len();
+    row.extend(
+        lane.crossings_per_period[..events]
+            .iter()
+            .map(|&c| number(c)),
+    );
+    row.push(lane.grazing.to_string());
+    row.push(number(lane.grazing_bound));
+    if scene.sweep.starts.is_some() {
+        // The branch is filled in when the set is finished.
+        row.extend([scene.lane_start(j).to_string(), String::new()]);
+    }
+    row.push(lane.orbit_period.map_or(String::new(), |p| p.to_string()));
+    row.push(lane.status.to_string());
+    row
 }
 
 /// The `bifurcation.csv` rows of the run's lane `j`.
