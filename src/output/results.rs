@@ -207,31 +207,53 @@ fn draw_grid(
 /// point: its rows in the sweep's order. Many starts (without
 /// `attractors.csv`): the largest λ1 of the point's lanes.
 fn lambda1_per_point(dir: &Path, scene: &Scene) -> Result<Vec<f64>> {
-    let table = Table::read(dir, spectrum_file(scene))?;
-    if scene.sweep.starts.is_some() {
-        let names: Vec<&str> = scene.sweep.axes().map(|a| a.parameter.as_str()).collect();
-        let lambda1 = table.column("lambda_1")?;
-        let lanes = (0..table.records.len())
-            .map(|row| {
-                let at = table.numbers(row, &names)?;
-                Ok((at, table.number(row, lambda1)?))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let at = lanes.iter().map(|(at, l)| (at.as_slice(), *l));
-        return largest_per_point(scene, &table.path, at);
+    if scene.sweep.starts.is_none() {
+        return lambda1_of_grid(&dir.join(spectrum_file(scene)), scene);
     }
-    let lambda1 = column(&table.path, &table.records, scene.sweep.axes().count())?;
+    // Many starts a point: the largest λ₁ of its lanes.
+    let table = Table::read(dir, spectrum_file(scene))?;
+    let names: Vec<&str> = scene.sweep.axes().map(|a| a.parameter.as_str()).collect();
+    let lambda1 = table.column("lambda_1")?;
+    let lanes = (0..table.records.len())
+        .map(|row| {
+            let at = table.numbers(row, &names)?;
+            Ok((at, table.number(row, lambda1)?))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let at = lanes.iter().map(|(at, l)| (at.as_slice(), *l));
+    largest_per_point(scene, &table.path, at)
+}
+
+/// λ₁ of each grid point, one lane a point: the column after the swept
+/// values, read a record at a time, so that drawing a million-lane map
+/// holds its numbers (8 bytes a point), not the file's text.
+fn lambda1_of_grid(path: &Path, scene: &Scene) -> Result<Vec<f64>> {
+    let bad = |reason: String| Error::Results {
+        path: path.to_owned(),
+        reason,
+    };
+    let k = scene.sweep.axes().count();
+    let mut reader = csv::Reader::from_path(path).map_err(|e| bad(e.to_string()))?;
+    let mut record = csv::StringRecord::new();
+    let mut lambda1 = Vec::with_capacity(scene.sweep.points());
+    while reader
+        .read_record(&mut record)
+        .map_err(|e| bad(e.to_string()))?
+    {
+        let value = record.get(k).and_then(|t| t.parse::<f64>().ok());
+        let row = lambda1.len() + 2;
+        lambda1.push(
+            value.ok_or_else(|| bad(format!("row {row}: column {} is not a number", k + 1)))?,
+        );
+    }
     let points = scene.sweep.points();
     if lambda1.len() != points {
-        return Err(Error::Results {
-            path: table.path,
-            reason: format!(
-                "{} rows for a {} × {} grid",
-                lambda1.len(),
-                scene.sweep.first.values.len(),
-                points / scene.sweep.first.values.len().max(1)
-            ),
-        });
+        return Err(bad(format!(
+            "{} rows for a {} × {} grid",
+            lambda1.len(),
+            scene.sweep.first.values.len(),
+            points / scene.sweep.first.values.len().max(1)
+        )));
     }
     Ok(lambda1)
 }
