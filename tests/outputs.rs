@@ -522,6 +522,35 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
     for batch in [1, 5, 13] {
         assert!(write(batch) == whole, "grid.csv in batches of {batch}");
     }
+
+    // The map's figure reads λ1 back a record at a time, and says which
+    // row is wrong, or that rows are missing.
+    let set = dir.path().join("batches-of-48");
+    let text = String::from_utf8(whole).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    let draw = |lines: &[&str]| {
+        std::fs::write(set.join("grid.csv"), lines.join("\n") + "\n").unwrap();
+        reseal(&set);
+        lyapsweep::output::results::draw(&set, &set)
+            .unwrap_err()
+            .to_string()
+    };
+    // Line 4 of the file (row 4, counting the header as row 1).
+    let fourth: Vec<&str> = lines[3].split(',').collect();
+    let bad = format!("{},{},x,{}", fourth[0], fourth[1], fourth[3..].join(","));
+    let row_3 = std::mem::replace(&mut lines[3], &bad);
+    assert!(
+        draw(&lines).ends_with("row 4: column 3 is not a number"),
+        "{}",
+        draw(&lines)
+    );
+    lines[3] = row_3;
+    lines.pop();
+    assert!(
+        draw(&lines).ends_with("47 rows for a 8 × 6 grid"),
+        "{}",
+        draw(&lines)
+    );
 }
 
 /// Rewrites a folder's manifest after a test edited its files, as if
