@@ -427,27 +427,16 @@ fn print_outcome(report: &Summary, written: &[PathBuf]) {
     if let Some(err) = report.max_sum_error {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }
-    let by_status: Vec<String> = report
-        .flagged_by_status
-        .iter()
-        .map(|(name, n)| format!("{n} {name}"))
-        .collect();
-    let (flagged, lanes) = (report.flagged, report.lanes);
-    if by_status.is_empty() {
+    let (flagged, lanes) = (report.flagged(), report.lanes);
+    if flagged == 0 {
         println!("  flagged lanes {flagged} of {lanes}");
     } else {
-        println!(
-            "  flagged lanes {flagged} of {lanes} ({})",
-            by_status.join(", ")
-        );
+        let by_status = Summary::by_status(&report.flagged_by_status);
+        println!("  flagged lanes {flagged} of {lanes} ({by_status})");
     }
     if !report.failures.is_empty() {
-        let failures: Vec<String> = report
-            .failures
-            .iter()
-            .map(|(name, n)| format!("{n} {name}"))
-            .collect();
-        println!("  failed lanes {} (no exponents)", failures.join(", "));
+        let failures = Summary::by_status(&report.failures);
+        println!("  failed lanes {failures} (no exponents)");
     }
     for path in written {
         println!("  wrote        {}", path.display());

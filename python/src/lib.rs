@@ -328,17 +328,9 @@ fn summary<'py>(
     d.set_item("lanes", s.lanes)?;
     d.set_item("time", s.elapsed.as_secs_f64())?;
     d.set_item("max_sum_error", s.max_sum_error)?;
-    d.set_item("flagged", s.flagged)?;
-    let failures = PyDict::new(py);
-    for (status, n) in &s.failures {
-        failures.set_item(status, n)?;
-    }
-    d.set_item("failures", failures)?;
-    let flagged = PyDict::new(py);
-    for (status, n) in &s.flagged_by_status {
-        flagged.set_item(status, n)?;
-    }
-    d.set_item("flagged_by_status", flagged)?;
+    d.set_item("flagged", s.flagged())?;
+    d.set_item("failures", &s.failures)?;
+    d.set_item("flagged_by_status", &s.flagged_by_status)?;
     if let Some(found) = &outcome.attractors {
         let total: usize = found.values.iter().map(|v| v.count()).sum();
         d.set_item("attractors", total)?;

@@ -536,9 +536,7 @@ pub struct Summary {
     /// The GPU part, summed over batches (validation: the largest difference).
     pub gpu: Option<GpuReport>,
     pub lanes: usize,
-    /// Lanes whose status is not `ok`.
-    pub flagged: usize,
-    /// Those lanes by status name.
+    /// Lanes whose status is not `ok`, by status name.
     pub flagged_by_status: std::collections::BTreeMap<&'static str, usize>,
     /// Lanes that gave no exponents at all (see [`LaneStatus::is_failure`]),
     /// by status name.
@@ -563,7 +561,6 @@ impl Summary {
             elapsed: Duration::ZERO,
             gpu: None,
             lanes: 0,
-            flagged: 0,
             flagged_by_status: Default::default(),
             failures: Default::default(),
             max_sum_error: None,
@@ -583,7 +580,6 @@ impl Summary {
     pub fn absorb(&mut self, report: &Report) {
         self.elapsed += report.elapsed;
         self.lanes += report.lanes.len();
-        self.flagged += report.flagged();
         for lane in report.lanes.iter().filter(|l| l.status != LaneStatus::Ok) {
             *self
                 .flagged_by_status
@@ -625,6 +621,21 @@ impl Summary {
                 self.cut = (self.cut.0 + 1, self.cut.1.max(parts));
             }
         }
+    }
+
+    /// Lanes whose status is not `ok`.
+    pub fn flagged(&self) -> usize {
+        self.flagged_by_status.values().sum()
+    }
+
+    /// Counts by status name as the messages say them: "2 sum-rule, 1
+    /// too-many-steps" (of `flagged_by_status` or `failures`).
+    pub fn by_status(counts: &std::collections::BTreeMap<&'static str, usize>) -> String {
+        let counts: Vec<String> = counts
+            .iter()
+            .map(|(name, n)| format!("{n} {name}"))
+            .collect();
+        counts.join(", ")
     }
 
     /// Whether every lane failed (the command then exits with 1).

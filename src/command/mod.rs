@@ -79,14 +79,8 @@ impl Outcome {
         if !self.summary.all_failed() {
             return Ok(());
         }
-        let reasons: Vec<String> = self
-            .summary
-            .failures
-            .iter()
-            .map(|(name, n)| format!("{n} {name}"))
-            .collect();
         Err(Error::AllLanesFailed {
-            reasons: reasons.join(", "),
+            reasons: Summary::by_status(&self.summary.failures),
         })
     }
 }

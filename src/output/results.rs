@@ -44,15 +44,20 @@ fn column(path: &Path, records: &[csv::StringRecord], k: usize) -> Result<Vec<f6
     records
         .iter()
         .enumerate()
-        .map(|(row, r)| {
-            r.get(k)
-                .and_then(|t| t.parse::<f64>().ok())
-                .ok_or_else(|| Error::Results {
-                    path: path.to_owned(),
-                    reason: format!("row {}: column {} is not a number", row + 2, k + 1),
-                })
-        })
+        .map(|(row, r)| cell(path, r, row, k))
         .collect()
+}
+
+/// Column `k` of `record`, the file's record number `row` (from 0, after
+/// the header), as a number.
+fn cell(path: &Path, record: &csv::StringRecord, row: usize, k: usize) -> Result<f64> {
+    record
+        .get(k)
+        .and_then(|t| t.parse::<f64>().ok())
+        .ok_or_else(|| Error::Results {
+            path: path.to_owned(),
+            reason: format!("row {}: column {} is not a number", row + 2, k + 1),
+        })
 }
 
 /// `lyapsweep plot DIR --out INTO`: checks that `dir` holds one complete
@@ -240,11 +245,7 @@ fn lambda1_of_grid(path: &Path, scene: &Scene) -> Result<Vec<f64>> {
         .read_record(&mut record)
         .map_err(|e| bad(e.to_string()))?
     {
-        let value = record.get(k).and_then(|t| t.parse::<f64>().ok());
-        let row = lambda1.len() + 2;
-        lambda1.push(
-            value.ok_or_else(|| bad(format!("row {row}: column {} is not a number", k + 1)))?,
-        );
+        lambda1.push(cell(path, &record, lambda1.len(), k)?);
     }
     let points = scene.sweep.points();
     if lambda1.len() != points {
