@@ -5,6 +5,8 @@
 use std::fs;
 use std::path::Path;
 
+use base64::Engine;
+
 use lyapsweep::output::plot::{
     heat_map, heat_map_pixels, sweep_figure, sweep_pixels, GridData, SweepData, DATA_COLOUR,
     HEAT_MAP_SIZE, SWEEP_SIZE,
@@ -257,6 +259,98 @@ fn heat_map_is_written_as_png_and_svg_at_its_size() {
     let svg = fs::read_to_string(&written[1]).unwrap();
     assert!(svg.contains("<svg") && svg.contains("ζ"));
     assert_eq!(listing(dir.path()), ["lambda1.png", "lambda1.svg"]);
+}
+
+/// λ₁ on a 700 × 600 grid, finer than the map's pixels, in blocks of
+/// 100 × 100 cells: +0.1 where the block's column and row add up to an even
+/// number, -0.1 elsewhere.
+fn fine_grid() -> GridData {
+    let (nx, ny) = (700, 600);
+    let x: Vec<f64> = (0..nx).map(|i| i as f64 / (nx - 1) as f64).collect();
+    let y: Vec<f64> = (0..ny).map(|j| 2.0 + j as f64 / (ny - 1) as f64).collect();
+    let lambda1 = (0..nx * ny)
+        .map(|k| match (k % nx / 100 + k / nx / 100) % 2 {
+            0 => 0.1,
+            _ => -0.1,
+        })
+        .collect();
+    GridData {
+        title: "fine".into(),
+        x_name: "eta".into(),
+        y_name: "zeta".into(),
+        x,
+        y,
+        lambda1,
+        per_unit_time: true,
+    }
+}
+
+/// The attribute `name` of an SVG tag's text.
+fn attribute<'a>(tag: &'a str, name: &str) -> &'a str {
+    let start = tag.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+    &tag[start..start + tag[start..].find('"').unwrap()]
+}
+
+#[test]
+fn a_map_finer_than_its_pixels_is_one_raster_that_the_svg_embeds_pixel_for_pixel() {
+    let data = fine_grid();
+    let dir = tempfile::tempdir().unwrap();
+    let written = heat_map(&data, dir.path(), "fine").unwrap();
+    let svg = fs::read_to_string(&written[1]).unwrap();
+    // A rectangle a cell would be 420 000 of them, about 36 MB.
+    assert!(svg.len() < 300_000, "{} bytes of SVG", svg.len());
+    assert_eq!(svg.matches("<image").count(), 1);
+    let tag = &svg[svg.find("<image").unwrap()..];
+    let tag = &tag[..tag.find("/>").unwrap()];
+    let number = |name: &str| attribute(tag, name).parse::<usize>().unwrap();
+    let (left, top, width, height) = (number("x"), number("y"), number("width"), number("height"));
+    let png = attribute(tag, "href")
+        .strip_prefix("data:image/png;base64,")
+        .unwrap();
+    let png = base64::engine::general_purpose::STANDARD
+        .decode(png)
+        .unwrap();
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+        .read_info()
+        .unwrap();
+    let mut raster = vec![0; reader.output_buffer_size()];
+    let frame = reader.next_frame(&mut raster).unwrap();
+    assert_eq!((frame.width, frame.height), (width as u32, height as u32));
+    assert_eq!(frame.color_type, png::ColorType::Rgb);
+
+    // The SVG's image is the PNG figure's map, pixel for pixel (inside the
+    // frame, which both draw over the map's edge).
+    let figure = heat_map_pixels(&data);
+    let figure_width = HEAT_MAP_SIZE.0 as usize;
+    for row in 1..height - 1 {
+        let at = 3 * ((top + row) * figure_width + left);
+        let same = figure[at + 3..at + 3 * (width - 1)]
+            == raster[3 * (row * width + 1)..3 * ((row + 1) * width - 1)];
+        assert!(same, "row {row} of the map differs");
+    }
+    // And the raster is the data: each block's centre has its sign's colour
+    // (the cells span the map, first row at the bottom).
+    for (bi, bj) in (0..7).flat_map(|bi| (0..6).map(move |bj| (bi, bj))) {
+        let column = (width as f64 * (bi as f64 * 100.0 + 50.5) / 700.0) as usize;
+        let row = (height as f64 * (1.0 - (bj as f64 * 100.0 + 50.5) / 600.0)) as usize;
+        let p = &raster[3 * (row * width + column)..][..3];
+        let (r, b) = (i32::from(p[0]), i32::from(p[2]));
+        let positive = (bi + bj) % 2 == 0;
+        assert_eq!(
+            (r > b + 60, b > r + 60),
+            (positive, !positive),
+            "block ({bi}, {bj}): {p:?}"
+        );
+    }
+}
+
+#[test]
+fn a_map_of_few_cells_stays_a_rectangle_a_cell_in_the_svg() {
+    let dir = tempfile::tempdir().unwrap();
+    let written = heat_map(&grid(), dir.path(), "coarse").unwrap();
+    let svg = fs::read_to_string(&written[1]).unwrap();
+    assert!(!svg.contains("<image"));
+    assert!(svg.matches("<rect").count() >= 60 * 40);
 }
 
 #[test]

@@ -20,6 +20,7 @@ pub mod merge;
 pub mod plot;
 pub mod results;
 pub mod set;
+pub mod svg_raster;
 
 use std::fs;
 use std::io::Write;

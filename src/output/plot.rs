@@ -19,13 +19,14 @@ use std::path::{Path, PathBuf};
 use plotters::chart::MeshStyle;
 use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::types::RangedCoordf64;
-use plotters::coord::Shift;
+use plotters::coord::{ReverseCoordTranslate, Shift};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::error::{Error, Result};
 use crate::output::figure::register_font;
+use crate::output::svg_raster;
 
 /// The sweep figure's size in pixels (the SVG's logical size too).
 pub const SWEEP_SIZE: (u32, u32) = (1600, 1200);
@@ -349,23 +350,32 @@ fn write<F: Figure>(figure: &F, dir: &Path, stem: &str) -> Result<Vec<PathBuf>> 
     result.map(|()| vec![png, svg])
 }
 
-/// Draws `figure` as SVG into `file`, and flushes that file to disk so that
-/// the rename that follows never exposes an empty figure.
+/// Draws `figure` as SVG into `file` (bitmaps embedded as PNG images, see
+/// [`svg_raster`]), and flushes that file to disk so that the rename that
+/// follows never exposes an empty figure.
 fn render_svg<F: Figure>(figure: &F, file: &Path) -> io::Result<()> {
     register_font();
-    let root = SVGBackend::new(file, F::SIZE).into_drawing_area();
-    figure
-        .draw(&root)
-        .and_then(|()| root.present())
-        .map_err(|e| io::Error::other(e.to_string()))?;
-    drop(root);
-    fs::File::open(file)?.sync_all()
+    let text = svg_raster::render(F::SIZE, |root| {
+        figure.draw(&root).and_then(|()| root.present())
+    })
+    .map_err(|e| io::Error::other(e.to_string()))?;
+    let mut out = fs::File::create(file)?;
+    io::Write::write_all(&mut out, text.as_bytes())?;
+    out.sync_all()
 }
 
-/// Writes RGB `pixels` of `size` as a PNG file, flushed to disk. (Encoded
-/// here with the `png` crate rather than by plotters' bitmap encoder, which
-/// brings the whole `image` crate and its decoders into the build.)
-pub fn write_png(file: &Path, pixels: &[u8], (width, height): (u32, u32)) -> io::Result<()> {
+/// Writes RGB `pixels` of `size` as a PNG file, flushed to disk.
+pub fn write_png(file: &Path, pixels: &[u8], size: (u32, u32)) -> io::Result<()> {
+    let encoded = encode_png(pixels, size)?;
+    let mut out = fs::File::create(file)?;
+    io::Write::write_all(&mut out, &encoded)?;
+    out.sync_all()
+}
+
+/// RGB `pixels` of `size` encoded as PNG. (Encoded here with the `png`
+/// crate rather than by plotters' bitmap encoder, which brings the whole
+/// `image` crate and its decoders into the build.)
+pub fn encode_png(pixels: &[u8], (width, height): (u32, u32)) -> io::Result<Vec<u8>> {
     let mut encoded = Vec::new();
     let mut encoder = png::Encoder::new(&mut encoded, width, height);
     encoder.set_color(png::ColorType::Rgb);
@@ -373,9 +383,7 @@ pub fn write_png(file: &Path, pixels: &[u8], (width, height): (u32, u32)) -> io:
     let mut writer = encoder.write_header().map_err(io::Error::other)?;
     writer.write_image_data(pixels).map_err(io::Error::other)?;
     writer.finish().map_err(io::Error::other)?;
-    let mut out = fs::File::create(file)?;
-    io::Write::write_all(&mut out, &encoded)?;
-    out.sync_all()
+    Ok(encoded)
 }
 
 /// Draws `figure` into memory as RGB pixels.
@@ -1010,17 +1018,78 @@ fn draw_cells<DB: DrawingBackend>(
         .x_desc(pretty(x_name))
         .y_desc(pretty(y_name))
         .draw()?;
-    let grid = y_cells.iter().enumerate().flat_map(|(j, ys)| {
-        x_cells
-            .iter()
-            .enumerate()
-            .map(move |(i, xs)| (i, j, xs, ys))
-    });
-    chart.draw_series(grid.map(|(i, j, xs, ys)| {
-        let corners = [(xs.start, ys.start), (xs.end, ys.end)];
-        Rectangle::new(corners, colour(j * nx + i).filled())
-    }))?;
+    let (width, height) = chart.plotting_area().dim_in_pixel();
+    let small = |pixels: u32, cells: usize| f64::from(pixels) < RASTER_CELL_PX * cells as f64;
+    if small(width, nx) || small(height, y.len()) {
+        draw_raster(&chart, (&x_cells, &y_cells), colour)?;
+    } else {
+        let grid = y_cells.iter().enumerate().flat_map(|(j, ys)| {
+            x_cells
+                .iter()
+                .enumerate()
+                .map(move |(i, xs)| (i, j, xs, ys))
+        });
+        chart.draw_series(grid.map(|(i, j, xs, ys)| {
+            let corners = [(xs.start, ys.start), (xs.end, ys.end)];
+            Rectangle::new(corners, colour(j * nx + i).filled())
+        }))?;
+    }
     frame(&chart)
+}
+
+/// Cells narrower or lower than this many pixels on average are drawn as
+/// one raster of the map's pixels rather than as a rectangle each: smaller
+/// rectangles show nothing more, and a million-cell map's SVG would hold a
+/// million of them (90 MB; see `svg_raster` for how the raster is kept).
+const RASTER_CELL_PX: f64 = 3.0;
+
+/// The cells as one bitmap of the plotting area's pixels, each pixel
+/// coloured by the cell its upper-left corner falls in (white outside all).
+fn draw_raster<DB: DrawingBackend>(
+    chart: &Chart<'_, DB>,
+    (x_cells, y_cells): (&[Range<f64>], &[Range<f64>]),
+    colour: impl Fn(usize) -> RGBColor,
+) -> Drawn<DB> {
+    let area = chart.plotting_area();
+    let (columns, rows) = area.get_pixel_range();
+    let spec = chart.as_coord_spec();
+    let (in_x, in_y) = (locate(x_cells), locate(y_cells));
+    let column_cells: Vec<Option<usize>> = columns
+        .clone()
+        .map(|px| in_x(spec.reverse_translate((px, rows.start))?.0))
+        .collect();
+    let row_cells: Vec<Option<usize>> = rows
+        .clone()
+        .map(|py| in_y(spec.reverse_translate((columns.start, py))?.1))
+        .collect();
+    let nx = x_cells.len();
+    let mut pixels = Vec::with_capacity(3 * column_cells.len() * row_cells.len());
+    for j in &row_cells {
+        for i in &column_cells {
+            let RGBColor(r, g, b) = match (i, j) {
+                (Some(i), Some(j)) => colour(j * nx + i),
+                _ => WHITE,
+            };
+            pixels.extend([r, g, b]);
+        }
+    }
+    let size = (column_cells.len() as u32, row_cells.len() as u32);
+    let bitmap = BitMapElement::with_owned_buffer((0, 0), size, pixels)
+        .expect("three bytes a pixel of the plotting area");
+    area.strip_coord_spec().draw(&bitmap)
+}
+
+/// Which of `cells` holds a value: the cells tile their span (see [`cells`])
+/// in any order.
+fn locate(cells: &[Range<f64>]) -> impl Fn(f64) -> Option<usize> + '_ {
+    let mut order: Vec<usize> = (0..cells.len()).collect();
+    order.sort_by(|&a, &b| cells[a].start.total_cmp(&cells[b].start));
+    move |v| {
+        let k = order[order
+            .partition_point(|&k| cells[k].start <= v)
+            .checked_sub(1)?];
+        (v <= cells[k].end).then_some(k)
+    }
 }
 
 /// A colour bar over `range`, its scale on the right named `name` and
