@@ -9,10 +9,14 @@
 // reference at phase 0, so the next part needs nothing from the host.
 
 #include "shared/bindings.wgsl"
+#include "shared/dispatch.wgsl"
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let lane = gid.x;
+fn main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let lane = invocation_index(gid, groups);
     if (lane >= control.lane_count) {
         return;
     }

@@ -6,16 +6,20 @@
 // dispatches. A failed (non-finite) trajectory stops; other lanes never read it.
 
 #include "shared/bindings.wgsl"
+#include "shared/dispatch.wgsl"
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
     var t: u32;
     var lane: u32;
     if (control.transient != 0u) {
-        lane = gid.x;
+        lane = invocation_index(gid, groups);
         t = lane * TRAJ;
     } else {
-        t = gid.x;
+        t = invocation_index(gid, groups);
         lane = t / TRAJ;
     }
     if (lane >= control.lane_count) {

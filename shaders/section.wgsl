@@ -71,10 +71,14 @@ fn crossed(at: real, before: State, after: State) -> bool {
 }
 
 #include "shared/loop_budget.wgsl"
+#include "shared/dispatch.wgsl"
 
 @compute @workgroup_size(WORKGROUP_SIZE)
-fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let j = gid.x;
+fn main(
+    @builtin(global_invocation_id) gid: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+) {
+    let j = invocation_index(gid, groups);
     if (j >= control.job_count) {
         return;
     }

@@ -405,6 +405,58 @@ fn workgroup_size_changes_no_digit_and_device_time_is_measured() {
 }
 
 #[test]
+fn a_sweep_dispatched_in_rows_of_workgroups_is_the_sweep_in_one_row() {
+    for precision in [Precision::F64, Precision::F32] {
+        let p = precision.name();
+        let test = "a_sweep_dispatched_in_rows_of_workgroups_is_the_sweep_in_one_row";
+        if !gpu_or_skip(test, precision) {
+            continue;
+        }
+        // The seed's chaotic and grazing window, 1 000 values: 5 000
+        // trajectories, 79 workgroups of 64. Ten to a row is one batch in
+        // rows; three to a row holds 576 invocations a dispatch, so the
+        // sweep is also split into batches of 115 lanes.
+        let overrides: Vec<String> = [
+            "sweep.from=0.69",
+            "sweep.to=0.74",
+            "sweep.count=1000",
+            "run.backend=\"gpu\"",
+            "run.validate=0",
+            "integration.steps_per_period=200",
+            "integration.transient=10",
+            "integration.iterations=20",
+            "output.bifurcation_points=1",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .chain([format!("run.precision=\"{p}\"")])
+        .collect();
+        let one_row = run(SEED, &overrides, RunOptions::default());
+        assert_eq!(one_row.gpu.as_ref().unwrap().batches, 1);
+        for (width, batches) in [(10, 1), (3, 9)] {
+            let options = RunOptions {
+                workgroups_per_row: Some(width),
+                ..Default::default()
+            };
+            let rows = run(SEED, &overrides, options);
+            assert_eq!(rows.gpu.as_ref().unwrap().batches, batches, "{p} {width}");
+            for (k, (a, b)) in one_row.lanes.iter().zip(&rows.lanes).enumerate() {
+                let same = |x: &f64, y: &f64| x == y || (x.is_nan() && y.is_nan());
+                assert!(
+                    a.exponents
+                        .iter()
+                        .zip(&b.exponents)
+                        .all(|(x, y)| same(x, y)),
+                    "{p}, {width} a row, lane {k}: bit for bit"
+                );
+                assert_eq!(a.bifurcation, b.bifurcation, "{p} {width} lane {k}");
+                assert_eq!(a.status, b.status, "{p} {width} lane {k}");
+            }
+        }
+    }
+}
+
+#[test]
 fn a_faulty_or_chattering_lane_touches_no_other_lane() {
     for precision in [Precision::F64, Precision::F32] {
         let p = precision.name();

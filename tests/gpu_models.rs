@@ -1327,9 +1327,9 @@ fn a_ball_locking_onto_the_table_is_recomputed_on_the_cpu() {
 }
 
 #[test]
-fn a_section_sweep_split_into_batches_is_the_sweep_in_one() {
+fn a_section_sweep_split_into_batches_or_rows_is_the_sweep_in_one() {
     if !gpu_or_skip(
-        "a_section_sweep_split_into_batches_is_the_sweep_in_one",
+        "a_section_sweep_split_into_batches_or_rows_is_the_sweep_in_one",
         Precision::F64,
     ) {
         return;
@@ -1349,9 +1349,20 @@ fn a_section_sweep_split_into_batches_is_the_sweep_in_one() {
     let split = lyapsweep::run_with(&scene, &options).expect("runs");
     assert_eq!(whole.gpu.as_ref().unwrap().batches, 1);
     assert_eq!(split.gpu.as_ref().unwrap().batches, 3);
-    for (k, (a, b)) in whole.lanes.iter().zip(&split.lanes).enumerate() {
-        assert_eq!(a.status, LaneStatus::Ok, "lane {k}");
-        assert_eq!(a.exponents, b.exponents, "lane {k}");
-        assert_eq!(a.bifurcation, b.bifurcation, "lane {k}");
+    // Dispatched in rows of workgroups, as a million lanes are: 25 jobs in
+    // workgroups of 4, three to a row.
+    let options = lyapsweep::RunOptions {
+        workgroup_size: Some(4),
+        workgroups_per_row: Some(3),
+        ..Default::default()
+    };
+    let rows = lyapsweep::run_with(&scene, &options).expect("runs");
+    assert_eq!(rows.gpu.as_ref().unwrap().batches, 1);
+    for other in [&split, &rows] {
+        for (k, (a, b)) in whole.lanes.iter().zip(&other.lanes).enumerate() {
+            assert_eq!(a.status, LaneStatus::Ok, "lane {k}");
+            assert_eq!(a.exponents, b.exponents, "lane {k}");
+            assert_eq!(a.bifurcation, b.bifurcation, "lane {k}");
+        }
     }
 }

@@ -24,6 +24,10 @@ pub struct RunOptions {
     /// software adapter with stops, else a whole period); tests set it to
     /// run lavapipe as a hardware GPU runs.
     pub dispatch_steps: Option<usize>,
+    /// Workgroups per row of a GPU dispatch at most (default: the device's
+    /// limit per dimension); tests set it low so that a small sweep is laid
+    /// out in rows of workgroups, as a million lanes are.
+    pub workgroups_per_row: Option<u32>,
     /// Ends the run early when requested: it then returns
     /// [`crate::Error::Stopped`], and a front end writes nothing.
     pub stop: Stop,

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use super::context::Gpu;
 use super::shader::{Kernel, Variant};
+use crate::backend::options::RunOptions;
 use crate::error::{Error, Result};
 use crate::method::LaneResult;
 use crate::scene::Precision;
@@ -40,6 +41,47 @@ pub(super) const TRUNCATION_RETRY: usize = 8;
 /// 1, where no lane shares a SIMD group, with this size bit for bit on
 /// chaotic, grazing, sticking and overflowing lanes.
 pub const DEFAULT_WORKGROUP: u32 = 64;
+
+/// How a dispatch's invocations are laid out in workgroups.
+#[derive(Clone, Copy, Debug)]
+pub struct Dispatch {
+    /// Invocations per workgroup.
+    pub workgroup: u32,
+    /// Workgroups per row at most: the device's limit per dimension, or
+    /// fewer where the run asks.
+    pub width: u32,
+}
+
+impl Dispatch {
+    pub fn new(gpu: &Gpu, options: &RunOptions) -> Self {
+        let device = gpu.limits.max_compute_workgroups_per_dimension;
+        Dispatch {
+            workgroup: options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP),
+            width: options
+                .workgroups_per_row
+                .map_or(device, |w| w.clamp(1, device)),
+        }
+    }
+
+    /// The workgroups (x, y) of a dispatch of `invocations`: one row when
+    /// they fit in `width` workgroups, else rows of `width`, the last one
+    /// partly idle (the kernels number invocations across rows:
+    /// shaders/shared/dispatch.wgsl). One row holds 4.2 million invocations
+    /// on most devices, 840 000 lanes of five trajectories: a million-lane
+    /// map would otherwise be two batches, the device idle between them.
+    pub fn grid(&self, invocations: usize) -> (u32, u32) {
+        let groups = invocations.div_ceil(self.workgroup as usize);
+        let x = groups.clamp(1, self.width as usize);
+        (x as u32, groups.div_ceil(x) as u32)
+    }
+
+    /// The most invocations one dispatch holds: `width` rows of `width`
+    /// workgroups, within the kernels' 32-bit invocation index.
+    pub fn max_invocations(&self) -> usize {
+        let grid = u64::from(self.width).pow(2) * u64::from(self.workgroup);
+        grid.min(u64::from(u32::MAX)) as usize
+    }
+}
 
 /// Where a GPU run's wall time went.
 #[derive(Clone, Copy, Debug, Default)]

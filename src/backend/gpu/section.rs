@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use super::context::Gpu;
 use super::pipeline::{
     compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    uniform_entry, Dispatch, GpuRun, Timings, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
@@ -82,13 +82,12 @@ pub fn run(
     };
     let per_lane = ((16 + 2 * real * (d + 1)) * trajectories) as u64;
     let limits = &gpu.limits;
-    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
+    let dispatch = Dispatch::new(gpu, options);
     let by_buffer = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size)
         / per_lane;
-    let by_dispatch = limits.max_compute_workgroups_per_dimension as u64 * u64::from(workgroup)
-        / trajectories as u64;
+    let by_dispatch = (dispatch.max_invocations() / trajectories) as u64;
     let batch = (by_buffer.min(by_dispatch) as usize)
         .min(options.max_batch_lanes.unwrap_or(usize::MAX))
         .max(1);
@@ -164,7 +163,7 @@ struct Stepper<'a> {
     steps: wgpu::Buffer,
     states: wgpu::Buffer,
     readback: wgpu::Buffer,
-    workgroup: u32,
+    dispatch: Dispatch,
     /// The reals of the buffers.
     precision: Precision,
     /// Steps per dispatch.
@@ -183,8 +182,9 @@ impl<'a> Stepper<'a> {
         lane_data: &[f64],
         capacity: usize,
         dim: usize,
-        workgroup: u32,
+        dispatch: Dispatch,
     ) -> Self {
+        let workgroup = dispatch.workgroup;
         use wgpu::util::DeviceExt;
         let device = &gpu.device;
         let entries = [
@@ -279,7 +279,7 @@ impl<'a> Stepper<'a> {
             steps,
             states,
             readback,
-            workgroup,
+            dispatch,
             precision,
             chunk,
             retries: 0,
@@ -384,9 +384,9 @@ impl<'a> Stepper<'a> {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
-            let groups = job_count.div_ceil(self.workgroup as usize) as u32;
+            let (x, y) = self.dispatch.grid(job_count);
             for _ in 0..dispatches {
-                pass.dispatch_workgroups(groups, 1, 1);
+                pass.dispatch_workgroups(x, y, 1);
             }
         }
         encoder.copy_buffer_to_buffer(&self.jobs, 0, &self.readback, 0, jobs_bytes);
@@ -526,8 +526,8 @@ where
     } else {
         0
     };
-    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
-    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, workgroup);
+    let dispatch = Dispatch::new(gpu, options);
+    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, dispatch);
     stepper.timings.setup = start.elapsed();
 
     let transient_start = Instant::now();

@@ -19,6 +19,10 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/bindings.wgsl"),
     ),
     (
+        "shared/dispatch.wgsl",
+        include_str!("../../../shaders/shared/dispatch.wgsl"),
+    ),
+    (
         "shared/loop_budget.wgsl",
         include_str!("../../../shaders/shared/loop_budget.wgsl"),
     ),

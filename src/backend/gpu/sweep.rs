@@ -18,8 +18,7 @@ use wgpu::util::DeviceExt;
 use super::context::Gpu;
 use super::pipeline::{
     compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, wait_for, GpuRun, Timings, DEFAULT_WORKGROUP, DISPATCH_LANE_STEPS,
-    TRUNCATION_RETRY,
+    uniform_entry, wait_for, Dispatch, GpuRun, Timings, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
 };
 use super::seed::{lane_constants, Seeds};
 use super::shader::{Kernel, Variant};
@@ -135,18 +134,17 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
-    let workgroup = options.workgroup_size.unwrap_or(DEFAULT_WORKGROUP);
-    let pipelines = Pipelines::cached(gpu, variant, workgroup);
+    let dispatch = Dispatch::new(gpu, options);
+    let pipelines = Pipelines::cached(gpu, variant, dispatch);
     let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant, settings);
     let limits = &gpu.limits;
     let binding = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size);
-    // A batch must fit one dispatch (workgroups per dimension) and its
-    // trajectory buffer one binding; at least one ring slot must fit too.
-    let by_dispatch =
-        limits.max_compute_workgroups_per_dimension as usize * workgroup as usize / layout.traj;
+    // A batch must fit one dispatch and its trajectory buffer one binding;
+    // at least one ring slot must fit too.
+    let by_dispatch = dispatch.max_invocations() / layout.traj;
     let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
     let by_ring = (binding / layout.largest_per_iteration()) as usize;
     let batch_lanes = by_dispatch
@@ -232,18 +230,25 @@ struct Pipelines {
     wall: bool,
     /// The fluxes (binding 9) of a variant with general surfaces.
     surfaces: bool,
-    workgroup: u32,
+    dispatch: Dispatch,
 }
 
 impl Pipelines {
-    fn cached(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
+    /// The pipelines of `variant` (compiled once per workgroup size), to
+    /// be dispatched as `dispatch` lays out.
+    fn cached(gpu: &Gpu, variant: &Variant, dispatch: Dispatch) -> Self {
         let source = variant.source(Kernel::Integrate) + &variant.source(Kernel::Finish);
-        compiled_once(gpu, source, workgroup, || {
-            Self::new(gpu, variant, workgroup)
-        })
+        let compiled = compiled_once(gpu, source, dispatch.workgroup, || {
+            Self::new(gpu, variant, dispatch)
+        });
+        Pipelines {
+            dispatch,
+            ..compiled
+        }
     }
 
-    fn new(gpu: &Gpu, variant: &Variant, workgroup: u32) -> Self {
+    fn new(gpu: &Gpu, variant: &Variant, dispatch: Dispatch) -> Self {
+        let workgroup = dispatch.workgroup;
         let mut entries = vec![
             uniform_entry(0),
             storage_entry(1, true),
@@ -276,7 +281,7 @@ impl Pipelines {
             lyapunov: variant.lyapunov,
             wall: variant.wall,
             surfaces: variant.surfaces(),
-            workgroup,
+            dispatch,
         }
     }
 }
@@ -476,7 +481,10 @@ where
                 self.part_steps,
             )
         };
-        let groups = |n: usize| n.div_ceil(pipelines.workgroup as usize) as u32;
+        let (invocations, lanes) = (
+            pipelines.dispatch.grid(invocations),
+            pipelines.dispatch.grid(self.count),
+        );
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(if transient { "transient" } else { "averaging" }),
             timestamp_writes: self.stopwatch.map(|s| s.writes(slot)),
@@ -485,10 +493,10 @@ where
         for _ in 0..iterations * parts {
             pass.set_pipeline(&pipelines.integrate);
             for _ in 0..part_steps.div_ceil(chunk) {
-                pass.dispatch_workgroups(groups(invocations), 1, 1);
+                pass.dispatch_workgroups(invocations.0, invocations.1, 1);
             }
             pass.set_pipeline(&pipelines.finish);
-            pass.dispatch_workgroups(groups(self.count), 1, 1);
+            pass.dispatch_workgroups(lanes.0, lanes.1, 1);
         }
     }
 
