@@ -382,6 +382,15 @@ fn runs_draw_their_figures_and_plot_redraws_them_from_the_csvs() {
     );
     assert_eq!(png_size(&grid.join("heat-map.png")), HEAT_MAP_SIZE);
     assert!(!grid.join("figure.png").exists());
+    // The run draws its map from the λ1 it wrote; read back, they are the
+    // same numbers and the same map.
+    let drawn = bytes(grid.join("heat-map.png"));
+    std::fs::remove_file(grid.join("heat-map.png")).unwrap();
+    ok(lyapsweep(&["plot", grid.to_str().unwrap()]));
+    assert!(
+        bytes(grid.join("heat-map.png")) == drawn,
+        "plot redraws the same map"
+    );
     // A shard draws nothing; its merge does.
     let shard = run(
         dir.path(),

@@ -8,6 +8,8 @@ pub mod progress;
 
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::method::lane::LanePlan;
 use crate::method::{LaneResult, LaneStatus, MethodSettings};
@@ -120,16 +122,19 @@ pub fn sum_rule_tolerance(precision: Precision, lane: &LaneResult) -> f64 {
 /// burst of expansion, the paper's linear impact location), which its
 /// numbers carry.
 fn flag_sum_rule(lanes: &mut [LaneResult], expected_sums: &[f64], precision: Precision) {
-    for (lane, &expected) in lanes.iter_mut().zip(expected_sums) {
-        let finite = lane.exponents.iter().all(|e| e.is_finite());
-        if lane.status != LaneStatus::Ok || lane.exponents.is_empty() || !finite {
-            continue;
-        }
-        let miss = (lane.exponent_sum() - expected).abs();
-        if miss > sum_rule_tolerance(precision, lane) {
-            lane.status = LaneStatus::SumRule { miss };
-        }
-    }
+    lanes
+        .par_iter_mut()
+        .zip(expected_sums)
+        .for_each(|(lane, &expected)| {
+            let finite = lane.exponents.iter().all(|e| e.is_finite());
+            if lane.status != LaneStatus::Ok || lane.exponents.is_empty() || !finite {
+                return;
+            }
+            let miss = (lane.exponent_sum() - expected).abs();
+            if miss > sum_rule_tolerance(precision, lane) {
+                lane.status = LaneStatus::SumRule { miss };
+            }
+        });
 }
 
 /// How far a GPU lane is from its CPU recomputation: the largest exponent
@@ -451,7 +456,9 @@ impl Runner {
                 // The kernels ran every lane with the sweep's plan; a lane whose
                 // own plan is beyond reach is not to be trusted (the CPU path
                 // does not run it at all).
-                for (k, lane) in run.lanes.iter_mut().enumerate() {
+                // (Over the host's cores, as the other steps over every
+                // lane are: at a million lanes each is a serial 0.1 s.)
+                run.lanes.par_iter_mut().enumerate().for_each(|(k, lane)| {
                     let own =
                         (crate::method::runner(scene.system).plan)(&scene.lane_params(k), settings);
                     if !own.affordable() {
@@ -462,7 +469,7 @@ impl Runner {
                             own,
                         );
                     }
-                }
+                });
                 let report = GpuReport {
                     adapter: gpu.summary.name.clone(),
                     adapter_backend: gpu.summary.backend.clone(),
@@ -500,7 +507,7 @@ impl Runner {
                 .model
                 .is_some_and(|code| code.divergence_along.is_some() && code.section.is_none());
         let expected_sums: Vec<f64> = lanes
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(k, lane)| {
                 if orbit_unknown {
@@ -703,7 +710,6 @@ fn date_transient_failures(scene: &Scene, lanes: &mut [LaneResult]) {
 /// Lanes `picked` of the sweep run on the CPU path with `settings`, in
 /// parallel: what a GPU run hands back to the CPU.
 fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<LaneResult> {
-    use rayon::prelude::*;
     picked
         .par_iter()
         .map(|&k| {

@@ -93,6 +93,9 @@ pub struct SetWriter {
     /// With `[attractors]`, each lane's (grid point, start) so far, in the
     /// order of its rows: their branches are filled in at the end.
     lanes: Vec<(u32, u32)>,
+    /// λ1 of each row so far, for the heat map of a grid of one lane a
+    /// point (8 bytes a lane, as reading it back would hold).
+    lambda1: Option<Vec<f64>>,
 }
 
 fn write_error(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
@@ -128,6 +131,12 @@ impl SetWriter {
             bifurcation,
             bifurcation_rows: Vec::new(),
             lanes: Vec::new(),
+            lambda1: (scene.plot
+                && scene.shard.is_none()
+                && scene.lyapunov
+                && scene.sweep.second.is_some()
+                && scene.sweep.starts.is_none())
+            .then(Vec::new),
         })
     }
 
@@ -140,6 +149,9 @@ impl SetWriter {
             let path = dir.join(spectrum_file(batch));
             write_rows(w, lanes, |j| [spectrum_row(batch, report, j)])
                 .map_err(write_error(&path))?;
+        }
+        if let Some(lambda1) = &mut self.lambda1 {
+            lambda1.extend(report.lanes.iter().map(|lane| lane.exponents[0]));
         }
         if batch.sweep.starts.is_some() {
             self.lanes.extend((0..lanes).map(|j| {
@@ -214,7 +226,7 @@ impl SetWriter {
             write_text(&dir.join(SHARD_FILE), &text)?;
         } else if scene.plot {
             set::pause("figures");
-            results::draw(&dir, &dir)?;
+            results::draw_with(&dir, &dir, self.lambda1)?;
         }
         self.staging.commit()
     }
