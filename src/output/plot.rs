@@ -25,7 +25,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::error::{Error, Result};
-use crate::output::figure::register_font;
+use crate::output::figure::{encode_png, register_font};
 use crate::output::svg_raster;
 
 /// The sweep figure's size in pixels (the SVG's logical size too).
@@ -370,20 +370,6 @@ pub fn write_png(file: &Path, pixels: &[u8], size: (u32, u32)) -> io::Result<()>
     let mut out = fs::File::create(file)?;
     io::Write::write_all(&mut out, &encoded)?;
     out.sync_all()
-}
-
-/// RGB `pixels` of `size` encoded as PNG. (Encoded here with the `png`
-/// crate rather than by plotters' bitmap encoder, which brings the whole
-/// `image` crate and its decoders into the build.)
-pub fn encode_png(pixels: &[u8], (width, height): (u32, u32)) -> io::Result<Vec<u8>> {
-    let mut encoded = Vec::new();
-    let mut encoder = png::Encoder::new(&mut encoded, width, height);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    let mut writer = encoder.write_header().map_err(io::Error::other)?;
-    writer.write_image_data(pixels).map_err(io::Error::other)?;
-    writer.finish().map_err(io::Error::other)?;
-    Ok(encoded)
 }
 
 /// Draws `figure` into memory as RGB pixels.

@@ -158,7 +158,7 @@ impl DrawingBackend for RasterSvg<'_> {
         (w, h): (u32, u32),
         src: &[u8],
     ) -> Result<(), DrawingErrorKind<Self::ErrorType>> {
-        let png = super::plot::encode_png(src, (w, h)).map_err(DrawingErrorKind::DrawingError)?;
+        let png = super::figure::encode_png(src, (w, h)).map_err(DrawingErrorKind::DrawingError)?;
         let mut placed = self.placed.borrow_mut();
         let colour = mark_colour(placed.len());
         let (w, h) = (w as i32, h as i32);
