@@ -123,7 +123,7 @@ pub fn large_run(scene: &Scene) -> Option<String> {
             "a large run: {lanes} lanes, about {work:.1e} RK4 lane-steps, {} held in memory{}",
             bytes(held),
             if batch < lanes {
-                format!(", results streamed in batches of {batch} lanes")
+                format!(", results streamed in batches of at most {batch} lanes")
             } else {
                 String::new()
             }

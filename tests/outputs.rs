@@ -496,6 +496,7 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
 #[test]
 fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
     use lyapsweep::output::{SetWriter, Staging};
+    use lyapsweep::scene::Precision;
     let dir = tempfile::tempdir().unwrap();
     // The million-lane map's scene at 8 × 6.
     let scene = common::committed_scene(
@@ -506,10 +507,11 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
             "run.backend=\"cpu\"",
         ],
     );
-    let write = |batch: usize| {
+    let write = |scene: &lyapsweep::scene::Scene, batch: usize| {
         let out = dir.path().join(format!("batches-of-{batch}"));
-        let mut writer = SetWriter::new(&scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
-        let (summary, _) = lyapsweep::run_streaming(&scene, &Default::default(), batch, |b, r| {
+        let _ = std::fs::remove_dir_all(&out);
+        let mut writer = SetWriter::new(scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
+        let (summary, _) = lyapsweep::run_streaming(scene, &Default::default(), batch, |b, r| {
             writer.append(b, r)
         })
         .unwrap();
@@ -517,12 +519,51 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
         assert_eq!(summary.lanes, 48);
         std::fs::read(out.join("grid.csv")).unwrap()
     };
-    let whole = write(48);
+    let whole = write(&scene, 48);
     assert_eq!(whole.iter().filter(|&&b| b == b'\n').count(), 49);
     for batch in [1, 5, 13] {
-        assert!(write(batch) == whole, "grid.csv in batches of {batch}");
+        assert!(
+            write(&scene, batch) == whole,
+            "grid.csv in batches of {batch}"
+        );
+    }
+    // On the GPU, the device runs a batch while the host writes the one
+    // before: the same bytes as one batch, and an error writing a batch
+    // ends the run with that error (not a hang, nor the stop it asks of
+    // the batch on the device).
+    if common::gpu_or_skip("streamed GPU batches", Precision::F64) {
+        let gpu = common::committed_scene(
+            "million-map.toml",
+            &[
+                "sweep.count=8",
+                "sweep.second.count=6",
+                "run.backend=\"gpu\"",
+            ],
+        );
+        let one = write(&gpu, 48);
+        for batch in [1, 5, 13] {
+            assert!(
+                write(&gpu, batch) == one,
+                "GPU grid.csv in batches of {batch}"
+            );
+        }
+        let mut batches = 0;
+        let error = lyapsweep::run_streaming(&gpu, &Default::default(), 10, |_, _| {
+            batches += 1;
+            match batches {
+                2 => Err(lyapsweep::Error::Output {
+                    path: "grid.csv".into(),
+                    reason: "the disk is full".into(),
+                }),
+                _ => Ok(()),
+            }
+        })
+        .expect_err("the sink's error");
+        assert!(error.to_string().contains("the disk is full"), "{error}");
+        assert_eq!(batches, 2);
     }
 
+    write(&scene, 48);
     // The map's figure reads λ1 back a record at a time, and says which
     // row is wrong, or that rows are missing.
     let set = dir.path().join("batches-of-48");

@@ -422,6 +422,12 @@ impl Runner {
 
     /// Runs `scene`'s lanes in batches of at most `batch_lanes`, handing
     /// each to `sink` and adding it to `summary`.
+    ///
+    /// A GPU run of several batches overlaps them: the device runs batch
+    /// k + 1 while the host finishes batch k (recomputed and validated
+    /// lanes, the sum rule, `sink`'s rows). Two batches' results are then
+    /// held at once, so each is half of `batch_lanes`. (The CPU path's lanes
+    /// take every core, and would gain nothing.)
     pub fn stream(
         &self,
         scene: &Scene,
@@ -430,26 +436,70 @@ impl Runner {
         mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
     ) -> Result<()> {
         let lanes = scene.run_lane_count();
-        for start in (0..lanes).step_by(batch_lanes.max(1)) {
-            let batch = scene.batch(start..(start + batch_lanes).min(lanes));
-            let report = self.run(&batch)?;
-            sink(&batch, &report)?;
+        let overlap = self.gpu.is_some() && batch_lanes < lanes;
+        let size = if overlap {
+            batch_lanes.div_ceil(2)
+        } else {
+            batch_lanes
+        }
+        .max(1);
+        let batches = (0..lanes)
+            .step_by(size)
+            .map(|start| scene.batch(start..(start + size).min(lanes)));
+        let mut finish = |batch: &Scene, ran: Ran| -> Result<()> {
+            let report = self.finish(batch, ran);
+            sink(batch, &report)?;
             match summary {
                 Some(s) => s.absorb(&report),
                 None => *summary = Some(Summary::of(scene, &report)),
             }
+            Ok(())
+        };
+        if !overlap {
+            for batch in batches {
+                let ran = self.lanes(&batch)?;
+                finish(&batch, ran)?;
+            }
+            return Ok(());
         }
-        Ok(())
+        std::thread::scope(|scope| {
+            let (ready, next) = std::sync::mpsc::sync_channel(0);
+            scope.spawn(move || {
+                for batch in batches {
+                    let ran = self.lanes(&batch);
+                    let failed = ran.is_err();
+                    // The host stopped taking batches (an error) or this
+                    // one failed: no more.
+                    if ready.send((batch, ran)).is_err() || failed {
+                        return;
+                    }
+                }
+            });
+            let result = next
+                .iter()
+                .try_for_each(|(batch, ran)| finish(&batch, ran?));
+            if result.is_err() {
+                // The batch on the device is not wanted: end it now.
+                self.settings.stop.request();
+            }
+            result
+        })
     }
 
     /// The lanes of `scene` (a batch of the run, or all of it).
     pub fn run(&self, scene: &Scene) -> Result<Report> {
+        let ran = self.lanes(scene)?;
+        Ok(self.finish(scene, ran))
+    }
+
+    /// The lanes of `scene` as its backend ran them, before the host's
+    /// checks.
+    fn lanes(&self, scene: &Scene) -> Result<Ran> {
         let start = Instant::now();
         let options = &self.options;
         let progress = self.progress.clone();
         let settings = &self.settings;
-        let precision = self.precision;
-        let (mut lanes, gpu_report) = match &self.gpu {
+        let (lanes, gpu_report) = match &self.gpu {
             None => (cpu::sweep(scene, settings, &progress), None),
             Some((gpu, variant)) => {
                 let mut run = gpu::run(gpu, scene, variant, settings, options)?;
@@ -486,12 +536,26 @@ impl Runner {
                 (run.lanes, Some(report))
             }
         };
-        let elapsed = start.elapsed();
         // A stopped run's lanes ended part way: they are not results.
         if self.settings.stop.requested() {
             return Err(Error::Stopped);
         }
+        Ok(Ran {
+            lanes,
+            gpu: gpu_report,
+            elapsed: start.elapsed(),
+        })
+    }
 
+    /// The report of `scene`'s lanes as they ran: on the GPU, the lanes the
+    /// host recomputes and validates; the sum rule checked.
+    fn finish(&self, scene: &Scene, ran: Ran) -> Report {
+        let Ran {
+            mut lanes,
+            gpu: gpu_report,
+            elapsed,
+        } = ran;
+        let precision = self.precision;
         let gpu_report = gpu_report.map(|mut report| {
             report.recomputed = recompute_sliding(scene, &self.settings, &mut lanes);
             date_transient_failures(scene, &mut lanes);
@@ -518,7 +582,7 @@ impl Runner {
             })
             .collect();
         flag_sum_rule(&mut lanes, &expected_sums, precision);
-        Ok(Report {
+        Report {
             backend: self.backend,
             precision,
             choice: self.choice.clone(),
@@ -527,8 +591,16 @@ impl Runner {
             elapsed,
             threads: rayon::current_num_threads(),
             gpu: gpu_report,
-        })
+        }
     }
+}
+
+/// A batch's lanes as the backend ran them (see [`Runner::finish`]).
+struct Ran {
+    lanes: Vec<LaneResult>,
+    gpu: Option<GpuReport>,
+    /// The lanes' time.
+    elapsed: Duration,
 }
 
 /// What a run did over all its batches: what the command prints.
