@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Device time of the seed oscillator's sweep against its size, one command-line
 # run per row (scaling.txt): 200 RK4 steps per period, 20 iterations, the wall at
-# 2 (impacts) or 100 (out of reach), and 2 or 60 iterations at two sizes.
+# 2 (impacts) or 100 (out of reach), and 2 or 60 iterations at two sizes; then
+# the million-lane map (scenes/million-map.toml) end to end, twice per
+# precision, the first compiling the kernels (million.txt).
 # Usage, from the repository root, on a machine with the GPU:
 #   B=target/release bash docs/hardware/h100/scaling.sh [OUTPUT FOLDER]
 set -euo pipefail
@@ -21,7 +23,18 @@ one() { # count precision wall iterations
     echo "$1 $2 $3 $4 $dev $rate $bytes $chunk" | tee -a "$R"
 }
 for p in f64 f32; do
-  for n in 8192 16384 24576 32768 40960 49152 65536 131072 262144; do one $n $p 2 20; done
+  for n in 8192 16384 24576 32768 40960 49152 65536 131072 262144 524288 1048576; do
+    one $n $p 2 20
+  done
 done
 for n in 16384 32768 65536 262144; do one $n f64 100 20; done
 for n in 16384 65536; do one $n f64 2 2; one $n f64 2 60; done
+M="$O/million.txt"
+TIMEFORMAT="end to end %R s"
+for p in f32 f64; do
+  for i in 1 2; do
+    echo "== million-map $p, run $i" >>"$M"
+    { time timeout 120 $B/lyapsweep run scenes/million-map.toml --backend gpu --precision $p \
+        --out /tmp/million-$p || echo "exit status $?"; } >>"$M" 2>&1
+  done
+done
