@@ -173,6 +173,35 @@ fn the_scene_file_is_never_written_over() {
 }
 
 #[test]
+fn a_bad_dispatch_budget_in_the_environment_is_refused_before_any_work() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    for bad in ["0", "-5", "many", "1e6"] {
+        let output = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+            .args([
+                "run",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .env("LYAPSWEEP_DISPATCH_LANE_STEPS", bad)
+            .output()
+            .unwrap();
+        refused(
+            &output,
+            &[
+                "LYAPSWEEP_DISPATCH_LANE_STEPS",
+                &format!("\"{bad}\""),
+                "whole number",
+            ],
+        );
+        assert!(!out.exists(), "{bad}: nothing written");
+    }
+}
+
+#[test]
 fn the_model_file_is_never_written_over() {
     let root = tempfile::tempdir().unwrap();
     let scene = pair_in_files(root.path());

@@ -375,6 +375,11 @@ pub struct Runner {
 impl Runner {
     /// Chooses and opens the backend `scene` asks for, and plans its lanes.
     pub fn new(scene: &Scene, options: &RunOptions) -> Result<Runner> {
+        let mut options = options.clone();
+        if options.dispatch_lane_steps.is_none() {
+            options.dispatch_lane_steps = options::dispatch_lane_steps_from_environment()?;
+        }
+        let options = &options;
         let (plan, precision, choice) = plan(scene, options.device)?;
         let (backend, settings, gpu) = match plan {
             Plan::Cpu | Plan::Exact => {

@@ -23,7 +23,7 @@ use crate::scene::Precision;
 /// trajectories) took 3 steps per dispatch, and lavapipe ran it seven times
 /// slower per lane-step than 4 096 values (docs/BENCHMARKS.md, "Throughput
 /// against sweep size").
-pub(super) const DISPATCH_LANE_STEPS: usize = 1 << 26;
+pub const DISPATCH_LANE_STEPS: usize = 1 << 26;
 
 /// How many times shorter the dispatches of a batch are made when the
 /// adapter cut its loops short (`SOFTWARE_WALL_CHUNK` in the sweep).
@@ -50,6 +50,9 @@ pub struct Dispatch {
     /// Workgroups per row at most: the device's limit per dimension, or
     /// fewer where the run asks.
     pub width: u32,
+    /// RK4 lane-steps an integrate dispatch takes at most:
+    /// [`DISPATCH_LANE_STEPS`] unless the run asks otherwise.
+    pub lane_steps: usize,
 }
 
 impl Dispatch {
@@ -60,6 +63,10 @@ impl Dispatch {
             width: options
                 .workgroups_per_row
                 .map_or(device, |w| w.clamp(1, device)),
+            lane_steps: options
+                .dispatch_lane_steps
+                .unwrap_or(DISPATCH_LANE_STEPS)
+                .max(1),
         }
     }
 

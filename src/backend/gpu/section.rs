@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use super::context::Gpu;
 use super::pipeline::{
     compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, Dispatch, GpuRun, Timings, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    uniform_entry, Dispatch, GpuRun, Timings, TRUNCATION_RETRY,
 };
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
@@ -266,7 +266,7 @@ impl<'a> Stepper<'a> {
             ],
         });
         let chunk = if gpu.summary.is_hardware() {
-            (DISPATCH_LANE_STEPS / capacity.max(1) as usize).max(1)
+            (dispatch.lane_steps / capacity.max(1) as usize).max(1)
         } else {
             SOFTWARE_CHUNK
         };

@@ -18,7 +18,7 @@ use wgpu::util::DeviceExt;
 use super::context::Gpu;
 use super::pipeline::{
     compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, wait_for, Dispatch, GpuRun, Timings, DISPATCH_LANE_STEPS, TRUNCATION_RETRY,
+    uniform_entry, wait_for, Dispatch, GpuRun, Timings, TRUNCATION_RETRY,
 };
 use super::seed::{lane_constants, Seeds};
 use super::shader::{Kernel, Variant};
@@ -384,8 +384,8 @@ where
         );
         let per_iteration = layout.per_iteration() * count as u64;
         let ring = ring_size(gpu, layout, settings, count, per_iteration);
-        let chunk =
-            |trajectories: usize| (DISPATCH_LANE_STEPS / trajectories.max(1)).clamp(1, steps);
+        let lane_steps = pipelines.dispatch.lane_steps;
+        let chunk = |trajectories: usize| (lane_steps / trajectories.max(1)).clamp(1, steps);
         // While averaging a dispatch stops at the end of a part.
         let chunk_steps = chunk(count * layout.traj).min(part_steps).min(max_chunk);
         let transient_chunk_steps = chunk(count).min(max_chunk);
