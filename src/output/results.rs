@@ -106,8 +106,7 @@ pub fn draw_with(dir: &Path, into: &Path, lambda1: Option<Vec<f64>>) -> Result<V
     };
     match (&scene.sweep.second, attractors) {
         (Some(second), attractors) => {
-            let grid = (second, attractors.as_deref(), lambda1);
-            draw_grid(dir, into, &scene, grid)
+            draw_grid(dir, into, &scene, second, attractors.as_deref(), lambda1)
         }
         (None, Some(attractors)) => {
             let data = attractor_sweep(dir, &scene, &attractors)?;
@@ -173,7 +172,9 @@ fn draw_grid(
     dir: &Path,
     into: &Path,
     scene: &Scene,
-    (second, attractors, lambda1): (&Axis, Option<&[Attractor]>, Option<Vec<f64>>),
+    second: &Axis,
+    attractors: Option<&[Attractor]>,
+    lambda1: Option<Vec<f64>>,
 ) -> Result<Vec<PathBuf>> {
     let (x_name, y_name) = (&scene.sweep.first.parameter, &second.parameter);
     let (x, y) = (&scene.sweep.first.values, &second.values);
@@ -190,10 +191,10 @@ fn draw_grid(
                     largest_per_point(scene, &dir.join(ATTRACTORS_FILE), lambda1)?,
                 )
             }
-            None => match lambda1 {
-                Some(lambda1) => (scene.name.clone(), lambda1),
-                None => (scene.name.clone(), lambda1_per_point(dir, scene)?),
-            },
+            None => (
+                scene.name.clone(),
+                lambda1.map_or_else(|| lambda1_per_point(dir, scene), Ok)?,
+            ),
         };
         let data = GridData {
             title,
