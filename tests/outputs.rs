@@ -497,6 +497,7 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
 fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
     use lyapsweep::output::{SetWriter, Staging};
     use lyapsweep::scene::Precision;
+    use lyapsweep::RunOptions;
     let dir = tempfile::tempdir().unwrap();
     // The million-lane map's scene at 8 × 6.
     let scene = common::committed_scene(
@@ -507,17 +508,18 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
             "run.backend=\"cpu\"",
         ],
     );
-    let write = |scene: &lyapsweep::scene::Scene, batch: usize| {
+    let write_with = |scene: &lyapsweep::scene::Scene, batch: usize, options: &RunOptions| {
         let out = dir.path().join(format!("batches-of-{batch}"));
         let _ = std::fs::remove_dir_all(&out);
         let mut writer = SetWriter::new(scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
-        let (summary, _) = lyapsweep::run_streaming(scene, &Default::default(), batch, |b, r| {
-            writer.append(b, r)
-        })
-        .unwrap();
+        let (summary, _) =
+            lyapsweep::run_streaming(scene, options, batch, |b, r| writer.append(b, r)).unwrap();
         writer.finish(None).unwrap();
         assert_eq!(summary.lanes, 48);
-        std::fs::read(out.join("grid.csv")).unwrap()
+        (std::fs::read(out.join("grid.csv")).unwrap(), summary)
+    };
+    let write = |scene: &lyapsweep::scene::Scene, batch: usize| {
+        write_with(scene, batch, &RunOptions::default()).0
     };
     let whole = write(&scene, 48);
     assert_eq!(whole.iter().filter(|&&b| b == b'\n').count(), 49);
@@ -530,7 +532,9 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
     // On the GPU, the device runs a batch while the host writes the one
     // before: the same bytes as one batch, and an error writing a batch
     // ends the run with that error (not a hang, nor the stop it asks of
-    // the batch on the device).
+    // the batch on the device). A device that holds fewer lanes than the
+    // results' budget cuts the batches, overlapped alike; the values
+    // validated are the run's, whatever its batches.
     if common::gpu_or_skip("streamed GPU batches", Precision::F64) {
         let gpu = common::committed_scene(
             "million-map.toml",
@@ -538,14 +542,33 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
                 "sweep.count=8",
                 "sweep.second.count=6",
                 "run.backend=\"gpu\"",
+                "run.validate=5",
             ],
         );
-        let one = write(&gpu, 48);
-        for batch in [1, 5, 13] {
+        let (one, summary) = write_with(&gpu, 48, &RunOptions::default());
+        let report = summary.gpu.unwrap();
+        assert_eq!(report.batches, 1);
+        let validated = report.validation.unwrap().lanes;
+        assert_eq!(validated, [0, 12, 24, 35, 47]);
+        for (batch, device, batches) in [
+            (1, None, 48),
+            (5, None, 16),
+            (13, None, 7),
+            (48, Some(7), 7),
+            (13, Some(4), 12),
+        ] {
+            let options = RunOptions {
+                max_batch_lanes: device,
+                ..Default::default()
+            };
+            let (bytes, summary) = write_with(&gpu, batch, &options);
             assert!(
-                write(&gpu, batch) == one,
-                "GPU grid.csv in batches of {batch}"
+                bytes == one,
+                "GPU grid.csv in batches of {batch}, device batches of {device:?}"
             );
+            let report = summary.gpu.unwrap();
+            assert_eq!(report.batches, batches, "{batch} {device:?}");
+            assert_eq!(report.validation.unwrap().lanes, validated);
         }
         let mut batches = 0;
         let error = lyapsweep::run_streaming(&gpu, &Default::default(), 10, |_, _| {

@@ -50,16 +50,36 @@ pub struct GpuReport {
     /// (`LYAPSWEEP_SHADER_DIR`, for kernel experiments): a run says so.
     pub kernel_sources: Option<std::path::PathBuf>,
     pub timings: gpu::pipeline::Timings,
+    /// Device batches (see [`gpu::max_batch_lanes`]).
     pub batches: usize,
     pub chunk_steps: usize,
     /// Batches redone with shorter dispatches (see `gpu::pipeline::GpuRun::retries`).
     pub retries: usize,
-    /// Device memory per lane (see `gpu::pipeline::GpuRun::bytes_per_lane`).
+    /// Device memory per lane (see `gpu::pipeline::GpuRun::bytes_per_lane`;
+    /// the largest batch's).
     pub bytes_per_lane: u64,
     pub validation: Option<Validation>,
     /// Indices of the sweep values the kernels flagged `sliding` (a motion
     /// on switches they do not integrate) and the CPU path recomputed.
     pub recomputed: Vec<usize>,
+}
+
+impl GpuReport {
+    /// Adds the GPU part of a later batch, whose lanes start at lane
+    /// `first` of this report's run.
+    fn absorb(&mut self, batch: &GpuReport, first: usize) {
+        self.timings.add(&batch.timings);
+        self.batches += batch.batches;
+        self.retries += batch.retries;
+        self.bytes_per_lane = self.bytes_per_lane.max(batch.bytes_per_lane);
+        self.chunk_steps = self.chunk_steps.min(batch.chunk_steps);
+        self.recomputed
+            .extend(batch.recomputed.iter().map(|k| first + k));
+        if let (Some(v), Some(w)) = (&mut self.validation, &batch.validation) {
+            v.lanes.extend(w.lanes.iter().map(|k| first + k));
+            v.max_difference = v.max_difference.max(w.max_difference);
+        }
+    }
 }
 
 /// The CPU recomputation of a few sweep values of a GPU run.
@@ -74,6 +94,18 @@ pub struct Validation {
 }
 
 impl Report {
+    /// Appends the report of the next batch, whose lanes start at lane
+    /// `first` of this one's.
+    fn append(&mut self, batch: Report, first: usize) {
+        debug_assert_eq!(first, self.lanes.len());
+        self.lanes.extend(batch.lanes);
+        self.expected_sums.extend(batch.expected_sums);
+        self.elapsed += batch.elapsed;
+        if let (Some(gpu), Some(next)) = (&mut self.gpu, &batch.gpu) {
+            gpu.absorb(next, first);
+        }
+    }
+
     /// The largest |λ_sum - expected_sum| over lanes that finished.
     pub fn max_sum_error(&self) -> Option<f64> {
         self.lanes
@@ -370,6 +402,9 @@ pub struct Runner {
     gpu: Option<(context::Gpu, Variant)>,
     options: RunOptions,
     progress: Progress,
+    /// RK4 steps per dispatch that held once the adapter cut longer ones
+    /// short (0 until then): the next batches start there.
+    held_dispatch_steps: std::sync::atomic::AtomicUsize,
 }
 
 impl Runner {
@@ -411,6 +446,7 @@ impl Runner {
             gpu,
             options: options.clone(),
             progress: options.progress.clone().unwrap_or_default(),
+            held_dispatch_steps: Default::default(),
         })
     }
 
@@ -427,12 +463,6 @@ impl Runner {
 
     /// Runs `scene`'s lanes in batches of at most `batch_lanes`, handing
     /// each to `sink` and adding it to `summary`.
-    ///
-    /// A GPU run of several batches overlaps them: the device runs batch
-    /// k + 1 while the host finishes batch k (recomputed and validated
-    /// lanes, the sum rule, `sink`'s rows). Two batches' results are then
-    /// held at once, so each is half of `batch_lanes`. (The CPU path's lanes
-    /// take every core, and would gain nothing.)
     pub fn stream(
         &self,
         scene: &Scene,
@@ -440,30 +470,81 @@ impl Runner {
         summary: &mut Option<Summary>,
         mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
     ) -> Result<()> {
-        let lanes = scene.run_lane_count();
-        let overlap = self.gpu.is_some() && batch_lanes < lanes;
-        let size = if overlap {
-            batch_lanes.div_ceil(2)
-        } else {
-            batch_lanes
-        }
-        .max(1);
-        let batches = (0..lanes)
-            .step_by(size)
-            .map(|start| scene.batch(start..(start + size).min(lanes)));
-        let mut finish = |batch: &Scene, ran: Ran| -> Result<()> {
-            let report = self.finish(batch, ran);
-            sink(batch, &report)?;
+        self.batches(scene, batch_lanes, |batch, report| {
+            sink(&batch, &report)?;
+            let first = batch.batch.as_ref().map_or(0, |b| b.start);
             match summary {
-                Some(s) => s.absorb(&report),
+                Some(s) => s.absorb(&report, first),
                 None => *summary = Some(Summary::of(scene, &report)),
             }
             Ok(())
+        })
+    }
+
+    /// The lanes of `scene` (the whole run, or a batch of it) in one
+    /// report, run in the device's batches.
+    pub fn run(&self, scene: &Scene) -> Result<Report> {
+        let mut whole: Option<(Report, usize)> = None;
+        self.batches(scene, usize::MAX, |batch, report| {
+            let first = batch.batch.as_ref().map_or(0, |b| b.start);
+            match &mut whole {
+                None => whole = Some((report, first)),
+                Some((whole, start)) => whole.append(report, first - *start),
+            }
+            Ok(())
+        })?;
+        Ok(whole.expect("a scene has at least one lane").0)
+    }
+
+    /// Runs `scene`'s lanes in batches, each handed to `take` with its
+    /// scene (`Scene::batch`) once the host has finished it: at most
+    /// `results_lanes` lanes' results held at once, and on the GPU at most
+    /// the lanes one device batch holds ([`gpu::max_batch_lanes`]).
+    ///
+    /// A GPU run of several batches overlaps them: the device runs batch
+    /// k + 1 while the host finishes batch k (recomputed and validated
+    /// lanes, the sum rule, `take`'s rows). Two batches' results are then
+    /// held at once, so a run over `results_lanes` takes batches of half
+    /// of it. (The CPU path's lanes take every core, and would gain
+    /// nothing.)
+    fn batches(
+        &self,
+        scene: &Scene,
+        results_lanes: usize,
+        mut take: impl FnMut(Scene, Report) -> Result<()>,
+    ) -> Result<()> {
+        let lanes = scene.batch.clone().unwrap_or(0..scene.run_lane_count());
+        let size = match &self.gpu {
+            None => results_lanes,
+            Some((gpu, variant)) => {
+                let held = if results_lanes < lanes.len() {
+                    results_lanes.div_ceil(2)
+                } else {
+                    results_lanes
+                };
+                held.min(gpu::max_batch_lanes(
+                    gpu,
+                    scene,
+                    variant,
+                    &self.settings,
+                    &self.options,
+                ))
+            }
+        }
+        .max(1);
+        let overlap = self.gpu.is_some() && size < lanes.len();
+        let end = lanes.end;
+        let batches = lanes
+            .step_by(size)
+            .map(|start| scene.batch(start..start.saturating_add(size).min(end)));
+        let mut finish = |batch: Scene, ran: Ran| -> Result<()> {
+            let report = self.finish(&batch, ran);
+            take(batch, report)
         };
         if !overlap {
             for batch in batches {
                 let ran = self.lanes(&batch)?;
-                finish(&batch, ran)?;
+                finish(batch, ran)?;
             }
             return Ok(());
         }
@@ -480,21 +561,13 @@ impl Runner {
                     }
                 }
             });
-            let result = next
-                .iter()
-                .try_for_each(|(batch, ran)| finish(&batch, ran?));
+            let result = next.iter().try_for_each(|(batch, ran)| finish(batch, ran?));
             if result.is_err() {
                 // The batch on the device is not wanted: end it now.
                 self.settings.stop.request();
             }
             result
         })
-    }
-
-    /// The lanes of `scene` (a batch of the run, or all of it).
-    pub fn run(&self, scene: &Scene) -> Result<Report> {
-        let ran = self.lanes(scene)?;
-        Ok(self.finish(scene, ran))
     }
 
     /// The lanes of `scene` as its backend ran them, before the host's
@@ -507,7 +580,16 @@ impl Runner {
         let (lanes, gpu_report) = match &self.gpu {
             None => (cpu::sweep(scene, settings, &progress), None),
             Some((gpu, variant)) => {
-                let mut run = gpu::run(gpu, scene, variant, settings, options)?;
+                use std::sync::atomic::Ordering::Relaxed;
+                let held = self.held_dispatch_steps.load(Relaxed);
+                let options = RunOptions {
+                    dispatch_steps: (held > 0).then_some(held).or(options.dispatch_steps),
+                    ..options.clone()
+                };
+                let mut run = gpu::run(gpu, scene, variant, settings, &options)?;
+                if run.retries > 0 {
+                    self.held_dispatch_steps.store(run.chunk_steps, Relaxed);
+                }
                 // The kernels ran every lane with the sweep's plan; a lane whose
                 // own plan is beyond reach is not to be trusted (the CPU path
                 // does not run it at all).
@@ -531,7 +613,7 @@ impl Runner {
                     variant: variant.name(),
                     kernel_sources: gpu::shader::source_dir(),
                     timings: run.timings,
-                    batches: run.batches,
+                    batches: 1,
                     chunk_steps: run.chunk_steps,
                     retries: run.retries,
                     bytes_per_lane: run.bytes_per_lane,
@@ -656,12 +738,13 @@ impl Summary {
                 usize::MAX
             },
         };
-        summary.absorb(report);
+        summary.absorb(report, 0);
         summary
     }
 
-    /// Adds one more batch's report.
-    pub fn absorb(&mut self, report: &Report) {
+    /// Adds one more batch's report, of the lanes from lane `first` of the
+    /// run.
+    pub fn absorb(&mut self, report: &Report, first: usize) {
         self.elapsed += report.elapsed;
         self.lanes += report.lanes.len();
         for lane in report.lanes.iter().filter(|l| l.status != LaneStatus::Ok) {
@@ -680,18 +763,7 @@ impl Summary {
         if let Some(gpu) = &report.gpu {
             match &mut self.gpu {
                 None => self.gpu = Some(gpu.clone()),
-                Some(sum) => {
-                    sum.timings.add(&gpu.timings);
-                    sum.batches += gpu.batches;
-                    sum.retries += gpu.retries;
-                    sum.bytes_per_lane = sum.bytes_per_lane.max(gpu.bytes_per_lane);
-                    sum.chunk_steps = sum.chunk_steps.min(gpu.chunk_steps);
-                    sum.recomputed.extend(&gpu.recomputed);
-                    if let (Some(v), Some(w)) = (&mut sum.validation, &gpu.validation) {
-                        v.lanes.extend(&w.lanes);
-                        v.max_difference = v.max_difference.max(w.max_difference);
-                    }
-                }
+                Some(sum) => sum.absorb(gpu, first),
             }
         }
         let requested = self.requested_steps;
@@ -800,8 +872,9 @@ fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<
         .collect()
 }
 
-/// Recomputes `scene.validate` sweep values, spread over the sweep, on the
-/// CPU path (f64) and marks GPU rows that differ beyond the tolerance.
+/// Recomputes `scene.validate` sweep values, spread over the run, on the
+/// CPU path (f64) and marks GPU rows that differ beyond the tolerance: of
+/// a batch, those that fall in it.
 fn validate(
     scene: &Scene,
     precision: Precision,
@@ -811,7 +884,10 @@ fn validate(
     if scene.validate == 0 || !scene.lyapunov || lanes.is_empty() {
         return None;
     }
-    let n = lanes.len();
+    // Spread over the run, whichever of its batches `scene` is: the picks
+    // that fall in this batch, as its own lanes.
+    let n = scene.run_lane_count();
+    let batch = scene.batch.clone().unwrap_or(0..n);
     let m = scene.validate.min(n);
     let mut picks: Vec<usize> = (0..m)
         .map(|k| {
@@ -821,6 +897,8 @@ fn validate(
                 (k * (n - 1) + (m - 1) / 2) / (m - 1)
             }
         })
+        .filter(|k| batch.contains(k))
+        .map(|k| k - batch.start)
         .collect();
     picks.dedup();
     // The same δ and difference scheme as the GPU run (both follow the

@@ -21,7 +21,8 @@ use context::Gpu;
 use pipeline::GpuRun;
 use shader::Variant;
 
-/// Runs the whole sweep on `gpu`: a Poincaré section's lanes on the
+/// Runs the lanes of `scene`, one device batch (at most
+/// [`max_batch_lanes`]), on `gpu`: a Poincaré section's lanes on the
 /// section's schedule, a period map's in the sweep's kernels.
 pub fn run(
     gpu: &Gpu,
@@ -34,5 +35,23 @@ pub fn run(
         section::run(gpu, scene, variant, settings, options)
     } else {
         sweep::run(gpu, scene, variant, settings, options)
+    }
+}
+
+/// The most lanes of `scene` that one device batch holds: the device's
+/// limits on one dispatch and one storage binding decide, and
+/// `options.max_batch_lanes`. A run of more lanes is cut into batches by
+/// the runner (`crate::backend::Runner::stream`).
+pub fn max_batch_lanes(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    options: &crate::backend::options::RunOptions,
+) -> usize {
+    if variant.section() {
+        section::max_batch_lanes(gpu, scene, variant, settings, options)
+    } else {
+        sweep::max_batch_lanes(gpu, scene, variant, settings, options)
     }
 }

@@ -125,18 +125,16 @@ impl Timings {
     }
 }
 
-/// The result of a GPU sweep.
+/// The result of one device batch.
 pub struct GpuRun {
     pub lanes: Vec<LaneResult>,
     pub timings: Timings,
-    /// How many batches the sweep was split into (buffer and dispatch limits).
-    pub batches: usize,
     /// RK4 steps per integrate dispatch in the averaging phase.
     pub chunk_steps: usize,
-    /// Batches redone with shorter dispatches because the adapter cut a
+    /// Tries redone with shorter dispatches because the adapter cut a
     /// dispatch's loops short (see `SOFTWARE_WALL_CHUNK`).
     pub retries: usize,
-    /// Device memory of a batch's buffers per lane (the largest batch's).
+    /// Device memory of the batch's buffers per lane.
     pub bytes_per_lane: u64,
 }
 

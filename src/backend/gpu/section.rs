@@ -59,7 +59,8 @@ const CROSSED: u32 = 3;
 const MISSED: u32 = 4;
 const TRUNCATED: u32 = 0x100;
 
-/// Runs a section model's sweep on the GPU.
+/// Runs the lanes of `scene` (one device batch: at most
+/// [`max_batch_lanes`]) of a section model on the GPU.
 pub fn run(
     gpu: &Gpu,
     scene: &Scene,
@@ -67,56 +68,63 @@ pub fn run(
     settings: &MethodSettings,
     options: &RunOptions,
 ) -> Result<GpuRun> {
+    debug_assert!(scene.lane_count() <= max_batch_lanes(gpu, scene, variant, settings, options));
+    let mut run = match scene.system.dimension() {
+        1 => run_dim::<1, 2>(gpu, scene, variant, settings, options),
+        2 => run_dim::<2, 3>(gpu, scene, variant, settings, options),
+        3 => run_dim::<3, 4>(gpu, scene, variant, settings, options),
+        d => Err(gpu_error(format!(
+            "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
+        ))),
+    }?;
+    run.bytes_per_lane = device_bytes_per_lane(scene, variant, settings).0
+        + 8 * (scene.system.parameters.len() as u64 + 1);
+    Ok(run)
+}
+
+/// The bytes a lane takes in the round's buffers (every job's table entry
+/// and two states), and its trajectories.
+fn device_bytes_per_lane(
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+) -> (u64, usize) {
     let d = scene.system.dimension();
     let trajectories = 1 + if settings.lyapunov {
         settings.difference.copies(d)
     } else {
         0
     };
-    // Batches that fit the device: the readback of a round (every job's
-    // table entry and two states) in one buffer, the states in one
-    // binding, the jobs in one dispatch.
     let real = match variant.precision {
         Precision::F64 => 8,
         Precision::F32 => 4,
     };
-    let per_lane = ((16 + 2 * real * (d + 1)) * trajectories) as u64;
+    (
+        ((16 + 2 * real * (d + 1)) * trajectories) as u64,
+        trajectories,
+    )
+}
+
+/// The most lanes of `scene` one device batch holds: the readback of a
+/// round in one buffer, the states in one binding, the jobs in one
+/// dispatch (and at most `options.max_batch_lanes`).
+pub fn max_batch_lanes(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    options: &RunOptions,
+) -> usize {
+    let (per_lane, trajectories) = device_bytes_per_lane(scene, variant, settings);
     let limits = &gpu.limits;
-    let dispatch = Dispatch::new(gpu, options);
     let by_buffer = limits
         .max_storage_buffer_binding_size
         .min(limits.max_buffer_size)
         / per_lane;
-    let by_dispatch = (dispatch.max_invocations() / trajectories) as u64;
-    let batch = (by_buffer.min(by_dispatch) as usize)
+    let by_dispatch = (Dispatch::new(gpu, options).max_invocations() / trajectories) as u64;
+    (by_buffer.min(by_dispatch) as usize)
         .min(options.max_batch_lanes.unwrap_or(usize::MAX))
-        .max(1);
-    let total = scene.lane_count();
-    let mut run = GpuRun {
-        lanes: Vec::with_capacity(total),
-        timings: Timings::default(),
-        batches: 0,
-        chunk_steps: 0,
-        retries: 0,
-        bytes_per_lane: per_lane + 8 * (scene.system.parameters.len() as u64 + 1),
-    };
-    for first in (0..total).step_by(batch) {
-        let lanes = first..total.min(first + batch);
-        let part = match d {
-            1 => run_dim::<1, 2>(gpu, scene, variant, settings, options, lanes),
-            2 => run_dim::<2, 3>(gpu, scene, variant, settings, options, lanes),
-            3 => run_dim::<3, 4>(gpu, scene, variant, settings, options, lanes),
-            d => Err(gpu_error(format!(
-                "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
-            ))),
-        }?;
-        run.lanes.extend(part.lanes);
-        run.timings.add(&part.timings);
-        run.batches += 1;
-        run.chunk_steps = part.chunk_steps;
-        run.retries += part.retries;
-    }
-    Ok(run)
+        .max(1)
 }
 
 /// One trajectory's stepping, for one round.
@@ -506,26 +514,21 @@ fn run_dim<const D: usize, const N: usize>(
     variant: &Variant,
     settings: &MethodSettings,
     options: &RunOptions,
-    batch: std::ops::Range<usize>,
 ) -> Result<GpuRun>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let start = Instant::now();
     let progress = options.progress.clone().unwrap_or_default();
-    let count = batch.len();
-    let mut lanes = plan_lanes::<D, N>(scene, settings, batch.clone());
+    let count = scene.lane_count();
+    let mut lanes = plan_lanes::<D, N>(scene, settings);
     // Per lane: its parameters and the section's position.
     let mut lane_data = Vec::new();
-    for (k, lane) in batch.zip(&lanes) {
+    for (k, lane) in lanes.iter().enumerate() {
         lane_data.extend_from_slice(&scene.lane_params(k).values);
         lane_data.push(lane.system.section().at);
     }
-    let trajectories = 1 + if settings.lyapunov {
-        settings.difference.copies(D)
-    } else {
-        0
-    };
+    let (_, trajectories) = device_bytes_per_lane(scene, variant, settings);
     let dispatch = Dispatch::new(gpu, options);
     let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, dispatch);
     stepper.timings.setup = start.elapsed();
@@ -547,7 +550,6 @@ where
     Ok(GpuRun {
         lanes: results,
         timings: stepper.timings,
-        batches: 1,
         chunk_steps: stepper.chunk,
         retries: stepper.retries,
         // (Set by `run`.)
@@ -555,17 +557,16 @@ where
     })
 }
 
-/// The batch's lanes, each planned; a lane whose plan is not affordable
-/// has its result already.
+/// The lanes of `scene` (a batch), each planned; a lane whose plan is not
+/// affordable has its result already.
 fn plan_lanes<const D: usize, const N: usize>(
     scene: &Scene,
     settings: &MethodSettings,
-    batch: std::ops::Range<usize>,
 ) -> Vec<Lane<D, N>>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    batch
+    (0..scene.lane_count())
         .map(|k| {
             let params = scene.lane_params(k);
             let system = SectionFlow::<D, N>::new(&params);

@@ -10,20 +10,19 @@ use crate::scene::{Precision, Scene};
 /// shared/bindings.wgsl), flagged as the finish kernel seeds such copies.
 pub const FLAG_BEHIND_WALL: u32 = 32;
 
-/// Per lane: parameters, h, cos(ωh/2), sin(ωh/2), ω, δ (`lane_stride`
-/// numbers), and the lanes' map periods.
+/// Per lane of `scene` (a batch): parameters, h, cos(ωh/2), sin(ωh/2), ω,
+/// δ (`lane_stride` numbers), and the lanes' map periods.
 pub fn lane_constants(
     scene: &Scene,
     settings: &MethodSettings,
     lane_stride: usize,
-    first: usize,
-    count: usize,
     steps: usize,
 ) -> (Vec<f64>, Vec<f64>) {
     let info = scene.system;
+    let count = scene.lane_count();
     let mut lane_data = Vec::with_capacity(count * lane_stride);
     let mut periods = Vec::with_capacity(count);
-    for k in first..first + count {
+    for k in 0..count {
         let params = scene.lane_params(k);
         let period = (info.period)(&params);
         let omega = (info.forcing_frequency)(&params);
@@ -50,24 +49,23 @@ impl Seeds {
     /// The reference at the initial state, copies at x0 + δe_i, with the
     /// perturbation actually taken in the variant's precision.
     /// `traj` trajectories per lane of `traj_stride` numbers, with a
-    /// region and a flux where the model has `surfaces`.
-    #[allow(clippy::too_many_arguments)]
+    /// region and a flux where the model has `surfaces`; every lane of
+    /// `scene` (a batch).
     pub fn new<const D: usize>(
         scene: &Scene,
         settings: &MethodSettings,
         (traj, traj_stride): (usize, usize),
         surfaces: bool,
         precision: Precision,
-        first: usize,
-        count: usize,
     ) -> Seeds {
         let info = scene.system;
+        let count = scene.lane_count();
         let mut traj_data = Vec::with_capacity(count * traj * traj_stride);
         let mut deltas = Vec::with_capacity(count * D);
         // Per trajectory: step 0, no impacts, FLAG_BEHIND_WALL for a copy
         // that starts behind the wall (as the finish kernel seeds them).
         let mut counts_data: Vec<[u32; 4]> = Vec::with_capacity(count * traj);
-        for k in first..first + count {
+        for k in 0..count {
             let params = scene.lane_params(k);
             // Each lane from its start, with the perturbation actually
             // taken in the variant's precision.

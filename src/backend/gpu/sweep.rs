@@ -45,9 +45,11 @@ const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
 
-/// Runs the whole sweep of a period map, split into batches that fit the
-/// device's limits (at most `options.max_batch_lanes` lanes each when
-/// given).
+/// Runs the lanes of `scene` (one device batch: at most [`max_batch_lanes`])
+/// of a period map. The first try's dispatches take at most
+/// `options.dispatch_steps` steps; a try whose dispatches the adapter cut
+/// short is redone with shorter ones (`GpuRun::retries`), and the caller
+/// starts its next batches at the length that held (`GpuRun::chunk_steps`).
 pub fn run(
     gpu: &Gpu,
     scene: &Scene,
@@ -65,6 +67,31 @@ pub fn run(
             reason: format!("maps of dimension {d} are not supported on the GPU (1 to 4 are)"),
         }),
     }
+}
+
+/// The most lanes of `scene` one device batch holds: its trajectories in
+/// one dispatch and in one storage binding, one ring slot of its lanes in
+/// one binding (and at most `options.max_batch_lanes`).
+pub fn max_batch_lanes(
+    gpu: &Gpu,
+    scene: &Scene,
+    variant: &Variant,
+    settings: &MethodSettings,
+    options: &RunOptions,
+) -> usize {
+    let layout = Layout::new(scene, variant, settings);
+    let limits = &gpu.limits;
+    let binding = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    let by_dispatch = Dispatch::new(gpu, options).max_invocations() / layout.traj;
+    let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
+    let by_ring = (binding / layout.largest_per_iteration()) as usize;
+    by_dispatch
+        .min(by_binding)
+        .min(by_ring)
+        .min(options.max_batch_lanes.unwrap_or(usize::MAX))
+        .max(1)
 }
 
 /// Sizes that depend on the variant, in bytes.
@@ -138,30 +165,12 @@ where
     let pipelines = Pipelines::cached(gpu, variant, dispatch);
     let stopwatch = Stopwatch::new(gpu);
     let layout = Layout::new(scene, variant, settings);
-    let limits = &gpu.limits;
-    let binding = limits
-        .max_storage_buffer_binding_size
-        .min(limits.max_buffer_size);
-    // A batch must fit one dispatch and its trajectory buffer one binding;
-    // at least one ring slot must fit too.
-    let by_dispatch = dispatch.max_invocations() / layout.traj;
-    let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
-    let by_ring = (binding / layout.largest_per_iteration()) as usize;
-    let batch_lanes = by_dispatch
-        .min(by_binding)
-        .min(by_ring)
-        .min(options.max_batch_lanes.unwrap_or(usize::MAX))
-        .max(1);
-    let total = scene.lane_count();
-    let mut lanes = Vec::with_capacity(total);
+    let count = scene.lane_count();
+    debug_assert!(count <= max_batch_lanes(gpu, scene, variant, settings, options));
     let mut timings = Timings {
         setup: start.elapsed(),
         ..Default::default()
     };
-    let mut batches = 0;
-    let mut chunk_steps = 0;
-    // The first try's dispatch length, and how many batches were redone
-    // with shorter ones.
     let software_stops = variant.wall && !gpu.summary.is_hardware();
     let default_chunk = if software_stops {
         SOFTWARE_WALL_CHUNK
@@ -170,53 +179,44 @@ where
     };
     let mut max_chunk = options.dispatch_steps.unwrap_or(default_chunk);
     let mut retries = 0;
-    let mut bytes_per_lane = 0;
     let progress = options.progress.clone().unwrap_or_default();
-    for first in (0..total).step_by(batch_lanes) {
-        let count = batch_lanes.min(total - first);
-        loop {
-            let batch = Batch::<D>::new(
-                gpu,
-                &pipelines,
-                stopwatch.as_ref(),
-                scene,
-                variant,
-                settings,
-                &layout,
-                first,
-                count,
-                max_chunk,
-            );
-            chunk_steps = batch.chunk_steps;
-            bytes_per_lane = bytes_per_lane.max(batch.device_bytes / count as u64);
-            let (results, t) = batch.run(gpu, &pipelines, &progress)?;
-            timings.add(&t);
-            if let Some(results) = results {
-                lanes.extend(results);
-                break;
-            }
-            // The adapter cut a dispatch's loops short: the results are
-            // wrong, and shorter dispatches stay within its cap.
-            if chunk_steps == 1 {
-                return Err(gpu_error(
-                    "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
-                     of 65 535 loop iterations per invocation): use backend = \"cpu\""
-                        .into(),
-                ));
-            }
-            max_chunk = (chunk_steps / TRUNCATION_RETRY).max(1);
-            retries += 1;
+    loop {
+        let batch = Batch::<D>::new(
+            gpu,
+            &pipelines,
+            stopwatch.as_ref(),
+            scene,
+            variant,
+            settings,
+            &layout,
+            count,
+            max_chunk,
+        );
+        let chunk_steps = batch.chunk_steps;
+        let bytes_per_lane = batch.device_bytes / count as u64;
+        let (results, t) = batch.run(gpu, &pipelines, &progress)?;
+        timings.add(&t);
+        if let Some(lanes) = results {
+            return Ok(GpuRun {
+                lanes,
+                timings,
+                chunk_steps,
+                retries,
+                bytes_per_lane,
+            });
         }
-        batches += 1;
+        // The adapter cut a dispatch's loops short: the results are
+        // wrong, and shorter dispatches stay within its cap.
+        if chunk_steps == 1 {
+            return Err(gpu_error(
+                "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
+                 of 65 535 loop iterations per invocation): use backend = \"cpu\""
+                    .into(),
+            ));
+        }
+        max_chunk = (chunk_steps / TRUNCATION_RETRY).max(1);
+        retries += 1;
     }
-    Ok(GpuRun {
-        lanes,
-        timings,
-        batches,
-        chunk_steps,
-        retries,
-        bytes_per_lane,
-    })
 }
 
 /// The two compute pipelines of a variant over one bind group layout.
@@ -346,7 +346,7 @@ impl<'a, const D: usize> Batch<'a, D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    /// The batch of lanes `first..first + count`: their constants and
+    /// The batch of `scene`'s `count` lanes: their constants and
     /// starting trajectories uploaded, the ring of iterations read back per
     /// chunk sized, the dispatches' steps chosen and the buffers bound.
     #[allow(clippy::too_many_arguments)]
@@ -358,7 +358,6 @@ where
         variant: &Variant,
         settings: &'a MethodSettings,
         layout: &'a Layout,
-        first: usize,
         count: usize,
         max_chunk: usize,
     ) -> Self {
@@ -371,16 +370,13 @@ where
         // The backend makes the steps a multiple of the parts (`gpu_plan`).
         assert_eq!(steps % layout.parts, 0, "steps are whole parts");
         let part_steps = steps / layout.parts;
-        let (lane_data, periods) =
-            lane_constants(scene, settings, layout.lane_stride, first, count, steps);
+        let (lane_data, periods) = lane_constants(scene, settings, layout.lane_stride, steps);
         let seeds = Seeds::new::<D>(
             scene,
             settings,
             (layout.traj, layout.traj_stride),
             pipelines.surfaces,
             precision,
-            first,
-            count,
         );
         let per_iteration = layout.per_iteration() * count as u64;
         let ring = ring_size(gpu, layout, settings, count, per_iteration);
@@ -420,9 +416,7 @@ where
             let cpu = crate::plan::cpu_twin(scene, settings);
             Grazing {
                 system: scene.system,
-                params: (first..first + count)
-                    .map(|k| scene.lane_params(k))
-                    .collect(),
+                params: (0..count).map(|k| scene.lane_params(k)).collect(),
                 settings: cpu,
             }
         });
