@@ -137,6 +137,13 @@ pub struct Gpu {
 }
 
 impl Gpu {
+    /// The most bytes one buffer bound as storage may hold.
+    pub fn max_binding(&self) -> u64 {
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
+    }
+
     /// Whether the kernels are handed to the driver as SPIR-V with
     /// contraction forbidden (see `spirv`).
     pub fn exact_rounding(&self) -> bool {

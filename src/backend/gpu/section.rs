@@ -116,11 +116,7 @@ pub fn max_batch_lanes(
     options: &RunOptions,
 ) -> usize {
     let (per_lane, trajectories) = device_bytes_per_lane(scene, variant, settings);
-    let limits = &gpu.limits;
-    let by_buffer = limits
-        .max_storage_buffer_binding_size
-        .min(limits.max_buffer_size)
-        / per_lane;
+    let by_buffer = gpu.max_binding() / per_lane;
     let by_dispatch = (Dispatch::new(gpu, options).max_invocations() / trajectories) as u64;
     (by_buffer.min(by_dispatch) as usize)
         .min(options.max_batch_lanes.unwrap_or(usize::MAX))

@@ -80,10 +80,7 @@ pub fn max_batch_lanes(
     options: &RunOptions,
 ) -> usize {
     let layout = Layout::new(scene, variant, settings);
-    let limits = &gpu.limits;
-    let binding = limits
-        .max_storage_buffer_binding_size
-        .min(limits.max_buffer_size);
+    let binding = gpu.max_binding();
     let by_dispatch = Dispatch::new(gpu, options).max_invocations() / layout.traj;
     let by_binding = (binding / (layout.traj * layout.traj_stride) as u64 / layout.real) as usize;
     let by_ring = (binding / layout.largest_per_iteration()) as usize;
@@ -923,10 +920,7 @@ fn ring_size(
     count: usize,
     per_iteration: u64,
 ) -> usize {
-    let binding = gpu
-        .limits
-        .max_storage_buffer_binding_size
-        .min(gpu.limits.max_buffer_size);
+    let binding = gpu.max_binding();
     let ring_budget = CHUNK_BYTES.min(binding);
     let ring_by_budget = (ring_budget / per_iteration.max(1)) as usize;
     let ring_by_binding = (binding / (layout.largest_per_iteration() * count as u64)) as usize;
