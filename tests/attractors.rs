@@ -341,9 +341,17 @@ fn bad_attractors_tables_name_their_key() {
 /// A sweep's attractors, through the command's entry (continuation
 /// included).
 fn attractors_of(scene: &lyapsweep::Scene) -> lyapsweep::Attractors {
+    attractors_with(scene, &Default::default())
+}
+
+/// [`attractors_of`] with `options`.
+fn attractors_with(
+    scene: &lyapsweep::Scene,
+    options: &lyapsweep::RunOptions,
+) -> lyapsweep::Attractors {
     let batch = lyapsweep::plan::batch_lanes(scene);
-    let (_, found) = lyapsweep::run_streaming(scene, &Default::default(), batch, |_, _| Ok(()))
-        .expect("the sweep runs");
+    let (_, found) =
+        lyapsweep::run_streaming(scene, options, batch, |_, _| Ok(())).expect("the sweep runs");
     found.expect("a scene with [attractors]")
 }
 
@@ -488,6 +496,29 @@ fn the_window_s_attractors_on_the_gpu_are_the_cpu_s() {
                 .attractors
                 .iter()
                 .all(|a| !matches!(a.first.lane.status, LaneStatus::Mismatch { .. })));
+        }
+        // With continuation passes, and the device's batches cut to 5 lanes
+        // (the scene's starts and each pass in overlapped batches): the
+        // same attractors, links and exponents, to the bit.
+        if precision == Precision::F64 {
+            let continued = common::scene(
+                &gpu_text.replace("[attractors]\n", "[attractors]\ncontinuation = \"both\"\n"),
+                &[],
+            );
+            let whole = attractors_of(&continued);
+            assert!(whole.passes > 0 && whole.continued_lanes > 0);
+            let split = attractors_with(
+                &continued,
+                &lyapsweep::RunOptions {
+                    max_batch_lanes: Some(5),
+                    ..Default::default()
+                },
+            );
+            assert_eq!(format!("{:?}", split.values), format!("{:?}", whole.values));
+            assert_eq!(
+                (split.passes, split.continued_lanes, split.branches),
+                (whole.passes, whole.continued_lanes, whole.branches)
+            );
         }
     }
 }
