@@ -427,6 +427,9 @@ fn print_outcome(report: &Summary, written: &[PathBuf]) {
     if let Some(err) = report.max_sum_error {
         println!("  max |lambda_sum - expected_sum| = {err:.3e}");
     }
+    if let Some(err) = report.max_error {
+        println!("  max lambda_error = {err:.3e}");
+    }
     let (flagged, lanes) = (report.flagged(), report.lanes);
     if flagged == 0 {
         println!("  flagged lanes {flagged} of {lanes}");

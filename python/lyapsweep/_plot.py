@@ -21,7 +21,7 @@ def draw(plt, run):
         state = points.columns[1]
         axes[0].plot(points[parameter], points[state], ",k")
         axes[0].set_ylabel(state)
-    exponents = [c for c in spectrum.columns if c.startswith("lambda_") and c != "lambda_sum"]
+    exponents = [c for c in spectrum.columns if c.startswith("lambda_") and c[7:].isdigit()]
     # With many starts a value has a row per start: points, not lines.
     style = "." if spectrum[parameter].duplicated().any() else "-"
     for column in exponents:

@@ -117,6 +117,15 @@ impl Report {
             .fold(None, |m, e| Some(m.map_or(e, |m: f64| m.max(e))))
     }
 
+    /// The largest `lambda_error` over lanes that state one.
+    pub fn max_error(&self) -> Option<f64> {
+        self.lanes
+            .iter()
+            .map(|l| l.error)
+            .filter(|e| e.is_finite())
+            .fold(None, |m, e| Some(m.map_or(e, |m: f64| m.max(e))))
+    }
+
     /// Lanes whose status is not `ok`.
     pub fn flagged(&self) -> usize {
         self.lanes
@@ -167,6 +176,47 @@ fn flag_sum_rule(lanes: &mut [LaneResult], expected_sums: &[f64], precision: Pre
                 lane.status = LaneStatus::SumRule { miss };
             }
         });
+}
+
+/// Time scales of the flow's slowest mode (1/|μ|, see
+/// `SystemInfo::slowest_rate`) that a lane's averaging must span, or it is
+/// `short-average`. On the seed's oscillator (|μ| = 1) the period-1
+/// orbit's exponents over 1000 iterations are off by 0.8 of their size at
+/// 0.63 time scales (η = 1e4), by 1e-3 at 6.3 (η = 1e3) and 63 (η = 100)
+/// alike; below about ten the error depends on where in its turn the
+/// frame stopped, so no estimate from the run itself can be trusted
+/// (docs/STABILITY.md, "How sure a row is").
+pub const SHORT_AVERAGE: f64 = 10.0;
+
+/// The largest `lambda_error` a row may state and stay `ok`: a tenth of
+/// |λ1|, the exponent whose sign tells chaos from order, plus a
+/// thousandth of the spectrum's scale max |λ_i|, so that a λ1 at zero (a
+/// bifurcation, a flow's neutral direction in a time-T map) is judged
+/// against the rest of the spectrum.
+pub fn error_tolerance(lane: &LaneResult) -> f64 {
+    let scale = lane.exponents.iter().fold(0.0_f64, |m, e| m.max(e.abs()));
+    0.1 * lane.exponents[0].abs() + 1e-3 * scale
+}
+
+/// Marks `ok` lanes whose exponents are not yet the limit they estimate:
+/// an averaging time short against the flow's slowest time scale
+/// ([`SHORT_AVERAGE`]), or an error estimate above
+/// [`error_tolerance`] (NaN: too few iterations to make one).
+fn flag_uncertain(scene: &Scene, lanes: &mut [LaneResult]) {
+    let iterations = scene.integration.iterations as f64;
+    lanes.par_iter_mut().enumerate().for_each(|(k, lane)| {
+        let finite = lane.exponents.iter().all(|e| e.is_finite());
+        if lane.status != LaneStatus::Ok || lane.exponents.is_empty() || !finite {
+            return;
+        }
+        let rate = (scene.system.slowest_rate)(&scene.lane_params(k));
+        let scales = lane.period * iterations * rate;
+        if rate > 0.0 && scales < SHORT_AVERAGE {
+            lane.status = LaneStatus::ShortAverage { scales };
+        } else if !(lane.error <= error_tolerance(lane)) {
+            lane.status = LaneStatus::Uncertain { error: lane.error };
+        }
+    });
 }
 
 /// How far a GPU lane is from its CPU recomputation: the largest exponent
@@ -669,6 +719,7 @@ impl Runner {
             })
             .collect();
         flag_sum_rule(&mut lanes, &expected_sums, precision);
+        flag_uncertain(scene, &mut lanes);
         Report {
             backend: self.backend,
             precision,
@@ -708,6 +759,8 @@ pub struct Summary {
     /// by status name.
     pub failures: std::collections::BTreeMap<&'static str, usize>,
     pub max_sum_error: Option<f64>,
+    /// The largest `lambda_error` of a row (see `LaneResult::error`).
+    pub max_error: Option<f64>,
     /// Lanes whose RK4 steps were raised, and the most steps per period.
     pub raised: (usize, usize),
     /// Lanes cut into sub-maps, and the most parts.
@@ -730,6 +783,7 @@ impl Summary {
             flagged_by_status: Default::default(),
             failures: Default::default(),
             max_sum_error: None,
+            max_error: None,
             raised: (0, 0),
             cut: (0, 0),
             requested_steps: if scene.system.is_flow && report.backend != Backend::Exact {
@@ -757,6 +811,10 @@ impl Summary {
             }
         }
         self.max_sum_error = match (self.max_sum_error, report.max_sum_error()) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+        self.max_error = match (self.max_error, report.max_error()) {
             (Some(a), Some(b)) => Some(a.max(b)),
             (a, b) => a.or(b),
         };

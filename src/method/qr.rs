@@ -161,6 +161,11 @@ where
         self.steps = 0;
     }
 
+    /// The sums Σ ln R_ii since the last restart, in the frame's order.
+    pub fn sums(&self) -> &[f64; D] {
+        &self.log_r
+    }
+
     /// The current frame Q_n.
     pub fn frame(&self) -> &SMatrix<f64, D, D> {
         &self.q

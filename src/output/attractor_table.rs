@@ -14,7 +14,7 @@ use crate::scene::Scene;
 /// The header of `attractors.csv`: the swept parameters, `branch` (empty
 /// for a lone failed lane), `period` (empty when aperiodic),
 /// `impacts_per_period` and for a model one `<event>_per_period` column
-/// per event, with exponents `lambda_1..N,lambda_sum,expected_sum`, then
+/// per event, with exponents `lambda_1..N,lambda_sum,expected_sum,lambda_error`, then
 /// `basin_fraction` (the share of the value's starts that end on it),
 /// `starts` (their count), the final state of the lane that found it, and
 /// its `status`.
@@ -24,7 +24,7 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
     if scene.lyapunov {
         header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-        header.extend(["lambda_sum", "expected_sum"].map(String::from));
+        header.extend(["lambda_sum", "expected_sum", super::ERROR_COLUMN].map(String::from));
     }
     header.extend(["basin_fraction", "starts"].map(String::from));
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
@@ -65,6 +65,7 @@ pub fn attractor_rows<'a>(
                     row.extend(lane.exponents.iter().map(|&e| number(e)));
                     row.push(number(lane.exponent_sum()));
                     row.push(number(a.first.expected_sum));
+                    row.push(number(lane.error));
                 }
                 row.push(number(a.starts as f64 / found.starts as f64));
                 row.push(a.starts.to_string());

@@ -41,7 +41,8 @@ pub use files::{
 pub use set::Staging;
 
 /// The header of `spectrum.csv` (`grid.csv`): the swept parameters, then
-/// `lambda_1,...,lambda_N,lambda_sum,expected_sum,impacts_per_period`, for a
+/// `lambda_1,...,lambda_N,lambda_sum,expected_sum,lambda_error,impacts_per_period`
+/// (`lambda_error` the exponents' estimated error per unit time), for a
 /// model one `<event>_per_period` column per event, then
 /// `grazing,grazing_bound`, with `[attractors]` `start,branch`, then
 /// `period,status`: `grazing` counts the averaging iterations re-estimated
@@ -53,7 +54,15 @@ pub use set::Staging;
 pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-    header.extend(["lambda_sum", "expected_sum", "impacts_per_period"].map(String::from));
+    header.extend(
+        [
+            "lambda_sum",
+            "expected_sum",
+            ERROR_COLUMN,
+            "impacts_per_period",
+        ]
+        .map(String::from),
+    );
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
     header.extend(["grazing", "grazing_bound"].map(String::from));
     if scene.sweep.starts.is_some() {
@@ -62,6 +71,10 @@ pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     header.extend([PERIOD_COLUMN, "status"].map(String::from));
     header
 }
+
+/// The column of a row's estimated exponent error (see
+/// `LaneResult::error`).
+pub const ERROR_COLUMN: &str = "lambda_error";
 
 /// The column of a lane's start among its value's (with `[attractors]`).
 pub const START_COLUMN: &str = "start";
@@ -287,6 +300,7 @@ fn spectrum_row(scene: &Scene, report: &Report, j: usize) -> Vec<String> {
     row.extend(lane.exponents.iter().map(|&e| number(e)));
     row.push(number(lane.exponent_sum()));
     row.push(number(report.expected_sums[j]));
+    row.push(number(lane.error));
     row.push(number(lane.impacts_per_period));
     let events = scene.system.events.len();
     row.extend(

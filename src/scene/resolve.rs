@@ -116,7 +116,7 @@ fn resolve_integration(info: &'static SystemInfo, i: RawIntegration) -> Result<I
             ))
         }
         Some(align) => align,
-        None => transient / DEFAULT_ALIGN_FRACTION,
+        None => transient.div_ceil(DEFAULT_ALIGN_FRACTION),
     };
     Ok(Integration {
         steps_per_period: positive(

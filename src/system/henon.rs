@@ -33,6 +33,8 @@ pub const INFO: SystemInfo = SystemInfo {
     check,
     check_state: |_, _| Ok(()),
     expected_sum: |p, _| p.get("b").abs().ln(),
+    // A map: its iterations are its time.
+    slowest_rate: |_| 0.0,
     period: super::period_of::<2, Henon>,
     forcing_frequency: |_| 0.0,
     gpu_refuses: |_| None,

@@ -37,6 +37,10 @@ pub struct SystemInfo {
     pub expected_sum: fn(&Params, &[f64]) -> f64,
     /// The time T of one map iteration at these parameters.
     pub period: fn(&Params) -> f64,
+    /// The rate of the flow's slowest mode, 1 over its longest time scale
+    /// (see `system::model`), against which a lane's averaging time is
+    /// judged; 0 where the system has none (a map).
+    pub slowest_rate: fn(&Params) -> f64,
     /// ω of the forcing (cos ωt enters the right-hand side); 0 if autonomous.
     pub forcing_frequency: fn(&Params) -> f64,
     /// Why the GPU kernels cannot run a lane with these parameters, if

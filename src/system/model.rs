@@ -101,6 +101,7 @@ pub fn info_as(
         check_state,
         expected_sum,
         period: |p| code_of(p).period(&p.values),
+        slowest_rate,
         forcing_frequency: |p| code_of(p).frequency(&p.values),
         gpu_refuses,
         wgsl: crate::model::wgsl::system_file(code),
@@ -259,6 +260,43 @@ fn expected_sum(p: &Params, crossings_per_time: &[f64]) -> f64 {
         }
     }
     sum
+}
+
+/// The rate of the slowest of the flow's own modes: the smallest |μ| over
+/// the eigenvalues μ of every region's Jacobian at the origin, where the
+/// plan reads the fastest too (`ModelFlow::scales_at_origin`). Neutral
+/// modes (|μ| below 1e-9 of the largest: a free coordinate, an angle's
+/// drift) have no time scale and are left out; 0 when every mode is.
+fn slowest_rate(p: &Params) -> f64 {
+    let code = code_of(p);
+    let n = code.states();
+    let origin = vec![0.0; n];
+    let slowest = code
+        .regions
+        .iter()
+        .map(|field| {
+            let values: Vec<f64> = field
+                .jacobian
+                .iter()
+                .map(|e| e.eval(&origin, &p.values, 0.0))
+                .collect();
+            let moduli: Vec<f64> = DMatrix::from_row_slice(n, n, &values)
+                .complex_eigenvalues()
+                .iter()
+                .map(|l| l.norm())
+                .collect();
+            let largest = moduli.iter().copied().fold(0.0, f64::max);
+            moduli
+                .into_iter()
+                .filter(|&m| m > 1e-9 * largest && m.is_finite())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(f64::INFINITY, f64::min);
+    if slowest.is_finite() {
+        slowest
+    } else {
+        0.0
+    }
 }
 
 /// θ in [-π, π): θ - 2π·floor((θ + π)/2π). Twin of the generated

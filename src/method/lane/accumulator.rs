@@ -7,6 +7,7 @@ use nalgebra::{Const, DimMin, SMatrix};
 use super::plan::LanePlan;
 use super::result::{LaneResult, LaneStatus};
 use super::settings::{difference_noise, MethodSettings, Tangent};
+use super::uncertainty::Uncertainty;
 use crate::integrate::MAX_EVENTS;
 use crate::method::qr::QrAccumulator;
 use crate::system::IterationStats;
@@ -28,6 +29,8 @@ const COLLAPSE_FLOOR: f64 = 10.0;
 #[derive(Clone, Debug)]
 pub struct LaneAccumulator<const D: usize> {
     qr: QrAccumulator<D>,
+    /// The sums of the lane's error estimate.
+    uncertainty: Uncertainty<D>,
     period: f64,
     plan: LanePlan,
     transient: usize,
@@ -88,8 +91,11 @@ where
         } else {
             1
         };
+        let qr = QrAccumulator::new();
+        let last = qr.frame().column(D - 1);
         LaneAccumulator {
-            qr: QrAccumulator::new(),
+            uncertainty: Uncertainty::new(crate::array::from_fn(|i| last[i])),
+            qr,
             period,
             plan,
             transient: settings.transient,
@@ -194,6 +200,7 @@ where
                 self.fail(self.taken());
                 return false;
             }
+            self.uncertainty.push(j, !aligning);
             if aligning {
                 continue;
             }
@@ -232,6 +239,12 @@ where
             }
         }
         self.done += 1;
+        let time = if self.time > 0.0 {
+            self.time
+        } else {
+            self.done as f64 * self.period
+        };
+        self.uncertainty.end_iteration(self.qr.sums(), time);
         true
     }
 
@@ -285,6 +298,7 @@ where
                 jacobians: self.jacobians.unwrap_or_default(),
                 grazing: self.grazing,
                 grazing_bound: f64::NAN,
+                error: f64::NAN,
                 plan: self.plan,
                 status: if self.no_return {
                     LaneStatus::NoReturn { iteration }
@@ -305,6 +319,11 @@ where
         };
         let mean_square = self.noise_squares / taken;
         let resolution_bound = (0.5 * mean_square + (mean_square / taken).sqrt()) / part_time;
+        let averaging_time = if self.time > 0.0 {
+            self.time
+        } else {
+            self.done as f64 * self.period
+        };
         let exponents = if self.lyapunov {
             let mut e = if self.time > 0.0 {
                 self.qr.exponents_over(self.time)
@@ -332,6 +351,12 @@ where
             e
         } else {
             Vec::new()
+        };
+        let error = if self.lyapunov {
+            self.uncertainty
+                .error(self.qr.sums(), &exponents, self.rank_loss, averaging_time)
+        } else {
+            f64::NAN
         };
         let grazing_bound = self.grazing_error / (self.done.max(1) as f64 * self.period);
         let status = if self.chattering > 0 {
@@ -375,6 +400,7 @@ where
             jacobians: self.jacobians.unwrap_or_default(),
             grazing: self.grazing,
             grazing_bound,
+            error,
             plan: self.plan,
             status,
         }

@@ -18,7 +18,8 @@
 //! (a lane's steps and sub-maps), `driver` (one lane alone), `lockstep`
 //! (neighbouring lanes stepped together), `grazing` (the δ ladder of
 //! near-grazing iterations), `accumulator` (the sums and the statuses they
-//! decide) and `result` (what a lane produces).
+//! decide), `uncertainty` (a lane's error estimate) and `result` (what a
+//! lane produces).
 
 mod accumulator;
 mod driver;
@@ -28,6 +29,7 @@ mod orbit;
 mod plan;
 mod result;
 mod settings;
+mod uncertainty;
 
 pub use crate::perturbation::perturbation_at;
 pub use accumulator::{LaneAccumulator, RESOLUTION_BOUND};

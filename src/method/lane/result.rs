@@ -70,6 +70,18 @@ pub enum LaneStatus {
     SumRule {
         miss: f64,
     },
+    /// The averaging time is short against the flow's own time scales:
+    /// `scales` of its slowest mode's 1/|μ| (`SystemInfo::slowest_rate`),
+    /// fewer than `backend::SHORT_AVERAGE`. The exponents are an average
+    /// over a stretch of the motion, not yet its asymptotic rates.
+    ShortAverage {
+        scales: f64,
+    },
+    /// The row's error estimate (`LaneResult::error`) is above its
+    /// tolerance (`backend::error_tolerance`), or could not be made.
+    Uncertain {
+        error: f64,
+    },
 }
 
 impl LaneStatus {
@@ -87,6 +99,8 @@ impl LaneStatus {
             LaneStatus::TooManySteps { .. } => "too-many-steps",
             LaneStatus::NoReturn { .. } => "no-return",
             LaneStatus::SumRule { .. } => "sum-rule",
+            LaneStatus::ShortAverage { .. } => "short-average",
+            LaneStatus::Uncertain { .. } => "uncertain",
         }
     }
 
@@ -122,6 +136,8 @@ impl std::fmt::Display for LaneStatus {
                 write!(f, "too-many-steps(needed={:.1e})", *needed as f64)
             }
             LaneStatus::SumRule { miss } => write!(f, "sum-rule(miss={miss:.1e})"),
+            LaneStatus::ShortAverage { scales } => write!(f, "short-average(scales={scales:.1e})"),
+            LaneStatus::Uncertain { error } => write!(f, "uncertain(error={error:.1e})"),
             LaneStatus::NoReturn { iteration } => write!(f, "no-return(iteration={iteration})"),
         }
     }
@@ -164,6 +180,11 @@ pub struct LaneResult {
     /// Their estimated error per unit time in the exponents:
     /// Σ (error in ln R_ii) / (N·T); 0 without grazing iterations.
     pub grazing_bound: f64,
+    /// The exponents' estimated error per unit time (see
+    /// `uncertainty`): what the frame's start still puts into λ1 plus the
+    /// largest standard error of the block means. NaN without exponents,
+    /// or where fewer than two blocks were averaged.
+    pub error: f64,
     /// How the lane's iterations were cut.
     pub plan: LanePlan,
     pub status: LaneStatus,
@@ -199,6 +220,7 @@ pub fn not_run(
         jacobians: Vec::new(),
         grazing: 0,
         grazing_bound: f64::NAN,
+        error: f64::NAN,
         plan,
         status: LaneStatus::TooManySteps {
             needed: plan.steps_per_period,
