@@ -213,7 +213,7 @@ fn flag_uncertain(scene: &Scene, lanes: &mut [LaneResult]) {
         let scales = lane.period * iterations * rate;
         if rate > 0.0 && scales < SHORT_AVERAGE {
             lane.status = LaneStatus::ShortAverage { scales };
-        } else if !(lane.error <= error_tolerance(lane)) {
+        } else if lane.error.is_nan() || lane.error > error_tolerance(lane) {
             lane.status = LaneStatus::Uncertain { error: lane.error };
         }
     });
