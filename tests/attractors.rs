@@ -620,6 +620,7 @@ fn attractors_csv_and_the_branch_columns_agree() {
             "lambda_2",
             "lambda_sum",
             "expected_sum",
+            "lambda_error",
             "basin_fraction",
             "starts",
             "x",
@@ -632,8 +633,11 @@ fn attractors_csv_and_the_branch_columns_agree() {
     assert_eq!(at("0.56").len(), 1);
     assert_eq!(at("0.6").len(), 2);
     for eta in ["0.56", "0.6"] {
-        let basins: f64 = at(eta).iter().map(|r| r[8].parse::<f64>().unwrap()).sum();
-        let starts: usize = at(eta).iter().map(|r| r[9].parse::<usize>().unwrap()).sum();
+        let basins: f64 = at(eta).iter().map(|r| r[9].parse::<f64>().unwrap()).sum();
+        let starts: usize = at(eta)
+            .iter()
+            .map(|r| r[10].parse::<usize>().unwrap())
+            .sum();
         assert!((basins - 1.0).abs() < 1e-12);
         assert_eq!(starts, 16);
     }

@@ -253,6 +253,7 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
         "lanes",
         "time",
         "max |lambda_sum - expected_sum|",
+        "max lambda_error",
     ] {
         assert!(
             summary.contains(needle),
@@ -263,7 +264,7 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
     let mut lines = spectrum.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,grazing,grazing_bound,period,status"
+        "eta,lambda_1,lambda_2,lambda_sum,expected_sum,lambda_error,impacts_per_period,grazing,grazing_bound,period,status"
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     assert_eq!(rows.len(), 3);
@@ -275,11 +276,14 @@ fn a_good_run_writes_whole_files_with_the_documented_columns() {
         assert_eq!(l1 + l2, sum);
         assert!(l1 >= l2);
         assert_eq!(row[4], "-0.1");
-        assert_eq!(row[6], "0", "no grazing iteration at a periodic point");
-        assert_eq!(row[7], "0");
+        // The row's stated error, within the tolerance of an `ok` row.
+        let error: f64 = row[5].parse().unwrap();
+        assert!(error >= 0.0 && error < 0.1 * l1.abs(), "{error}");
+        assert_eq!(row[7], "0", "no grazing iteration at a periodic point");
+        assert_eq!(row[8], "0");
         // The period: a whole number, or empty when none closes.
-        assert!(row[8].is_empty() || row[8].parse::<usize>().is_ok_and(|p| (1..=12).contains(&p)));
-        assert_eq!(row[9], "ok");
+        assert!(row[9].is_empty() || row[9].parse::<usize>().is_ok_and(|p| (1..=12).contains(&p)));
+        assert_eq!(row[10], "ok");
     }
     let bifurcation = std::fs::read_to_string(dir.path().join("out/bifurcation.csv")).unwrap();
     assert!(bifurcation.starts_with("eta,x,v\n"));

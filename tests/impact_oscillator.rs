@@ -38,7 +38,7 @@ fn exponents_sum_to_minus_two_zeta_across_the_sweep() {
 fn the_chaotic_window_where_impacts_begin_has_a_positive_exponent() {
     let values: Vec<f64> = (0..=40).map(|k| 0.70 + 0.001 * k as f64).collect();
     let report = seed_run(&values, &[]);
-    common::assert_all_ok(&report);
+    common::assert_ok_or_uncertain(&report);
     let (best, eta) = report
         .lanes
         .iter()

@@ -86,7 +86,7 @@ where
     let mut crossings = vec![0usize; stops.len()];
     let full_step = flow_matrix(h);
     // The tool's protocol: the transient's last tenth turns the frame.
-    let align = transient / DEFAULT_ALIGN_FRACTION;
+    let align = transient.div_ceil(DEFAULT_ALIGN_FRACTION);
     for iteration in 0..transient + iterations {
         let averaging = iteration >= transient;
         let mut phi = SMatrix::<f64, N, N>::identity();

@@ -778,7 +778,7 @@ fn a_lane_beyond_any_step_budget_says_so_and_a_run_of_only_such_lanes_fails() {
     let rows = std::fs::read_to_string(out.join("spectrum.csv")).unwrap();
     let last: Vec<&str> = rows.lines().nth(2).unwrap().split(',').collect();
     assert_eq!(last[0], "0.8");
-    assert_eq!(last[9], "ok");
+    assert_eq!(last[10], "ok");
     let sum: f64 = last[3].parse().unwrap();
     assert!(
         (sum + 0.1).abs() < 1e-7,

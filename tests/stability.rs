@@ -66,7 +66,13 @@ fn fine_sweeps_across_both_onsets_match_the_exact_backend() {
         let exact = seed_sweep(from, to, count, "exact");
         let values = (0..count).map(|k| from + (to - from) * k as f64 / (count - 1) as f64);
         for ((a, b), eta) in rk4.lanes.iter().zip(&exact.lanes).zip(values) {
-            assert_eq!(a.status, LaneStatus::Ok, "η = {eta}");
+            // Chaotic rows over 1000 iterations, and rows whose long
+            // transient ends within the average, say `uncertain`.
+            assert!(
+                matches!(a.status, LaneStatus::Ok | LaneStatus::Uncertain { .. }),
+                "η = {eta}: {}",
+                a.status
+            );
             // The sum rule holds whatever the orbit.
             let sum_error = (a.exponent_sum() - -0.1).abs();
             assert!(sum_error < 1e-6, "η = {eta}: sum off by {sum_error:e}");
@@ -138,9 +144,20 @@ fn stiff_damping_without_impacts_gives_both_closed_form_exponents() {
         let closed = [-zeta + kappa, -zeta - kappa];
         for (k, eta) in [0.05, 0.1, 0.2].into_iter().enumerate() {
             let (a, b) = (&rk4.lanes[k], &exact.lanes[k]);
-            assert_eq!(a.status, LaneStatus::Ok, "ζ = {zeta}, η = {eta}");
-            assert_eq!(a.impacts_per_period, 0.0);
             let period = std::f64::consts::TAU / eta;
+            // 50 iterations span 50·T·|λ_slow| of the slow mode's time
+            // scales: under 10 (ζ = 200, η ≥ 0.1) the row says so.
+            let scales = 50.0 * period * (zeta - kappa);
+            if scales < lyapsweep::backend::SHORT_AVERAGE {
+                assert!(
+                    matches!(a.status, LaneStatus::ShortAverage { .. }),
+                    "ζ = {zeta}, η = {eta}: {}",
+                    a.status
+                );
+            } else {
+                assert_eq!(a.status, LaneStatus::Ok, "ζ = {zeta}, η = {eta}");
+            }
+            assert_eq!(a.impacts_per_period, 0.0);
             let rate = zeta + kappa;
             assert!(
                 a.plan.steps_per_period as f64 >= period * rate / 0.1,

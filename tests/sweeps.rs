@@ -143,7 +143,7 @@ fn a_model_s_grid_shards_and_merges_like_a_built_in_s() {
     let grid = std::fs::read_to_string(out.join("grid.csv")).unwrap();
     let header = grid.lines().next().unwrap();
     assert!(
-        header.starts_with("eta,e,lambda_1,lambda_2,lambda_sum,expected_sum,impacts_per_period,right_stop_per_period,left_stop_per_period,"),
+        header.starts_with("eta,e,lambda_1,lambda_2,lambda_sum,expected_sum,lambda_error,impacts_per_period,right_stop_per_period,left_stop_per_period,"),
         "{header}"
     );
     assert_eq!(grid.lines().count(), 1 + 8);

@@ -399,7 +399,7 @@ fn smooth_spectrum<const D: usize>(
     let (mut y, mut q) = (SVector::<f64, D>::zeros(), SMatrix::<f64, D, D>::identity());
     let mut logs = [0.0; D];
     // The tool's protocol: the transient's last tenth turns the frame.
-    let align = transient / DEFAULT_ALIGN_FRACTION;
+    let align = transient.div_ceil(DEFAULT_ALIGN_FRACTION);
     for n in 0..transient + iterations {
         let mut phi = SMatrix::<f64, D, D>::identity();
         for k in 0..steps {
@@ -528,7 +528,16 @@ fn a_vibrating_table_s_impacts_keep_e_squared_per_impact() {
     let e: f64 = 0.8;
     let mut chaotic = 0;
     for (k, (lane, expected)) in report.lanes.iter().zip(&report.expected_sums).enumerate() {
-        assert_eq!(lane.status, LaneStatus::Ok, "lane {k}");
+        // A chaotic bounce over 200 iterations is `uncertain` (its λ1's
+        // standard error is over a tenth of it); the sum rule is exact all
+        // the same.
+        let chaotic_enough =
+            matches!(lane.status, LaneStatus::Uncertain { .. }) && lane.exponents[0] > 0.0;
+        assert!(
+            lane.status == LaneStatus::Ok || chaotic_enough,
+            "lane {k}: {}",
+            lane.status
+        );
         let impacts_per_time = lane.crossings_per_period[0] / lane.period;
         assert!(impacts_per_time > 0.0);
         let e_squared = 2.0 * e.ln() * impacts_per_time;

@@ -149,7 +149,7 @@ class Run:
     ``spectrum`` (a two-parameter sweep's grid.csv), ``bifurcation`` and
     ``attractors`` are DataFrames with the columns of the CSV files, or None
     where the run wrote no such file. ``summary`` is what the command line
-    prints (backend, precision, lanes, time, max_sum_error, flagged, the
+    prints (backend, precision, lanes, time, max_sum_error, max_error, flagged, the
     flagged lanes by status in ``flagged_by_status``, of which those with no
     exponents in ``failures``), ``scene`` the scene as run, and ``folder`` where
     the set lies (``out``, or a temporary folder removed with the Run).

@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use super::files::{number, write_atomically, BRANCH_COLUMN};
+use super::files::{number, write_atomically, BRANCH_COLUMN, ERROR_COLUMN};
 use crate::attractor::Attractors;
 use crate::error::{Error, Result};
 use crate::model::code::event_column;
@@ -24,7 +24,7 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
     header.extend(scene.system.events.iter().map(|e| event_column(e)));
     if scene.lyapunov {
         header.extend((1..=scene.system.dimension()).map(|i| format!("lambda_{i}")));
-        header.extend(["lambda_sum", "expected_sum", super::ERROR_COLUMN].map(String::from));
+        header.extend(["lambda_sum", "expected_sum", ERROR_COLUMN].map(String::from));
     }
     header.extend(["basin_fraction", "starts"].map(String::from));
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));

@@ -20,6 +20,9 @@ pub const ATTRACTORS_FILE: &str = "attractors.csv";
 /// The column naming the branch an attractor (or a lane's) belongs to: one
 /// attractor followed across the swept values.
 pub const BRANCH_COLUMN: &str = "branch";
+/// The column of a row's estimated exponent error (see
+/// `LaneResult::error`).
+pub const ERROR_COLUMN: &str = "lambda_error";
 
 /// `spectrum.csv` for one swept parameter, `grid.csv` for two.
 pub fn spectrum_file(scene: &Scene) -> &'static str {

@@ -35,8 +35,8 @@ use crate::model::code::event_column;
 use crate::scene::Scene;
 use files::{number, write_text};
 pub use files::{
-    spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, GRID_FILE,
-    HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
+    spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, ERROR_COLUMN,
+    GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
 };
 pub use set::Staging;
 
@@ -71,10 +71,6 @@ pub fn spectrum_header(scene: &Scene) -> Vec<String> {
     header.extend([PERIOD_COLUMN, "status"].map(String::from));
     header
 }
-
-/// The column of a row's estimated exponent error (see
-/// `LaneResult::error`).
-pub const ERROR_COLUMN: &str = "lambda_error";
 
 /// The column of a lane's start among its value's (with `[attractors]`).
 pub const START_COLUMN: &str = "start";

@@ -239,13 +239,19 @@ where
             }
         }
         self.done += 1;
-        let time = if self.time > 0.0 {
+        self.uncertainty
+            .end_iteration(self.qr.sums(), self.averaging_time());
+        true
+    }
+
+    /// The time of the averaging iterations so far: a Poincaré map's
+    /// iterations' own times, or the map period's multiple.
+    fn averaging_time(&self) -> f64 {
+        if self.time > 0.0 {
             self.time
         } else {
             self.done as f64 * self.period
-        };
-        self.uncertainty.end_iteration(self.qr.sums(), time);
-        true
+        }
     }
 
     /// The iterations taken so far, counted from the start of the transient:
@@ -319,11 +325,7 @@ where
         };
         let mean_square = self.noise_squares / taken;
         let resolution_bound = (0.5 * mean_square + (mean_square / taken).sqrt()) / part_time;
-        let averaging_time = if self.time > 0.0 {
-            self.time
-        } else {
-            self.done as f64 * self.period
-        };
+        let averaging_time = self.averaging_time();
         let exponents = if self.lyapunov {
             let mut e = if self.time > 0.0 {
                 self.qr.exponents_over(self.time)

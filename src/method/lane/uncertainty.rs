@@ -148,9 +148,9 @@ mod tests {
 
     #[test]
     fn a_path_that_zigzags_gives_its_residual() {
-        // ln R alternating 1 and 3: the sums zigzag about 2t with residual
-        // -1/2, 0, -1/2, 0, ... (√(N/2·1/4) over N points in root mean
-        // square: 1/√8), so the estimate is √6/√8/N.
+        // ln R alternating 1 and 3: S_n = 2n - 1 for odd n, 2n for even n,
+        // so against the line 2t through the end the residual is -1, 0,
+        // -1, 0, ... (mean square 1/2), and the estimate √(6/2)/N.
         let n = 1000;
         let mut u = Uncertainty::<1>::new([1.0]);
         let mut log_r = [0.0];
@@ -161,7 +161,7 @@ mod tests {
             u.end_iteration(&log_r, k as f64);
         }
         // One dimension: the second direction is the frame, no frame term.
-        let expected = (6.0f64 / 8.0).sqrt() / n as f64;
+        let expected = 3.0f64.sqrt() / n as f64;
         let error = u.error(&log_r, &[2.0], 0, n as f64);
         assert!(
             (error - expected).abs() < 1e-9 * expected,
