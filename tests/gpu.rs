@@ -256,11 +256,14 @@ fn large_sweeps_split_into_batches_and_match_the_cpu() {
             v.max_difference
         );
         // A lane of the chaotic window may miss the sum rule by a little more
-        // than 1e-6 (the seed sweep's worst, 1.2e-6) and say so.
+        // than 1e-6 (the seed sweep's worst, 1.2e-6), or carry a standard
+        // error above a tenth of its λ1, and say so.
         assert!(report.lanes.iter().all(|l| l.status == LaneStatus::Ok
             || matches!(
                 l.status,
-                LaneStatus::Unresolved { .. } | LaneStatus::SumRule { .. }
+                LaneStatus::Unresolved { .. }
+                    | LaneStatus::SumRule { .. }
+                    | LaneStatus::Uncertain { .. }
             )));
         assert!(report
             .lanes

@@ -739,7 +739,15 @@ fn an_event_that_moves_with_the_clock_keeps_its_volume_law_on_the_gpu() {
         .zip(&gpu.expected_sums)
         .enumerate()
     {
-        assert_eq!(g.status, LaneStatus::Ok, "lane {k}");
+        // A chaotic bounce over 200 iterations may be `uncertain`, as on
+        // the CPU (tests/switches.rs).
+        let chaotic_enough =
+            matches!(g.status, LaneStatus::Uncertain { .. }) && g.exponents[0] > 0.0;
+        assert!(
+            g.status == LaneStatus::Ok || chaotic_enough,
+            "lane {k}: {}",
+            g.status
+        );
         let e_squared = 2.0 * e.ln() * g.crossings_per_period[0] / g.period;
         let error = (g.exponent_sum() - expected).abs();
         eprintln!(
@@ -1242,9 +1250,17 @@ fn a_section_never_reached_fails_its_lane_on_the_gpu_as_on_the_cpu() {
             report.lanes[0].status
         );
         assert!(report.lanes[0].exponents.iter().all(|e| e.is_nan()));
-        assert_eq!(report.lanes[1].status, LaneStatus::Ok);
+        // Five returns are short against the flow's time scales: the lane
+        // says so, with its exponents.
+        assert!(report.lanes[1].exponents.iter().all(|e| e.is_finite()));
+        assert!(
+            matches!(report.lanes[1].status, LaneStatus::ShortAverage { .. }),
+            "{}",
+            report.lanes[1].status
+        );
     }
     assert_eq!(gpu.lanes[0].status, cpu.lanes[0].status);
+    assert_eq!(gpu.lanes[1].status, cpu.lanes[1].status);
 }
 
 #[test]
@@ -1360,7 +1376,13 @@ fn a_section_sweep_split_into_batches_or_rows_is_the_sweep_in_one() {
     assert_eq!(rows.gpu.as_ref().unwrap().batches, 1);
     for other in [&split, &rows] {
         for (k, (a, b)) in whole.lanes.iter().zip(&other.lanes).enumerate() {
-            assert_eq!(a.status, LaneStatus::Ok, "lane {k}");
+            // Chaotic averages over 40 returns are `uncertain`.
+            assert!(
+                matches!(a.status, LaneStatus::Ok | LaneStatus::Uncertain { .. }),
+                "lane {k}: {}",
+                a.status
+            );
+            assert_eq!(a.status, b.status, "lane {k}");
             assert_eq!(a.exponents, b.exponents, "lane {k}");
             assert_eq!(a.bifurcation, b.bifurcation, "lane {k}");
         }

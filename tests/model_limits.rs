@@ -451,7 +451,7 @@ fn a_flow_expanding_in_bursts_meets_its_sum_rule_and_a_row_that_misses_it_does_n
         assert_eq!(code, Some(0), "{stderr}");
         assert!(sum_error(&rows[0]) < 1e-6, "{backend}: {rows:?}");
         assert_eq!(rows[0].last().unwrap(), "ok", "{backend}");
-        let grazing: usize = rows[0][7].parse().unwrap();
+        let grazing: usize = rows[0][8].parse().unwrap();
         assert!(grazing > 0, "{backend}: no iteration re-estimated");
         rows_of.push(rows);
     }
