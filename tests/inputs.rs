@@ -710,6 +710,26 @@ fn a_max_period_past_the_iterations_is_refused_before_any_work() {
 }
 
 #[test]
+fn a_max_period_whose_points_no_machine_holds_is_refused_before_any_work() {
+    // A map may average 1e14 iterations within the work limit; holding
+    // 2·5e13 points for the period test is petabytes on any machine.
+    let root = tempfile::tempdir().unwrap();
+    let scene = "[system]\nkind = \"henon\"\n[sweep]\nparameter = \"a\"\nvalues = [1.4]\n\
+                 [integration]\ntransient = 1\niterations = 100000000000000\n\
+                 [attractors]\nmax_period = 50000000000000\n";
+    let output = run_text(root.path(), scene, &[]);
+    refused(
+        &output,
+        &[
+            "attractors.max_period",
+            "period test",
+            "this machine has free",
+        ],
+    );
+    assert_eq!(std::fs::read_dir(root.path()).unwrap().count(), 1);
+}
+
+#[test]
 fn max_period_alone_is_one_start() {
     let root = tempfile::tempdir().unwrap();
     ok(run_text(

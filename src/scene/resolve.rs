@@ -7,7 +7,7 @@ use super::defaults::{
     DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 use super::raw::{RawAxis, RawIntegration, RawOutput, RawScene, RawSweep};
-use super::starts::resolve_starts;
+use super::starts::{resolve_starts, RawAttractors};
 use super::sweep::resolve_sweep;
 use super::types::{Integration, Lyapunov, Precision, Scene, Shard, Sweep};
 use crate::error::{clip, number, Error, Result};
@@ -26,14 +26,14 @@ pub(super) fn resolve(
     let (info, params) = resolve_kind(&raw)?;
     let integration = resolve_integration(info, raw.integration)?;
     let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
-    let starts = raw.attractors.as_ref().map(|a| (a.key(), a.count()));
-    let max_period = raw.attractors.as_ref().and_then(|a| a.max_period);
-    check_max_period(max_period, &integration)?;
+    check_max_period(
+        raw.attractors.as_ref().and_then(|a| a.max_period),
+        &integration,
+    )?;
     check_size(
         info,
         &raw.sweep,
-        starts,
-        max_period,
+        raw.attractors.as_ref(),
         &raw.output,
         &integration,
         lyapunov,
@@ -148,8 +148,7 @@ fn resolve_integration(info: &'static SystemInfo, i: RawIntegration) -> Result<I
 fn check_size(
     info: &'static SystemInfo,
     sweep: &RawSweep,
-    starts: Option<(&'static str, usize)>,
-    max_period: Option<usize>,
+    attractors: Option<&RawAttractors>,
     output: &RawOutput,
     integration: &Integration,
     lyapunov: bool,
@@ -159,8 +158,8 @@ fn check_size(
     if let Some(second) = &sweep.second {
         counts.push(("sweep.second.count".to_owned(), axis_len(second)));
     }
-    if let Some((key, n)) = starts {
-        counts.push((key.to_owned(), n));
+    if let Some(a) = attractors {
+        counts.push((a.key().to_owned(), a.count()));
     }
     let copies = if lyapunov {
         integration
@@ -174,7 +173,7 @@ fn check_size(
         &counts,
         info.dimension(),
         output.bifurcation_points.unwrap_or(0),
-        max_period,
+        attractors.and_then(|a| a.max_period),
         integration.steps_per_lane(info.is_flow, copies),
         shard.map(|s| s.count),
     )
