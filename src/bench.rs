@@ -405,14 +405,25 @@ pub fn best_for(ms: &[Measurement], target: f64) -> Option<&Measurement> {
         .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
 }
 
-/// Writes bench.csv, bench.md and bench.png into `dir`.
+/// The files [`write`] writes into its folder.
+pub const FILES: [&str; 3] = ["bench.csv", "bench.md", "bench.png"];
+
+/// That `dir` can take the files (see `output::owned`): checked before
+/// the measurements, which take minutes.
+pub fn check_folder(dir: &Path) -> Result<()> {
+    crate::output::owned::check(dir, &FILES)
+}
+
+/// Writes bench.csv, bench.md and bench.png into `dir` (refusing to
+/// write over files lyapsweep did not write there).
 pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Result<Vec<PathBuf>> {
+    check_folder(dir)?;
     let fail = |path: &Path, e: std::io::Error| Error::Write {
         path: path.to_owned(),
         source: e,
     };
     std::fs::create_dir_all(dir).map_err(|e| fail(dir, e))?;
-    let csv_path = dir.join("bench.csv");
+    let csv_path = dir.join(FILES[0]);
     crate::output::files::write_atomically(&csv_path, |w| {
         w.write_record([
             "path",
@@ -452,15 +463,17 @@ pub fn write(dir: &Path, plan: &Plan, ms: &[Measurement], machine: &str) -> Resu
         Ok(())
     })?;
 
-    let md_path = dir.join("bench.md");
+    let md_path = dir.join(FILES[1]);
     std::fs::write(&md_path, markdown(plan, ms, machine)).map_err(|e| fail(&md_path, e))?;
-    let png_path = dir.join("bench.png");
+    let png_path = dir.join(FILES[2]);
     let caption = match &plan.subject {
         Subject::Seed => "seed oscillator".to_owned(),
         Subject::Scene(path) => path.display().to_string(),
     };
     plot(&png_path, ms, &caption).map_err(|e| fail(&png_path, std::io::Error::other(e)))?;
-    Ok(vec![csv_path, md_path, png_path])
+    let written = vec![csv_path, md_path, png_path];
+    crate::output::owned::record(dir, &written)?;
+    Ok(written)
 }
 
 /// The Markdown report: every configuration, then the best per error target.

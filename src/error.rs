@@ -101,6 +101,19 @@ impl Error {
 
 pub type Result<T> = std::result::Result<T, Error>;
 
+/// A number as messages and the output's files write it: Rust's shortest
+/// text that reads back to the same f64, in exponent form where the plain
+/// form would be absurdly long (|v| ≥ 1e16, or nonzero |v| < 1e-5: `1e300`,
+/// not 301 digits). Ordinary numbers keep their plain form, so files of
+/// ordinary runs are unchanged to the byte.
+pub fn number(v: f64) -> String {
+    if v.is_finite() && v != 0.0 && !(1e-5..1e16).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Characters of the user's text (a key, a name, an assignment) a message
 /// echoes: enough to recognise it, where a mistyped 1 MB key echoed whole
 /// would bury the message.

@@ -19,6 +19,7 @@ pub mod attractor;
 pub mod backend;
 pub mod bench;
 pub mod command;
+pub mod environment;
 pub mod error;
 pub mod integrate;
 pub mod limits;

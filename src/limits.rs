@@ -37,11 +37,13 @@ pub fn bytes(b: f64) -> String {
 /// The size of a sweep as the scene file gives it, checked before its
 /// values are generated: the lanes must be countable, and the values and
 /// one lane's kept points must fit in memory. `counts` are the values per
-/// axis with their keys.
+/// axis with their keys; `max_period` is `attractors.max_period` when the
+/// scene gives it.
 pub fn check_sweep(
     counts: &[(String, usize)],
     dimension: usize,
     bifurcation_points: usize,
+    max_period: Option<usize>,
     lane_steps_per_lane: f64,
     shards: Option<usize>,
 ) -> Result<()> {
@@ -109,6 +111,23 @@ pub fn check_sweep(
                 bytes(available)
             ),
         });
+    }
+    // Each lane in work holds up to 2·max_period points for its period
+    // test, and keeps as many in its result when it finds no period; a lane
+    // is in work on each thread at once.
+    if let Some(max_period) = max_period {
+        let threads = rayon::current_num_threads() as f64;
+        let orbit = 2.0 * 8.0 * dimension as f64 * 2.0 * max_period as f64 * threads;
+        if let Some(available) = available.filter(|&a| orbit > a / 2.0) {
+            return Err(Error::TooLarge {
+                keys: "attractors.max_period".into(),
+                reason: format!(
+                    "the last 2·{max_period} points that each of the {threads} lanes in work holds for its period test take {}, more than half of the {} this machine has free: lower attractors.max_period",
+                    bytes(orbit),
+                    bytes(available)
+                ),
+            });
+        }
     }
     Ok(())
 }

@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use lyapsweep::command::{self, progress_bar};
+use lyapsweep::error::number;
 use lyapsweep::scene::{self, Backend, Precision};
 use lyapsweep::{output, Error, Scene, Summary};
 
@@ -38,12 +39,13 @@ enum Command {
         #[arg(long = "set", value_name = "KEY.PATH=VALUE")]
         sets: Vec<String>,
         /// Run shard i of n (from 0): sweep values i, i + n, i + 2n, ...; `merge` combines the shards.
-        #[arg(long, value_name = "I/N")]
+        // Hyphens too: `--shard -1/3` is then told what a shard is.
+        #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
         shard: Option<String>,
         /// No progress on stderr.
         #[arg(long, short)]
         quiet: bool,
-        /// Run on adapter N of `lyapsweep devices` (e.g. one process per GPU, each with a shard).
+        /// Run on adapter N of `lyapsweep devices` (e.g. one process per GPU, each with a shard); the GPU backend only.
         #[arg(long, value_name = "N")]
         device: Option<usize>,
     },
@@ -95,6 +97,10 @@ enum ModelCommand {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Every variable the README names, before any work.
+    if let Err(e) = lyapsweep::environment::check() {
+        return exit_code(Err(e));
+    }
     match cli.command {
         Command::Devices => exit_code(print_devices()),
         Command::Model {
@@ -138,8 +144,7 @@ fn check_model(file: &std::path::Path) -> Result<(), Error> {
             path.display()
         );
     }
-    print!("{}", check.description);
-    Ok(())
+    emit(&check.description, "the model was checked")
 }
 
 /// Success, or the error on stderr with exit code 2 for bad input, 1 otherwise.
@@ -168,6 +173,17 @@ fn run(
 ) -> Result<(), Error> {
     let shard = how.shard.map(scene::Shard::parse).transpose()?;
     let scene = scene::load_shard(path, overrides, shard)?;
+    if let Some(n) = how.device {
+        if matches!(scene.backend, Backend::Cpu | Backend::Exact) {
+            return Err(Error::invalid(
+                "--device",
+                format!(
+                    "--device {n} picks a GPU adapter, and run.backend is \"{}\": give --backend gpu (or auto), or leave --device out",
+                    scene.backend.name()
+                ),
+            ));
+        }
+    }
     let dir = out.unwrap_or_else(|| match scene.shard {
         Some(s) => {
             PathBuf::from("out").join(format!("{}.shard-{}-of-{}", scene.name, s.index, s.count))
@@ -190,91 +206,136 @@ fn run(
         w.finish();
     }
     let outcome = outcome?;
+    let mut summary = String::new();
     print_summary(
+        &mut summary,
         &scene,
         &outcome.summary,
         outcome.attractors.as_ref(),
         &outcome.written,
     );
+    emit(
+        &summary,
+        &format!("the output set {} was written whole", dir.display()),
+    )?;
     outcome.result()
 }
 
-fn plot(dir: &std::path::Path, into: &std::path::Path) -> Result<(), Error> {
-    for path in output::results::redraw(dir, into)? {
-        println!("wrote {}", path.display());
+/// Appends a line to a command's text for stdout (see [`emit`]).
+macro_rules! say {
+    ($out:expr, $($arg:tt)*) => {{
+        use std::fmt::Write as _;
+        // Writing to a String cannot fail.
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
+/// Writes a command's text to stdout once its work is done. A closed pipe
+/// (`lyapsweep devices | head -c0`) ends the printing quietly, as Unix
+/// tools end when their reader has gone; any other failure (`> /dev/full`,
+/// a full disk) is an error, exit code 1, saying what was `done` before it.
+fn emit(text: &str, done: &str) -> Result<(), Error> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(Error::Write {
+            path: PathBuf::from("standard output"),
+            source: std::io::Error::new(e.kind(), format!("{e}; {done}")),
+        }),
+        _ => Ok(()),
     }
-    Ok(())
+}
+
+/// "wrote PATH" lines for the files a command wrote, on stdout.
+fn emit_written(paths: &[PathBuf]) -> Result<(), Error> {
+    let mut text = String::new();
+    for path in paths {
+        say!(text, "wrote {}", path.display());
+    }
+    emit(&text, "the files were written whole")
+}
+
+fn plot(dir: &std::path::Path, into: &std::path::Path) -> Result<(), Error> {
+    emit_written(&output::results::redraw(dir, into)?)
 }
 
 fn merge(out: &std::path::Path, shards: &[PathBuf]) -> Result<(), Error> {
-    for path in output::merge::merge(out, shards)? {
-        println!("wrote {}", path.display());
-    }
-    Ok(())
+    emit_written(&output::merge::merge(out, shards)?)
 }
 
 /// The summary a run prints: what ran where, on what, how, what was
 /// adjusted, how long it took and what came out.
 fn print_summary(
+    out: &mut String,
     scene: &Scene,
     report: &Summary,
     attractors: Option<&lyapsweep::Attractors>,
     written: &[PathBuf],
 ) {
-    println!("lyapsweep: {} ({})", scene.name, scene.system.kind);
+    say!(out, "lyapsweep: {} ({})", scene.name, scene.system.kind);
     if let Some(choice) = &report.choice {
-        println!("  {choice}");
+        say!(out, "  {choice}");
     }
-    print_backend(report);
-    print_lanes(scene);
-    print_method(scene, report);
-    print_adjustments(scene, report);
-    println!("  time         {:.3} s", report.elapsed.as_secs_f64());
-    print_gpu_run(report);
+    print_backend(out, report);
+    print_lanes(out, scene);
+    print_method(out, scene, report);
+    print_adjustments(out, scene, report);
+    say!(out, "  time         {:.3} s", report.elapsed.as_secs_f64());
+    print_gpu_run(out, report);
     if let Some(found) = attractors {
-        print_attractors(scene, found);
+        print_attractors(out, scene, found);
     }
-    print_outcome(report, written);
+    print_outcome(out, report, written);
 }
 
 /// What the many starts found: attractors, branches, continuation.
-fn print_attractors(scene: &Scene, found: &lyapsweep::Attractors) {
+fn print_attractors(out: &mut String, scene: &Scene, found: &lyapsweep::Attractors) {
     let total: usize = found.values.iter().map(|v| v.count()).sum();
-    println!(
+    say!(
+        out,
         "  attractors   {total} over {} values in {} branches; {} values hold more than one",
         scene.sweep.points(),
         found.branches,
         found.several()
     );
     if found.passes > 0 {
-        println!(
+        say!(
+            out,
             "  continued    {} lanes in {} passes from the neighbours' attractors",
-            found.continued_lanes, found.passes
+            found.continued_lanes,
+            found.passes
         );
     }
 }
 
 /// The backend and precision, and for the GPU its adapter and kernels.
-fn print_backend(report: &Summary) {
+fn print_backend(out: &mut String, report: &Summary) {
     let precision = match report.precision {
         Precision::F64 => "f64",
         Precision::F32 => "f32",
     };
     match &report.gpu {
         Some(gpu) => {
-            println!(
+            say!(
+                out,
                 "  backend      gpu ({precision}) on {} ({})",
-                gpu.adapter, gpu.adapter_backend
+                gpu.adapter,
+                gpu.adapter_backend
             );
-            println!("  kernels      {}", gpu.variant);
+            say!(out, "  kernels      {}", gpu.variant);
             if let Some(dir) = &gpu.kernel_sources {
-                println!(
+                say!(
+                    out,
                     "               composed from {} (LYAPSWEEP_SHADER_DIR), not the binary's",
                     dir.display()
                 );
             }
         }
-        None => println!(
+        None => say!(
+            out,
             "  backend      {} ({precision}, {} threads)",
             report.backend.name(),
             report.threads
@@ -283,7 +344,7 @@ fn print_backend(report: &Summary) {
 }
 
 /// The lanes: each axis's values, and the shard's part of them.
-fn print_lanes(scene: &Scene) {
+fn print_lanes(out: &mut String, scene: &Scene) {
     let ranges: Vec<String> = scene
         .sweep
         .axes()
@@ -296,6 +357,7 @@ fn print_lanes(scene: &Scene) {
                 });
             let n = axis.values.len();
             let values = if n == 1 { "value" } else { "values" };
+            let (lo, hi) = (number(lo), number(hi));
             if n == 1 {
                 format!("1 {values} of {}: {lo}", axis.parameter)
             } else {
@@ -317,11 +379,11 @@ fn print_lanes(scene: &Scene) {
         .starts
         .as_ref()
         .map_or(String::new(), |s| format!(" × {} starts", s.states.len()));
-    println!("  lanes        {}{starts}{shard}", ranges.join(" × "));
+    say!(out, "  lanes        {}{starts}{shard}", ranges.join(" × "));
 }
 
 /// The method's settings as this backend uses them.
-fn print_method(scene: &Scene, report: &Summary) {
+fn print_method(out: &mut String, scene: &Scene, report: &Summary) {
     let i = &scene.integration;
     let mut method = format!(
         "transient {} (the last {} aligning the QR frame), iterations {}",
@@ -336,22 +398,23 @@ fn print_method(scene: &Scene, report: &Summary) {
             method += &format!(", impacts located by {}", i.impact_location.name());
         }
     }
-    println!("  method       {method}");
+    say!(out, "  method       {method}");
 }
 
 /// What the run changed or left out of the scene: points lowered, keys not
 /// used, steps raised and iterations cut into sub-maps.
-fn print_adjustments(scene: &Scene, report: &Summary) {
+fn print_adjustments(out: &mut String, scene: &Scene, report: &Summary) {
     let i = &scene.integration;
     if let Some(asked) = scene.bifurcation_points_asked {
-        println!(
+        say!(out,
             "  points       output.bifurcation_points lowered from {asked} to {}: a lane keeps at most one point per averaged iteration (integration.iterations = {})",
             scene.bifurcation_points, i.iterations
         );
     }
     let unused = scene.unused_keys(report.backend);
     if !unused.is_empty() {
-        println!(
+        say!(
+            out,
             "  not used     {}: {}",
             unused.join(", "),
             if report.backend == Backend::Exact {
@@ -363,26 +426,26 @@ fn print_adjustments(scene: &Scene, report: &Summary) {
     }
     let (raised, most) = report.raised;
     if raised > 0 {
-        println!(
+        say!(out,
             "  steps        raised in {raised} lanes, up to {most} per period: their fastest time scale needs RK4 step × rate ≤ {}",
             lyapsweep::method::lane::MAX_STEP_RATE
         );
     }
     let (cut, most) = report.cut;
     if cut > 0 {
-        println!(
+        say!(out,
             "  sub-maps     {cut} lanes cut each iteration into up to {most} parts: over a whole one the fastest contraction falls below what the finite difference resolves"
         );
     }
 }
 
 /// A GPU run's timings, retries, recomputed and validated lanes.
-fn print_gpu_run(report: &Summary) {
+fn print_gpu_run(out: &mut String, report: &Summary) {
     let Some(gpu) = &report.gpu else {
         return;
     };
     let t = &gpu.timings;
-    println!(
+    say!(out,
         "               setup {:.3} s, transient {:.3} s, averaging {:.3} s (waiting for the GPU {:.3} s, readback {:.3} s, host QR {:.3} s); {} batch(es), {} RK4 steps per dispatch, {} bytes of device memory per lane",
         t.setup.as_secs_f64(),
         t.transient.as_secs_f64(),
@@ -395,25 +458,26 @@ fn print_gpu_run(report: &Summary) {
         gpu.bytes_per_lane
     );
     if gpu.retries > 0 {
-        println!(
+        say!(out,
             "               {} batch run(s) redone with shorter dispatches: the adapter cut loops short past its cap (lavapipe: 65 535 loop iterations per invocation)",
             gpu.retries
         );
     }
     if let Some(busy) = t.gpu_busy {
-        println!(
+        say!(
+            out,
             "               device time of the compute passes (timestamp queries) {:.3} s",
             busy.as_secs_f64()
         );
     }
     if !gpu.recomputed.is_empty() {
-        println!(
+        say!(out,
             "  sliding      {} values recomputed on the CPU: the kernels flagged a motion they do not integrate (sliding, or held on an event)",
             gpu.recomputed.len()
         );
     }
     if let Some(v) = &gpu.validation {
-        println!(
+        say!(out,
             "  validation   {} values recomputed on the CPU: max difference {:.2e} (tolerance {:.0e})",
             v.lanes.len(),
             v.max_difference,
@@ -423,37 +487,37 @@ fn print_gpu_run(report: &Summary) {
 }
 
 /// The sum rule's largest miss, the flagged and failed lanes, the files.
-fn print_outcome(report: &Summary, written: &[PathBuf]) {
+fn print_outcome(out: &mut String, report: &Summary, written: &[PathBuf]) {
     if let Some(err) = report.max_sum_error {
-        println!("  max |lambda_sum - expected_sum| = {err:.3e}");
+        say!(out, "  max |lambda_sum - expected_sum| = {err:.3e}");
     }
     if let Some(err) = report.max_error {
         println!("  max lambda_error = {err:.3e}");
     }
     let (flagged, lanes) = (report.flagged(), report.lanes);
     if flagged == 0 {
-        println!("  flagged lanes {flagged} of {lanes}");
+        say!(out, "  flagged lanes {flagged} of {lanes}");
     } else {
         let by_status = Summary::by_status(&report.flagged_by_status);
-        println!("  flagged lanes {flagged} of {lanes} ({by_status})");
+        say!(out, "  flagged lanes {flagged} of {lanes} ({by_status})");
     }
     if !report.failures.is_empty() {
         let failures = Summary::by_status(&report.failures);
-        println!("  failed lanes {failures} (no exponents)");
+        say!(out, "  failed lanes {failures} (no exponents)");
     }
     for path in written {
-        println!("  wrote        {}", path.display());
+        say!(out, "  wrote        {}", path.display());
     }
 }
 
 fn print_devices() -> Result<(), Error> {
     let adapters = command::devices()?;
+    let out = &mut String::new();
     if adapters.is_empty() {
-        println!("no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
-        return Ok(());
+        say!(out, "no GPU adapters found (a Vulkan driver such as mesa-vulkan-drivers provides a software one)");
     }
     for (n, a) in adapters.iter().enumerate() {
-        println!(
+        say!(out,
             "{n}: {} [{}] {}: f64 {}, timestamps {}, kernels without contraction {}, max storage binding {} MiB, max buffer {} MiB, max workgroups/dim {}",
             a.name,
             a.backend,
@@ -466,7 +530,7 @@ fn print_devices() -> Result<(), Error> {
             a.max_workgroups
         );
     }
-    Ok(())
+    emit(out, "nothing else was done")
 }
 
 fn bench(scene: Option<PathBuf>, quick: bool, out: Option<PathBuf>) -> Result<(), Error> {
@@ -487,6 +551,7 @@ fn bench(scene: Option<PathBuf>, quick: bool, out: Option<PathBuf>) -> Result<()
         }
     };
     let out = out.unwrap_or(default_out);
+    bench::check_folder(&out)?;
     let measurements = bench::run(&plan)?;
     let mut machine = format!(
         "{} cores of {}",
@@ -497,11 +562,14 @@ fn bench(scene: Option<PathBuf>, quick: bool, out: Option<PathBuf>) -> Result<()
         machine += &format!("; GPU adapter {} ({})", a.name, a.backend);
     }
     let written = bench::write(&out, &plan, &measurements, &machine)?;
-    print!("{}", bench::markdown(&plan, &measurements, &machine));
+    let mut text = bench::markdown(&plan, &measurements, &machine);
     for path in written {
-        println!("wrote {}", path.display());
+        say!(text, "wrote {}", path.display());
     }
-    Ok(())
+    emit(
+        &text,
+        &format!("the results were written to {}", out.display()),
+    )
 }
 
 /// The CPU's model name, for naming the machine in reports.

@@ -498,3 +498,36 @@ fn a_run_with_many_starts_counts_its_values_with_several_attractors() {
     assert_eq!(attractors.lines().count(), 1 + 30);
     refused(&scene, &["--shard", "0/2"], "--shard");
 }
+
+/// A kernel source in `LYAPSWEEP_SHADER_DIR` that is not text, or was
+/// emptied, is an error naming the file before any work (it was a panic
+/// when the kernels were composed).
+#[test]
+fn a_shader_folder_with_a_broken_source_names_the_file() {
+    let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    for (broken, bytes) in [
+        ("shared/rk4.wgsl", &b"fn \xff\xfe broken"[..]),
+        ("shared/impact.wgsl", &b"\n"[..]),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let copy = dir.path().join("shaders");
+        copy_folder(&shaders, &copy);
+        std::fs::write(copy.join(broken), bytes).unwrap();
+        let path = dir.path().join("scene.toml");
+        std::fs::write(&path, BASE).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+            .args(["run", path.to_str().unwrap(), "--backend", "gpu", "--out"])
+            .arg(dir.path().join("out"))
+            .env("LYAPSWEEP_SHADER_DIR", &copy)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{broken}: {stderr}");
+        assert!(
+            stderr.contains("LYAPSWEEP_SHADER_DIR") && stderr.contains(broken),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!dir.path().join("out").exists());
+    }
+}

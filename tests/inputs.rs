@@ -661,3 +661,335 @@ fn a_quick_look_lowers_the_points_to_the_iterations() {
     refused(&output, &["output.bifurcation_points", "must not exceed"]);
     assert!(!refused_out.exists());
 }
+
+/// Runs `scene_text` (with `args`) into `root/out`; the output.
+fn run_text(root: &Path, scene_text: &str, args: &[&str]) -> Output {
+    let scene = root.join("scene.toml");
+    std::fs::write(&scene, scene_text).unwrap();
+    let out = root.join("out");
+    let mut all = vec![
+        "run",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    all.extend_from_slice(args);
+    lyapsweep(&all, None)
+}
+
+#[test]
+fn a_max_period_past_the_iterations_is_refused_before_any_work() {
+    // A period p is told from 2·p averaged iterations: past half of them
+    // no period can be found, and a huge one once reserved its points.
+    for (table, max_period) in [
+        ("max_period = 1000000000000\n", "1000000000000"),
+        (
+            "starts = 4\nbox = { x = [0, 1] }\nmax_period = 1000000000\n",
+            "1000000000",
+        ),
+        ("list = [[0, 0]]\nmax_period = 11\n", "11"),
+    ] {
+        let root = tempfile::tempdir().unwrap();
+        let output = run_text(root.path(), &format!("{BASE}[attractors]\n{table}"), &[]);
+        refused(
+            &output,
+            &[
+                "attractors.max_period",
+                "at most 10",
+                &format!("got {max_period}"),
+                "integration.iterations is 20",
+            ],
+        );
+        assert_eq!(
+            std::fs::read_dir(root.path()).unwrap().count(),
+            1,
+            "{table}: nothing but the scene written"
+        );
+    }
+}
+
+#[test]
+fn a_max_period_whose_points_no_machine_holds_is_refused_before_any_work() {
+    // A map may average 1e14 iterations within the work limit; holding
+    // 2·5e13 points for the period test is petabytes on any machine.
+    let root = tempfile::tempdir().unwrap();
+    let scene = "[system]\nkind = \"henon\"\n[sweep]\nparameter = \"a\"\nvalues = [1.4]\n\
+                 [integration]\ntransient = 1\niterations = 100000000000000\n\
+                 [attractors]\nmax_period = 50000000000000\n";
+    let output = run_text(root.path(), scene, &[]);
+    refused(
+        &output,
+        &[
+            "attractors.max_period",
+            "period test",
+            "this machine has free",
+        ],
+    );
+    assert_eq!(std::fs::read_dir(root.path()).unwrap().count(), 1);
+}
+
+#[test]
+fn max_period_alone_is_one_start() {
+    let root = tempfile::tempdir().unwrap();
+    ok(run_text(
+        root.path(),
+        &format!("{BASE}[attractors]\nmax_period = 10\n"),
+        &[],
+    ));
+    let attractors = std::fs::read_to_string(root.path().join("out/attractors.csv")).unwrap();
+    // A header and one attractor for each of the three values.
+    assert_eq!(attractors.lines().count(), 4, "{attractors}");
+}
+
+/// Runs the base scene into `root/out` with one environment variable set.
+fn run_with_variable(root: &Path, name: &str, value: &str) -> Output {
+    let scene = root.join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args([
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            root.join("out").to_str().unwrap(),
+        ])
+        .env(name, value)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn bad_environment_values_are_refused_before_any_work() {
+    let cases: &[(&str, &str, &str)] = &[
+        ("LYAPSWEEP_PROGRESS_SECONDS", "1e308", "from 0 to 1e9"),
+        ("LYAPSWEEP_PROGRESS_SECONDS", "-1", "from 0 to 1e9"),
+        ("LYAPSWEEP_PROGRESS_SECONDS", "nan", "from 0 to 1e9"),
+        ("LYAPSWEEP_PROGRESS_SECONDS", "abc", "from 0 to 1e9"),
+        ("LYAPSWEEP_STEP_LOOPS", "bogus", "not a choice"),
+        ("LYAPSWEEP_NO_AVX2", "0", "set it to 1"),
+        ("RAYON_NUM_THREADS", "100000", "per core"),
+        ("RAYON_NUM_THREADS", "four", "whole number"),
+        ("WGPU_BACKEND", "foo", "not a backend"),
+        ("LYAPSWEEP_SHADER_DIR", "/no/such/folder", "not a folder"),
+    ];
+    for (name, value, reason) in cases {
+        let root = tempfile::tempdir().unwrap();
+        let output = run_with_variable(root.path(), name, value);
+        refused(&output, &[name, value, reason]);
+        assert!(
+            !root.path().join("out").exists(),
+            "{name}={value}: nothing written"
+        );
+    }
+    // Good values run.
+    for (name, value) in [
+        ("LYAPSWEEP_PROGRESS_SECONDS", "0.5"),
+        ("LYAPSWEEP_STEP_LOOPS", "interpreter"),
+        ("LYAPSWEEP_NO_AVX2", "1"),
+        ("RAYON_NUM_THREADS", "1"),
+        ("WGPU_BACKEND", "vulkan"),
+    ] {
+        let root = tempfile::tempdir().unwrap();
+        ok(run_with_variable(root.path(), name, value));
+    }
+}
+
+#[test]
+fn a_full_stdout_is_an_error_after_the_set_is_written() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    let full = || {
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap()
+    };
+    let output = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args([
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .arg("-q")
+        .stdout(full())
+        .output()
+        .unwrap();
+    let text = stderr(&output);
+    assert_eq!(output.status.code(), Some(1), "{text}");
+    assert!(
+        text.contains("standard output") && text.contains("was written whole"),
+        "{text}"
+    );
+    assert!(!text.contains("panicked"), "{text}");
+    assert!(out.join("manifest.toml").is_file(), "the set was written");
+    let model = root.path().join("pair.toml");
+    std::fs::write(&model, PAIR_MODEL).unwrap();
+    let output = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(["model", "check", model.to_str().unwrap()])
+        .stdout(full())
+        .output()
+        .unwrap();
+    let text = stderr(&output);
+    assert_eq!(output.status.code(), Some(1), "{text}");
+    assert!(text.contains("standard output"), "{text}");
+}
+
+#[test]
+fn a_closed_pipe_ends_the_printing_quietly() {
+    use std::process::Stdio;
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    for args in [
+        vec!["devices".to_owned()],
+        vec![
+            "run".to_owned(),
+            scene.to_str().unwrap().to_owned(),
+            "--out".to_owned(),
+            root.path().join("out").to_str().unwrap().to_owned(),
+            "-q".to_owned(),
+        ],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+            .args(&args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // The reader goes before a byte is read (`| head -c0`).
+        drop(child.stdout.take());
+        let output = child.wait_with_output().unwrap();
+        let text = stderr(&output);
+        assert_eq!(output.status.code(), Some(0), "{args:?}: {text}");
+        assert!(text.is_empty(), "{args:?}: {text}");
+    }
+}
+
+#[test]
+fn plot_and_bench_write_over_no_file_of_the_users() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    let out_s = out.to_str().unwrap();
+    ok(lyapsweep(
+        &["run", scene.to_str().unwrap(), "--out", out_s, "-q"],
+        None,
+    ));
+    // The user's own figures in the folder --out names: kept, refused.
+    let figures = root.path().join("figures");
+    std::fs::create_dir(&figures).unwrap();
+    std::fs::write(figures.join("figure.png"), "my own figure").unwrap();
+    let before = snapshot(root.path());
+    let output = lyapsweep(&["plot", out_s, "--out", figures.to_str().unwrap()], None);
+    refused(&output, &["figure.png", "not written by lyapsweep"]);
+    assert_eq!(snapshot(root.path()), before);
+    // A new folder takes the figures, and takes them again.
+    let fresh = root.path().join("fresh");
+    for _ in 0..2 {
+        let output = ok(lyapsweep(
+            &["plot", out_s, "--out", fresh.to_str().unwrap()],
+            None,
+        ));
+        assert!(
+            stdout(&output).contains("figure.png"),
+            "{}",
+            stdout(&output)
+        );
+    }
+    // A folder inside the set would be a foreign folder there.
+    let before = snapshot(root.path());
+    let inside = out.join("figures");
+    let output = lyapsweep(&["plot", out_s, "--out", inside.to_str().unwrap()], None);
+    refused(&output, &["inside the output set"]);
+    assert_eq!(snapshot(root.path()), before);
+    // bench --out: the user's bench.md, refused before any measurement.
+    let reports = root.path().join("reports");
+    std::fs::create_dir(&reports).unwrap();
+    std::fs::write(reports.join("bench.md"), "my notes").unwrap();
+    let before = snapshot(root.path());
+    let output = lyapsweep(
+        &["bench", "--quick", "--out", reports.to_str().unwrap()],
+        None,
+    );
+    refused(&output, &["bench.md", "not written by lyapsweep"]);
+    assert_eq!(snapshot(root.path()), before);
+}
+
+#[test]
+fn flags_and_values_are_told_in_the_users_words() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let scene = scene.to_str().unwrap();
+    let out = root.path().join("out");
+    let out_s = out.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["run", scene, "--out", out_s, "-q"];
+        args.extend_from_slice(extra);
+        lyapsweep(&args, None)
+    };
+    // A table given a number: what the table holds, not the code's type.
+    let text = refused(
+        &run(&["--set", "sweep=5"]),
+        &["--set sweep=5", "a table (parameter"],
+    );
+    assert!(!text.contains("Raw"), "{text}");
+    // A huge number is written with its exponent, not as 301 digits.
+    let text = refused(
+        &run(&["--set", "integration.perturbation=-1e300"]),
+        &["integration.perturbation", "got -1e300"],
+    );
+    assert!(text.len() < 200, "{text}");
+    // A shard that starts with a hyphen is told what a shard is.
+    let text = refused(&run(&["--shard", "-1/3"]), &["-1/3"]);
+    assert!(!text.contains("unexpected argument"), "{text}");
+    // --device picks a GPU adapter: with the CPU backend it is refused.
+    refused(
+        &run(&["--device", "7", "--backend", "cpu"]),
+        &["--device", "GPU", "cpu"],
+    );
+    assert!(!out.exists(), "nothing written");
+}
+
+#[test]
+fn extreme_values_are_written_with_an_exponent_that_reads_back() {
+    let root = tempfile::tempdir().unwrap();
+    let scene = root.path().join("base.toml");
+    std::fs::write(&scene, BASE).unwrap();
+    let out = root.path().join("out");
+    let output = lyapsweep(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+            "--set",
+            "sweep.from=1e300",
+            "--set",
+            "sweep.to=2e300",
+        ],
+        None,
+    );
+    // Whatever the lanes make of such values, the files hold them short.
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{}",
+        stderr(&output)
+    );
+    let spectrum = std::fs::read_to_string(out.join("spectrum.csv")).unwrap();
+    let first: Vec<&str> = spectrum
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap())
+        .collect();
+    assert_eq!(first, ["1e300", "1.5e300", "2e300"], "{spectrum}");
+    for (text, value) in first.iter().zip([1e300, 1.5e300, 2e300]) {
+        assert_eq!(text.parse::<f64>().unwrap(), value);
+    }
+    assert!(stdout(&output).len() < 2000, "{}", stdout(&output));
+}

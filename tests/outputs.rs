@@ -726,6 +726,26 @@ fn merge_checks_every_row_and_never_writes_over_a_shard() {
     );
     std::fs::write(&spectrum, &original).unwrap();
     reseal(&sh1);
+
+    // A shard file edited to a split no `--shard` makes: refused, naming it.
+    let shard_file = sh1.join("shard.toml");
+    let shard_text = std::fs::read_to_string(&shard_file).unwrap();
+    for (from, to) in [("count = 2", "count = 0"), ("index = 1", "index = 5")] {
+        for dir in [&sh0, &sh1] {
+            let path = dir.join("shard.toml");
+            let text = std::fs::read_to_string(&path).unwrap();
+            std::fs::write(&path, text.replace(from, to)).unwrap();
+            reseal(dir);
+        }
+        refused(merge(&merged), &["shard.toml", "count ≥ 1"], &merged);
+        for dir in [&sh0, &sh1] {
+            let path = dir.join("shard.toml");
+            let text = std::fs::read_to_string(&path).unwrap();
+            std::fs::write(&path, text.replace(to, from)).unwrap();
+            reseal(dir);
+        }
+    }
+    assert_eq!(std::fs::read_to_string(&shard_file).unwrap(), shard_text);
     ok(merge(&merged));
 }
 

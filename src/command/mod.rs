@@ -36,6 +36,7 @@ pub struct Outcome {
 /// (when the scene was read), then the output folder, which must be able
 /// to take a new set (see [`Staging::prepare`]).
 pub fn prepare(scene: &Scene, dir: &Path) -> Result<Prepared> {
+    crate::environment::check()?;
     let large = plan::large_run(scene);
     let writer = SetWriter::new(scene, Staging::prepare(dir, &scene.files)?)?;
     Ok(Prepared {

@@ -77,11 +77,11 @@ fn bar(progress: &Progress, stop: &AtomicBool) {
 
 fn lines(progress: &Progress, stop: &AtomicBool) {
     // LYAPSWEEP_PROGRESS_SECONDS sets the interval (the tests use 0).
-    let every = std::env::var("LYAPSWEEP_PROGRESS_SECONDS")
+    // (checked with the other variables before the run: `environment`).
+    let every = crate::environment::progress_interval()
         .ok()
-        .and_then(|s| s.parse::<f64>().ok())
-        .filter(|s| s.is_finite() && *s >= 0.0)
-        .map_or(LINE_EVERY, Duration::from_secs_f64);
+        .flatten()
+        .unwrap_or(LINE_EVERY);
     let start = Instant::now();
     let mut next = every;
     loop {

@@ -62,6 +62,6 @@ fn has_avx2() -> bool {
     *HAS.get_or_init(|| {
         std::is_x86_feature_detected!("avx2")
             && std::is_x86_feature_detected!("fma")
-            && std::env::var_os("LYAPSWEEP_NO_AVX2").is_none()
+            && std::env::var_os("LYAPSWEEP_NO_AVX2").is_none_or(|v| v.is_empty())
     })
 }

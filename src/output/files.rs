@@ -39,10 +39,11 @@ pub const HEAT_MAP: &str = "heat-map";
 /// With `[attractors]` over two parameters: the attractors found per cell.
 pub const ATTRACTOR_MAP: &str = "attractors-map";
 
-/// Rust's `{}` for f64 is the shortest text that reads back to the same
-/// number: full precision without trailing noise.
+/// The shortest text that reads back to the same number: full precision
+/// without trailing noise, with an exponent only for extreme magnitudes
+/// (see [`crate::error::number`]).
 pub(crate) fn number(v: f64) -> String {
-    format!("{v}")
+    crate::error::number(v)
 }
 
 /// Writes a text file under a temporary name and renames it into place.

@@ -63,6 +63,16 @@ fn read_shard(dir: &Path) -> Result<Shard> {
     let text = read(SHARD_FILE)?;
     let file: ShardFile =
         toml::from_str(&text).map_err(|e| bad(&dir.join(SHARD_FILE), e.message().to_owned()))?;
+    // As `--shard I/N` takes them: the lanes are dealt out N ways.
+    if file.count == 0 || file.index >= file.count {
+        return Err(bad(
+            &dir.join(SHARD_FILE),
+            format!(
+                "index = {}, count = {}: a shard is one of count ≥ 1, its index from 0 to count - 1",
+                file.index, file.count
+            ),
+        ));
+    }
     Ok(Shard {
         dir: dir.to_owned(),
         file,

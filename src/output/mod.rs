@@ -17,6 +17,7 @@ pub mod attractor_table;
 pub mod figure;
 pub mod files;
 pub mod merge;
+pub mod owned;
 pub mod plot;
 pub mod results;
 pub mod set;

@@ -65,18 +65,36 @@ fn cell(path: &Path, record: &csv::StringRecord, row: usize, k: usize) -> Result
 /// call created is removed again when drawing fails.
 pub fn redraw(dir: &Path, into: &Path) -> Result<Vec<PathBuf>> {
     super::set::verify(dir)?;
-    // The user's mistake, found before drawing (creating the folder would
-    // fail only after the figures were drawn, as a failed write).
-    if std::fs::metadata(into).is_ok_and(|m| !m.is_dir()) {
-        return Err(Error::Output {
-            path: into.to_owned(),
-            reason: "exists and is not a folder: --out names the folder the figures go into".into(),
-        });
+    // The set's own figures are redrawn in place; elsewhere the figures go
+    // only where they replace no file but lyapsweep's own (`owned`), and
+    // never into a folder of the set, which holds only the set's files.
+    // All found before drawing: creating the folder would fail only after
+    // the figures were drawn, as a failed write.
+    let own = into.canonicalize().ok() == dir.canonicalize().ok();
+    if !own {
+        if super::owned::is_within(into, dir) {
+            return Err(Error::Output {
+                path: into.to_owned(),
+                reason: format!(
+                    "is inside the output set {}, which holds only the files a run writes (a later run would refuse the set): give --out a folder outside it, or leave --out out to redraw the set's own figures",
+                    dir.display()
+                ),
+            });
+        }
+        let names: Vec<String> = super::set::FIGURE_STEMS
+            .iter()
+            .flat_map(|stem| [format!("{stem}.png"), format!("{stem}.svg")])
+            .collect();
+        super::owned::check(into, &names.iter().map(String::as_str).collect::<Vec<_>>())?;
     }
     let created = !into.exists();
     let result = draw(dir, into);
-    if result.is_err() && created {
-        let _ = std::fs::remove_dir_all(into);
+    match &result {
+        Err(_) if created => {
+            let _ = std::fs::remove_dir_all(into);
+        }
+        Ok(written) if !own => super::owned::record(into, written)?,
+        _ => {}
     }
     result
 }

@@ -42,7 +42,7 @@ const DATA_FILES: [&str; 6] = [
     BIFURCATION_FILE,
     ATTRACTORS_FILE,
 ];
-const FIGURE_STEMS: [&str; 3] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP];
+pub const FIGURE_STEMS: [&str; 3] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP];
 
 /// Pauses before writing each file and before the swap, naming the step on
 /// stderr, for tests that kill a run in its write phase.

@@ -96,6 +96,25 @@ pub(super) struct RawOutput {
     pub(super) plot: Option<bool>,
 }
 
+/// The tables a scene's keys hold, as serde names them ("struct RawSweep")
+/// and as its user knows them: a table, with its keys.
+const TABLES: [(&str, &str); 7] = [
+    ("struct RawSweep", "a table (parameter, and from, to, count or values; second)"),
+    ("struct RawAxis", "a table (parameter, and from, to, count or values)"),
+    ("struct RawIntegration", "a table (steps_per_period, transient, align, iterations, initial_state, perturbation, difference, impact_location, submaps)"),
+    ("struct RawRun", "a table (backend, precision, validate)"),
+    ("struct RawOutput", "a table (lyapunov, bifurcation_points, plot)"),
+    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation)"),
+    ("struct RawScene", "a table"),
+];
+
+/// serde's message with the code's type names put in the user's words.
+fn in_the_users_words(message: &str) -> String {
+    TABLES.iter().fold(message.to_owned(), |m, (code, words)| {
+        m.replace(code, words)
+    })
+}
+
 /// The table, overrides applied, as a [`RawScene`]; a bad value is named
 /// by its key, and said to be the override's when `--set` gave it.
 pub(super) fn deserialize(
@@ -113,7 +132,9 @@ pub(super) fn deserialize(
         // The value deserializer appends "in `path`" on a second line;
         // the path is already in front.
         let inner = e.inner().to_string();
-        let first_line = clip_quoted(inner.lines().next().unwrap_or_default().trim());
+        let first_line = clip_quoted(&in_the_users_words(
+            inner.lines().next().unwrap_or_default().trim(),
+        ));
         // A value an override gave is the override's fault, not the file's.
         let from = |key: &str| {
             path == key

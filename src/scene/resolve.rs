@@ -7,10 +7,10 @@ use super::defaults::{
     DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 use super::raw::{RawAxis, RawIntegration, RawOutput, RawScene, RawSweep};
-use super::starts::resolve_starts;
+use super::starts::{resolve_starts, RawAttractors};
 use super::sweep::resolve_sweep;
 use super::types::{Integration, Lyapunov, Precision, Scene, Shard, Sweep};
-use crate::error::{clip, Error, Result};
+use crate::error::{clip, number, Error, Result};
 use crate::method::jacobian::Difference;
 use crate::system::{self, Params, SystemInfo};
 
@@ -26,11 +26,14 @@ pub(super) fn resolve(
     let (info, params) = resolve_kind(&raw)?;
     let integration = resolve_integration(info, raw.integration)?;
     let lyapunov = raw.output.lyapunov.unwrap_or_default() == Lyapunov::Spectrum;
-    let starts = raw.attractors.as_ref().map(|a| (a.key(), a.count()));
+    check_max_period(
+        raw.attractors.as_ref().and_then(|a| a.max_period),
+        &integration,
+    )?;
     check_size(
         info,
         &raw.sweep,
-        starts,
+        raw.attractors.as_ref(),
         &raw.output,
         &integration,
         lyapunov,
@@ -43,7 +46,7 @@ pub(super) fn resolve(
     {
         return Err(Error::invalid(
             "integration.perturbation",
-            format!("must be a finite number > 0, got {delta}"),
+            format!("must be a finite number > 0, got {}", number(delta)),
         ));
     }
     check_initial_state(info, &params, &sweep, &integration.initial_state)?;
@@ -145,7 +148,7 @@ fn resolve_integration(info: &'static SystemInfo, i: RawIntegration) -> Result<I
 fn check_size(
     info: &'static SystemInfo,
     sweep: &RawSweep,
-    starts: Option<(&'static str, usize)>,
+    attractors: Option<&RawAttractors>,
     output: &RawOutput,
     integration: &Integration,
     lyapunov: bool,
@@ -155,8 +158,8 @@ fn check_size(
     if let Some(second) = &sweep.second {
         counts.push(("sweep.second.count".to_owned(), axis_len(second)));
     }
-    if let Some((key, n)) = starts {
-        counts.push((key.to_owned(), n));
+    if let Some(a) = attractors {
+        counts.push((a.key().to_owned(), a.count()));
     }
     let copies = if lyapunov {
         integration
@@ -170,9 +173,30 @@ fn check_size(
         &counts,
         info.dimension(),
         output.bifurcation_points.unwrap_or(0),
+        attractors.and_then(|a| a.max_period),
         integration.steps_per_lane(info.is_flow, copies),
         shard.map(|s| s.count),
     )
+}
+
+/// `attractors.max_period` against the averaged iterations: a period p is
+/// told from the last 2·p of them, so a longer one can never be detected
+/// (and a lane would hold points for it in vain).
+fn check_max_period(max_period: Option<usize>, integration: &Integration) -> Result<()> {
+    let Some(max_period) = max_period else {
+        return Ok(());
+    };
+    let most = (integration.iterations / 2).max(1);
+    if max_period > most {
+        return Err(Error::invalid(
+            "attractors.max_period",
+            format!(
+                "must be at most {most}, got {max_period}: a period p is told from the last 2·p averaged iterations, and integration.iterations is {}",
+                integration.iterations
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The initial state: as many finite numbers as the system has states,
@@ -204,7 +228,7 @@ fn check_initial_state(
     if let Some(v) = state.iter().find(|v| !v.is_finite()) {
         return Err(Error::invalid(
             "integration.initial_state",
-            format!("must be finite, got {v}"),
+            format!("must be finite, got {}", number(*v)),
         ));
     }
     check_state_at_every_value(info, params, sweep, state)
@@ -227,7 +251,11 @@ fn check_state_at_every_value(
             p.set(axis.index, *value);
             (info.check_state)(&p, state).map_err(|reason| {
                 let at = if axis.values.len() > 1 {
-                    format!(" (at {} = {value}, sweep value {k})", axis.parameter)
+                    format!(
+                        " (at {} = {}, sweep value {k})",
+                        axis.parameter,
+                        number(*value)
+                    )
                 } else {
                     String::new()
                 };
@@ -240,7 +268,7 @@ fn check_state_at_every_value(
 
 /// "[1, -0.5]": a state as a message shows it.
 fn numbers(state: &[f64]) -> String {
-    let parts: Vec<String> = state.iter().map(|v| v.to_string()).collect();
+    let parts: Vec<String> = state.iter().map(|&v| number(v)).collect();
     format!("[{}]", parts.join(", "))
 }
 

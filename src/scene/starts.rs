@@ -139,6 +139,16 @@ pub(super) fn resolve_starts(
         ));
     }
     let given = [raw.starts.is_some(), raw.grid.is_some(), raw.list.is_some()];
+    // A table that chooses no starts (only max_period or continuation)
+    // asks for one: integration.initial_state, as without the table.
+    if given == [false; 3] && raw.bounds.is_none() && raw.seed.is_none() {
+        return Ok(Starts {
+            layout: Layout::List,
+            states: vec![initial_state.to_vec()],
+            max_period,
+            continuation,
+        });
+    }
     if given.iter().filter(|&&g| g).count() != 1 {
         return Err(Error::invalid(
             "attractors",

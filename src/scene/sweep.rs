@@ -5,7 +5,7 @@
 use super::defaults::{positive, DEFAULT_COUNT};
 use super::raw::{RawAxis, RawSweep};
 use super::types::{Axis, Sweep};
-use crate::error::{clip, Error, Result};
+use crate::error::{clip, number, Error, Result};
 use crate::system::{Params, SystemInfo};
 
 /// The sweep's axes, the second (if any) a different parameter.
@@ -46,8 +46,11 @@ pub(super) fn resolve_sweep(
                     Error::invalid(
                         info.key(name),
                         format!(
-                            "{reason} (at {} = {x}, {} = {y})",
-                            first.parameter, second.parameter
+                            "{reason} (at {} = {}, {} = {})",
+                            first.parameter,
+                            number(x),
+                            second.parameter,
+                            number(y)
                         ),
                     )
                 })?;
@@ -160,11 +163,14 @@ fn resolve_axis(
                     "system" => info.key(&parameter),
                     other => key(other),
                 };
-                Error::invalid(at, format!("{parameter} = {value}: {parameter} {reason}"))
+                Error::invalid(
+                    at,
+                    format!("{parameter} = {}: {parameter} {reason}", number(*value)),
+                )
             } else {
                 Error::invalid(
                     info.key(name),
-                    format!("{reason} (with {parameter} = {value})"),
+                    format!("{reason} (with {parameter} = {})", number(*value)),
                 )
             }
         })?;

@@ -388,7 +388,7 @@ impl Scene {
             .sweep
             .axes()
             .zip(self.sweep.values_at(k))
-            .map(|(axis, v)| format!("{} = {v}", axis.parameter))
+            .map(|(axis, v)| format!("{} = {}", axis.parameter, crate::error::number(v)))
             .collect();
         if self.sweep.starts.is_some() {
             at.push(format!("start {}", self.sweep.start_index(k)));

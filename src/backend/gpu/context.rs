@@ -100,8 +100,13 @@ pub fn backends_from_env() -> Result<wgpu::Backends> {
     const KNOWN: [&str; 10] = [
         "vulkan", "vk", "dx12", "d3d12", "metal", "mtl", "opengl", "gles", "gl", "webgpu",
     ];
-    let Ok(text) = std::env::var("WGPU_BACKEND") else {
-        return Ok(wgpu::Backends::all());
+    // Unset or empty: every backend, as wgpu reads it.
+    let text = match std::env::var("WGPU_BACKEND") {
+        Ok(text) if !text.trim().is_empty() => text,
+        Err(std::env::VarError::NotUnicode(_)) => {
+            return Err(Error::invalid("WGPU_BACKEND", "is not UTF-8 text"))
+        }
+        _ => return Ok(wgpu::Backends::all()),
     };
     if let Some(unknown) = text
         .split(',')

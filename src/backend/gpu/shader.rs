@@ -290,6 +290,22 @@ pub fn check_source_dir() -> Result<(), crate::Error> {
         .filter(|path| !dir.join(path).is_file())
         .collect();
     if missing.is_empty() {
+        // Each read whole here, so that `include` (which can only panic)
+        // finds text: one that is not UTF-8, or emptied, is named now.
+        for (path, _) in SOURCES {
+            let file = dir.join(path);
+            let problem = match std::fs::read_to_string(&file) {
+                Ok(text) if text.trim().is_empty() => {
+                    "is empty: every kernel source holds code".to_owned()
+                }
+                Ok(_) => continue,
+                Err(e) => format!("cannot be read as text ({e})"),
+            };
+            return Err(crate::Error::invalid(
+                "LYAPSWEEP_SHADER_DIR",
+                format!("{}: {problem}", file.display()),
+            ));
+        }
         return Ok(());
     }
     Err(crate::Error::Backend {

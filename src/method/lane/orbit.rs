@@ -24,7 +24,9 @@ pub fn return_tolerance(rounding_unit: f64) -> f64 {
 impl<const D: usize> RecentPoints<D> {
     pub fn new(max_period: usize, rounding_unit: f64) -> Self {
         RecentPoints {
-            points: Vec::with_capacity(2 * max_period),
+            // Grown as points come, never reserved whole: a lane holds no
+            // more points than it iterates, however large `max_period` is.
+            points: Vec::new(),
             next: 0,
             seen: 0,
             max_period,

@@ -1,0 +1,136 @@
+//! The environment variables lyapsweep reads (README.md's table), checked
+//! together before any work: a value that is not one the variable takes is
+//! refused naming the variable and why, where it was once ignored, taken
+//! for another, or failed deep in a run.
+//!
+//! `CC`, `XDG_CACHE_HOME` and `WGPU_ADAPTER_NAME` take any text: where a
+//! C compiler does not run or the cache cannot be written the interpreter
+//! runs the model (the same bits, slower), and an adapter name that matches
+//! nothing is an error, naming the adapters found, when a GPU is chosen.
+
+use crate::error::{clip, Error, Result};
+
+/// Seconds between the `progress:` lines.
+pub const PROGRESS_SECONDS: &str = "LYAPSWEEP_PROGRESS_SECONDS";
+/// The longest interval between progress lines (about 30 years): past it a
+/// run would print nothing, and far past it the interval is no duration.
+pub const MOST_PROGRESS_SECONDS: f64 = 1e9;
+/// What runs the models' equations (`interpreter`, or unset).
+pub const STEP_LOOPS: &str = "LYAPSWEEP_STEP_LOOPS";
+/// Step trajectories one at a time, without AVX2.
+pub const NO_AVX2: &str = "LYAPSWEEP_NO_AVX2";
+/// The threads of the CPU path (read by rayon itself).
+pub const THREADS: &str = "RAYON_NUM_THREADS";
+/// Threads per core `RAYON_NUM_THREADS` may ask for: past a few per core
+/// more threads only add the cost of starting and switching them (100 000
+/// of them made a 0.1 s run take minutes).
+pub const MOST_THREADS_PER_CORE: usize = 8;
+
+/// Every variable checked; the first bad one is the error.
+pub fn check() -> Result<()> {
+    progress_interval()?;
+    step_loops_interpreter()?;
+    without_avx2()?;
+    threads()?;
+    crate::backend::options::dispatch_lane_steps_from_environment()?;
+    crate::backend::gpu::context::backends_from_env()?;
+    text("WGPU_ADAPTER_NAME")?;
+    if let Some(dir) = text("LYAPSWEEP_SHADER_DIR")? {
+        if !std::path::Path::new(&dir).is_dir() {
+            return Err(Error::invalid(
+                "LYAPSWEEP_SHADER_DIR",
+                format!("\"{}\" is not a folder (a copy of shaders/)", clip(&dir)),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A variable's text, `None` when unset or empty (as a shell's `VAR=` is
+/// read); text that is not UTF-8 is refused.
+pub fn text(name: &str) -> Result<Option<String>> {
+    match std::env::var(name) {
+        Ok(text) if text.is_empty() => Ok(None),
+        Ok(text) => Ok(Some(text)),
+        Err(std::env::VarError::NotPresent) => Ok(None),
+        Err(std::env::VarError::NotUnicode(_)) => Err(Error::invalid(name, "is not UTF-8 text")),
+    }
+}
+
+/// The interval between `progress:` lines, when set: seconds from 0 to
+/// [`MOST_PROGRESS_SECONDS`].
+pub fn progress_interval() -> Result<Option<std::time::Duration>> {
+    let Some(text) = text(PROGRESS_SECONDS)? else {
+        return Ok(None);
+    };
+    match text.trim().parse::<f64>() {
+        Ok(s) if (0.0..=MOST_PROGRESS_SECONDS).contains(&s) => {
+            Ok(Some(std::time::Duration::from_secs_f64(s)))
+        }
+        _ => Err(Error::invalid(
+            PROGRESS_SECONDS,
+            format!(
+                "\"{}\" is not a number of seconds from 0 to {MOST_PROGRESS_SECONDS:e}",
+                clip(&text)
+            ),
+        )),
+    }
+}
+
+/// Whether `LYAPSWEEP_STEP_LOOPS` asks for the interpreter (its one value).
+pub fn step_loops_interpreter() -> Result<bool> {
+    match text(STEP_LOOPS)? {
+        None => Ok(false),
+        Some(text) if text == "interpreter" => Ok(true),
+        Some(text) => Err(Error::invalid(
+            STEP_LOOPS,
+            format!(
+                "\"{}\" is not a choice: `interpreter` runs models on the tape's interpreter; unset, they run as native code",
+                clip(&text)
+            ),
+        )),
+    }
+}
+
+/// Whether `LYAPSWEEP_NO_AVX2` is set: `1` (or `true`, `yes`); a value
+/// that reads as "no" would be taken for its opposite, and is refused.
+pub fn without_avx2() -> Result<bool> {
+    match text(NO_AVX2)? {
+        None => Ok(false),
+        Some(text) if ["1", "true", "yes"].contains(&text.to_lowercase().as_str()) => Ok(true),
+        Some(text) => Err(Error::invalid(
+            NO_AVX2,
+            format!(
+                "\"{}\" is not 1: set it to 1 to step without AVX2, or unset it",
+                clip(&text)
+            ),
+        )),
+    }
+}
+
+/// `RAYON_NUM_THREADS`: a whole number (0: one per core, as rayon reads
+/// it), at most [`MOST_THREADS_PER_CORE`] per core.
+fn threads() -> Result<()> {
+    let Some(text) = text(THREADS)? else {
+        return Ok(());
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let most = MOST_THREADS_PER_CORE * cores;
+    // As rayon reads it: untrimmed.
+    match text.parse::<usize>() {
+        Ok(n) if n <= most => Ok(()),
+        Ok(n) => Err(Error::invalid(
+            THREADS,
+            format!(
+                "{n} threads on {cores} cores: at most {most} ({MOST_THREADS_PER_CORE} per core); more only add the cost of starting and switching threads"
+            ),
+        )),
+        Err(_) => Err(Error::invalid(
+            THREADS,
+            format!(
+                "\"{}\" is not a whole number of threads (0: one per core)",
+                clip(&text)
+            ),
+        )),
+    }
+}
