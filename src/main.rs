@@ -224,6 +224,14 @@ fn run(
         None => PathBuf::from("out").join(&scene.name),
     });
     let prepared = command::prepare(&scene, &dir)?;
+    if let Some(warning) = scene
+        .system
+        .model
+        .filter(|_| matches!(scene.backend, Backend::Cpu | Backend::Auto))
+        .and_then(|m| m.interpreter_fallback())
+    {
+        eprintln!("lyapsweep: warning: {warning}");
+    }
     if let Some(line) = prepared.large().filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
     }
@@ -276,6 +284,9 @@ fn print_summary(
         println!("  {choice}");
     }
     print_backend(report);
+    if let Some(fallback) = &report.interpreter_fallback {
+        println!("  interpreter  {fallback}");
+    }
     print_lanes(scene);
     print_method(scene, report);
     print_adjustments(scene, report);

@@ -712,6 +712,9 @@ pub struct Summary {
     pub raised: (usize, usize),
     /// Lanes cut into sub-maps, and the most parts.
     pub cut: (usize, usize),
+    /// Why the CPU runs the model on the interpreter, where the host's C
+    /// compiler failed to build its native code (a CPU run only).
+    pub interpreter_fallback: Option<String>,
     /// The scene's RK4 steps per period, against which `raised` counts.
     requested_steps: usize,
 }
@@ -732,6 +735,10 @@ impl Summary {
             max_sum_error: None,
             raised: (0, 0),
             cut: (0, 0),
+            interpreter_fallback: match report.backend {
+                Backend::Cpu => scene.system.model.and_then(|m| m.interpreter_fallback()),
+                _ => None,
+            },
             requested_steps: if scene.system.is_flow && report.backend != Backend::Exact {
                 scene.integration.steps_per_period
             } else {
