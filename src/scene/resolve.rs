@@ -308,7 +308,9 @@ fn axis_len(raw: &RawAxis) -> usize {
 /// A `[model]` table: parsed, compiled, and checked at its defaults.
 fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
     let model = crate::model::Model::parse(table, "model")?;
-    let info = system::model::info(crate::model::code::Code::compile(model, "model")?);
+    let info = system::model::info_of(&format!("{table:?}"), || {
+        crate::model::code::Code::compile(model, "model")
+    })?;
     let params = Params::defaults(info);
     (info.check)(&params).map_err(|(name, reason)| Error::invalid(info.key(name), reason))?;
     Ok((info, params))
