@@ -67,6 +67,7 @@ fn staging(parent: &Path) -> Vec<String> {
 /// steps, and checks the exit code, the time to exit, that no staging
 /// folder is left and that the previous set is untouched.
 fn stopped_by(signal: libc::c_int, code: i32, backend: &str) {
+    let _alone = one_at_a_time();
     // lavapipe has no f64: the GPU runs f32 (as `gpu_or_skip` checked).
     let precision = if backend == "gpu" { "f32" } else { "f64" };
     let dir = tempfile::tempdir().unwrap();
@@ -153,4 +154,75 @@ fn sigterm_stops_a_gpu_run_and_keeps_the_previous_set() {
     if common::gpu_or_skip("sigterm_stops_a_gpu_run", Precision::F32) {
         stopped_by(libc::SIGTERM, 143, "gpu");
     }
+}
+
+/// The tests of this file one at a time: each keeps the cores busy, and
+/// a stop timed against the others' runs (lavapipe's above all) measures
+/// the load, not the stop.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static ALONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ALONE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A million starts per value (the most `[attractors]` takes): the run
+/// plans each value once, not each of its starts, so its first progress
+/// line comes within seconds (it came after 23 to 40 s at 8 values on two
+/// busy cores, planning 2^20 lanes per value on one thread), and Ctrl-C
+/// stops it.
+#[test]
+fn a_million_starts_per_value_show_progress_within_seconds() {
+    let _alone = one_at_a_time();
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.toml");
+    let text = SHORT.replace("count = 4", "count = 8")
+        + "[attractors]\ngrid = [1024, 1024]\nbox = { x = [-3, 0.9], v = [-3, 3] }\n";
+    std::fs::write(&scene, text).unwrap();
+    let started = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        // `auto` (the default) plans the sweep for the GPU, to choose.
+        .args(["run", "--out"])
+        .arg(dir.path().join("out"))
+        .arg(&scene)
+        .env("LYAPSWEEP_PROGRESS_SECONDS", "0.2")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    use std::io::BufRead;
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        let progress = line.starts_with("progress");
+        seen.push(line);
+        if progress {
+            break;
+        }
+    }
+    let waited = started.elapsed();
+    // SAFETY: as in `stopped_by`.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    // Read to the end: the run still writes to its stderr.
+    let rest: Vec<String> = lines.map(|l| l.unwrap()).collect();
+    let status = child.wait().unwrap();
+    assert!(
+        rest.iter().any(|l| l.contains("stopped by SIGINT")),
+        "{rest:?}"
+    );
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
+        "8 values × 2^20 starts: first progress after {:.2} s",
+        waited.as_secs_f64()
+    );
+    assert!(
+        seen.last().is_some_and(|l| l.starts_with("progress")),
+        "{seen:?}"
+    );
+    assert!(waited < Duration::from_secs(6), "{waited:?}: {seen:?}");
+    assert_eq!(status.code(), Some(130));
+    assert_eq!(staging(dir.path()), Vec::<String>::new(), "staging left");
 }

@@ -336,9 +336,16 @@ fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
     // Whether the kernels would compile impact code (precision is irrelevant).
     let wall = variant(scene, Precision::F64).wall;
     // Over the whole sweep, so that a shard runs every lane as the whole
-    // sweep would.
+    // sweep would. The starts of one point share its parameters, so its
+    // refusal and plan: one lane of each run of lanes at one point is
+    // planned (a million starts per value once took minutes here).
+    let mut last_point = None;
     for k in 0..scene.sweep.lanes() {
-        let params = scene.params_at(k);
+        let point = scene.sweep.point_of(k);
+        if last_point.replace(point) == Some(point) {
+            continue;
+        }
+        let params = scene.params_at_point(point);
         if let Some(reason) = (scene.system.gpu_refuses)(&params).filter(|_| wall) {
             return Err(Error::invalid(
                 "run.backend",
