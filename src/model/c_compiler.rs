@@ -89,7 +89,8 @@ pub(super) fn compiled_in(
         // against the digest written with it) and has no initialisers.
         match unsafe { libloading::Library::new(&object) } {
             Ok(library) => return Ok(library),
-            Err(e) if built => return Err(format!("{}: {e}", object.display())),
+            // The loader's message names the object.
+            Err(e) if built => return Err(e.to_string()),
             // Cached, intact by its digest, and not loadable: built again.
             Err(_) => {
                 let _ = std::fs::remove_file(&object);
