@@ -2,6 +2,8 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicI32, Ordering};
+use std::sync::Arc;
 
 use clap::{Parser, Subcommand};
 use lyapsweep::command::{self, progress_bar};
@@ -121,12 +123,17 @@ fn main() -> ExitCode {
             // Flags are overrides of their scene keys, applied last.
             overrides.extend(backend.map(|b| format!("run.backend=\"{b}\"")));
             overrides.extend(precision.map(|p| format!("run.precision=\"{p}\"")));
+            let (stop, caught) = stop_on_signals();
             let how = How {
                 shard: shard.as_deref(),
                 quiet,
                 device,
+                stop,
             };
-            exit_code(run(&scene, out, &overrides, how))
+            match run(&scene, out, &overrides, how) {
+                Err(Error::Stopped) => stopped(caught.load(Ordering::SeqCst)),
+                result => exit_code(result),
+            }
         }
         Command::Plot { dir, out } => exit_code(plot(&dir, out.as_deref().unwrap_or(&dir))),
         Command::Merge { out, shards } => exit_code(merge(&out, &shards)),
@@ -163,6 +170,48 @@ struct How<'a> {
     shard: Option<&'a str>,
     quiet: bool,
     device: Option<usize>,
+    stop: lyapsweep::method::Stop,
+}
+
+/// SIGINT (Ctrl-C) and SIGTERM stop a run: the first asks the library to
+/// stop (every lane loop and GPU dispatch loop looks at the flag, and the
+/// stopped run removes its staged set, so the output folder keeps what it
+/// held); a second exits at once, leaving the staging folder for the next
+/// run into that folder to remove. Returns the flag and the signal caught
+/// (0 until one is).
+fn stop_on_signals() -> (lyapsweep::method::Stop, Arc<AtomicI32>) {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let stop = lyapsweep::method::Stop::default();
+    let caught = Arc::new(AtomicI32::new(0));
+    match signal_hook::iterator::Signals::new([SIGINT, SIGTERM]) {
+        Ok(mut signals) => {
+            let (stop, caught) = (stop.clone(), caught.clone());
+            std::thread::spawn(move || {
+                for signal in signals.forever() {
+                    if caught.swap(signal, Ordering::SeqCst) != 0 {
+                        std::process::exit(128 + signal);
+                    }
+                    stop.request();
+                }
+            });
+        }
+        Err(e) => eprintln!(
+            "lyapsweep: no handler for SIGINT and SIGTERM ({e}): they end a run without removing its staging folder"
+        ),
+    }
+    (stop, caught)
+}
+
+/// The exit code of a run stopped by `signal`: 128 + its number (130 for
+/// SIGINT, 143 for SIGTERM), as a shell reports a process it ended.
+fn stopped(signal: i32) -> ExitCode {
+    let name = match signal {
+        signal_hook::consts::SIGINT => "SIGINT",
+        signal_hook::consts::SIGTERM => "SIGTERM",
+        _ => "a signal",
+    };
+    eprintln!("lyapsweep: stopped by {name}; the output folder keeps what it held");
+    ExitCode::from(u8::try_from(128 + signal).unwrap_or(1))
 }
 
 fn run(
@@ -191,6 +240,14 @@ fn run(
         None => PathBuf::from("out").join(&scene.name),
     });
     let prepared = command::prepare(&scene, &dir)?;
+    if let Some(warning) = scene
+        .system
+        .model
+        .filter(|_| matches!(scene.backend, Backend::Cpu | Backend::Auto))
+        .and_then(|m| m.interpreter_fallback())
+    {
+        eprintln!("lyapsweep: warning: {warning}");
+    }
     if let Some(line) = prepared.large().filter(|_| !how.quiet) {
         eprintln!("lyapsweep: {line}");
     }
@@ -199,6 +256,7 @@ fn run(
     let options = lyapsweep::RunOptions {
         progress: Some(progress.clone()),
         device: how.device,
+        stop: how.stop,
         ..Default::default()
     };
     let outcome = prepared.run(&options);
@@ -280,6 +338,9 @@ fn print_summary(
         say!(out, "  {choice}");
     }
     print_backend(out, report);
+    if let Some(fallback) = &report.interpreter_fallback {
+        say!(out, "  interpreter  {fallback}");
+    }
     print_lanes(out, scene);
     print_method(out, scene, report);
     print_adjustments(out, scene, report);

@@ -531,3 +531,50 @@ fn a_shader_folder_with_a_broken_source_names_the_file() {
         assert!(!dir.path().join("out").exists());
     }
 }
+
+/// A C compiler that fails (or is missing) leaves the model to the
+/// interpreter, 8 to 10 times slower: the run says so on stderr, naming
+/// the compiler and its error, and in its summary, and still runs.
+#[test]
+fn a_failing_c_compiler_is_named_on_stderr_and_in_the_summary() {
+    let cache = tempfile::tempdir().unwrap();
+    for (cc, error) in [
+        ("/bin/false", "/bin/false failed (exit status: 1"),
+        ("/no/such/compiler", "/no/such/compiler: No such file"),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("scene.toml"), BASE).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+            .args(["run", "--quiet", "--backend", "cpu", "--out"])
+            .arg(dir.path().join("out"))
+            .arg(dir.path().join("scene.toml"))
+            .env("CC", cc)
+            .env("XDG_CACHE_HOME", cache.path())
+            .env_remove("LYAPSWEEP_STEP_LOOPS")
+            .output()
+            .unwrap();
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+        );
+        assert_eq!(out.status.code(), Some(0), "{cc}: {stderr}");
+        let warning = stderr
+            .lines()
+            .find(|l| l.contains("warning"))
+            .unwrap_or_else(|| panic!("{cc}: no warning on stderr: {stderr}"));
+        assert!(warning.contains(&format!("CC = {cc}")), "{warning}");
+        assert!(warning.contains("interpreter"), "{warning}");
+        assert!(warning.contains(error), "{warning}");
+        let line = stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with("interpreter"))
+            .unwrap_or_else(|| panic!("{cc}: not in the summary: {stdout}"));
+        assert!(line.contains(error), "{line}");
+    }
+    // The host's compiler builds it: neither says a word.
+    let dir = tempfile::tempdir().unwrap();
+    let out = lyapsweep(dir.path(), BASE, &["--quiet", "--backend", "cpu"]);
+    assert!(out.status.success());
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("warning"));
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("interpreter"));
+}

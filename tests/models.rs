@@ -194,3 +194,23 @@ fn malformed_models_are_refused_naming_the_key() {
     );
     assert!(err.contains("(at eta = -0.5, sweep value 3)"), "{err}");
 }
+
+/// A model's description (its compiled code, native code and WGSL
+/// included) is kept for the process: a scene run again and again in one
+/// process (the Python package's loop) compiles and keeps it once, not
+/// once per run.
+#[test]
+fn the_same_model_loaded_again_is_kept_once() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/duffing.toml");
+    let first = lyapsweep::scene::load(&path, &[]).unwrap();
+    let kept = lyapsweep::system::model::described();
+    for _ in 0..20 {
+        let again = lyapsweep::scene::load(&path, &[]).unwrap();
+        assert!(std::ptr::eq(first.system, again.system));
+    }
+    assert_eq!(lyapsweep::system::model::described(), kept);
+    // An override of a parameter's default is the scene's, not the model's.
+    let other = lyapsweep::scene::load(&path, &["sweep.count=3".into()]).unwrap();
+    assert!(std::ptr::eq(first.system, other.system));
+    assert_eq!(lyapsweep::system::model::described(), kept);
+}

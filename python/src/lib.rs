@@ -329,6 +329,7 @@ fn summary<'py>(
     d.set_item("time", s.elapsed.as_secs_f64())?;
     d.set_item("max_sum_error", s.max_sum_error)?;
     d.set_item("max_error", s.max_error)?;
+    d.set_item("interpreter_fallback", s.interpreter_fallback.as_deref())?;
     d.set_item("flagged", s.flagged())?;
     d.set_item("failures", &s.failures)?;
     d.set_item("flagged_by_status", &s.flagged_by_status)?;

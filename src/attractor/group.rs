@@ -84,6 +84,34 @@ pub struct ValueAttractors {
     /// attractor) when a lane started from that attractor's final state
     /// ended on this one.
     pub links: Vec<(usize, usize, usize)>,
+    /// What the matching reads of each attractor's first lane, by index
+    /// (see [`Shape`]): kept, not recomputed for every lane that arrives.
+    shapes: Vec<Shape>,
+}
+
+/// What [`same_attractor`] reads of a lane beyond its period and points,
+/// computed once per lane: the signs of its exponents, the box around its
+/// points and the largest |x| among them. Min, max and comparisons are
+/// exact, so the cached values give the same answers, to the bit, as
+/// folding the points again at every comparison; matching a lane against
+/// N attractors then costs N boxes, not N passes over their points.
+#[derive(Clone, Debug)]
+struct Shape {
+    signs: Vec<i8>,
+    /// (low, high) of each coordinate of the points.
+    bounds: Vec<(f64, f64)>,
+    /// max(1, |x|∞) over the points.
+    scale: f64,
+}
+
+impl Shape {
+    fn of(lane: &LaneResult, dim: usize) -> Shape {
+        Shape {
+            signs: signs(&lane.exponents),
+            bounds: (0..dim).map(|i| bounds(lane, dim, i)).collect(),
+            scale: lane.orbit.iter().fold(1.0_f64, |m, v| m.max(v.abs())),
+        }
+    }
 }
 
 impl ValueAttractors {
@@ -93,13 +121,20 @@ impl ValueAttractors {
     /// new.
     pub fn join(&mut self, member: Member, sampled: bool, rule: Rule) -> (usize, bool) {
         let start = member.start;
+        while self.shapes.len() < self.attractors.len() {
+            let first = &self.attractors[self.shapes.len()].first.lane;
+            self.shapes.push(Shape::of(first, rule.dim));
+        }
+        let shape = Shape::of(&member.lane, rule.dim);
         let found = self
             .attractors
             .iter()
-            .position(|a| same_attractor(&a.first.lane, &member.lane, rule));
+            .zip(&self.shapes)
+            .position(|(a, known)| matches(&a.first.lane, known, &member.lane, &shape, rule));
         let (index, new) = match found {
             Some(i) => (i, false),
             None => {
+                self.shapes.push(shape);
                 self.attractors.push(Attractor {
                     first: member,
                     starts: 0,
@@ -130,6 +165,13 @@ impl ValueAttractors {
 /// a point of the other; or both aperiodic, with the same signs of
 /// exponents and regions (the boxes around their points) that overlap.
 pub fn same_attractor(a: &LaneResult, b: &LaneResult, rule: Rule) -> bool {
+    matches(a, &Shape::of(a, rule.dim), b, &Shape::of(b, rule.dim), rule)
+}
+
+/// [`same_attractor`] of `a` and `b` with their shapes computed already:
+/// the same tests in the same order, the points' folds read from the
+/// shapes.
+fn matches(a: &LaneResult, sa: &Shape, b: &LaneResult, sb: &Shape, rule: Rule) -> bool {
     if is_lone(&a.status) || is_lone(&b.status) || a.orbit.is_empty() || b.orbit.is_empty() {
         return false;
     }
@@ -141,8 +183,8 @@ pub fn same_attractor(a: &LaneResult, b: &LaneResult, rule: Rule) -> bool {
                     .all(|x| points(b, dim).any(|y| relative_distance(x, y) <= tolerance))
         }
         (None, None) => {
-            signs(&a.exponents) == signs(&b.exponents)
-                && box_gap(a, b, dim) <= tolerance * scale(a, b)
+            sa.signs == sb.signs
+                && gap(&sa.bounds, &sb.bounds) <= tolerance * sa.scale.max(sb.scale)
         }
         _ => false,
     }
@@ -172,16 +214,25 @@ pub(super) fn scale(a: &LaneResult, b: &LaneResult) -> f64 {
 /// The gap between the boxes around two lanes' points, in the max norm
 /// (0 when they overlap).
 pub(super) fn box_gap(a: &LaneResult, b: &LaneResult, dim: usize) -> f64 {
-    let bounds = |lane: &LaneResult, i: usize| {
-        points(lane, dim).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
-            (lo.min(x[i]), hi.max(x[i]))
-        })
-    };
-    (0..dim).fold(0.0_f64, |gap, i| {
-        let (alo, ahi) = bounds(a, i);
-        let (blo, bhi) = bounds(b, i);
-        gap.max(alo - bhi).max(blo - ahi)
+    let box_of = |lane| -> Vec<(f64, f64)> { (0..dim).map(|i| bounds(lane, dim, i)).collect() };
+    gap(&box_of(a), &box_of(b))
+}
+
+/// (low, high) of coordinate `i` over a lane's points.
+fn bounds(lane: &LaneResult, dim: usize, i: usize) -> (f64, f64) {
+    points(lane, dim).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+        (lo.min(x[i]), hi.max(x[i]))
     })
+}
+
+/// The gap between two boxes, each (low, high) per coordinate, in the max
+/// norm (0 when they overlap).
+fn gap(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+    a.iter()
+        .zip(b)
+        .fold(0.0_f64, |gap, (&(alo, ahi), &(blo, bhi))| {
+            gap.max(alo - bhi).max(blo - ahi)
+        })
 }
 
 /// The signs of the exponents (+1, 0, -1), an exponent within a hundredth
@@ -201,4 +252,197 @@ fn signs(exponents: &[f64]) -> Vec<i8> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::method::lane::LanePlan;
+
+    /// The matching as it was, every fold over the points redone at every
+    /// comparison: the reference the kept shapes must agree with.
+    fn same_attractor_by_points(a: &LaneResult, b: &LaneResult, rule: Rule) -> bool {
+        if is_lone(&a.status) || is_lone(&b.status) || a.orbit.is_empty() || b.orbit.is_empty() {
+            return false;
+        }
+        let (dim, tolerance) = (rule.dim, rule.tolerance);
+        match (a.orbit_period, b.orbit_period) {
+            (Some(p), Some(q)) => {
+                p == q
+                    && points(a, dim)
+                        .all(|x| points(b, dim).any(|y| relative_distance(x, y) <= tolerance))
+            }
+            (None, None) => {
+                let bounds = |lane: &LaneResult, i: usize| {
+                    points(lane, dim).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                        (lo.min(x[i]), hi.max(x[i]))
+                    })
+                };
+                let gap = (0..dim).fold(0.0_f64, |gap, i| {
+                    let (alo, ahi) = bounds(a, i);
+                    let (blo, bhi) = bounds(b, i);
+                    gap.max(alo - bhi).max(blo - ahi)
+                });
+                signs(&a.exponents) == signs(&b.exponents) && gap <= tolerance * scale(a, b)
+            }
+            _ => false,
+        }
+    }
+
+    fn lane(orbit: Vec<f64>, period: Option<usize>, exponents: Vec<f64>) -> LaneResult {
+        LaneResult {
+            exponents,
+            impacts_per_period: 0.0,
+            crossings_per_period: [0.0; crate::integrate::MAX_EVENTS],
+            period: 1.0,
+            orbit_period: period,
+            orbit,
+            orbit_term: 0.0,
+            bifurcation: Vec::new(),
+            jacobians: Vec::new(),
+            grazing: 0,
+            grazing_bound: 0.0,
+            error: 0.0,
+            plan: LanePlan {
+                steps_per_period: 100,
+                parts: 1,
+            },
+            status: LaneStatus::Ok,
+        }
+    }
+
+    /// Lanes of every kind the matching tells apart: periodic orbits of a
+    /// few periods, some on one orbit within the tolerance; aperiodic
+    /// regions that overlap, touch or lie apart, of either sign pattern,
+    /// NaN points among them; failed and empty lanes.
+    fn assorted(n: usize, points: usize, rng: &mut fastrand::Rng) -> Vec<LaneResult> {
+        (0..n)
+            .map(|k| {
+                let centre = [rng.usize(0..6) as f64 * 0.75, rng.usize(0..3) as f64];
+                match k % 7 {
+                    0 | 1 => {
+                        let p = 1 + rng.usize(0..3);
+                        let jitter = if rng.bool() { 1e-12 } else { 1e-3 };
+                        let orbit = (0..p)
+                            .flat_map(|j| [centre[0] + j as f64, centre[1] + jitter * rng.f64()])
+                            .collect();
+                        lane(orbit, Some(p), vec![-0.1, -0.5])
+                    }
+                    2 => lane(Vec::new(), None, vec![0.1, -0.5]),
+                    _ => {
+                        let width = 0.1 + 0.4 * rng.f64();
+                        let mut orbit: Vec<f64> = (0..points)
+                            .flat_map(|_| {
+                                [centre[0] + width * rng.f64(), centre[1] + width * rng.f64()]
+                            })
+                            .collect();
+                        if k % 11 == 0 {
+                            orbit[1] = f64::NAN;
+                        }
+                        let mut result =
+                            lane(orbit, None, vec![[0.1, 0.0][k % 2], -0.5 - rng.f64()]);
+                        if k % 13 == 0 {
+                            result.status = LaneStatus::NonFinite { iteration: 3 };
+                        }
+                        result
+                    }
+                }
+            })
+            .collect()
+    }
+
+    /// Each lane's attractor by the scan as it was: the first attractor
+    /// whose first lane matches, else a new one.
+    fn grouped_by_points(lanes: &[LaneResult], rule: Rule) -> Vec<usize> {
+        let mut firsts: Vec<&LaneResult> = Vec::new();
+        lanes
+            .iter()
+            .map(|l| {
+                match firsts
+                    .iter()
+                    .position(|a| same_attractor_by_points(a, l, rule))
+                {
+                    Some(i) => i,
+                    None => {
+                        firsts.push(l);
+                        firsts.len() - 1
+                    }
+                }
+            })
+            .collect()
+    }
+
+    fn grouped(lanes: &[LaneResult], rule: Rule) -> ValueAttractors {
+        let mut value = ValueAttractors::default();
+        for (start, l) in lanes.iter().enumerate() {
+            let member = Member {
+                start,
+                lane: l.clone(),
+                expected_sum: 0.0,
+            };
+            value.join(member, true, rule);
+        }
+        value
+    }
+
+    #[test]
+    fn kept_shapes_group_lanes_as_the_folds_over_their_points_did() {
+        let rule = Rule {
+            dim: 2,
+            tolerance: 1e-9,
+        };
+        for seed in 0..20 {
+            let mut rng = fastrand::Rng::with_seed(seed);
+            let lanes = assorted(300, 1 + rng.usize(0..40), &mut rng);
+            let value = grouped(&lanes, rule);
+            let kept: Vec<usize> = value.of_start.iter().map(|a| a.unwrap()).collect();
+            assert_eq!(kept, grouped_by_points(&lanes, rule), "seed {seed}");
+            assert!(
+                value.attractors.len() > 10,
+                "seed {seed}: a trivial grouping"
+            );
+            for (i, j) in [(0, 1), (3, 4), (5, 10), (12, 13)] {
+                assert_eq!(
+                    same_attractor(&lanes[i], &lanes[j], rule),
+                    same_attractor_by_points(&lanes[i], &lanes[j], rule)
+                );
+            }
+        }
+    }
+
+    /// Thousands of lanes that never settled (aperiodic, each on a region
+    /// of its own): the matching as it was against the kept shapes, timed.
+    #[test]
+    fn lanes_that_never_settle_are_matched_without_refolding_their_points() {
+        let rule = Rule {
+            dim: 2,
+            tolerance: 1e-9,
+        };
+        let (n, points) = (2000, 200);
+        let lanes: Vec<LaneResult> = (0..n)
+            .map(|k| {
+                let orbit = (0..points)
+                    .flat_map(|j| [k as f64 * 10.0 + j as f64 * 1e-3, 0.5])
+                    .collect();
+                lane(orbit, None, vec![0.1, -0.5])
+            })
+            .collect();
+        let before = std::time::Instant::now();
+        let reference = grouped_by_points(&lanes, rule);
+        let folded = before.elapsed();
+        let now = std::time::Instant::now();
+        let value = grouped(&lanes, rule);
+        let kept = now.elapsed();
+        assert_eq!(value.attractors.len(), n);
+        let of_start: Vec<usize> = value.of_start.iter().map(|a| a.unwrap()).collect();
+        assert_eq!(of_start, reference);
+        use std::io::Write;
+        let _ = writeln!(
+            std::io::stderr(),
+            "{n} lanes of {points} points, none settled: folding the points {:.2} s, kept shapes {:.3} s",
+            folded.as_secs_f64(),
+            kept.as_secs_f64()
+        );
+        assert!(kept < folded, "{kept:?} against {folded:?}");
+    }
 }

@@ -13,7 +13,7 @@ use crate::scene::Scene;
 const NEIGHBOURS: usize = crate::integrate::LANE_BATCH;
 
 /// Runs every lane of `scene` (of its shard, when sharded), in parallel,
-/// results in sweep order.
+/// results in sweep order; none when the run is stopped.
 pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> Vec<LaneResult> {
     // Each chunk's results go straight into their slots: collecting a
     // parallel iterator of unknown length would hold them twice at its end.
@@ -22,6 +22,11 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
         .par_chunks_mut(NEIGHBOURS)
         .enumerate()
         .for_each(|(c, slots)| {
+            // A stopped run sets up no more lanes (a million of them take
+            // seconds even when each ends at its first iteration).
+            if settings.stop.requested() {
+                return;
+            }
             let first = c * NEIGHBOURS;
             let lanes: Vec<Lane> = (first..first + slots.len())
                 .map(|k| Lane {
@@ -36,6 +41,10 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                 *slot = Some(result);
             }
         });
+    if settings.stop.requested() {
+        // Not results: the runner returns `Error::Stopped`.
+        return Vec::new();
+    }
     slots
         .into_iter()
         .map(|r| r.expect("every chunk fills its slots"))

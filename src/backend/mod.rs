@@ -386,9 +386,16 @@ fn gpu_plan(scene: &Scene, settings: &MethodSettings) -> Result<LanePlan> {
     // Whether the kernels would compile impact code (precision is irrelevant).
     let wall = variant(scene, Precision::F64).wall;
     // Over the whole sweep, so that a shard runs every lane as the whole
-    // sweep would.
+    // sweep would. The starts of one point share its parameters, so its
+    // refusal and plan: one lane of each run of lanes at one point is
+    // planned (a million starts per value once took minutes here).
+    let mut last_point = None;
     for k in 0..scene.sweep.lanes() {
-        let params = scene.params_at(k);
+        let point = scene.sweep.point_of(k);
+        if last_point.replace(point) == Some(point) {
+            continue;
+        }
+        let params = scene.params_at_point(point);
         if let Some(reason) = (scene.system.gpu_refuses)(&params).filter(|_| wall) {
             return Err(Error::invalid(
                 "run.backend",
@@ -765,6 +772,9 @@ pub struct Summary {
     pub raised: (usize, usize),
     /// Lanes cut into sub-maps, and the most parts.
     pub cut: (usize, usize),
+    /// Why the CPU runs the model on the interpreter, where the host's C
+    /// compiler failed to build its native code (a CPU run only).
+    pub interpreter_fallback: Option<String>,
     /// The scene's RK4 steps per period, against which `raised` counts.
     requested_steps: usize,
 }
@@ -786,6 +796,10 @@ impl Summary {
             max_error: None,
             raised: (0, 0),
             cut: (0, 0),
+            interpreter_fallback: match report.backend {
+                Backend::Cpu => scene.system.model.and_then(|m| m.interpreter_fallback()),
+                _ => None,
+            },
             requested_steps: if scene.system.is_flow && report.backend != Backend::Exact {
                 scene.integration.steps_per_period
             } else {

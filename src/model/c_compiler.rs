@@ -21,8 +21,13 @@ pub(super) const FLAGS: [&str; 6] = [
 
 /// The cached shared object built from `source` for this machine, loaded.
 pub(super) fn compiled(source: &str) -> Result<libloading::Library, String> {
-    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let cc = compiler();
     compiled_in(&cache_dir()?, &cc, cpu_target(&cc), source)
+}
+
+/// The C compiler: `$CC`, else `cc`.
+pub(super) fn compiler() -> String {
+    std::env::var("CC").unwrap_or_else(|_| "cc".into())
 }
 
 /// The name of the object built by `cc` for the processor `cpu` from
@@ -45,7 +50,7 @@ fn hex(bytes: &[u8]) -> String {
 }
 
 /// The SHA-256 of `bytes`, in hex.
-fn digest(bytes: &[u8]) -> String {
+pub(super) fn digest(bytes: &[u8]) -> String {
     use sha2::{Digest, Sha256};
     hex(&Sha256::digest(bytes))
 }
@@ -54,9 +59,10 @@ fn digest(bytes: &[u8]) -> String {
 /// processor `cpu` (the key's part that [`cpu_target`] gives). Each
 /// object is kept with the SHA-256 of its bytes (`.sha256` beside it): an
 /// object that does not match it (cut short, overwritten) is built again,
-/// never loaded. Both are written under names of this thread's, then
-/// renamed: runs and threads at the same time never load a half-written
-/// object.
+/// never loaded. One that matches it and still fails to load (garbage
+/// written with its own digest) is removed and built again, once. Both
+/// are written under names of this thread's, then renamed: runs and
+/// threads at the same time never load a half-written object.
 pub(super) fn compiled_in(
     dir: &std::path::Path,
     cc: &str,
@@ -72,45 +78,71 @@ pub(super) fn compiled_in(
             _ => false,
         }
     };
-    if !intact() {
-        static BUILDS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-        let build = BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let unique = |ext: &str| -> PathBuf {
-            dir.join(format!("{key}.{}-{build}.{ext}", std::process::id()))
-        };
-        let (c, so, so_sum) = (unique("c"), unique("so"), unique("sha256"));
-        std::fs::write(&c, source).map_err(|e| format!("{}: {e}", c.display()))?;
-        let output = std::process::Command::new(cc)
-            .args(FLAGS)
-            .arg("-o")
-            .arg(&so)
-            .arg(&c)
-            .output()
-            .map_err(|e| format!("{cc}: {e}"));
-        let _ = std::fs::remove_file(&c);
-        let output = output?;
-        let written = if output.status.success() {
-            std::fs::read(&so)
-                .and_then(|bytes| std::fs::write(&so_sum, digest(&bytes)))
-                .and_then(|()| std::fs::rename(&so, &object))
-                .and_then(|()| std::fs::rename(&so_sum, &sum))
-                .map_err(|e| format!("{}: {e}", object.display()))
-        } else {
-            Err(format!(
-                "{cc} failed: {}",
-                String::from_utf8_lossy(&output.stderr)
-            ))
-        };
-        if written.is_err() {
-            let _ = std::fs::remove_file(&so);
-            let _ = std::fs::remove_file(&so_sum);
+    let mut built = false;
+    loop {
+        if !intact() {
+            build(dir, &key, cc, source, (&object, &sum))?;
+            built = true;
         }
-        written?;
+        // SAFETY: the object is ours (built above or earlier from the same
+        // source for this processor, named by its hash, its bytes checked
+        // against the digest written with it) and has no initialisers.
+        match unsafe { libloading::Library::new(&object) } {
+            Ok(library) => return Ok(library),
+            // The loader's message names the object.
+            Err(e) if built => return Err(e.to_string()),
+            // Cached, intact by its digest, and not loadable: built again.
+            Err(_) => {
+                let _ = std::fs::remove_file(&object);
+                let _ = std::fs::remove_file(&sum);
+            }
+        }
     }
-    // SAFETY: the object is ours (built above or earlier from the same
-    // source for this processor, named by its hash, its bytes checked
-    // against the digest written with it) and has no initialisers.
-    unsafe { libloading::Library::new(&object) }.map_err(|e| format!("{}: {e}", object.display()))
+}
+
+/// Builds `source` with `cc` into `object`, its digest into `sum` (the
+/// pair of [`compiled_in`]).
+fn build(
+    dir: &std::path::Path,
+    key: &str,
+    cc: &str,
+    source: &str,
+    (object, sum): (&std::path::Path, &std::path::Path),
+) -> Result<(), String> {
+    static BUILDS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let build = BUILDS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let unique =
+        |ext: &str| -> PathBuf { dir.join(format!("{key}.{}-{build}.{ext}", std::process::id())) };
+    let (c, so, so_sum) = (unique("c"), unique("so"), unique("sha256"));
+    std::fs::write(&c, source).map_err(|e| format!("{}: {e}", c.display()))?;
+    let output = std::process::Command::new(cc)
+        .args(FLAGS)
+        .arg("-o")
+        .arg(&so)
+        .arg(&c)
+        .output()
+        .map_err(|e| format!("{cc}: {e}"));
+    let _ = std::fs::remove_file(&c);
+    let output = output?;
+    let written = if output.status.success() {
+        std::fs::read(&so)
+            .and_then(|bytes| std::fs::write(&so_sum, digest(&bytes)))
+            .and_then(|()| std::fs::rename(&so, object))
+            .and_then(|()| std::fs::rename(&so_sum, sum))
+            .map_err(|e| format!("{}: {e}", object.display()))
+    } else {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let stderr = stderr.trim();
+        Err(match stderr.is_empty() {
+            true => format!("{cc} failed ({}, nothing on stderr)", output.status),
+            false => format!("{cc} failed ({}): {stderr}", output.status),
+        })
+    };
+    if written.is_err() {
+        let _ = std::fs::remove_file(&so);
+        let _ = std::fs::remove_file(&so_sum);
+    }
+    written
 }
 
 /// The processor `cc` builds for under `-march=native`, once per process:

@@ -201,6 +201,29 @@ fn states_read(e: &Expr, n: usize) -> Vec<usize> {
 }
 
 impl Code {
+    /// Where the host's C compiler was asked for the model's native code
+    /// and failed (the interpreter then runs it, 8 to 10 times slower): a
+    /// warning naming the compiler (`$CC`, else `cc`) and its error. `None`
+    /// where it built the code, or `LYAPSWEEP_STEP_LOOPS=interpreter`
+    /// asked for the interpreter.
+    pub fn interpreter_fallback(&self) -> Option<String> {
+        if step_loops() == Loops::Interpreter {
+            return None;
+        }
+        let why = self
+            .regions
+            .iter()
+            .find_map(|f| f.native_failure.as_deref())
+            .or(match &self.switch_loops {
+                Some(Err(why)) => Some(why.as_str()),
+                _ => None,
+            })?;
+        Some(format!(
+            "the C compiler (CC = {}) did not build the model's native code, so the CPU runs it on the interpreter, 8 to 10 times slower: {why}",
+            super::c_compiler::compiler()
+        ))
+    }
+
     /// Compiles a parsed model; errors name the model's key (`key` is
     /// "model").
     pub fn compile(model: Model, key: &str) -> Result<Code> {

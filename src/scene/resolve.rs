@@ -52,13 +52,22 @@ pub(super) fn resolve(
     check_initial_state(info, &params, &sweep, &integration.initial_state)?;
     if let Some(attractors) = raw.attractors {
         let starts = resolve_starts(attractors, info, &integration.initial_state)?;
-        for (s, state) in starts.states.iter().enumerate() {
-            check_state_at_every_value(info, &params, &sweep, state).map_err(|reason| {
-                Error::invalid(
-                    starts.layout.key(),
-                    format!("start {s} ({}): {reason}", numbers(state)),
-                )
-            })?;
+        // Over the host's cores (up to 2^20 starts × every value); the
+        // first start refused is named, as a loop in order would.
+        use rayon::prelude::*;
+        let refused = starts
+            .states
+            .par_iter()
+            .enumerate()
+            .find_map_first(|(s, state)| {
+                let refused = check_state_at_every_value(info, &params, &sweep, state).err();
+                refused.map(|reason| (s, reason))
+            });
+        if let Some((s, reason)) = refused {
+            return Err(Error::invalid(
+                starts.layout.key(),
+                format!("start {s} ({}): {reason}", numbers(&starts.states[s])),
+            ));
         }
         sweep.starts = Some(starts);
     }
@@ -336,7 +345,9 @@ fn axis_len(raw: &RawAxis) -> usize {
 /// A `[model]` table: parsed, compiled, and checked at its defaults.
 fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
     let model = crate::model::Model::parse(table, "model")?;
-    let info = system::model::info(crate::model::code::Code::compile(model, "model")?);
+    let info = system::model::info_of(&format!("{table:?}"), || {
+        crate::model::code::Code::compile(model, "model")
+    })?;
     let params = Params::defaults(info);
     (info.check)(&params).map_err(|(name, reason)| Error::invalid(info.key(name), reason))?;
     Ok((info, params))

@@ -26,6 +26,15 @@ use crate::model::expr::{Expr, Var};
 use crate::model::native::{Kind, Layout};
 use crate::model::tape::Registers;
 
+/// Model descriptions built in this process ([`info_as`]): each is kept
+/// for the process, so this counts what the process holds for its models.
+static DESCRIBED: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// How many model descriptions this process has built and keeps.
+pub fn described() -> usize {
+    DESCRIBED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 fn leak(s: &str) -> &'static str {
     Box::leak(s.to_owned().into_boxed_str())
 }
@@ -43,6 +52,43 @@ pub fn info(code: Code) -> &'static SystemInfo {
     )
 }
 
+/// [`info`] of a model whose `[model]` table reads as `text` (its
+/// canonical form: the same table, the same text), compiled by `compile`
+/// the first time this process meets it and kept: a model is compiled,
+/// and its description held, once per process, however many scenes run
+/// it (a Python loop over runs holds one, not one per run). The
+/// environment that decides what the compiler builds (`CC`,
+/// `LYAPSWEEP_STEP_LOOPS`, the cache directory) is part of the key. What is
+/// held grows with the distinct models a process runs, not with its runs;
+/// each is a few kilobytes besides its native code.
+pub fn info_of(
+    text: &str,
+    compile: impl FnOnce() -> crate::error::Result<Code>,
+) -> crate::error::Result<&'static SystemInfo> {
+    type Kept = std::collections::BTreeMap<String, &'static SystemInfo>;
+    static KEPT: std::sync::Mutex<Kept> = std::sync::Mutex::new(Kept::new());
+    let environment: Vec<Option<String>> = ["CC", "LYAPSWEEP_STEP_LOOPS", "XDG_CACHE_HOME", "HOME"]
+        .iter()
+        .map(|name| std::env::var(name).ok())
+        .collect();
+    let key = format!("{text}\u{0}{environment:?}");
+    let kept = |key: &str| {
+        KEPT.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(key)
+            .copied()
+    };
+    if let Some(info) = kept(&key) {
+        return Ok(info);
+    }
+    // Compiled outside the lock: other models compile at the same time.
+    let code = compile()?;
+    let mut all = KEPT.lock().unwrap_or_else(|e| e.into_inner());
+    // Another thread may have kept the same model meanwhile: its is used,
+    // and this one dropped.
+    Ok(*all.entry(key).or_insert_with(|| info(code)))
+}
+
 /// [`info`] for a built-in kind given as a model (`system::MODEL_KINDS`):
 /// its parameters are the scene's `[system]` keys, and `default_sweep` is
 /// what a sweep naming no parameter sweeps, and `exact` how the exact
@@ -53,6 +99,7 @@ pub fn info_as(
     default_sweep: &str,
     exact: ExactPropagator,
 ) -> &'static SystemInfo {
+    DESCRIBED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let code: &'static Code = Box::leak(Box::new(code));
     let model = &code.model;
     let parameters: Vec<Parameter> = model
