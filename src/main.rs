@@ -553,7 +553,7 @@ fn print_outcome(out: &mut String, report: &Summary, written: &[PathBuf]) {
         say!(out, "  max |lambda_sum - expected_sum| = {err:.3e}");
     }
     if let Some(err) = report.max_error {
-        println!("  max lambda_error = {err:.3e}");
+        say!(out, "  max lambda_error = {err:.3e}");
     }
     let (flagged, lanes) = (report.flagged(), report.lanes);
     if flagged == 0 {

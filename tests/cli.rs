@@ -532,6 +532,42 @@ fn a_shader_folder_with_a_broken_source_names_the_file() {
     }
 }
 
+/// A kernel source in `LYAPSWEEP_SHADER_DIR` that does not parse is an
+/// error naming the folder and naga's message, before the device compiles
+/// it (it was a panic in the pipeline's creation).
+#[test]
+fn a_shader_folder_whose_kernels_do_not_parse_is_refused() {
+    if !common::gpu_or_skip(
+        "a_shader_folder_whose_kernels_do_not_parse_is_refused",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("shaders");
+    copy_folder(&shaders, &copy);
+    let rk4 = copy.join("shared/rk4.wgsl");
+    let text = std::fs::read_to_string(&rk4).unwrap();
+    std::fs::write(&rk4, text + "\nfn broken( {\n").unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, BASE).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(["run", path.to_str().unwrap(), "--backend", "gpu", "--out"])
+        .arg(dir.path().join("out"))
+        .env("LYAPSWEEP_SHADER_DIR", &copy)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("LYAPSWEEP_SHADER_DIR") && stderr.contains("not valid WGSL"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!dir.path().join("out").exists());
+}
+
 /// A C compiler that fails (or is missing) leaves the model to the
 /// interpreter, 8 to 10 times slower: the run says so on stderr, naming
 /// the compiler and its error, and in its summary, and still runs.

@@ -491,6 +491,7 @@ impl Runner {
                 settings.stop = options.stop.clone();
                 follow_gpu_plan(scene, &mut settings)?;
                 let variant = variant(scene, precision);
+                gpu::shader::check_composed(&variant)?;
                 let gpu = context::open(adapter, summary, precision)?;
                 (Backend::Gpu, settings, Some((gpu, variant)))
             }

@@ -185,6 +185,13 @@ impl SetWriter {
     /// otherwise) and swaps it into the output folder; returns the paths
     /// written there.
     pub fn finish(self, attractors: Option<&Attractors>) -> Result<Vec<PathBuf>> {
+        self.complete(attractors)?.commit()
+    }
+
+    /// [`finish`](Self::finish) up to the swap: the staged set, complete,
+    /// for a caller that may still decide against it (a stop requested
+    /// while the files were written).
+    pub fn complete(self, attractors: Option<&Attractors>) -> Result<Staging> {
         let dir = self.staging.dir().to_owned();
         for (writer, name) in [
             (self.spectrum, spectrum_file(&self.scene)),
@@ -238,7 +245,7 @@ impl SetWriter {
             set::pause("figures");
             results::draw_with(&dir, &dir, self.lambda1)?;
         }
-        self.staging.commit()
+        Ok(self.staging)
     }
 }
 

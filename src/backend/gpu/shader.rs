@@ -318,6 +318,40 @@ pub fn check_source_dir() -> Result<(), crate::Error> {
     })
 }
 
+/// That every kernel of `variant` composed from the folder
+/// `LYAPSWEEP_SHADER_DIR` names, if any, is valid WGSL, checked before the
+/// device compiles it (a kernel the device refuses can only panic there).
+/// The built-in kernels are validated by the tests (tests/shaders.rs).
+pub fn check_composed(variant: &Variant) -> Result<(), crate::Error> {
+    let Some(dir) = source_dir() else {
+        return Ok(());
+    };
+    for &kernel in variant.kernels() {
+        let source = variant.source(kernel);
+        let problem = match naga::front::wgsl::parse_str(&source) {
+            Err(e) => e.emit_to_string(&source),
+            Ok(module) => match naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            {
+                Err(e) => e.emit_to_string(&source),
+                Ok(_) => continue,
+            },
+        };
+        return Err(crate::Error::invalid(
+            "LYAPSWEEP_SHADER_DIR",
+            format!(
+                "{}: the {kernel:?} kernel of {} composed from it is not valid WGSL:\n{problem}",
+                dir.display(),
+                variant.name()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn source_in(dir: Option<&Path>, path: &str) -> Cow<'static, str> {
     if let Some(dir) = dir {
         let file = dir.join(path);
