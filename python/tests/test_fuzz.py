@@ -90,15 +90,31 @@ def test_any_scene_returns_or_raises_what_is_documented(scene):
     outcome(lambda: lyapsweep.run(scene, set={"run.backend": "cpu"}, progress=False))
 
 
+def nested(depth, leaf, kind):
+    """`leaf` inside `depth` dicts (or lists)."""
+    for _ in range(depth):
+        leaf = {"a": leaf} if kind == "dict" else [leaf]
+    return leaf
+
+
 @SETTINGS
 @given(
-    key=st.sampled_from(["sweep.values", "sweep.count", "sweep.from", "integration.transient",
-                         "integration.step", "output.lyapunov", "model.parameters.zeta", "name",
-                         "sweep", "sweep.values[0]"]),
-    value=values,
+    key=st.sampled_from(["sweep.count", "sweep.from", "sweep.to", "integration.transient",
+                         "integration.iterations", "output.lyapunov", "output.bifurcation_points",
+                         "model.parameters.zeta", "name", "sweep", "run.precision"]),
+    value=st.one_of(values, numpy_scalars, st.integers(-3, 5), st.floats(-1, 3)),
 )
 def test_any_override_of_a_tiny_scene_returns_or_raises_what_is_documented(key, value):
     outcome(lambda: lyapsweep.run(SCENE, set={**TINY, key: value}, progress=False))
+
+
+@SETTINGS
+@given(depth=st.integers(0, 3000), kind=st.sampled_from(["dict", "list"]), leaf=scalars)
+def test_values_nested_at_any_depth_are_refused_or_run(depth, kind, leaf):
+    got = outcome(lambda: lyapsweep.run({"sweep": nested(depth, leaf, kind)}, progress=False))
+    assert not isinstance(got, lyapsweep.Run)
+    if depth > 40:
+        assert "nested deeper than" in str(got)
 
 
 @SETTINGS
@@ -108,11 +124,13 @@ def test_any_override_of_a_tiny_scene_returns_or_raises_what_is_documented(key, 
 ))
 def test_numeric_sweep_values_run_or_name_the_key(values):
     # nan and inf among the values: refused by key, never run.
-    got = outcome(lambda: lyapsweep.run(SCENE, set={**TINY, "sweep.values": values}, progress=False))
+    sweep = {"parameter": "eta", "values": values}
+    got = outcome(lambda: lyapsweep.run(SCENE, set={**TINY, "sweep": sweep}, progress=False))
     if isinstance(got, lyapsweep.Run):
         assert len(got.spectrum) == len(values)
     elif isinstance(got, lyapsweep.SceneError):
-        assert got.key is not None and got.key.startswith("sweep"), got
+        # A key: the value itself, or what it makes of the model (eta = 0).
+        assert got.key is not None, got
 
 
 @SETTINGS
