@@ -46,17 +46,7 @@ fn run<'py>(
     progress: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let source = SceneSource::of(scene)?;
-    let labelled = overrides
-        .iter()
-        .map(|(key, value, keyword)| {
-            let value = to_toml(value, key)?;
-            let label = match keyword.as_str() {
-                "set" => format!("set[{key:?}] = {value}"),
-                _ => format!("{keyword}={value}"),
-            };
-            Ok((format!("{key}={value}"), label))
-        })
-        .collect::<PyResult<Vec<(String, String)>>>()?;
+    let labelled = labelled_overrides(&overrides)?;
     let overrides: Vec<String> = labelled.iter().map(|(a, _)| a.clone()).collect();
     let report: Option<Py<PyAny>> = progress.is_callable().then(|| progress.clone().unbind());
     let own_display = report.is_none() && progress.is_truthy()?;
@@ -143,6 +133,29 @@ fn run<'py>(
     result.set_item("scene", resolved(py, &scene)?)?;
     result.set_item("written", outcome.written)?;
     Ok(result)
+}
+
+/// Each override as the library's assignment (`sweep.count=5`) and as the
+/// caller wrote it (`set["sweep.count"] = 5`, `backend="gpu"`), for the
+/// messages; `overrides` are (key, value, the keyword that gave it).
+fn labelled_overrides(
+    overrides: &[(String, Bound<'_, PyAny>, String)],
+) -> PyResult<Vec<(String, String)>> {
+    overrides
+        .iter()
+        .map(|(key, value, keyword)| {
+            let value = to_toml(value, key)?;
+            let mut label = match keyword.as_str() {
+                "set" => format!("set[{key:?}] = {value}"),
+                _ => format!("{keyword}={value}"),
+            };
+            // A whole table given as one value is clipped, as `--set`'s is.
+            if label.chars().count() > 80 {
+                label = label.chars().take(79).chain(['…']).collect();
+            }
+            Ok((format!("{key}={value}"), label))
+        })
+        .collect()
 }
 
 /// The threads runs compute on. rayon's global pool is made once per
