@@ -8,7 +8,13 @@ def draw(plt, run):
     kept) above the exponents; for two, the largest exponent over the grid."""
     spectrum = run.spectrum
     if spectrum is None:
-        raise ValueError("the run kept no exponents (output.lyapunov = \"none\"): nothing to plot")
+        # A run without exponents (output.lyapunov = "none"): the diagram
+        # alone, as the command line draws it.
+        if run.bifurcation is None:
+            raise ValueError(
+                "the run kept neither exponents (output.lyapunov = \"none\") nor points: nothing to plot"
+            )
+        return _points_alone(plt, run)
     # The swept parameters head the columns, the exponents follow.
     if not spectrum.columns[1].startswith("lambda_"):
         return _grid(plt, spectrum)
@@ -30,6 +36,18 @@ def draw(plt, run):
     axes[-1].set_xlabel(parameter)
     axes[-1].set_ylabel("exponent")
     axes[-1].legend(loc="best", fontsize="small")
+    fig.suptitle(run.summary["name"])
+    fig.tight_layout()
+    return fig
+
+
+def _points_alone(plt, run):
+    points = run.bifurcation
+    parameter, state = points.columns[0], points.columns[1]
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    ax.plot(points[parameter], points[state], ",k")
+    ax.set_xlabel(parameter)
+    ax.set_ylabel(state)
     fig.suptitle(run.summary["name"])
     fig.tight_layout()
     return fig

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Union
 
 import pandas
 
 from . import _lyapsweep
+from ._errors import RunError
 
 Scene = Union[str, "os.PathLike[str]", Mapping[str, Any]]
 
@@ -23,7 +26,7 @@ _ATTRACTORS_FILE = "attractors.csv"
 def run(
     scene: Scene,
     *,
-    set: Optional[Mapping[str, Any]] = None,
+    set: Union[Mapping[str, Any], "list[tuple[str, Any]]", None] = None,
     backend: Optional[str] = None,
     precision: Optional[str] = None,
     out: Union[str, "os.PathLike[str]", None] = None,
@@ -31,14 +34,18 @@ def run(
 ) -> "Run":
     """Runs a scene as ``lyapsweep run`` does and returns its results.
 
-    ``scene`` is a path (a ``pathlib.Path``, or a str without a newline and
-    without ``=``), TOML text, or a dict of the same tables. A file's
+    ``scene`` is a path, TOML text, or a dict of the same tables. A
+    ``pathlib.Path`` (any ``os.PathLike``) is a path; a str is a path when
+    it names an existing file, or has no newline and ends in ``.toml``, and
+    TOML text otherwise. A file's
     ``model = "file.toml"`` is relative to the file; text's and a dict's are
     relative to the current directory.
 
     ``set`` overrides scene keys by their dotted names, as the command
-    line's ``--set`` does: ``{"sweep.count": 101, "run.backend": "cpu"}``;
-    values are Python's (str, int, float, bool, lists, dicts). ``backend``
+    line's ``--set`` does: ``{"sweep.count": 101, "run.backend": "cpu"}``,
+    or a list of such ``(key, value)`` pairs, applied in order; values are
+    Python's (str, int, float, bool, lists, dicts) or numpy's (numbers, and
+    arrays of integers or floats). ``backend``
     ("auto", "cpu", "gpu", "exact") and ``precision`` ("f64", "f32")
     override ``run.backend`` and ``run.precision`` after them; left at None,
     the scene's own choice stands.
@@ -57,13 +64,26 @@ def run(
     files cannot be written or every lane failed. The GIL is released while
     the lanes run. Ctrl-C (or any exception from the progress callable)
     stops the run within about a second and is raised once it has stopped;
-    nothing is then written.
+    nothing is then written, unless it came after the lanes had finished,
+    while the set was being written: the set is then written whole (the
+    previous one in ``out`` replaced), and the exception says so in its
+    ``lyapsweep_written`` attribute (the paths written; ``[]`` for a
+    temporary folder, removed) and, from Python 3.11, in a note.
+
+    Runs in threads of one program each stage their set in a folder of
+    their own; two at once into the same ``out`` are refused: the second
+    raises ``RunError`` at once, and the first writes its set whole.
     """
-    overrides = list((set or {}).items())
+    overrides = [(key, value, "set") for key, value in _pairs(set)]
     if backend is not None:
-        overrides.append(("run.backend", backend))
+        overrides.append(("run.backend", backend, "backend"))
     if precision is not None:
-        overrides.append(("run.precision", precision))
+        overrides.append(("run.precision", precision, "precision"))
+    if not (isinstance(progress, bool) or callable(progress)):
+        raise TypeError(
+            f"progress is True, False or a callable of (done, total), not {type(progress).__name__}"
+        )
+    source = _source(scene)
     scratch = None
     if out is None:
         scratch = tempfile.TemporaryDirectory(prefix="lyapsweep-")
@@ -72,15 +92,22 @@ def run(
         folder = Path(out)
     bar = _Bar() if progress is True and _tqdm() is not None else None
     try:
-        ran = _lyapsweep.run(_source(scene), overrides, folder, bar or progress)
-    except BaseException:
+        with _writing(folder):
+            ran = _lyapsweep.run(source, overrides, folder, bar or progress)
+            result = Run(folder, ran["summary"], ran["scene"], scratch)
+    except BaseException as e:
+        written = getattr(e, "lyapsweep_written", None)
         if scratch is not None:
             scratch.cleanup()
+            if written is not None:
+                e.lyapsweep_written = []
+        elif written:
+            _note(e, f"lyapsweep: the lanes had finished; the new set was written to {folder} before this was raised")
         raise
     finally:
         if bar is not None:
             bar.close()
-    return Run(folder, ran["summary"], ran["scene"], scratch)
+    return result
 
 
 def _tqdm() -> Optional[type]:
@@ -118,14 +145,81 @@ def _source(scene: Scene) -> Any:
     """What the extension reads a scene (or a model) from: a Path for a
     file, the text, or the dict."""
     if isinstance(scene, Mapping):
-        return dict(scene)
+        # The dict itself, so that one holding itself is named as it is.
+        return scene if isinstance(scene, dict) else dict(scene)
     if isinstance(scene, str):
-        return scene if "\n" in scene or "=" in scene else Path(scene)
+        # TOML text has a newline or an `=`, and so may a file's name: a
+        # name is told by the file it names, or by its ending.
+        one_line = "\n" not in scene and "\r" not in scene
+        if one_line and (scene.endswith(".toml") or _is_file(scene)):
+            return Path(scene)
+        return scene
     if isinstance(scene, os.PathLike):
         return Path(scene)
     raise TypeError(
         f"a scene is a path, TOML text or a dict, not {type(scene).__name__}"
     )
+
+
+def _is_file(name: str) -> bool:
+    try:
+        return os.path.isfile(name)
+    except (ValueError, OSError):  # a NUL, a name too long
+        return False
+
+
+def _pairs(overrides: Any) -> list:
+    """``set=`` as (key, value) pairs: a mapping's items, or a list (any
+    iterable but a str) of pairs."""
+    if overrides is None:
+        return []
+    if isinstance(overrides, Mapping):
+        return list(overrides.items())
+    if isinstance(overrides, (str, bytes)) or not hasattr(overrides, "__iter__"):
+        raise TypeError(
+            f"set is a dict of dotted keys and values, or a list of (key, value) pairs, not {type(overrides).__name__}"
+        )
+    pairs = []
+    for i, pair in enumerate(overrides):
+        if not (isinstance(pair, (tuple, list)) and len(pair) == 2 and isinstance(pair[0], str)):
+            raise TypeError(f"set[{i}] is not a (key, value) pair with a str key: {pair!r:.80}")
+        pairs.append(tuple(pair))
+    return pairs
+
+
+# The output folders runs of this process are writing, so that two threads
+# never write (and read back) the same one at once.
+_busy: "set[str]" = set()
+_busy_lock = threading.Lock()
+# A child started by fork has none of its parent's runs.
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_busy.clear)
+
+
+@contextmanager
+def _writing(folder: Path):
+    """Claims ``folder`` for one run (or write) of this process until its
+    set is written and read back; another at the same time raises
+    RunError."""
+    key = os.path.realpath(folder)
+    with _busy_lock:
+        if key in _busy:
+            raise RunError(
+                f"{folder}: another run of this program is writing it now; wait for it, or give another out",
+                key=None,
+            )
+        _busy.add(key)
+    try:
+        yield
+    finally:
+        with _busy_lock:
+            _busy.discard(key)
+
+
+def _note(exception: BaseException, note: str) -> None:
+    # add_note is Python 3.11's; before it the attribute alone says so.
+    if hasattr(exception, "add_note"):
+        exception.add_note(note)
 
 
 # Each number must be the file's to the bit: pandas before 3 parses with a
@@ -184,7 +278,8 @@ class Run:
         does: staged beside it and swapped in whole, with its manifest; the
         folder must be new, empty or a lyapsweep output folder. Returns the
         paths written."""
-        written = _lyapsweep.copy_set(self.folder, Path(folder))
+        with _writing(Path(folder)):
+            written = _lyapsweep.copy_set(self.folder, Path(folder))
         return [Path(p) for p in written]
 
     def plot(self):

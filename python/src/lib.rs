@@ -11,7 +11,7 @@ use std::time::Duration;
 use lyapsweep::command::{self, progress_bar};
 use lyapsweep::scene::{self, Scene};
 use lyapsweep::{Error, Progress, RunOptions};
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 
@@ -41,15 +41,13 @@ mod _lyapsweep {
 fn run<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyAny>,
-    overrides: Vec<(String, Bound<'py, PyAny>)>,
+    overrides: Vec<(String, Bound<'py, PyAny>, String)>,
     out: PathBuf,
     progress: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let source = SceneSource::of(scene)?;
-    let overrides = overrides
-        .iter()
-        .map(|(key, value)| Ok(format!("{key}={}", to_toml(value, key)?)))
-        .collect::<PyResult<Vec<String>>>()?;
+    let labelled = labelled_overrides(&overrides)?;
+    let overrides: Vec<String> = labelled.iter().map(|(a, _)| a.clone()).collect();
     let report: Option<Py<PyAny>> = progress.is_callable().then(|| progress.clone().unbind());
     let own_display = report.is_none() && progress.is_truthy()?;
     let options = RunOptions {
@@ -73,8 +71,9 @@ fn run<'py>(
         std::thread::scope(|threads| {
             let (done, finished) = mpsc::channel();
             threads.spawn(move || {
-                // The receiver waits below until this is sent.
-                let _ = done.send(work());
+                // The receiver waits below until this is sent. The run's
+                // own pool of threads, not rayon's global one: see `threads`.
+                let _ = done.send(threads::pool().install(work));
             });
             let watcher = own_display.then(|| progress_bar::watch(&counts));
             let mut raised: Option<PyErr> = None;
@@ -109,18 +108,88 @@ fn run<'py>(
             (ran, raised)
         })
     });
-    if let Some(e) = raised {
-        return Err(e);
+    // An interrupt (or the callable's exception) that came once the lanes
+    // had finished, while the set was written, stopped nothing: the set is
+    // in place, and the exception says so.
+    let written = |e: PyErr, outcome: &command::Outcome| {
+        let paths = outcome.written.clone();
+        match e.value(py).setattr("lyapsweep_written", paths) {
+            Ok(()) => e,
+            Err(other) => other,
+        }
+    };
+    match (raised, &ran) {
+        (Some(e), Ok((_, outcome))) => return Err(written(e, outcome)),
+        (Some(e), Err(_)) => return Err(e),
+        (None, _) => {}
     }
-    let (scene, outcome) = ran.map_err(|e| to_exception(py, e))?;
+    let (scene, outcome) = ran.map_err(|e| to_exception_labelled(py, e, &labelled))?;
     if let Some(f) = &report {
-        f.call1(py, (counts.done(), counts.total()))?;
+        f.call1(py, (counts.done(), counts.total()))
+            .map_err(|e| written(e, &outcome))?;
     }
     let result = PyDict::new(py);
     result.set_item("summary", summary(py, &scene, &outcome)?)?;
     result.set_item("scene", resolved(py, &scene)?)?;
     result.set_item("written", outcome.written)?;
     Ok(result)
+}
+
+/// Each override as the library's assignment (`sweep.count=5`) and as the
+/// caller wrote it (`set["sweep.count"] = 5`, `backend="gpu"`), for the
+/// messages; `overrides` are (key, value, the keyword that gave it).
+fn labelled_overrides(
+    overrides: &[(String, Bound<'_, PyAny>, String)],
+) -> PyResult<Vec<(String, String)>> {
+    overrides
+        .iter()
+        .map(|(key, value, keyword)| {
+            let value = to_toml(value, key)?;
+            let mut label = match keyword.as_str() {
+                "set" => format!("set[{key:?}] = {value}"),
+                _ => format!("{keyword}={value}"),
+            };
+            // A whole table given as one value is clipped, as `--set`'s is.
+            if label.chars().count() > 80 {
+                label = label.chars().take(79).chain(['…']).collect();
+            }
+            Ok((format!("{key}={value}"), label))
+        })
+        .collect()
+}
+
+/// The threads runs compute on. rayon's global pool is made once per
+/// process, and a child started by `fork` (Python's `multiprocessing` on
+/// Linux) inherits it without its threads: a run there waits forever for
+/// work none of them takes. So each process makes a pool of its own, a
+/// forked child a new one.
+mod threads {
+    use std::sync::{Arc, Mutex};
+
+    use rayon::{ThreadPool, ThreadPoolBuilder};
+
+    static POOL: Mutex<Option<(u32, Arc<ThreadPool>)>> = Mutex::new(None);
+
+    /// This process's pool (made on first use).
+    pub fn pool() -> Arc<ThreadPool> {
+        let pid = std::process::id();
+        let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+        match pool.as_ref() {
+            Some((made_in, p)) if *made_in == pid => return p.clone(),
+            // The parent's pool: dropping it would signal threads this
+            // process does not have.
+            Some(_) => std::mem::forget(pool.take()),
+            None => {}
+        }
+        let made = Arc::new(
+            ThreadPoolBuilder::new()
+                .thread_name(|i| format!("lyapsweep-{i}"))
+                .build()
+                .expect("the run's threads start"),
+        );
+        *pool = Some((pid, made.clone()));
+        made
+    }
 }
 
 /// How often a running scene's calling thread looks at Python's signals and
@@ -214,66 +283,163 @@ impl SceneSource {
 }
 
 /// A Python value as TOML: dicts are tables (with string keys), lists and
-/// tuples arrays, and str, int, float and bool themselves. `key` names the
-/// value in the error for anything else (None has no TOML value).
+/// tuples arrays, and str, int, float and bool themselves; numpy's numbers
+/// and numeric arrays too. `key` names the value in the error for anything
+/// else (None has no TOML value), for a dict or list that holds itself,
+/// and for one nested deeper than [`DEEPEST`]: the conversion recurses, and
+/// a Python value may be nested far deeper than a thread's stack holds.
 fn to_toml(value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
-    let at = |inner: &str| match (key, inner) {
-        ("", _) => inner.to_owned(),
-        (_, "") => key.to_owned(),
-        _ => format!("{key}.{inner}"),
-    };
-    // bool before int: Python's bools are ints.
-    if let Ok(b) = value.cast::<PyBool>() {
-        return Ok(toml::Value::Boolean(b.is_true()));
+    Converter::default().value(value, key)
+}
+
+/// How deep a dict's dicts and lists may go: a scene's tables go three or
+/// four levels deep.
+const DEEPEST: usize = 32;
+
+/// The conversion's way down: the dicts and lists it is inside, to tell a
+/// value that holds itself.
+#[derive(Default)]
+struct Converter {
+    inside: Vec<(usize, String)>,
+}
+
+impl Converter {
+    fn value(&mut self, value: &Bound<'_, PyAny>, key: &str) -> PyResult<toml::Value> {
+        let at = |inner: &str| match (key, inner) {
+            ("", _) => inner.to_owned(),
+            (_, "") => key.to_owned(),
+            _ => format!("{key}.{inner}"),
+        };
+        let shown = || {
+            if key.is_empty() {
+                "the top".to_owned()
+            } else {
+                key.to_owned()
+            }
+        };
+        // bool before int: Python's bools are ints.
+        if let Ok(b) = value.cast::<PyBool>() {
+            return Ok(toml::Value::Boolean(b.is_true()));
+        }
+        if value.is_instance_of::<PyInt>() {
+            return value
+                .extract::<i64>()
+                .map(toml::Value::Integer)
+                .map_err(|_| {
+                    PyValueError::new_err(format!("{}: an integer beyond 64 bits", shown()))
+                });
+        }
+        if value.is_instance_of::<PyFloat>() {
+            return Ok(toml::Value::Float(value.extract()?));
+        }
+        if let Ok(text) = value.cast::<PyString>() {
+            return Ok(toml::Value::String(text.to_cow()?.into_owned()));
+        }
+        let is_dict = value.is_instance_of::<PyDict>();
+        if is_dict || value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+            let id = value.as_ptr() as usize;
+            if let Some((_, outer)) = self.inside.iter().find(|(i, _)| *i == id) {
+                let outer = if outer.is_empty() { "the top" } else { outer };
+                return Err(PyValueError::new_err(format!(
+                    "{}: holds itself (it is the {} at {outer}), which TOML cannot write",
+                    shown(),
+                    if is_dict { "dict" } else { "list" }
+                )));
+            }
+            if self.inside.len() >= DEEPEST {
+                return Err(PyValueError::new_err(format!(
+                    "{}: nested deeper than {DEEPEST} dicts and lists (a scene's tables go a few levels deep)",
+                    shown()
+                )));
+            }
+            self.inside.push((id, key.to_owned()));
+            let converted = if is_dict {
+                self.table(value.cast::<PyDict>()?, key)
+            } else {
+                value
+                    .try_iter()?
+                    .enumerate()
+                    .map(|(i, item)| self.value(&item?, &format!("{}[{i}]", at(""))))
+                    .collect::<PyResult<Vec<_>>>()
+                    .map(toml::Value::Array)
+            };
+            self.inside.pop();
+            return converted;
+        }
+        if let Some(converted) = self.numpy(value, key)? {
+            return Ok(converted);
+        }
+        let kind = value.get_type().name()?;
+        Err(PyTypeError::new_err(format!(
+            "{}: a {kind} has no TOML value (str, int, float, bool, list or dict, or numpy's numbers)",
+            shown()
+        )))
     }
-    if value.is_instance_of::<PyInt>() {
-        return value
-            .extract::<i64>()
-            .map(toml::Value::Integer)
-            .map_err(|_| PyTypeError::new_err(format!("{}: an integer beyond 64 bits", at(""))));
-    }
-    if value.is_instance_of::<PyFloat>() {
-        return Ok(toml::Value::Float(value.extract()?));
-    }
-    if let Ok(text) = value.cast::<PyString>() {
-        return Ok(toml::Value::String(text.to_cow()?.into_owned()));
-    }
-    if let Ok(dict) = value.cast::<PyDict>() {
+
+    fn table(&mut self, dict: &Bound<'_, PyDict>, key: &str) -> PyResult<toml::Value> {
         let mut table = toml::Table::new();
         for (k, v) in dict.iter() {
             let name: String = k.extract().map_err(|_| {
                 PyTypeError::new_err(format!(
                     "{}: a key that is not a string ({})",
-                    at(""),
+                    if key.is_empty() { "the top" } else { key },
                     k.repr().map_or_else(|_| "?".into(), |r| r.to_string())
                 ))
             })?;
-            let inner = to_toml(&v, &at(&name))?;
+            let inner = self.value(
+                &v,
+                &if key.is_empty() {
+                    name.clone()
+                } else {
+                    format!("{key}.{name}")
+                },
+            )?;
             table.insert(name, inner);
         }
-        return Ok(toml::Value::Table(table));
+        Ok(toml::Value::Table(table))
     }
-    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
-        let items = value.try_iter()?;
-        let array = items
-            .enumerate()
-            .map(|(i, item)| to_toml(&item?, &format!("{}[{i}]", at(""))))
-            .collect::<PyResult<Vec<_>>>()?;
-        return Ok(toml::Value::Array(array));
+
+    /// numpy's scalars and arrays (anything with a `dtype` and an `ndim`):
+    /// booleans, integers and floats, as TOML's; None when `value` is not
+    /// numpy's. An array is its `tolist()`, so only of those kinds.
+    fn numpy(&mut self, value: &Bound<'_, PyAny>, key: &str) -> PyResult<Option<toml::Value>> {
+        let (Ok(dtype), Ok(ndim)) = (value.getattr("dtype"), value.getattr("ndim")) else {
+            return Ok(None);
+        };
+        let (Ok(kind), Ok(ndim)) = (
+            dtype.getattr("kind").and_then(|k| k.extract::<String>()),
+            ndim.extract::<usize>(),
+        ) else {
+            return Ok(None);
+        };
+        let shown = if key.is_empty() { "the top" } else { key };
+        let numeric = matches!(kind.as_str(), "i" | "u" | "f");
+        if ndim > 0 && !numeric {
+            return Err(PyTypeError::new_err(format!(
+                "{shown}: a numpy array of {} has no TOML value (integers or floats)",
+                dtype.str()?
+            )));
+        }
+        let converted = match kind.as_str() {
+            _ if ndim > 0 => self.value(&value.call_method0("tolist")?, key)?,
+            "b" => toml::Value::Boolean(value.is_truthy()?),
+            "i" | "u" => value
+                .call_method0("item")?
+                .extract::<i64>()
+                .map(toml::Value::Integer)
+                .map_err(|_| {
+                    PyValueError::new_err(format!("{shown}: an integer beyond 64 bits"))
+                })?,
+            "f" => toml::Value::Float(value.call_method0("item")?.extract()?),
+            _ => {
+                return Err(PyTypeError::new_err(format!(
+                    "{shown}: a numpy {} has no TOML value (a bool, an integer or a float)",
+                    dtype.str()?
+                )))
+            }
+        };
+        Ok(Some(converted))
     }
-    // numpy's scalars: its integers convert through __index__, its floats
-    // through __float__.
-    if let Ok(i) = value.extract::<i64>() {
-        return Ok(toml::Value::Integer(i));
-    }
-    if let Ok(x) = value.extract::<f64>() {
-        return Ok(toml::Value::Float(x));
-    }
-    let kind = value.get_type().name()?;
-    Err(PyTypeError::new_err(format!(
-        "{}: a {kind} has no TOML value (str, int, float, bool, list or dict)",
-        at("")
-    )))
 }
 
 /// A TOML value as Python's: tables are dicts, arrays lists, a date its text.
@@ -346,7 +512,25 @@ fn summary<'py>(
 /// column, the rest of the input's as `SceneError`, both with the key;
 /// the machine's (a write failed, every lane failed) as `RunError`.
 fn to_exception(py: Python<'_>, error: Error) -> PyErr {
-    let message = error.to_string();
+    to_exception_labelled(py, error, &[])
+}
+
+/// [`to_exception`] for a run given `overrides`: pairs of the assignment
+/// the library was given (`sweep.count=5`) and how the caller wrote it
+/// (`set["sweep.count"] = 5`, `backend="gpu"`), which the message says
+/// instead of the command line's `--set sweep.count=5`.
+fn to_exception_labelled(py: Python<'_>, error: Error, overrides: &[(String, String)]) -> PyErr {
+    let mut message = error.to_string();
+    if let Some(set) = error.key().filter(|k| k.starts_with("--set ")) {
+        let key = dotted_key(set);
+        let label = overrides
+            .iter()
+            .rev()
+            .find(|(assignment, _)| assignment.split('=').next() == Some(key.as_str()));
+        if let Some((_, label)) = label {
+            message = message.replacen(set, label, 1);
+        }
+    }
     let key = error.key().map(dotted_key);
     let class = if !error.is_input_error() {
         "RunError"

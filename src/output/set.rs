@@ -7,7 +7,7 @@
 //! output folder (one with its manifest; nothing else in it is ever
 //! replaced), it must not hold the run's inputs (its scene file, say), and
 //! its parent must be writable. The files go into
-//! `.NAME.lyapsweep-PID.partial` beside it; [`commit`](Staging::commit)
+//! `.NAME.lyapsweep-PID-SEQ.partial` beside it (see [`staging_name`]); [`commit`](Staging::commit)
 //! writes `manifest.toml` (every data file's size and SHA-256) and
 //! exchanges the two folders in one `renameat2(2)` call (`RENAME_EXCHANGE`,
 //! Linux), then removes the previous set. Where the
@@ -109,13 +109,50 @@ fn within(input: &Path, canonical: &Path) -> bool {
         .any(|path| path.starts_with(canonical))
 }
 
-/// The staging folders of `target` are named `.NAME.lyapsweep-PID.partial`.
+/// The staging folders of `target` are named `.NAME.lyapsweep-PID-SEQ.partial`
+/// (`NAME` shortened, see [`staging_base`]); this is what precedes the PID.
 fn staging_prefix(target: &Path) -> String {
     let name = target
         .file_name()
         .and_then(|n| n.to_str())
         .unwrap_or("output");
-    format!(".{name}.lyapsweep-")
+    format!(".{}.lyapsweep-", staging_base(name))
+}
+
+/// The longest output folder name kept whole in its staging folder's name:
+/// the rest of that name (at most 52 bytes with a 10-digit process id and a
+/// 20-digit sequence number, `.previous` being the longest ending) must fit
+/// in the 255 bytes a file name may have.
+const LONGEST_WHOLE_NAME: usize = 200;
+
+/// `name` as it appears in its staging folder's name: itself when short
+/// enough, else its first bytes and a digest of the whole (so that two long
+/// names that share their start are still told apart).
+fn staging_base(name: &str) -> String {
+    if name.len() <= LONGEST_WHOLE_NAME {
+        return name.to_owned();
+    }
+    let mut end = 120;
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    let hash = Sha256::digest(name.as_bytes());
+    let hex: String = hash[..8].iter().map(|b| format!("{b:02x}")).collect();
+    format!("{}~{hex}", &name[..end])
+}
+
+/// A fresh staging folder's name for `target`: the process id tells a
+/// killed run's folder (see [`remove_abandoned`]), and a number counted
+/// within the process keeps two runs of one process (threads of a Python
+/// program) in folders of their own.
+fn staging_name(target: &Path) -> String {
+    static SEQUENCE: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let seq = SEQUENCE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    format!(
+        "{}{}-{seq}.partial",
+        staging_prefix(target),
+        std::process::id()
+    )
 }
 
 impl Staging {
@@ -211,11 +248,7 @@ impl Staging {
         fs::create_dir_all(&parent)
             .map_err(|e| unwritable(target, format!("cannot create {}: {e}", parent.display())))?;
         remove_abandoned(&parent, &staging_prefix(target));
-        let dir = parent.join(format!(
-            "{}{}.partial",
-            staging_prefix(target),
-            std::process::id()
-        ));
+        let dir = parent.join(staging_name(target));
         if dir.exists() {
             let _ = fs::remove_dir_all(&dir);
         }
@@ -390,7 +423,8 @@ fn remove_abandoned(parent: &Path, prefix: &str) {
         let Some(rest) = name.strip_prefix(prefix) else {
             continue;
         };
-        let pid = rest.split('.').next().unwrap_or_default();
+        // `PID-SEQ.partial` (and `PID.partial`, before runs were counted).
+        let pid = rest.split(['.', '-']).next().unwrap_or_default();
         if pid.parse::<u32>().is_ok() && !Path::new("/proc").join(pid).exists() {
             let _ = fs::remove_dir_all(entry.path());
         }
@@ -430,4 +464,81 @@ pub fn verify(dir: &Path) -> Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A set whose one data file says which run wrote it.
+    fn stage(target: &Path, text: &str) -> Result<Staging> {
+        let staging = Staging::prepare(target, &[])?;
+        fs::write(staging.dir().join(SCENE_FILE), text).unwrap();
+        Ok(staging)
+    }
+
+    #[test]
+    fn a_long_folder_name_stages_beside_it() {
+        // 240 bytes is a legal name; `.NAME.lyapsweep-PID.partial` of it
+        // was not ("File name too long").
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("x".repeat(240));
+        let written = stage(&target, "one").unwrap().commit().unwrap();
+        assert_eq!(fs::read_to_string(&written[1]).unwrap(), "one");
+        // And again over the set it wrote (the swap's own names fit too).
+        stage(&target, "two").unwrap().commit().unwrap();
+        assert_eq!(fs::read_to_string(target.join(SCENE_FILE)).unwrap(), "two");
+        verify(&target).unwrap();
+        let left: Vec<_> = fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(left.len(), 1, "only the set is left");
+    }
+
+    #[test]
+    fn long_names_that_share_their_start_stage_apart() {
+        let a = staging_base(&format!("{}a", "é".repeat(120)));
+        let b = staging_base(&format!("{}b", "é".repeat(120)));
+        assert_ne!(a, b);
+        assert!(a.len() < LONGEST_WHOLE_NAME, "{}", a.len());
+        assert_eq!(staging_base("short"), "short");
+    }
+
+    #[test]
+    fn two_runs_of_one_process_stage_apart() {
+        // Threads of one program: each its own staging folder, each set
+        // whole when swapped in one after the other.
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out");
+        let first = stage(&target, "first").unwrap();
+        let second = stage(&target, "second").unwrap();
+        assert_ne!(first.dir(), second.dir());
+        first.commit().unwrap();
+        assert_eq!(
+            fs::read_to_string(target.join(SCENE_FILE)).unwrap(),
+            "first"
+        );
+        verify(&target).unwrap();
+        second.commit().unwrap();
+        assert_eq!(
+            fs::read_to_string(target.join(SCENE_FILE)).unwrap(),
+            "second"
+        );
+        verify(&target).unwrap();
+    }
+
+    #[test]
+    fn a_dead_process_staging_is_removed_a_live_one_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out");
+        let prefix = staging_prefix(&target);
+        // No process has id 4294967295 (beyond Linux's pid_max); this one lives.
+        let dead = dir.path().join(format!("{prefix}4294967295-3.partial"));
+        let old = dir.path().join(format!("{prefix}4294967295.partial"));
+        let live = dir.path().join(staging_name(&target));
+        for d in [&dead, &old, &live] {
+            fs::create_dir(d).unwrap();
+        }
+        remove_abandoned(dir.path(), &prefix);
+        assert!(!dead.exists() && !old.exists());
+        assert!(live.exists());
+    }
 }
