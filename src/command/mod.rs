@@ -64,13 +64,10 @@ impl Prepared {
         let (summary, attractors) = run_streaming(&scene, options, batch, |batch, report| {
             writer.append(batch, report)
         })?;
-        let staged = writer.complete(attractors.as_ref())?;
         // A stop asked for while the files were written (Ctrl-C after the
-        // lanes) still leaves the folder as it was: the staged set goes.
-        if options.stop.requested() {
-            return Err(Error::Stopped);
-        }
-        let written = staged.commit()?;
+        // lanes), up to the swap, still leaves the folder as it was.
+        let staged = writer.complete(attractors.as_ref())?;
+        let written = staged.commit_unless(&|| options.stop.requested())?;
         Ok(Outcome {
             summary,
             attractors,

@@ -269,7 +269,15 @@ impl Staging {
 
     /// Writes the manifest and swaps the set in; returns the paths of its
     /// files in the output folder.
-    pub fn commit(mut self) -> Result<Vec<PathBuf>> {
+    pub fn commit(self) -> Result<Vec<PathBuf>> {
+        self.commit_unless(&|| false)
+    }
+
+    /// [`commit`](Self::commit), unless `stopped` says, at the last moment
+    /// before the swap, that the run was stopped meanwhile (Ctrl-C while
+    /// the set was written): then `Error::Stopped`, the staged set removed
+    /// and the output folder as it was.
+    pub fn commit_unless(mut self, stopped: &dyn Fn() -> bool) -> Result<Vec<PathBuf>> {
         let write_error = |source| Error::Write {
             path: self.target.clone(),
             source,
@@ -300,6 +308,9 @@ impl Staging {
             .and_then(|d| d.sync_all())
             .map_err(write_error)?;
         pause("swap");
+        if stopped() {
+            return Err(Error::Stopped);
+        }
         swap_in(&self.dir, &self.target).map_err(write_error)?;
         self.committed = true;
         // The staging folder now holds the previous set, if there was one.
