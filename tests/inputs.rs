@@ -992,4 +992,26 @@ fn extreme_values_are_written_with_an_exponent_that_reads_back() {
         assert_eq!(text.parse::<f64>().unwrap(), value);
     }
     assert!(stdout(&output).len() < 2000, "{}", stdout(&output));
+    // The model's own checks print them short too: a start behind the
+    // wall, a parameter out of its range.
+    for (set, needle) in [
+        (
+            "integration.initial_state=[1e300, 0]",
+            "x = 1e300 lies behind the stop at 2",
+        ),
+        ("system.restitution=1e300", "must lie in [0, 1], got 1e300"),
+    ] {
+        let output = lyapsweep(
+            &[
+                "run",
+                scene.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--set",
+                set,
+            ],
+            None,
+        );
+        refused(&output, &[needle]);
+    }
 }

@@ -153,7 +153,10 @@ pub enum ExactPropagator {
 pub fn check_finite(params: &Params) -> Result<(), (&'static str, String)> {
     for (p, v) in params.info.parameters.iter().zip(&params.values) {
         if !v.is_finite() {
-            return Err((p.name, format!("must be a finite number, got {v}")));
+            return Err((
+                p.name,
+                format!("must be a finite number, got {}", crate::error::number(*v)),
+            ));
         }
     }
     Ok(())

@@ -12,6 +12,7 @@ use nalgebra::{DMatrix, DVector, SMatrix};
 use super::{
     ExactPropagator, FlowSettings, IterationStats, Parameter, Params, Part, System, SystemInfo,
 };
+use crate::error::number;
 use crate::integrate::clock::Phase;
 use crate::integrate::closed_form::{ExactStatus, ForcedImpactOscillator};
 use crate::integrate::piecewise_linear::{PiecewiseLinear, PiecewiseStatus};
@@ -179,9 +180,14 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
     {
         if !(min..=max).contains(&value) {
             let reason = match (min.is_finite(), max.is_finite()) {
-                (true, true) => format!("must lie in [{min}, {max}], got {value}"),
-                (true, false) => format!("must be >= {min}, got {value}"),
-                _ => format!("must be <= {max}, got {value}"),
+                (true, true) => format!(
+                    "must lie in [{}, {}], got {}",
+                    number(min),
+                    number(max),
+                    number(value)
+                ),
+                (true, false) => format!("must be >= {}, got {}", number(min), number(value)),
+                _ => format!("must be <= {}, got {}", number(max), number(value)),
             };
             return Err((param.name, reason));
         }
@@ -200,18 +206,24 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
         return Err(match bare.or_else(|| blamed(p, period)) {
             Some(name) => (
                 name,
-                format!("the map's period must be a finite number > 0, got {t}"),
+                format!(
+                    "the map's period must be a finite number > 0, got {}",
+                    number(t)
+                ),
             ),
             None => (
                 "model.map.period",
-                format!("must be a finite number > 0, got {t}"),
+                format!("must be a finite number > 0, got {}", number(t)),
             ),
         });
     }
     if let Some(section) = &code.section {
         let at = section.at.eval(&[], &p.values, 0.0);
         if !at.is_finite() {
-            return Err(("model.map.section.at", format!("must be finite, got {at}")));
+            return Err((
+                "model.map.section.at",
+                format!("must be finite, got {}", number(at)),
+            ));
         }
     }
     for limit in code
@@ -224,8 +236,9 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
             return Err((
                 blamed(p, limit).unwrap_or("model.switches.stick_limit"),
                 format!(
-                    "the stick limit {}, got {value}",
-                    crate::model::table::STICK_LIMIT_RULE
+                    "the stick limit {}, got {}",
+                    crate::model::table::STICK_LIMIT_RULE,
+                    number(value)
                 ),
             ));
         }
@@ -272,8 +285,9 @@ fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
         let g = s.g.eval(x, &p.values, 0.0);
         if g > 0.0 {
             return Err(format!(
-                "it lies beyond the event '{}' (its surface is {g} > 0 there)",
-                s.name
+                "it lies beyond the event '{}' (its surface is {} > 0 there)",
+                s.name,
+                number(g)
             ));
         }
     }
@@ -281,7 +295,9 @@ fn check_state(p: &Params, x: &[f64]) -> std::result::Result<(), String> {
         if w.side * (x[w.coordinate] - w.position) > 0.0 {
             return Err(format!(
                 "{} = {} lies behind the stop at {}",
-                code.model.names.states[w.coordinate], x[w.coordinate], w.position
+                code.model.names.states[w.coordinate],
+                number(x[w.coordinate]),
+                number(w.position)
             ));
         }
     }
