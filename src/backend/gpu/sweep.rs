@@ -44,6 +44,11 @@ const SOFTWARE_WALL_CHUNK: usize = 256;
 const SUBMIT_LANE_STEPS: usize = 1 << 26;
 /// Bytes of Jacobians, points and summaries per chunk of iterations.
 const CHUNK_BYTES: u64 = 32 << 20;
+/// Trajectory-steps per chunk of iterations on a software adapter, about
+/// 0.1 s of lavapipe's on 2 cores: a stop waits for the chunk in flight,
+/// and a chunk of the byte budget alone (5 000 iterations of 64 lanes)
+/// took it 7 s to stop there. Hardware GPUs keep the byte budget.
+const SOFTWARE_CHUNK_STEPS: usize = 1 << 24;
 
 /// Runs the lanes of `scene` (one device batch: at most [`max_batch_lanes`])
 /// of a period map. The first try's dispatches take at most
@@ -377,6 +382,11 @@ where
         );
         let per_iteration = layout.per_iteration() * count as u64;
         let ring = ring_size(gpu, layout, settings, count, per_iteration);
+        let ring = if gpu.summary.is_hardware() {
+            ring
+        } else {
+            ring.min((SOFTWARE_CHUNK_STEPS / (count * layout.traj * steps).max(1)).max(1))
+        };
         let lane_steps = pipelines.dispatch.lane_steps;
         let chunk = |trajectories: usize| (lane_steps / trajectories.max(1)).clamp(1, steps);
         // While averaging a dispatch stops at the end of a part.
