@@ -431,11 +431,11 @@ fn main() {
 }
 
 /// Section 8: the CPU path with the native code built by the host's C
-/// compiler (`model::c_loop`, the default) and with the tape's interpreter
+/// compiler (`model::native::library`, the default) and with the tape's interpreter
 /// alone (`LYAPSWEEP_STEP_LOOPS=interpreter`, the portable reference), the
 /// seed's model (its code is built when the scene is parsed), whole runs
 /// alternated; the speed-up is the median of the rounds' ratios. The
-/// spectra are the same to the bit (tests: `model::c_loop`).
+/// spectra are the same to the bit (tests: `model::native::library`).
 fn loops(repeats: usize) {
     println!(
         "\nNative code on the CPU path, the seed's model ({} threads; medians of {repeats} alternated rounds after a warm-up)\n",
@@ -494,10 +494,10 @@ fn loops(repeats: usize) {
 /// The C compiler's step loop alone (8 slots, one trajectory of each of 8
 /// lanes, no stop met), nanoseconds per slot-step.
 fn loop_alone(repeats: usize) {
-    use lyapsweep::model::c_loop::Native;
-    use lyapsweep::model::expr::{Expr, Names};
-    use lyapsweep::model::native::{Layout, StopCode};
-    use lyapsweep::model::tape::Tape;
+    use lyapsweep::model::ir::tape::Tape;
+    use lyapsweep::model::language::expr::{Expr, Names};
+    use lyapsweep::model::native::abi::{Layout, StopCode};
+    use lyapsweep::model::native::library::Native;
     const W: usize = 8;
     let names = Names {
         states: vec!["x".into(), "v".into()],

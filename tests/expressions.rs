@@ -1,9 +1,9 @@
-//! The model language's expressions (src/model/expr.rs): they evaluate as
+//! The model language's expressions (src/model/language/expr.rs): they evaluate as
 //! the same formulas written in Rust, report errors at their column, differentiate
 //! symbolically to what finite differences give, and read back from their
 //! text form to the same values.
 
-use lyapsweep::model::expr::{Expr, Names, Var, Written};
+use lyapsweep::model::language::expr::{Expr, Names, Var, Written};
 
 fn names() -> Names {
     Names {

@@ -1,5 +1,5 @@
 //! Models on the GPU: the system file generated from a model's expression
-//! trees (src/model/wgsl.rs) run by the same kernels as the built-ins, on
+//! trees (src/model/codegen/wgsl.rs) run by the same kernels as the built-ins, on
 //! whatever adapter exists (lavapipe in CI, where skipping is an error):
 //! the forced pendulum (its sin θ the CPU's arithmetic) agrees with
 //! the CPU path to 1e-10 in f64, the Duffing oscillator too, and both,
@@ -121,7 +121,7 @@ fn the_forced_pendulum_on_the_gpu_agrees_with_the_cpu_in_f64() {
     // every rounding difference between the two paths by 1/δ, and on a
     // periodic orbit the same points recur every iteration, so those
     // differences do not average out. sin θ is the same arithmetic on
-    // both paths (`lyapsweep::model::math64`, the twin of math64.wgsl's
+    // both paths (`lyapsweep::model::language::math64`, the twin of math64.wgsl's
     // sin64, the same bits on lavapipe): with the C library's sin on the
     // CPU, an ulp apart, the paths differed by up to 2.4e-9 at δ = 1e-6.
     // Now 8.0e-12 at δ = 1e-6 and 6.1e-14 at 1e-4 (measured), within

@@ -9,7 +9,7 @@ mod common;
 use std::sync::mpsc;
 
 use lyapsweep::backend::gpu::context::{self, Want};
-use lyapsweep::model::math64;
+use lyapsweep::model::language::math64;
 use lyapsweep::scene::Precision;
 use wgpu::util::DeviceExt;
 
@@ -236,7 +236,7 @@ fn f64_functions_from_arithmetic_match_rust_within_a_few_ulp() {
             "{name}: {worst:.1} ulp at {at:?} (allowed {allowed})"
         );
         // sin, cos and tan are the CPU's own: the model evaluator calls
-        // the same arithmetic (lyapsweep::model::math64). To the bit on a
+        // the same arithmetic (lyapsweep::model::language::math64). To the bit on a
         // software adapter (lavapipe, CI's) and wherever the kernels run
         // with contraction forbidden; elsewhere a hardware driver may fuse
         // a multiply-add of the series, an ulp's difference.

@@ -3,7 +3,7 @@
 //! naming a key of the model, never a panic (a stack overflow would abort
 //! this whole test binary, which fails it too).
 
-use lyapsweep::model::code::Code;
+use lyapsweep::model::compiled::Code;
 use lyapsweep::model::describe::describe;
 use lyapsweep::model::Model;
 use proptest::prelude::*;

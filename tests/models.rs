@@ -2,7 +2,7 @@
 //! and every malformed model is refused naming its key (and, for an
 //! expression, the column).
 
-use lyapsweep::model::expr::Var;
+use lyapsweep::model::language::expr::Var;
 use lyapsweep::model::{Map, Model};
 
 /// The models issue's example, exactly as written there.

@@ -398,7 +398,7 @@ fn no_module_imports_one_that_imports_it_back() {
         edges["backend"]
     );
     assert!(
-        edges["output"].contains("model::code"),
+        edges["output"].contains("model::compiled"),
         "{:?}",
         edges["output"]
     );

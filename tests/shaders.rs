@@ -1,6 +1,6 @@
 //! Every shader variant validates with naga, without an adapter, the
 //! built-ins' and those of the system files generated from models
-//! (src/model/wgsl.rs); f64 variants call no transcendental builtin;
+//! (src/model/codegen/wgsl.rs); f64 variants call no transcendental builtin;
 //! variants leave out what a scene does not need.
 
 use lyapsweep::backend::gpu::shader::{Kernel, Variant};
@@ -44,7 +44,7 @@ period = "2*pi"
 "#;
 
 fn no_parameters() -> &'static SystemInfo {
-    use lyapsweep::model::code::Code;
+    use lyapsweep::model::compiled::Code;
     use lyapsweep::model::Model;
     use lyapsweep::system::model::info;
     let table: toml::Value = toml::from_str(NO_PARAMETERS).unwrap();

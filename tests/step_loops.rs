@@ -1,13 +1,13 @@
 //! A model with general surfaces (switches, events) steps between its
 //! crossings in the C compiler's loop over its regions
-//! (`model::c_loop::SwitchLoops`); where that loop is not built, the
+//! (`model::native::library::SwitchLoops`); where that loop is not built, the
 //! integrator's own step loop takes every step. The two must give every
 //! lane the same numbers, to the bit.
 
 mod common;
 
 use lyapsweep::method::{runner, Lane};
-use lyapsweep::model::code::Code;
+use lyapsweep::model::compiled::Code;
 use lyapsweep::model::Model;
 use lyapsweep::plan::method_settings;
 use lyapsweep::scene::{Backend, Precision};

@@ -1,4 +1,4 @@
-// The functions a generated model's system file calls (src/model/wgsl.rs),
+// The functions a generated model's system file calls (src/model/codegen/wgsl.rs),
 // one name per function for both precisions. On f64 they are math64.wgsl's,
 // built from arithmetic, because WGSL's transcendental builtins compile on
 // f64 but return garbage under Vulkan; on f32 they are WGSL's builtins.

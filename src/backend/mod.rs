@@ -340,7 +340,7 @@ fn plan(scene: &Scene, device: Option<usize>) -> Result<(Plan, Precision, Option
 
 /// Why the GPU kernels cannot run the scene's system at all, if they
 /// cannot: a built-in without a WGSL twin, or a model whose generated WGSL
-/// the kernels do not run yet (`model::wgsl::check`, the same for every
+/// the kernels do not run yet (`model::codegen::wgsl::check`, the same for every
 /// lane, so the first lane's parameters ask).
 fn no_kernels(scene: &Scene) -> Option<String> {
     let system = scene.system;

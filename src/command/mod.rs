@@ -11,7 +11,7 @@ use crate::attractor::{run_streaming, Attractors};
 use crate::backend::gpu::context::{self, AdapterSummary};
 use crate::backend::{RunOptions, Summary};
 use crate::error::{clip, Error, Result};
-use crate::model::{self, code::Code, Model};
+use crate::model::{self, compiled::Code, Model};
 use crate::output::{SetWriter, Staging};
 use crate::plan;
 use crate::scene::{self, Scene};

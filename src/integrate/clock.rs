@@ -19,7 +19,7 @@ pub const ZERO_PHASE: Phase = [1.0, 0.0];
 /// stroboscopic map, ω·steps·h = 2πm to rounding), the angle is taken as
 /// exactly πm/steps: ω·h/2 rounds differently for every ω of a sweep, and
 /// with this every lane turns its phase through the same bits, so lanes
-/// stepped together in lockstep share one phase (`c_loop::Native::walk`)
+/// stepped together in lockstep share one phase (`library::Native::walk`)
 /// instead of each turning its own.
 pub fn half_turn(omega: f64, h: f64, steps: usize) -> Phase {
     let steps = steps as f64;

@@ -15,7 +15,7 @@ use super::wall::Wall;
 pub type Reset<const D: usize> = ([f64; D], [[f64; D]; D], [f64; D]);
 
 /// Event j's surface and its rates at a state, for holding the motion on
-/// it (`model::code::EventHold`): g and ∇g, ġ and ∇ġ, g̈ along the free
+/// it (`model::compiled::EventHold`): g and ∇g, ġ and ∇ġ, g̈ along the free
 /// field (> 0 presses into the surface), and the states the reset changes.
 #[derive(Clone, Copy, Debug)]
 pub struct EventHoldValues<const D: usize> {

@@ -672,7 +672,7 @@ impl<'a, const W: usize> WallColumns<'a, W> {
 
     /// The slots (bit k) whose step from y to y1 meets a wall: at rest on
     /// it before the step, or the stop test ([`wall::may_reach`]) after it;
-    /// in two passes, as the step loops (`c_source::WalkText::detect` says why): the
+    /// in two passes, as the step loops (`c::WalkText::detect` says why): the
     /// turns that the plain test finds again, only those within reach of
     /// the wall.
     #[inline(always)]

@@ -130,7 +130,7 @@ pub struct SurfaceValues {
 /// [`SurfaceValues`] of W trajectories, structure of arrays, as a
 /// batch's evaluation gives them and the step loop's detection reads them,
 /// a vector per row: g of surface j in row 2j, its rate in row 2j + 1 (the
-/// outputs of a model's surfaces' tape, `model::code::Field::surfaces`,
+/// outputs of a model's surfaces' tape, `model::compiled::Field::surfaces`,
 /// which its native code writes in place). A model with fewer surfaces
 /// leaves the rows past its own at their zeros, unwritten.
 /// 32-byte aligned, for the AVX2 loads of the rows.

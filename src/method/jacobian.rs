@@ -8,7 +8,7 @@
 use nalgebra::SMatrix;
 
 use crate::integrate::clock::Phase;
-use crate::model::code::MAX_STATES;
+use crate::model::compiled::MAX_STATES;
 pub use crate::perturbation::Difference;
 use crate::system::{FlowSettings, IterationStats, Part, System};
 

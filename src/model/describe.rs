@@ -5,11 +5,11 @@
 
 use std::fmt::Write;
 
-use super::code::Code;
-use super::expr::{Expr, Op, Var, Written};
-use super::tape::reads_state_or_time;
-use super::wgsl;
 use crate::integrate::surface::Surface;
+use crate::model::codegen::wgsl;
+use crate::model::compiled::Code;
+use crate::model::language::expr::reads_state_or_time;
+use crate::model::language::expr::{Expr, Op, Var, Written};
 
 /// The report of a model that compiled: the model as written, then as the
 /// integrator sees it, then what each backend runs.
@@ -192,7 +192,7 @@ fn write_events(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
                     .reset
                     .iter()
                     .enumerate()
-                    .filter(|(i, e)| **e != Expr::Var(crate::model::expr::Var::State(*i)))
+                    .filter(|(i, e)| **e != Expr::Var(crate::model::language::expr::Var::State(*i)))
                     .map(|(i, e)| format!("{} -> {}", names.states[i], show(e)))
                     .collect();
                 let _ = writeln!(

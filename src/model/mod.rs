@@ -1,32 +1,23 @@
 //! A system as data (the models issue): what a scene's `[model]` table
 //! says, parsed once and read by every backend.
 //!
-//! The expression tree ([`expr`]), with its parser, evaluation, symbolic
-//! derivatives (for the sum rule) and text form; the `[model]` table
-//! checked and parsed into a [`Model`] ([`table`]); the CPU's compiled
-//! evaluator ([`tape`], and its native code as [`native`] describes it:
-//! its C text [`c_source`], built by [`c_compiler`], loaded by [`c_loop`])
-//! and the GPU's generated system file ([`wgsl`]), both printed from the
-//! lowered tapes by one printer ([`print`]), with
-//! sin, cos and tan computed by the same arithmetic on both ([`math64`]); and
-//! `model check`'s report ([`describe`]). `system::model` and
+//! The folders are the pipeline: the [`language`] (expressions, the
+//! `[model]` table checked into a [`Model`]), lowered to the [`ir`] (the
+//! instruction tape and its interpreter, the reference), printed by
+//! [`codegen`] (one printer; C for the CPU, WGSL for the GPU), the C built
+//! and loaded as [`native`] code; [`compiled`] joins them into the compiled
+//! model every backend reads, and [`describe`] is `model check`'s report. `system::model` and
 //! `system::section` make a compiled model a system like the hand-written
 //! one (Hénon's map).
 
-pub mod c_compiler;
-pub mod c_loop;
-pub mod c_source;
-pub mod code;
+pub mod codegen;
+pub mod compiled;
 pub mod describe;
-pub mod expr;
-pub mod math64;
+pub mod ir;
+pub mod language;
 pub mod native;
-pub mod print;
-pub mod table;
-pub mod tape;
-pub mod wgsl;
 
-pub use table::{Event, Map, Model};
+pub use language::{Event, Map, Model};
 
 /// A model file's `[model]` table (or, without one, the whole file as the
 /// model table), unparsed: what a scene's `model = "file"` stands for.

@@ -8,7 +8,7 @@ use std::path::Path;
 use super::files::{number, write_atomically, BRANCH_COLUMN, ERROR_COLUMN};
 use crate::attractor::Attractors;
 use crate::error::{Error, Result};
-use crate::model::code::event_column;
+use crate::model::compiled::event_column;
 use crate::scene::Scene;
 
 /// The header of `attractors.csv`: the swept parameters, `branch` (empty

@@ -32,7 +32,7 @@ use rayon::prelude::*;
 use crate::attractor::{self, Attractors};
 use crate::backend::Report;
 use crate::error::{Error, Result};
-use crate::model::code::event_column;
+use crate::model::compiled::event_column;
 use crate::scene::Scene;
 use files::{number, write_text};
 pub use files::{

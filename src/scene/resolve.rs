@@ -346,7 +346,7 @@ fn axis_len(raw: &RawAxis) -> usize {
 fn resolve_model(table: &toml::Value) -> Result<(&'static SystemInfo, Params)> {
     let model = crate::model::Model::parse(table, "model")?;
     let info = system::model::info_of(&format!("{table:?}"), || {
-        crate::model::code::Code::compile(model, "model")
+        crate::model::compiled::Code::compile(model, "model")
     })?;
     let params = Params::defaults(info);
     (info.check)(&params).map_err(|(name, reason)| Error::invalid(info.key(name), reason))?;

@@ -38,9 +38,9 @@ pub const INFO: SystemInfo = SystemInfo {
     period: super::period_of::<2, Henon>,
     forcing_frequency: |_| 0.0,
     gpu_refuses: |_| None,
-    wgsl: Some(crate::model::wgsl::SystemFile::plain(include_str!(
-        "../../shaders/system/henon.wgsl"
-    ))),
+    wgsl: Some(crate::model::codegen::wgsl::SystemFile::plain(
+        include_str!("../../shaders/system/henon.wgsl"),
+    )),
     wall_reachable: None,
     model: None,
     table: "system",

@@ -52,14 +52,14 @@ pub struct SystemInfo {
     /// and per stop its coordinate, velocity, side, position and
     /// restitution, when it has any) or `map_step` for a map. `None`: no
     /// GPU backend for this system.
-    pub wgsl: Option<crate::model::wgsl::SystemFile>,
+    pub wgsl: Option<crate::model::codegen::wgsl::SystemFile>,
     /// Whether the trajectory from this start can reach the system's wall at
     /// these parameters (a conservative bound: `true` when unsure); `None`
     /// for a system without a wall. A sweep that cannot reach it runs GPU
     /// kernels compiled without impact code.
     pub wall_reachable: Option<fn(&Params, &[f64]) -> bool>,
     /// The compiled model of a system given as data (`None` for a built-in).
-    pub model: Option<&'static crate::model::code::Code>,
+    pub model: Option<&'static crate::model::compiled::Code>,
     /// The scene table its parameters are keys of ("system", or
     /// "model.parameters"), for messages.
     pub table: &'static str,

@@ -92,7 +92,7 @@ fn model_kind(m: &ModelKind) -> &'static SystemInfo {
         |mut t| t.remove("model").expect("a [model] table"),
     );
     let compiled = crate::model::Model::parse(&table, "model")
-        .and_then(|model| crate::model::code::Code::compile(model, "model"));
+        .and_then(|model| crate::model::compiled::Code::compile(model, "model"));
     match compiled {
         Ok(code) => model::info_as(code, "system", m.default_sweep, m.exact),
         Err(e) => panic!("the {} kind's model file: {e}", m.kind),

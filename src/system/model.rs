@@ -1,9 +1,9 @@
-//! A system given as data: a compiled model (`crate::model::code`) run as
+//! A system given as data: a compiled model (`crate::model::compiled`) run as
 //! a flow ([`ModelFlow`]: its fields per region of the switches, its stops
 //! as walls, its other events and switches as the integrator's surfaces)
 //! and described to the rest of the tool like a built-in system
 //! ([`info`]). A model that is piecewise linear also gets the exact
-//! backend (`crate::model::code::piecewise_linear`).
+//! backend (`crate::model::compiled::piecewise_linear`).
 
 use std::mem::MaybeUninit;
 
@@ -21,11 +21,11 @@ use crate::integrate::{
     part_map_many, rk4, time_map, time_map_many, Flow, Surface, SurfaceBatch, SurfaceValues,
     Switching, Wall,
 };
-use crate::model::c_loop::Native;
-use crate::model::code::{piecewise_linear, reads_state_or_time, walls_at, Code};
-use crate::model::expr::{Expr, Var};
-use crate::model::native::{Kind, Layout};
-use crate::model::tape::Registers;
+use crate::model::compiled::{piecewise_linear, reads_state_or_time, walls_at, Code};
+use crate::model::ir::tape::Registers;
+use crate::model::language::expr::{Expr, Var};
+use crate::model::native::abi::{Kind, Layout};
+use crate::model::native::library::Native;
 
 /// Model descriptions built in this process ([`info_as`]): each is kept
 /// for the process, so this counts what the process holds for its models.
@@ -152,7 +152,7 @@ pub fn info_as(
         slowest_rate,
         forcing_frequency: |p| code_of(p).frequency(&p.values),
         gpu_refuses,
-        wgsl: crate::model::wgsl::system_file(code),
+        wgsl: crate::model::codegen::wgsl::system_file(code),
         wall_reachable: if code.walls.is_empty() && code.surfaces.is_empty() {
             None
         } else {
@@ -232,12 +232,12 @@ fn check(p: &Params) -> std::result::Result<(), (&'static str, String)> {
         .iter()
         .filter_map(|s| s.stick_limit.as_ref())
     {
-        if let Some(value) = crate::model::table::bad_stick_limit(limit, &p.values) {
+        if let Some(value) = crate::model::language::table::bad_stick_limit(limit, &p.values) {
             return Err((
                 blamed(p, limit).unwrap_or("model.switches.stick_limit"),
                 format!(
                     "the stick limit {}, got {}",
-                    crate::model::table::STICK_LIMIT_RULE,
+                    crate::model::language::table::STICK_LIMIT_RULE,
                     number(value)
                 ),
             ));
@@ -363,7 +363,7 @@ fn slowest_rate(p: &Params) -> f64 {
 }
 
 /// θ in [-π, π): θ - 2π·floor((θ + π)/2π). Twin of the generated
-/// `wrap_angles` of `model::wgsl`, operation for operation.
+/// `wrap_angles` of `model::codegen::wgsl`, operation for operation.
 pub fn wrap_angle(theta: f64) -> f64 {
     use std::f64::consts::{PI, TAU};
     theta - TAU * ((theta + PI) / TAU).floor()
@@ -1251,9 +1251,9 @@ impl<const D: usize> System<D> for ModelFlow<D> {
 }
 
 /// Why the GPU kernels cannot run this model, the same for every lane
-/// (`model::wgsl::check`); `None` when its generated WGSL runs.
+/// (`model::codegen::wgsl::check`); `None` when its generated WGSL runs.
 fn gpu_refuses(p: &Params) -> Option<String> {
-    crate::model::wgsl::check(code_of(p))
+    crate::model::codegen::wgsl::check(code_of(p))
         .err()
         .map(|why| why.to_string())
 }

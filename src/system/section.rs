@@ -18,8 +18,8 @@ use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
 use crate::integrate::section::{advance, next_crossings, Crossing, Section};
 use crate::integrate::Flow;
-use crate::model::code::Code;
-use crate::model::tape::Tape;
+use crate::model::compiled::Code;
+use crate::model::ir::tape::Tape;
 use crate::perturbation::{perturbation_at, Difference};
 
 /// The contraction one part of a return may have, e^PART_CONTRACTION: far

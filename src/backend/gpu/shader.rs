@@ -240,10 +240,10 @@ impl Variant {
         let defines = self.defines();
         let mut out = self.prelude();
         out.push_str(&preprocess(system, &defines));
-        // A generated model's functions (`model::wgsl`): f64 builds them
+        // A generated model's functions (`model::codegen::wgsl`): f64 builds them
         // from arithmetic; a system that calls none gets neither file. The
         // surface code takes ln |det S| (log_r).
-        if crate::model::wgsl::calls_wrappers(system) || self.surfaces() {
+        if crate::model::codegen::wgsl::calls_wrappers(system) || self.surfaces() {
             if self.precision == Precision::F64 {
                 out.push_str(&preprocess(&include("shared/math64.wgsl"), &defines));
             }

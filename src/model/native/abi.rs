@@ -3,12 +3,12 @@
 //! ([`Walk`]), what they compute ([`Kind`]) and how their arguments are
 //! laid out ([`Layout`]), the widths built, the stops a loop detects
 //! ([`StopCode`]), and the functions it calls back into Rust
-//! ([`callback`]). The host's C compiler builds it ([`super::c_loop`]);
+//! ([`callback`]). The host's C compiler builds it ([`crate::model::native::library`]);
 //! where it cannot, or `LYAPSWEEP_STEP_LOOPS=interpreter` asks, the tape's
-//! interpreter ([`super::tape::Tape::run`], the portable reference) runs
+//! interpreter ([`crate::model::ir::tape::Tape::run`], the portable reference) runs
 //! the model, to the same bits.
 
-use super::expr::Func;
+use crate::model::language::expr::Func;
 
 /// A compiled function: reads the `[[f64; W]; D]` states at `y`, the
 /// clock at `clock`, the lane constants at `lane` and the step sizes at `h`
@@ -23,7 +23,7 @@ pub type Function = unsafe extern "C" fn(
     out: *mut f64,
 );
 
-/// A compiled step loop (`c_loop::Native::walk`): takes up to `steps` RK4
+/// A compiled step loop (`library::Native::walk`): takes up to `steps` RK4
 /// steps of the `[[f64; W]; D]` states at `y` (in place) from the forcing
 /// phase `phase[0..2]`, turned by `phase[2..4]` per half step (written
 /// back where the loop stopped), with the lane constants at `lane` and the
@@ -41,7 +41,7 @@ pub type Walk = unsafe extern "C" fn(
     steps: u64,
 ) -> u64;
 
-/// A stop as the step loop detects it (`model::code::Stop`): the
+/// A stop as the step loop detects it (`model::compiled::Stop`): the
 /// coordinate it bounds, that coordinate's velocity, and the side (±1) the
 /// coordinate is kept on, compiled into the loop's comparisons.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -55,13 +55,13 @@ pub struct StopCode {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Loops {
     /// Native code built by the host's C compiler for the host's vectors
-    /// ([`super::c_loop`]), the interpreter where it fails.
+    /// ([`crate::model::native::library`]), the interpreter where it fails.
     CCompiler,
     /// The tape's interpreter alone: no native code.
     Interpreter,
 }
 
-/// The widths a step loop is compiled for (`c_loop::Native::walk`): a
+/// The widths a step loop is compiled for (`library::Native::walk`): a
 /// lane's reference and copies (3 to 9 trajectories) in batches of 4 or 8,
 /// the trajectories of neighbouring lanes in batches of 16
 /// (`integrate::LANE_BATCH`).

@@ -1,7 +1,7 @@
 //! A tape's native code, written in C and built by the host's C compiler
 //! for the host's own vectors ([`Native`]): its functions (a field's
 //! right-hand side or RK4 step, a model's surfaces' values and rates; see
-//! [`super::native`]) and a field's step loop between stops ([`Walk`]);
+//! [`crate::model::native::abi`]) and a field's step loop between stops ([`Walk`]);
 //! and for a model with general surfaces, the loop over its regions that
 //! also detects them ([`SwitchWalk`]) and the steps of its slides.
 //!
@@ -16,17 +16,17 @@
 //!
 //! Where there is no C compiler (`cc`, or `$CC`), or it fails, the tape's
 //! interpreter runs the model, to the same bits. The C text is
-//! `model::c_source`'s, the compiler and its cache of shared objects
-//! `model::c_compiler`'s; this module loads what they build and calls it.
+//! `model::codegen::c`'s, the compiler and its cache of shared objects
+//! `model::native::compiler`'s; this module loads what they build and calls it.
 
-use super::c_compiler::compiled;
-use super::c_source::{slide_name, slides, source_of, Region};
-use super::expr::Func;
-use super::native::{
+use crate::integrate::surface::Surface;
+use crate::model::codegen::c::{slide_name, slides, source_of, Region};
+use crate::model::ir::tape::Tape;
+use crate::model::language::expr::Func;
+use crate::model::native::abi::{
     callback, step_loops, Function, Kind, Layout, Loops, StopCode, Walk, WALK_WIDTHS, WIDTHS,
 };
-use super::tape::Tape;
-use crate::integrate::surface::Surface;
+use crate::model::native::compiler::compiled;
 
 /// A tape's native code, built by the C compiler: its functions by
 /// kind, width and layout (no [`Kind::Step`] for a tape whose outputs are
@@ -60,7 +60,7 @@ impl Native {
 
     /// [`compile`](Self::compile) for a field's equations, with its step
     /// loops ([`walk`](Self::walk)) where `stops` are given: each stop's
-    /// coordinate, velocity and side (±1, `model::code::Stop`), detected in
+    /// coordinate, velocity and side (±1, `model::compiled::Stop`), detected in
     /// the loop as the step loop of `integrate` detects them.
     pub fn compile_stepping(tape: &Tape, stops: Option<&[StopCode]>) -> Result<Native, String> {
         if step_loops() == Loops::Interpreter {
@@ -650,9 +650,9 @@ mod tests {
     use crate::integrate::clock::Phase;
     use crate::integrate::impact::may_turn_past;
     use crate::integrate::rk4;
-    use crate::model::c_compiler::{compiled_in, cpu_target, digest, object_key};
-    use crate::model::expr::{Expr, Names, Op};
-    use crate::model::tape::Registers;
+    use crate::model::ir::tape::Registers;
+    use crate::model::language::expr::{Expr, Names, Op};
+    use crate::model::native::compiler::{compiled_in, cpu_target, digest, object_key};
     use std::path::PathBuf;
 
     /// A field with every kind of instruction: fused products, a division,
@@ -963,7 +963,7 @@ reset = { v = "-0.9*v" }
     /// `surface::may_cross`): the steps taken, the states, the phase and
     /// the surfaces' values where it stopped, to the bit; walked on from
     /// each stop one plain step at a time, as the integrator does.
-    fn same_as_stepped<const W: usize>(code: &crate::model::code::Code, layout: Layout) {
+    fn same_as_stepped<const W: usize>(code: &crate::model::compiled::Code, layout: Layout) {
         use crate::integrate::{impact, rk4, surface};
         let loops = code
             .switch_loops
@@ -981,7 +981,7 @@ reset = { v = "-0.9*v" }
                 p
             })
             .collect();
-        let walls = crate::model::code::walls_at(code, &params[0]);
+        let walls = crate::model::compiled::walls_at(code, &params[0]);
         let regions = code.regions.len();
         // Each region's constants, per slot of the layout; then side by
         // side (row j: constant j of every slot) for `Each`.
@@ -1194,7 +1194,7 @@ reset = { v = "-0.9*v" }
     fn the_regions_step_loop_is_each_region_s_step_to_the_bit() {
         let table: toml::Value = toml::from_str(SWITCHING).unwrap();
         let model = crate::model::Model::parse(&table, "model").unwrap();
-        let code = crate::model::code::Code::compile(model, "model").unwrap();
+        let code = crate::model::compiled::Code::compile(model, "model").unwrap();
         assert_eq!(code.regions.len(), 4);
         assert_eq!(code.walls.len(), 1);
         assert_eq!(code.kinds.len(), 3);
@@ -1208,7 +1208,7 @@ reset = { v = "-0.9*v" }
     /// The regions' native fields with the switches' constant gradients:
     /// what `surface::Sliding` reads of `ModelFlow`.
     struct Fields<'a> {
-        code: &'a crate::model::code::Code,
+        code: &'a crate::model::compiled::Code,
         constants: Vec<Vec<f64>>,
         gradients: Vec<Vec<f64>>,
     }
@@ -1241,7 +1241,7 @@ reset = { v = "-0.9*v" }
     /// fields, over states on and off the surfaces, forcing phases and
     /// step sizes, to the bit. Gives the steps compared: finite, and NaN
     /// (the control singular) in both.
-    fn same_slides<const D: usize>(code: &crate::model::code::Code) -> (usize, usize) {
+    fn same_slides<const D: usize>(code: &crate::model::compiled::Code) -> (usize, usize) {
         use crate::integrate::clock::cos_sin;
         use crate::integrate::{rk4, surface};
         let loops = code.switch_loops.as_ref().unwrap().as_ref().unwrap();
@@ -1325,7 +1325,7 @@ reset = { v = "-0.9*v" }
             let table: toml::Value = toml::from_str(text).unwrap();
             let table = table.get("model").cloned().unwrap_or(table);
             let model = crate::model::Model::parse(&table, at).unwrap();
-            crate::model::code::Code::compile(model, at).unwrap()
+            crate::model::compiled::Code::compile(model, at).unwrap()
         };
         // The contact (x - 0.5) is crossed at the rate v on both sides: its
         // control is singular everywhere, alone or with the moving belt;

@@ -3,8 +3,8 @@
 //! and parsed into a [`Model`]. Every error names its key, and for an
 //! expression the column: `model.equations.v: unknown name 'zeta2' (column 6)`.
 
-use super::expr::{Expr, Names, Var};
 use crate::error::{Error, Result};
+use crate::model::language::expr::{Expr, Names, Var};
 
 /// A model as the scene gives it, its expressions parsed.
 #[derive(Clone, Debug)]
@@ -253,7 +253,7 @@ fn crossable(surface: &Expr, names: &Names, key: &str) -> Result<()> {
 /// the rates' mean is below the limit in size, so such a limit means
 /// nothing. `None` where it is fine, or depends on the state.
 pub fn bad_stick_limit(limit: &Expr, params: &[f64]) -> Option<f64> {
-    if super::tape::reads_state_or_time(limit) {
+    if crate::model::language::expr::reads_state_or_time(limit) {
         return None;
     }
     let value = limit.eval(&[], params, 0.0);

@@ -115,10 +115,10 @@ impl Func {
 
     pub(crate) fn apply(self, a: &[f64]) -> f64 {
         match self {
-            // The GPU's arithmetic, to the bit (`super::math64`).
-            Func::Sin => super::math64::sin(a[0]),
-            Func::Cos => super::math64::cos(a[0]),
-            Func::Tan => super::math64::tan(a[0]),
+            // The GPU's arithmetic, to the bit (`crate::model::language::math64`).
+            Func::Sin => crate::model::language::math64::sin(a[0]),
+            Func::Cos => crate::model::language::math64::cos(a[0]),
+            Func::Tan => crate::model::language::math64::tan(a[0]),
             Func::Exp => a[0].exp(),
             Func::Log => a[0].ln(),
             Func::Sqrt => a[0].sqrt(),
@@ -851,5 +851,17 @@ fn write_expr(f: &mut fmt::Formatter<'_>, e: &Expr, names: &Names, outer: u8) ->
             }
             write!(f, ")")
         }
+    }
+}
+
+/// Whether `e` reads a state or the time (anything but parameters and
+/// numbers).
+pub(crate) fn reads_state_or_time(e: &Expr) -> bool {
+    match e {
+        Expr::Num(_) => false,
+        Expr::Var(v) => !matches!(v, Var::Param(_)),
+        Expr::Neg(a) => reads_state_or_time(a),
+        Expr::Bin(_, a, b) => reads_state_or_time(a) || reads_state_or_time(b),
+        Expr::Call(_, args) => args.iter().any(reads_state_or_time),
     }
 }

@@ -17,17 +17,17 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::c_loop::{Native, SwitchLoops};
-use super::expr::{Expr, Var, Written};
-use super::native::{step_loops, Loops, StopCode};
-pub(crate) use super::tape::reads_state_or_time;
-use super::tape::Tape;
-use super::{Map, Model};
 use crate::error::{Error, Result};
 use crate::integrate::impact::MAX_WALLS;
 use crate::integrate::piecewise_linear::{LinearField, LinearSurface, PiecewiseLinear};
 use crate::integrate::surface::MAX_SURFACES;
 use crate::integrate::{Surface, Wall};
+use crate::model::ir::tape::Tape;
+pub(crate) use crate::model::language::expr::reads_state_or_time;
+use crate::model::language::expr::{Expr, Var, Written};
+use crate::model::native::abi::{step_loops, Loops, StopCode};
+use crate::model::native::library::{Native, SwitchLoops};
+use crate::model::{Map, Model};
 
 /// The largest model dimension the CPU path is compiled for.
 pub const MAX_STATES: usize = 6;
@@ -124,7 +124,7 @@ pub struct EventHold {
 
 impl EventHold {
     fn new(g: &Expr, gradient: &[Expr], reset: &[Expr], field: &[Expr]) -> Self {
-        use super::expr::{add, mul};
+        use crate::model::language::expr::{add, mul};
         let along = |gradient: &[Expr], of: &Expr| {
             gradient
                 .iter()
@@ -220,7 +220,7 @@ impl Code {
             })?;
         Some(format!(
             "the C compiler (CC = {}) did not build the model's native code, so the CPU runs it on the interpreter, 8 to 10 times slower: {why}",
-            super::c_compiler::compiler()
+            crate::model::native::compiler::compiler()
         ))
     }
 
@@ -370,7 +370,7 @@ fn stop(model: &Model, event: &crate::model::Event, key: &str) -> Option<Stop> {
     };
     // g = side·(x - c) = side·x + r, so c = -side·r with r = g at x = 0.
     let position = Expr::Neg(Box::new(Expr::Bin(
-        crate::model::expr::Op::Mul,
+        crate::model::language::expr::Op::Mul,
         Box::new(Expr::Num(side)),
         Box::new(at_zero(&event.surface, coordinate)),
     )));
@@ -522,7 +522,7 @@ pub fn piecewise_linear(code: &Code, params: &[f64]) -> Option<PiecewiseLinear> 
 /// `e` with the clock's cos(w t) and sin(w t) replaced by the numbers
 /// `cos` and `sin` (see [`piecewise_linear`]).
 fn with_clock(e: &Expr, cos: f64, sin: f64) -> Expr {
-    use crate::model::expr::Func;
+    use crate::model::language::expr::Func;
     match e {
         Expr::Call(Func::Cos, args) if args[0].uses(Var::Time) => Expr::Num(cos),
         Expr::Call(Func::Sin, args) if args[0].uses(Var::Time) => Expr::Num(sin),
@@ -622,14 +622,20 @@ fn field(
             let rate = (0..n)
                 .map(|i| {
                     Expr::Bin(
-                        crate::model::expr::Op::Mul,
+                        crate::model::language::expr::Op::Mul,
                         Box::new(s.gradient[i].clone()),
                         Box::new(equations[i].clone()),
                     )
                 })
                 // ∂g/∂t: a surface that moves with the forcing.
                 .chain([s.g.derivative(Var::Time)])
-                .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
+                .reduce(|a, b| {
+                    Expr::Bin(
+                        crate::model::language::expr::Op::Add,
+                        Box::new(a),
+                        Box::new(b),
+                    )
+                })
                 .expect("a model has a state");
             [s.g.clone(), rate]
         })
@@ -877,7 +883,13 @@ fn divergence_of(
     let n = model.names.states.len();
     let whole_divergence = (0..n)
         .map(|i| model.equations[i].derivative(Var::State(i)))
-        .reduce(|a, b| Expr::Bin(crate::model::expr::Op::Add, Box::new(a), Box::new(b)))
+        .reduce(|a, b| {
+            Expr::Bin(
+                crate::model::language::expr::Op::Add,
+                Box::new(a),
+                Box::new(b),
+            )
+        })
         .expect("a model has a state");
     // A divergence that reads the switches' sides is the same
     // everywhere only when every region's is the same.

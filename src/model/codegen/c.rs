@@ -1,19 +1,19 @@
-//! The C source of a tape's native code (`model::c_loop`): the functions
+//! The C source of a tape's native code (`model::native::library`): the functions
 //! of a field's tape ([`Kind`]), the step loops between stops, over the
 //! regions of a model with general surfaces too, and the steps of its
 //! slides, each a loop over the slots that the C compiler vectorises.
-//! The tapes themselves are printed by `model::print` with C's
+//! The tapes themselves are printed by `model::codegen::print` with C's
 //! [`Syntax`] (numbers of the same bits, the exact functions as builtins,
 //! every other function a call back into Rust), the text around them
 //! here: the same operations in the same order as the interpreter
 //! (`Tape::run`), `rk4::step_batch` and `integrate::steps`.
 
-use super::expr::Func;
-use super::native::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};
-use super::print::{self, Inputs, Syntax};
-use super::tape::{Code, Tape};
 use crate::integrate::impact::TURN_REACH;
 use crate::integrate::surface::Surface;
+use crate::model::codegen::print::{self, Inputs, Syntax};
+use crate::model::ir::tape::{Code, Tape};
+use crate::model::language::expr::Func;
+use crate::model::native::abi::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};
 use std::fmt::Write as _;
 
 /// C's [`Syntax`]: `calls` are the functions called back into Rust, by
@@ -46,9 +46,9 @@ impl Syntax for C<'_> {
 
 /// One region's tapes: the field, and where the model has general
 /// surfaces, their values and rates along it.
-pub(super) struct Region<'a> {
-    pub(super) field: &'a Tape,
-    pub(super) surfaces: Option<&'a Tape>,
+pub(crate) struct Region<'a> {
+    pub(crate) field: &'a Tape,
+    pub(crate) surfaces: Option<&'a Tape>,
 }
 
 /// The C source of `regions`' code, and the functions it calls back into
@@ -57,7 +57,7 @@ pub(super) struct Region<'a> {
 /// `functions`' kinds ([`function`], every width and layout), where
 /// `stops` are given the step loops of `regions` ([`walk`], every width
 /// and layout), and the steps of their slides on the switches of `kinds`.
-pub(super) fn source_of(
+pub(crate) fn source_of(
     regions: &[Region],
     stops: Option<&[StopCode]>,
     kinds: &[Surface],
@@ -170,7 +170,7 @@ fn function(out: &mut String, tape: &Tape, calls: &[Func], kind: Kind, w: usize,
 /// once (their bits, in the order of their surfaces, as
 /// `surface::SlidingSet` lists them), from each base region without
 /// their bits.
-pub(super) fn slides(regions: usize, kinds: &[Surface]) -> Vec<(usize, Vec<usize>)> {
+pub(crate) fn slides(regions: usize, kinds: &[Surface]) -> Vec<(usize, Vec<usize>)> {
     let bits: Vec<usize> = kinds
         .iter()
         .filter_map(|k| match *k {
@@ -193,7 +193,7 @@ pub(super) fn slides(regions: usize, kinds: &[Surface]) -> Vec<(usize, Vec<usize
 }
 
 /// The C name of a slide's step.
-pub(super) fn slide_name(base: usize, bits: &[usize]) -> String {
+pub(crate) fn slide_name(base: usize, bits: &[usize]) -> String {
     let bits: Vec<String> = bits.iter().map(|b| b.to_string()).collect();
     format!("slide{base}_{}", bits.join("_"))
 }
@@ -207,7 +207,7 @@ fn sum_start() -> f64 {
 /// Appends `walk{w}{layout:?}`: the step loop (the phase turned, the
 /// RK4 step, the stops detected, as `integrate::steps` does) over `w`
 /// slots, a loop over the slots per step for the compiler to vectorise.
-/// Where the regions have surfaces it is a `c_loop::SwitchWalk`: each slot
+/// Where the regions have surfaces it is a `library::SwitchWalk`: each slot
 /// steps its own region's field (every region present computed over the
 /// batch, each slot keeping its own's, as `ModelFlow::step_each_in`
 /// does), the surfaces' values and rates are taken at each step's end as

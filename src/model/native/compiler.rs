@@ -1,4 +1,4 @@
-//! The host's C compiler, as the native code (`model::c_loop`) uses it:
+//! The host's C compiler, as the native code (`model::native::library`) uses it:
 //! a C source built into a shared object with the flags that keep the
 //! IEEE operations as written ([`FLAGS`]), and the objects cached in the
 //! user's cache directory by the hash of their source, compiler, flags
@@ -26,7 +26,7 @@ pub(super) fn compiled(source: &str) -> Result<libloading::Library, String> {
 }
 
 /// The C compiler: `$CC`, else `cc`.
-pub(super) fn compiler() -> String {
+pub(crate) fn compiler() -> String {
     std::env::var("CC").unwrap_or_else(|_| "cc".into())
 }
 

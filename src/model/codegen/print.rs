@@ -1,6 +1,6 @@
 //! A tape as source text: the one printer behind both generated
-//! languages, the C of the CPU's native code (`model::c_loop`) and the
-//! WGSL of the GPU's system file (`model::wgsl`).
+//! languages, the C of the CPU's native code (`model::native::library`) and the
+//! WGSL of the GPU's system file (`model::codegen::wgsl`).
 //!
 //! It writes the tape's lowered instructions ([`Tape::lowered`], the
 //! interpreter's own order) as one named value per instruction, each a
@@ -15,8 +15,8 @@
 
 use std::fmt::Write as _;
 
-use super::expr::Func;
-use super::tape::{Code, Tape};
+use crate::model::ir::tape::{Code, Tape};
+use crate::model::language::expr::Func;
 
 /// How a target writes what a tape's text needs beyond `+ - * /` and
 /// unary minus, which C and WGSL write alike.
@@ -89,7 +89,7 @@ pub fn print(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::expr::{Expr, Names};
+    use crate::model::language::expr::{Expr, Names};
 
     /// A syntax that shows which hook wrote what.
     struct Plain;

@@ -22,8 +22,8 @@
 use std::collections::HashMap;
 use std::mem::MaybeUninit;
 
-use super::expr::{Expr, Func, Op, Var};
 use crate::integrate::clock::Phase;
+use crate::model::language::expr::{reads_state_or_time, Expr, Func, Op, Var};
 
 /// Where an operand comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,7 +108,7 @@ impl Tape {
     }
 
     /// Compiles `exprs` for a target that reads the parameters where it
-    /// runs, as the GPU's system file does (`model::wgsl`): every parameter
+    /// runs, as the GPU's system file does (`model::codegen::wgsl`): every parameter
     /// and switch side the expressions read is a lane constant of its own
     /// (`Expr::Var`), and every operation on them, numbers' included, an
     /// instruction, in the tree's order. Hoisting them would need a second
@@ -116,7 +116,7 @@ impl Tape {
     /// call: read in place, the printed code computes what the tree says,
     /// the operations [`Expr::eval`] does for the CPU's lane constants, so
     /// an f64 kernel keeps the CPU's bits. Such a tape is printed
-    /// (`model::print`), never run: the interpreter's register-file limits
+    /// (`model::codegen::print`), never run: the interpreter's register-file limits
     /// do not apply.
     pub fn compile_reading_parameters<'a>(
         exprs: impl IntoIterator<Item = &'a Expr>,
@@ -242,7 +242,7 @@ impl Tape {
         out
     }
 
-    /// The tape as [`Tape::run`] runs it, for the native code (`model::c_loop`): the
+    /// The tape as [`Tape::run`] runs it, for the native code (`model::native::library`): the
     /// lowered instructions, the numbers (slots after the lane constants)
     /// and the slot of each output. Slots are the states, cos and sin of
     /// the clock, the lane constants, the numbers, then one result per
@@ -557,22 +557,10 @@ fn time_outside_clock() -> CompileError {
     )
 }
 
-/// Whether `e` reads a state or the time (anything but parameters and
-/// numbers).
-pub(crate) fn reads_state_or_time(e: &Expr) -> bool {
-    match e {
-        Expr::Num(_) => false,
-        Expr::Var(v) => !matches!(v, Var::Param(_)),
-        Expr::Neg(a) => reads_state_or_time(a),
-        Expr::Bin(_, a, b) => reads_state_or_time(a) || reads_state_or_time(b),
-        Expr::Call(_, args) => args.iter().any(reads_state_or_time),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::expr::Names;
+    use crate::model::language::expr::Names;
 
     fn names() -> Names {
         Names {

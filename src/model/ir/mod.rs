@@ -1,0 +1,5 @@
+//! The one intermediate representation every generated target is printed
+//! from: the lowered instruction tape of a model's expressions and its
+//! interpreter, the reference ([`tape`]).
+
+pub mod tape;
