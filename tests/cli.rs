@@ -432,11 +432,16 @@ fn kernels_from_a_shader_folder_are_used_and_said() {
     let (stdout, copied) = run("copy", Some(&shaders));
     assert!(stdout.contains(&said), "{stdout}");
     assert_eq!(copied, binary, "the same sources, other bits");
-    // RK4's weights off by a part in 60 000: other numbers.
-    let rk4 = shaders.join("shared/rk4.wgsl");
-    let text = std::fs::read_to_string(&rk4).unwrap();
-    assert_eq!(text.matches("h / real(6.0)").count(), 1);
-    std::fs::write(&rk4, text.replace("h / real(6.0)", "h / real(6.0001)")).unwrap();
+    // The clock's 1/3! off by a part in 60 000 (the phase of every
+    // partial step to an impact): other numbers.
+    let clock = shaders.join("shared/clock.wgsl");
+    let text = std::fs::read_to_string(&clock).unwrap();
+    assert_eq!(text.matches("real(1.0 / 6.0)").count(), 1);
+    std::fs::write(
+        &clock,
+        text.replace("real(1.0 / 6.0)", "real(1.0 / 6.0001)"),
+    )
+    .unwrap();
     let (stdout, edited) = run("edited", Some(&shaders));
     assert!(stdout.contains(&said), "{stdout}");
     assert_ne!(edited, binary, "the edited kernels were not used");
@@ -506,7 +511,7 @@ fn a_run_with_many_starts_counts_its_values_with_several_attractors() {
 fn a_shader_folder_with_a_broken_source_names_the_file() {
     let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
     for (broken, bytes) in [
-        ("shared/rk4.wgsl", &b"fn \xff\xfe broken"[..]),
+        ("shared/clock.wgsl", &b"fn \xff\xfe broken"[..]),
         ("shared/impact.wgsl", &b"\n"[..]),
     ] {
         let dir = tempfile::tempdir().unwrap();
@@ -547,9 +552,9 @@ fn a_shader_folder_whose_kernels_do_not_parse_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("shaders");
     copy_folder(&shaders, &copy);
-    let rk4 = copy.join("shared/rk4.wgsl");
-    let text = std::fs::read_to_string(&rk4).unwrap();
-    std::fs::write(&rk4, text + "\nfn broken( {\n").unwrap();
+    let clock = copy.join("shared/clock.wgsl");
+    let text = std::fs::read_to_string(&clock).unwrap();
+    std::fs::write(&clock, text + "\nfn broken( {\n").unwrap();
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, BASE).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))

@@ -1,15 +1,7 @@
 // The forcing clock: (cos ωt, sin ωt) from arithmetic alone, because WGSL's
 // transcendental builtins are undefined on f64 under Vulkan. Twin of
-// src/integrate/clock.rs.
-
-// The phase rotated by the angle whose (cos, sin) is `by`, renormalised to the
-// unit circle by one Newton step for 1/sqrt(c² + s²).
-fn rotate(phase: vec2<real>, by: vec2<real>) -> vec2<real> {
-    let c = phase.x * by.x - phase.y * by.y;
-    let s = phase.y * by.x + phase.x * by.y;
-    let scale = real(1.5) - real(0.5) * (c * c + s * s);
-    return vec2<real>(c * scale, s * scale);
-}
+// src/integrate/clock.rs; its rotation, `rotate`, is generated from the
+// integrator's step program (src/model/ir/step.rs), with RK4.
 
 // (cos φ, sin φ) by Taylor polynomials to φ^14 and φ^15, halving φ until
 // |φ| <= 1/2 and doubling back.

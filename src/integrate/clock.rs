@@ -6,7 +6,9 @@
 //! stroboscopic section puts ωt ≡ 0) and advanced by exact rotations:
 //! a grid step by the host-computed rotation through ωh/2 twice, a partial
 //! step (to an impact) by the rotation through ωs from [`cos_sin`]. The
-//! Rust here and `shaders/shared/clock.wgsl` are twins.
+//! Rust here is the reference for the rotation of the step program
+//! (`model::ir::step::integrator`) and the twin of
+//! `shaders/shared/clock.wgsl`'s `cos_sin`.
 
 /// (cos ωt, sin ωt).
 pub type Phase = [f64; 2];

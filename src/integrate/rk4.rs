@@ -1,5 +1,6 @@
 //! The classical fourth-order Runge–Kutta step (the paper's integrator),
-//! twin of `shaders/shared/rk4.wgsl`.
+//! the reference for the step program that the generated C and WGSL print
+//! (`model::ir::step::integrator`).
 
 use super::clock::{rotate, Phase};
 

@@ -31,10 +31,6 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/clock.wgsl"),
     ),
     (
-        "shared/rk4.wgsl",
-        include_str!("../../../shaders/shared/rk4.wgsl"),
-    ),
-    (
         "shared/impact.wgsl",
         include_str!("../../../shaders/shared/impact.wgsl"),
     ),
@@ -253,9 +249,9 @@ impl Variant {
             ));
         }
         out.push_str(&preprocess(&include("shared/clock.wgsl"), &defines));
-        if self.system.is_flow {
-            out.push_str(&preprocess(&include("shared/rk4.wgsl"), &defines));
-        }
+        out.push_str(&crate::model::codegen::wgsl::integrator(
+            self.system.is_flow,
+        ));
         if self.wall {
             out.push_str(&preprocess(&include("shared/impact.wgsl"), &defines));
         }

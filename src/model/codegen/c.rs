@@ -11,6 +11,8 @@
 use crate::integrate::impact::TURN_REACH;
 use crate::integrate::surface::Surface;
 use crate::model::codegen::print::{self, Inputs, Syntax};
+use crate::model::codegen::step::{self, CField, CValue};
+use crate::model::ir::step::integrator;
 use crate::model::ir::tape::{Code, Tape};
 use crate::model::language::expr::Func;
 use crate::model::native::abi::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};
@@ -152,12 +154,8 @@ fn function(out: &mut String, tape: &Tape, calls: &[Func], kind: Kind, w: usize,
             for (r, name) in names.iter().enumerate() {
                 let _ = writeln!(out, "      const double {name} = {};", row("clock", r));
             }
-            let _ = writeln!(
-                out,
-                "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
-                row("h", 0)
-            );
-            rk4(out, tape, calls, "", &state, &lane)
+            let _ = writeln!(out, "      const double hh = {};", row("h", 0));
+            rk4(out, tape, calls, "q", &state, &lane)
         }
     };
     for (m, value) in values.iter().enumerate() {
@@ -351,26 +349,35 @@ impl WalkText<'_> {
         }
     }
 
-    /// `clock::rotate`, as `rk4::stage_phases` turns it: the phases of the
-    /// step's middle and end.
+    /// The phases of the step's middle and end (`rk4::stage_phases`):
+    /// the step program's `rotate`, once for every slot.
     fn turn_clock(&self, out: &mut String) {
-        for (from, to) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
-            let ((c, s), (c1, s1)) = (from, to);
-            let _ = writeln!(
+        let program = integrator();
+        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
+        let mut text = step::C {
+            syntax: &C { calls: self.calls },
+            field: &mut field,
+            indent: "    ",
+        };
+        let half = CValue::Phase("hc".into(), "hs".into());
+        for ((c, s), (c1, s1)) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
+            let phase = CValue::Phase(c.into(), s.into());
+            let turned = text.inline(
                 out,
-                "    double {c1}_ = {c} * hc - {s} * hs, {s1}_ = {s} * hc + {c} * hs;\n    \
-                 double {c1}n = 1.5 - 0.5 * ({c1}_ * {c1}_ + {s1}_ * {s1}_);\n    \
-                 double {c1} = {c1}_ * {c1}n, {s1} = {s1}_ * {c1}n;"
+                &program,
+                "rotate",
+                vec![phase, half.clone()],
+                &format!("{c1}_"),
             );
+            let [CValue::Phase(tc, ts)] = &turned[..] else {
+                unreachable!("rotate gives a phase")
+            };
+            let _ = writeln!(out, "    const double {c1} = {tc}, {s1} = {ts};");
         }
     }
 
     fn step_sizes(&self, out: &mut String) {
-        let _ = writeln!(
-            out,
-            "      const double hh = {}, h2 = 0.5 * hh, sixth = hh / 6.0;",
-            self.row("h", 0)
-        );
+        let _ = writeln!(out, "      const double hh = {};", self.row("h", 0));
     }
 
     fn state(&self) -> Vec<String> {
@@ -394,7 +401,7 @@ impl WalkText<'_> {
             out,
             self.regions[0].field,
             self.calls,
-            "",
+            "q",
             &self.state(),
             &lane,
         );
@@ -595,8 +602,8 @@ fn reaches_across() -> String {
 
 /// `rk4::step_batch`'s step of the slot whose states are `state`, with
 /// the field `tape` (its constants from `row`, its values named after
-/// `prefix`), inside a loop over the slots that has set `hh`, `h2` and
-/// `sixth`; gives each state's value after the step as a C expression.
+/// `prefix`), inside a loop over the slots that has set `hh`; gives each
+/// state's value after the step as a C expression.
 fn rk4(
     out: &mut String,
     tape: &Tape,
@@ -605,38 +612,45 @@ fn rk4(
     state: &[String],
     row: &dyn Fn(&str, usize) -> String,
 ) -> Vec<String> {
-    rk4_of(out, prefix, state, &mut |out, prefix, state, clock| {
-        rhs(out, tape, calls, prefix, state, clock, row)
-    })
+    rk4_of(
+        out,
+        calls,
+        prefix,
+        state,
+        &mut |out, prefix, state, clock| rhs(out, tape, calls, prefix, state, clock, row),
+    )
 }
 
-/// A field's values at a state and clock, written as C values named after
-/// a prefix (`rhs`, or the sliding field of `slide_step`).
-type FieldCode<'a> = dyn FnMut(&mut String, &str, &[String], (&str, &str)) -> Vec<String> + 'a;
-
-/// [`rk4`] with the field given as code.
-fn rk4_of(out: &mut String, prefix: &str, state: &[String], field: &mut FieldCode) -> Vec<String> {
-    let name = |p: &str| format!("{prefix}{p}");
-    let k1 = field(out, &name("a"), state, ("c", "s"));
-    let y2 = axpy(out, &name("b"), state, "h2", &k1);
-    let k2 = field(out, &name("c"), &y2, ("mc", "ms"));
-    let y3 = axpy(out, &name("d"), state, "h2", &k2);
-    let k3 = field(out, &name("e"), &y3, ("mc", "ms"));
-    let y4 = axpy(out, &name("f"), state, "hh", &k3);
-    let k4 = field(out, &name("g"), &y4, ("ec", "es"));
-    // y + h/6·(k1 + 2(k2 + k3) + k4)
-    (0..state.len())
-        .map(|i| {
-            format!(
-                "{y} + sixth * ((({k1} + 2.0 * ({k2} + {k3}))) + {k4})",
-                y = state[i],
-                k1 = k1[i],
-                k2 = k2[i],
-                k3 = k3[i],
-                k4 = k4[i],
-            )
-        })
-        .collect()
+/// [`rk4`] with the field given as code: the step program's
+/// `rk4_update`, at the phases `c, s` (the step's start), `mc, ms` and
+/// `ec, es` and the step `hh`.
+fn rk4_of(
+    out: &mut String,
+    calls: &[Func],
+    prefix: &str,
+    state: &[String],
+    field: &mut CField,
+) -> Vec<String> {
+    let phase = |c: &str, s: &str| CValue::Phase(c.into(), s.into());
+    let args = vec![
+        phase("c", "s"),
+        phase("mc", "ms"),
+        phase("ec", "es"),
+        CValue::State(state.to_vec()),
+        CValue::Real("hh".into()),
+    ];
+    let mut text = step::C {
+        syntax: &C { calls },
+        field,
+        indent: "      ",
+    };
+    match text
+        .inline(out, &integrator(), "rk4_update", args, prefix)
+        .remove(0)
+    {
+        CValue::State(end) => end,
+        other => unreachable!("rk4_update gives a state, not {other:?}"),
+    }
 }
 
 /// One RK4 step of one trajectory sliding on the switches `bits` at
@@ -661,8 +675,7 @@ fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zer
          const double *restrict lc0, const double *restrict lc1, const double *restrict lc2, \
          const double *restrict g0, const double *restrict g1, double *restrict out) {{\n  \
          const double c = clock[0], s = clock[1], mc = clock[2], ms = clock[3], \
-         ec = clock[4], es = clock[5];\n  \
-         const double h2 = 0.5 * hh, sixth = hh / 6.0;"
+         ec = clock[4], es = clock[5];"
     );
     let state: Vec<String> = (0..d).map(|i| format!("y[{i}]")).collect();
     let dot = |m: usize, f: &[String]| {
@@ -670,99 +683,90 @@ fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zer
             format!("({sum} + g{m}[{i}] * {})", f[i])
         })
     };
-    let end = rk4_of(out, "", &state, &mut |out, prefix, state, clock| {
-        let f: Vec<Vec<String>> = (0..=n)
-            .map(|m| {
-                let row = move |_: &str, j: usize| format!("lc{m}[{j}]");
-                rhs(
-                    out,
-                    tapes[m],
-                    calls,
-                    &format!("{prefix}f{m}_"),
-                    state,
-                    clock,
-                    &row,
-                )
-            })
-            .collect();
-        let v = |x: &str| format!("{prefix}{x}");
-        // C statements with this stage's names: `$x` is `{prefix}x`.
-        let mut line = |text: &str| {
-            let _ = writeln!(out, "      {}", text.replace('$', prefix));
-        };
-        if n == 1 {
-            line(&format!("const double $p = {};", dot(0, &f[0])));
-            line(&format!("const double $q = {};", dot(0, &f[1])));
-            line("const double $u0 = $p / ($p - $q);");
-            line("const int $ok = __builtin_isfinite($u0);");
-        } else {
-            // a_j, and the matrix M = a_j - c_jk, as equivalent_on.
-            for j in 0..2 {
-                line(&format!("const double $a{j} = {};", dot(j, &f[0])));
-                for k in 0..2 {
-                    line(&format!(
-                        "const double $m{j}{k} = $a{j} - {};",
-                        dot(j, &f[k + 1])
-                    ));
+    let end = rk4_of(
+        out,
+        calls,
+        "rk",
+        &state,
+        &mut |out, prefix, state, clock| {
+            let f: Vec<Vec<String>> = (0..=n)
+                .map(|m| {
+                    let row = move |_: &str, j: usize| format!("lc{m}[{j}]");
+                    rhs(
+                        out,
+                        tapes[m],
+                        calls,
+                        &format!("{prefix}f{m}_"),
+                        state,
+                        clock,
+                        &row,
+                    )
+                })
+                .collect();
+            let v = |x: &str| format!("{prefix}{x}");
+            // C statements with this stage's names: `$x` is `{prefix}x`.
+            let mut line = |text: &str| {
+                let _ = writeln!(out, "      {}", text.replace('$', prefix));
+            };
+            if n == 1 {
+                line(&format!("const double $p = {};", dot(0, &f[0])));
+                line(&format!("const double $q = {};", dot(0, &f[1])));
+                line("const double $u0 = $p / ($p - $q);");
+                line("const int $ok = __builtin_isfinite($u0);");
+            } else {
+                // a_j, and the matrix M = a_j - c_jk, as equivalent_on.
+                for j in 0..2 {
+                    line(&format!("const double $a{j} = {};", dot(j, &f[0])));
+                    for k in 0..2 {
+                        line(&format!(
+                            "const double $m{j}{k} = $a{j} - {};",
+                            dot(j, &f[k + 1])
+                        ));
+                    }
                 }
-            }
-            // The pivot of column 0: the row with the larger |M_j0| in
-            // `total_cmp`'s order (NaN above all), the second on a tie
-            // (`max_by` keeps the last maximum); after the swap the
-            // pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr].
-            line("const double $x0 = __builtin_fabs($m00), $x1 = __builtin_fabs($m10);");
-            line("const int $sw = __builtin_isnan($x1) || (!__builtin_isnan($x0) && $x1 >= $x0);");
-            line("const double $p0 = $sw ? $m10 : $m00, $p1 = $sw ? $m11 : $m01, $pr = $sw ? $a1 : $a0;");
-            line("const double $q0 = $sw ? $m00 : $m10, $q1 = $sw ? $m01 : $m11, $qr = $sw ? $a0 : $a1;");
-            // Elimination, then back-substitution, in solve's order.
-            line("const double $k = $q0 / $p0;");
-            line("const double $e1 = $q1 - $k * $p1, $er = $qr - $k * $pr;");
-            line("const double $u1 = $er / $e1;");
-            line("const double $u0 = ($pr - $p1 * $u1) / $p0;");
-            line(
-                "const int $ok = $p0 != 0.0 && $e1 != 0.0 \
+                // The pivot of column 0: the row with the larger |M_j0| in
+                // `total_cmp`'s order (NaN above all), the second on a tie
+                // (`max_by` keeps the last maximum); after the swap the
+                // pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr].
+                line("const double $x0 = __builtin_fabs($m00), $x1 = __builtin_fabs($m10);");
+                line("const int $sw = __builtin_isnan($x1) || (!__builtin_isnan($x0) && $x1 >= $x0);");
+                line("const double $p0 = $sw ? $m10 : $m00, $p1 = $sw ? $m11 : $m01, $pr = $sw ? $a1 : $a0;");
+                line("const double $q0 = $sw ? $m00 : $m10, $q1 = $sw ? $m01 : $m11, $qr = $sw ? $a0 : $a1;");
+                // Elimination, then back-substitution, in solve's order.
+                line("const double $k = $q0 / $p0;");
+                line("const double $e1 = $q1 - $k * $p1, $er = $qr - $k * $pr;");
+                line("const double $u1 = $er / $e1;");
+                line("const double $u0 = ($pr - $p1 * $u1) / $p0;");
+                line(
+                    "const int $ok = $p0 != 0.0 && $e1 != 0.0 \
                  && __builtin_isfinite($u0) && __builtin_isfinite($u1);",
-            );
-        }
-        (0..d)
-            .map(|i| {
-                let name = v(&format!("v{i}"));
-                let mut field = f[0][i].clone();
-                for m in 0..n {
-                    field = format!(
-                        "({field} + {u} * ({} - {}))",
-                        f[m + 1][i],
-                        f[0][i],
-                        u = v(&format!("u{m}"))
-                    );
-                }
-                line(&format!(
-                    "const double $v{i} = $ok ? {field} : {};",
-                    literal(f64::NAN)
-                ));
-                name
-            })
-            .collect()
-    });
+                );
+            }
+            (0..d)
+                .map(|i| {
+                    let name = v(&format!("v{i}"));
+                    let mut field = f[0][i].clone();
+                    for m in 0..n {
+                        field = format!(
+                            "({field} + {u} * ({} - {}))",
+                            f[m + 1][i],
+                            f[0][i],
+                            u = v(&format!("u{m}"))
+                        );
+                    }
+                    line(&format!(
+                        "const double $v{i} = $ok ? {field} : {};",
+                        literal(f64::NAN)
+                    ));
+                    name
+                })
+                .collect()
+        },
+    );
     for (i, v) in end.iter().enumerate() {
         let _ = writeln!(out, "  out[{i}] = {v};");
     }
     let _ = writeln!(out, "}}");
-}
-
-/// y + a·k, named `{prefix}{i}`.
-fn axpy(out: &mut String, prefix: &str, y: &[String], a: &str, k: &[String]) -> Vec<String> {
-    (0..y.len())
-        .map(|i| {
-            let name = format!("{prefix}{i}");
-            let _ = writeln!(
-                out,
-                "      const double {name} = {} + {a} * {};",
-                y[i], k[i]
-            );
-            name
-        })
-        .collect()
 }
 
 /// The tape at `state` and clock `(cos, sin)` (`Tape::run`'s register

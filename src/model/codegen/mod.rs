@@ -4,4 +4,5 @@
 
 pub mod c;
 pub mod print;
+pub mod step;
 pub mod wgsl;

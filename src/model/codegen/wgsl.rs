@@ -752,6 +752,21 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
     }
 }
 
+/// The integrator's step program (`model::ir::step::integrator`) as
+/// WGSL functions: the clock's `rotate`, and for a flow (a system file
+/// with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment` and
+/// `rk4_step` with their `Stepped` result.
+pub fn integrator(flow: bool) -> String {
+    let mut program = crate::model::ir::step::integrator();
+    if !flow {
+        program.functions.retain(|f| f.name == "rotate");
+    }
+    format!(
+        "// Generated from the integrator's step program (model::ir::step).\n\n{}",
+        super::step::wgsl(&program, &Wgsl)
+    )
+}
+
 /// A number as a WGSL `real`: Rust's shortest representation that reads
 /// back to the same f64 (`{:?}` always has a `.` or an exponent, so WGSL
 /// reads a float, an abstract one that `real(…)` converts exactly in f64).

@@ -2,4 +2,5 @@
 //! from: the lowered instruction tape of a model's expressions and its
 //! interpreter, the reference ([`tape`]).
 
+pub mod step;
 pub mod tape;
