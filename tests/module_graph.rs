@@ -492,7 +492,8 @@ fn order_violations(
         }
     }
     for e in order {
-        if !top_level.contains(e) && !(e.contains('/') && root().join(e).exists()) {
+        let front_end = e.contains('/') && root().join(e).exists();
+        if !(top_level.contains(e) || front_end) {
             found.push(format!(
                 "`{e}` in the module order is neither a top-level module of src/ nor a \
                  front end that exists"
