@@ -113,10 +113,28 @@ fn strip(src: &str) -> String {
             i += 1;
         }
     }
-    match out.find("#[cfg(test)]\nmod tests") {
-        Some(k) => out[..k].to_owned(),
-        None => out,
+    // The test module, to its closing brace: code after it still counts.
+    let Some(k) = out.find("#[cfg(test)]\nmod tests") else {
+        return out;
+    };
+    let mut depth = 0;
+    let mut end = out.len();
+    for (i, c) in out[k..].char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' if depth == 1 => {
+                end = k + i + 1;
+                break;
+            }
+            '}' => depth -= 1,
+            ';' if depth == 0 => {
+                end = k + i + 1;
+                break;
+            }
+            _ => {}
+        }
     }
+    format!("{}{}", &out[..k], &out[end..])
 }
 
 fn is_ident(c: char) -> bool {
