@@ -553,11 +553,9 @@ fn loop_alone(repeats: usize) {
 }
 
 /// Section 7: models against the seed's oscillator (the
-/// `impact-oscillator` kind, models/impact-oscillator.toml since its
-/// hand-written system was retired: docs/BENCHMARKS.md, "Models against
-/// the built-in system", holds the last comparison), on the CPU path and
-/// on the GPU adapter (f64), on the impacts section's sweep (4096 values
-/// of η, 200 steps per period, transient 20, iterations 20).
+/// `impact-oscillator` kind, models/impact-oscillator.toml), on the CPU
+/// path and on the GPU adapter (f64), on the impacts section's sweep (4096
+/// values of η, 200 steps per period, transient 20, iterations 20).
 fn models(repeats: usize) {
     for backend in ["cpu", "gpu"] {
         models_on(backend, repeats);

@@ -1,18 +1,23 @@
-//! Data flows one way through the crate's modules: no file imports an item
-//! of a module that imports it back, directly or through others
-//! (ARCHITECTURE.md). The graph is read from the sources: every `use` and
-//! every `crate::`, `super::`, `self::` or child-module path in code (tests
-//! and comments left out), each followed to the file that defines the item,
-//! through `pub use` re-exports. A parent `mod.rs` that uses its children
-//! must therefore not define what they import.
+//! Data flows one way through the crate's modules, in the order that
+//! ARCHITECTURE.md states under "Modules, bottom to top": every top-level
+//! module of src/ is listed there once, and no file imports an item of a
+//! module listed after its own; within a module, no file imports an item of
+//! a module that imports it back, directly or through others. The order is
+//! read from that list, so the map and this test cannot drift apart. The
+//! graph is read from the sources: every `use` and every `crate::`,
+//! `super::`, `self::` or child-module path in code (tests and comments left
+//! out), each followed to the file that defines the item, through `pub use`
+//! re-exports. A parent `mod.rs` that uses its children must therefore not
+//! define what they import.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// Module path ("" for the crate root, "backend::gpu::sweep") → its source,
-/// stripped of comments, strings and its test module.
-fn modules() -> BTreeMap<String, (bool, String)> {
-    fn walk(dir: &Path, prefix: &[String], out: &mut BTreeMap<String, (bool, String)>) {
+/// Module path ("" for the crate root, "backend::gpu::sweep") → its file
+/// (from the repository's root) and its source, stripped of comments,
+/// strings and its test module.
+fn modules() -> BTreeMap<String, (String, String)> {
+    fn walk(dir: &Path, prefix: &[String], out: &mut BTreeMap<String, (String, String)>) {
         for entry in std::fs::read_dir(dir).unwrap() {
             let path = entry.unwrap().path();
             let name = path.file_stem().unwrap().to_str().unwrap().to_owned();
@@ -30,17 +35,18 @@ fn modules() -> BTreeMap<String, (bool, String)> {
                     p.push(name);
                 }
                 let source = strip(&std::fs::read_to_string(&path).unwrap());
-                out.insert(p.join("::"), (is_dir_module, source));
+                let file = path.strip_prefix(root()).unwrap().display().to_string();
+                out.insert(p.join("::"), (file, source));
             }
         }
     }
     let mut out = BTreeMap::new();
-    walk(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("src"),
-        &[],
-        &mut out,
-    );
+    walk(&root().join("src"), &[], &mut out);
     out
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// The source without comments, string and character literals, and test
@@ -107,10 +113,28 @@ fn strip(src: &str) -> String {
             i += 1;
         }
     }
-    match out.find("#[cfg(test)]\nmod tests") {
-        Some(k) => out[..k].to_owned(),
-        None => out,
+    // The test module, to its closing brace: code after it still counts.
+    let Some(k) = out.find("#[cfg(test)]\nmod tests") else {
+        return out;
+    };
+    let mut depth = 0;
+    let mut end = out.len();
+    for (i, c) in out[k..].char_indices() {
+        match c {
+            '{' => depth += 1,
+            '}' if depth == 1 => {
+                end = k + i + 1;
+                break;
+            }
+            '}' => depth -= 1,
+            ';' if depth == 0 => {
+                end = k + i + 1;
+                break;
+            }
+            _ => {}
+        }
     }
+    format!("{}{}", &out[..k], &out[end..])
 }
 
 fn is_ident(c: char) -> bool {
@@ -200,7 +224,7 @@ fn uses(source: &str) -> Vec<(bool, String)> {
 }
 
 struct Crate {
-    modules: BTreeMap<String, (bool, String)>,
+    modules: BTreeMap<String, (String, String)>,
     definitions: BTreeMap<String, BTreeSet<String>>,
     uses: BTreeMap<String, Vec<(bool, String)>>,
 }
@@ -257,7 +281,9 @@ impl Crate {
         Some(module)
     }
 
-    fn edges(&self) -> BTreeMap<String, BTreeSet<String>> {
+    /// Module → the modules it imports → the paths, as written, that
+    /// import each.
+    fn imports(&self) -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
         let mut edges = BTreeMap::new();
         for (m, (_, source)) in &self.modules {
             let children: BTreeSet<String> = self
@@ -305,14 +331,22 @@ impl Crate {
                     i += 1;
                 }
             }
-            let targets: BTreeSet<String> = paths
-                .iter()
-                .filter_map(|p| self.target(&self.absolute(m, p), 0))
-                .filter(|t| t != m)
-                .collect();
+            let mut targets: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+            for p in &paths {
+                if let Some(t) = self.target(&self.absolute(m, p), 0).filter(|t| t != m) {
+                    targets.entry(t).or_default().insert(p.clone());
+                }
+            }
             edges.insert(m.clone(), targets);
         }
         edges
+    }
+
+    fn edges(&self) -> BTreeMap<String, BTreeSet<String>> {
+        self.imports()
+            .into_iter()
+            .map(|(m, targets)| (m, targets.into_keys().collect()))
+            .collect()
     }
 }
 
@@ -375,20 +409,200 @@ fn circles(edges: &BTreeMap<String, BTreeSet<String>>) -> Vec<Vec<String>> {
     s.found
 }
 
+impl Crate {
+    fn read() -> Crate {
+        let modules = modules();
+        Crate {
+            definitions: modules
+                .iter()
+                .map(|(m, (_, s))| (m.clone(), definitions(s)))
+                .collect(),
+            uses: modules
+                .iter()
+                .map(|(m, (_, s))| (m.clone(), uses(s)))
+                .collect(),
+            modules,
+        }
+    }
+
+    /// The top-level modules of src/ (those `lib.rs` declares).
+    fn top_level(&self) -> BTreeSet<String> {
+        self.modules
+            .keys()
+            .filter(|m| !m.is_empty())
+            .map(|m| top(m).to_owned())
+            .collect()
+    }
+}
+
+fn top(module: &str) -> &str {
+    module.split("::").next().unwrap()
+}
+
+/// The heading in ARCHITECTURE.md whose numbered list is the module order.
+const ORDER_HEADING: &str = "## Modules, bottom to top";
+
+/// The entries of the numbered list under [`ORDER_HEADING`], in order: each
+/// item's first code span, `src/NAME.rs` or `src/NAME/` for the module NAME,
+/// or a front end outside the library (`src/main.rs`, `python/`), kept as
+/// written.
+fn stated_order(doc: &str) -> Result<Vec<String>, String> {
+    let mut lines = doc.lines().skip_while(|l| l.trim_end() != ORDER_HEADING);
+    if lines.next().is_none() {
+        return Err(format!("ARCHITECTURE.md has no heading `{ORDER_HEADING}`"));
+    }
+    let mut order = Vec::new();
+    for line in lines.take_while(|l| !l.starts_with("## ")) {
+        let Some((number, rest)) = line.split_once(". ") else {
+            continue;
+        };
+        if number.is_empty() || !number.chars().all(|c| c.is_ascii_digit()) {
+            continue;
+        }
+        if number != (order.len() + 1).to_string() {
+            return Err(format!(
+                "item {number} of the module order should be numbered {}: {line}",
+                order.len() + 1
+            ));
+        }
+        let span = rest
+            .strip_prefix('`')
+            .and_then(|r| r.split_once('`'))
+            .map(|(span, _)| span)
+            .ok_or_else(|| {
+                format!("item {number} does not start with a path in backticks: {line}")
+            })?;
+        let entry = match span
+            .strip_prefix("src/")
+            .and_then(|n| n.strip_suffix(".rs").or_else(|| n.strip_suffix('/')))
+        {
+            Some("main") | None => span.to_owned(),
+            Some(name) => name.to_owned(),
+        };
+        order.push(entry);
+    }
+    if order.is_empty() {
+        return Err(format!("no numbered list under `{ORDER_HEADING}`"));
+    }
+    Ok(order)
+}
+
+/// What breaks the stated order: a top-level module missing from it or
+/// listed twice, an entry that is neither a module nor a front end that
+/// exists, and every import of a module from one listed after it (above it).
+fn order_violations(
+    order: &[String],
+    top_level: &BTreeSet<String>,
+    files: &BTreeMap<String, (String, String)>,
+    imports: &BTreeMap<String, BTreeMap<String, BTreeSet<String>>>,
+) -> Vec<String> {
+    let mut found = Vec::new();
+    let place = |m: &str| order.iter().position(|e| e == m);
+    for m in top_level {
+        match order.iter().filter(|e| *e == m).count() {
+            1 => {}
+            0 => found.push(format!(
+                "{} is the top-level module `{m}`, which the order in ARCHITECTURE.md \
+                 (`{ORDER_HEADING}`) does not list",
+                files.get(m).map_or(format!("src/{m}"), |(f, _)| f.clone())
+            )),
+            n => found.push(format!("`{m}` is listed {n} times in the module order")),
+        }
+    }
+    for e in order {
+        let front_end = e.contains('/') && root().join(e).exists();
+        if !(top_level.contains(e) || front_end) {
+            found.push(format!(
+                "`{e}` in the module order is neither a top-level module of src/ nor a \
+                 front end that exists"
+            ));
+        }
+    }
+    for (m, targets) in imports {
+        let Some(from) = place(top(m)).filter(|_| !m.is_empty()) else {
+            continue;
+        };
+        for (t, paths) in targets {
+            let Some(to) = place(top(t)).filter(|&to| to > from) else {
+                continue;
+            };
+            found.push(format!(
+                "{} imports `{}` (defined in {t}): `{}` is {} in the module order, \
+                 `{}` is {} (above it)",
+                files[m].0,
+                paths.iter().next().unwrap(),
+                top(m),
+                from + 1,
+                top(t),
+                to + 1
+            ));
+        }
+    }
+    found
+}
+
+#[test]
+fn every_module_imports_only_modules_below_it_in_the_stated_order() {
+    let krate = Crate::read();
+    let doc = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let order = stated_order(&doc).unwrap_or_else(|e| panic!("{e}"));
+    let found = order_violations(&order, &krate.top_level(), &krate.modules, &krate.imports());
+    assert!(
+        found.is_empty(),
+        "the module order stated in ARCHITECTURE.md, bottom to top, is {order:?}; \
+         a module imports only modules listed before it:\n{}",
+        found.join("\n")
+    );
+}
+
+/// The check itself: a module left out of the list, and an import from
+/// above, are each named with the file, the item and both places.
+#[test]
+fn the_order_check_names_a_missing_module_and_an_import_from_above() {
+    let doc = "# A\n\n## Modules, bottom to top\n\n1. `src/error.rs`: errors.\n\n    \
+               **Architecture Invariant:** none.\n2. `src/output/`: files.\n3. `src/main.rs`\n\n\
+               ## Invariants\n\n1. `src/scene/` is not in the order.\n";
+    let order = stated_order(doc).unwrap();
+    assert_eq!(order, ["error", "output", "src/main.rs"]);
+    let top_level: BTreeSet<String> = ["error", "output", "scene"].map(String::from).into();
+    let files: BTreeMap<String, (String, String)> = [
+        ("error", "src/error.rs"),
+        ("output::files", "src/output/files.rs"),
+        ("scene", "src/scene/mod.rs"),
+    ]
+    .map(|(m, f)| (m.to_owned(), (f.to_owned(), String::new())))
+    .into();
+    let imports: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = [
+        (
+            "error",
+            "output::files",
+            "crate::output::files::atomic_write",
+        ),
+        ("output::files", "error", "crate::error::Error"),
+    ]
+    .map(|(m, t, p)| (m.to_owned(), [(t.to_owned(), [p.to_owned()].into())].into()))
+    .into();
+    let found = order_violations(&order, &top_level, &files, &imports);
+    assert_eq!(found.len(), 2, "{found:#?}");
+    assert_eq!(
+        found[0],
+        "src/scene/mod.rs is the top-level module `scene`, which the order in \
+         ARCHITECTURE.md (`## Modules, bottom to top`) does not list"
+    );
+    assert_eq!(
+        found[1],
+        "src/error.rs imports `crate::output::files::atomic_write` (defined in \
+         output::files): `error` is 1 in the module order, `output` is 2 (above it)"
+    );
+    let unnumbered = doc.replace("2. `src/output/`", "3. `src/output/`");
+    assert!(stated_order(&unnumbered)
+        .unwrap_err()
+        .contains("numbered 2"));
+}
+
 #[test]
 fn no_module_imports_one_that_imports_it_back() {
-    let modules = modules();
-    let krate = Crate {
-        definitions: modules
-            .iter()
-            .map(|(m, (_, s))| (m.clone(), definitions(s)))
-            .collect(),
-        uses: modules
-            .iter()
-            .map(|(m, (_, s))| (m.clone(), uses(s)))
-            .collect(),
-        modules,
-    };
+    let krate = Crate::read();
     let edges = krate.edges();
     // The reader sees real edges: the backend uses the method, the method
     // never the backend.
