@@ -319,9 +319,13 @@ impl Crate {
                         j += 1;
                     }
                     let path: String = chars[i..j].iter().collect();
+                    // `a::b::{c, d}` names c and d, which the uses list
+                    // has, not the module a::b itself.
+                    let group = path.ends_with("::") && chars.get(j) == Some(&'{');
                     let path = path.trim_end_matches(':');
                     let first = path.split("::").next().unwrap();
-                    if path.contains("::")
+                    if !group
+                        && path.contains("::")
                         && (matches!(first, "crate" | "super" | "self") || children.contains(first))
                     {
                         paths.push(path.to_owned());
