@@ -548,7 +548,7 @@ fn cell(error: f64) -> String {
 
 fn plot(path: &Path, ms: &[Measurement], subject: &str) -> std::result::Result<(), String> {
     use plotters::prelude::*;
-    crate::output::figure::register_font();
+    crate::output::plot::figure::register_font();
     let points: Vec<&Measurement> = ms
         .iter()
         .filter(|m| m.config.backend != Backend::Exact)

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::time::Duration;
 
+use lyapsweep::command::summary::{RunSummary, Value};
 use lyapsweep::command::{self, progress_bar};
 use lyapsweep::scene::{self, Scene};
 use lyapsweep::{Error, Progress, RunOptions};
@@ -129,7 +130,7 @@ fn run<'py>(
             .map_err(|e| written(e, &outcome))?;
     }
     let result = PyDict::new(py);
-    result.set_item("summary", summary(py, &scene, &outcome)?)?;
+    result.set_item("summary", summary(py, &RunSummary::of(&scene, &outcome))?)?;
     result.set_item("scene", resolved(py, &scene)?)?;
     result.set_item("written", outcome.written)?;
     Ok(result)
@@ -476,33 +477,18 @@ fn resolved<'py>(py: Python<'py>, scene: &Scene) -> PyResult<Bound<'py, PyAny>> 
     to_python(py, &toml::Value::Table(table))
 }
 
-/// The summary the command line prints, as a dict.
-fn summary<'py>(
-    py: Python<'py>,
-    scene: &Scene,
-    outcome: &command::Outcome,
-) -> PyResult<Bound<'py, PyDict>> {
-    let s = &outcome.summary;
+/// The summary the command line prints, as a dict: its record's keys and
+/// values.
+fn summary<'py>(py: Python<'py>, summary: &RunSummary) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("name", &scene.name)?;
-    d.set_item("system", scene.system.kind)?;
-    d.set_item("backend", s.backend.name())?;
-    d.set_item("precision", s.precision.name())?;
-    d.set_item("choice", s.choice.as_deref())?;
-    d.set_item("adapter", s.gpu.as_ref().map(|g| g.adapter.as_str()))?;
-    d.set_item("threads", s.threads)?;
-    d.set_item("lanes", s.lanes)?;
-    d.set_item("time", s.elapsed.as_secs_f64())?;
-    d.set_item("max_sum_error", s.max_sum_error)?;
-    d.set_item("max_error", s.max_error)?;
-    d.set_item("interpreter_fallback", s.interpreter_fallback.as_deref())?;
-    d.set_item("flagged", s.flagged())?;
-    d.set_item("failures", &s.failures)?;
-    d.set_item("flagged_by_status", &s.flagged_by_status)?;
-    if let Some(found) = &outcome.attractors {
-        let total: usize = found.values.iter().map(|v| v.count()).sum();
-        d.set_item("attractors", total)?;
-        d.set_item("branches", found.branches)?;
+    for (key, value) in summary.record() {
+        match value {
+            Value::Text(text) => d.set_item(key, text)?,
+            Value::Count(n) => d.set_item(key, n)?,
+            Value::Number(x) => d.set_item(key, x)?,
+            Value::ByStatus(counts) => d.set_item(key, counts)?,
+            Value::Nothing => d.set_item(key, py.None())?,
+        }
     }
     Ok(d)
 }

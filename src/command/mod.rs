@@ -4,6 +4,7 @@
 //! so that both front ends refuse, write and describe alike.
 
 pub mod progress_bar;
+pub mod summary;
 
 use std::path::{Path, PathBuf};
 

@@ -14,14 +14,12 @@
 //! holds one run's files or the previous run's, never a mix.
 
 pub mod attractor_table;
-pub mod figure;
 pub mod files;
 pub mod merge;
 pub mod owned;
 pub mod plot;
 pub mod results;
 pub mod set;
-pub mod svg_raster;
 
 use std::fs;
 use std::io::Write;

@@ -2,7 +2,7 @@
 //! image instead of a rectangle per pixel.
 //!
 //! A map of a million cells is drawn as the raster of its pixels (see
-//! `draw_cells` in `plot`): plotters' SVG backend, without the `image`
+//! `draw_cells` in `grid`): plotters' SVG backend, without the `image`
 //! crate, would write each of those pixels as its own `<rect>`, tens of
 //! megabytes. [`RasterSvg`] passes every other drawing call to plotters'
 //! SVG backend unchanged, and marks each bitmap's place with a rectangle of
