@@ -156,68 +156,94 @@ pub(super) fn resolve_starts(
         ));
     }
     let names: Vec<String> = info.state_names.iter().map(|s| s.to_string()).collect();
-    if let Some(list) = raw.list {
+    let (layout, states) = if let Some(list) = raw.list {
         if raw.bounds.is_some() || raw.seed.is_some() {
             return Err(Error::invalid(
                 "attractors.list",
                 "gives whole states: box and seed do not apply to it",
             ));
         }
-        for (s, state) in list.iter().enumerate() {
-            if state.len() != initial_state.len() {
+        (Layout::List, listed(list, initial_state.len(), &names)?)
+    } else {
+        let bounds = box_of(raw.bounds, &names, initial_state.len())?;
+        if let Some(n) = raw.starts {
+            check_count(n, "attractors.starts")?;
+            let seed = raw.seed.unwrap_or(1);
+            (
+                Layout::Random { seed },
+                random(n, seed, &bounds, initial_state),
+            )
+        } else {
+            let counts = raw.grid.unwrap_or_default();
+            if raw.seed.is_some() {
                 return Err(Error::invalid(
-                    "attractors.list",
-                    format!(
-                        "start {s} has {} numbers; a state has {} ({})",
-                        state.len(),
-                        initial_state.len(),
-                        names.join(", ")
-                    ),
+                    "attractors.seed",
+                    "applies to random starts (starts = N), not to a grid",
                 ));
             }
-            if let Some(v) = state.iter().find(|v| !v.is_finite()) {
-                return Err(Error::invalid(
-                    "attractors.list",
-                    format!("start {s} must be finite, got {v}"),
-                ));
-            }
+            let states = grid(&counts, &bounds, initial_state)?;
+            (Layout::Grid { counts }, states)
         }
-        check_count(list.len(), "attractors.list")?;
-        return Ok(Starts {
-            layout: Layout::List,
-            states: list,
-            max_period,
-            continuation,
-        });
+    };
+    Ok(Starts {
+        layout,
+        states,
+        max_period,
+        continuation,
+    })
+}
+
+/// A list's starts, checked: whole states of `dim` finite numbers.
+fn listed(list: Vec<Vec<f64>>, dim: usize, names: &[String]) -> Result<Vec<Vec<f64>>> {
+    for (s, state) in list.iter().enumerate() {
+        if state.len() != dim {
+            return Err(Error::invalid(
+                "attractors.list",
+                format!(
+                    "start {s} has {} numbers; a state has {dim} ({})",
+                    state.len(),
+                    names.join(", ")
+                ),
+            ));
+        }
+        if let Some(v) = state.iter().find(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                "attractors.list",
+                format!("start {s} must be finite, got {v}"),
+            ));
+        }
     }
-    let bounds = box_of(raw.bounds, &names, initial_state.len())?;
-    if let Some(n) = raw.starts {
-        check_count(n, "attractors.starts")?;
-        let seed = raw.seed.unwrap_or(1);
-        let mut rng = fastrand::Rng::with_seed(seed);
-        let states = (0..n)
-            .map(|_| {
-                let mut state = initial_state.to_vec();
-                for &(i, lo, hi) in &bounds {
-                    state[i] = lo + (hi - lo) * rng.f64();
-                }
-                state
-            })
-            .collect();
-        return Ok(Starts {
-            layout: Layout::Random { seed },
-            states,
-            max_period,
-            continuation,
-        });
-    }
-    let counts = raw.grid.unwrap_or_default();
-    if raw.seed.is_some() {
-        return Err(Error::invalid(
-            "attractors.seed",
-            "applies to random starts (starts = N), not to a grid",
-        ));
-    }
+    check_count(list.len(), "attractors.list")?;
+    Ok(list)
+}
+
+/// `n` starts drawn uniformly in the box from `seed`, the states the box
+/// leaves out at `initial_state`.
+fn random(
+    n: usize,
+    seed: u64,
+    bounds: &[(usize, f64, f64)],
+    initial_state: &[f64],
+) -> Vec<Vec<f64>> {
+    let mut rng = fastrand::Rng::with_seed(seed);
+    (0..n)
+        .map(|_| {
+            let mut state = initial_state.to_vec();
+            for &(i, lo, hi) in bounds {
+                state[i] = lo + (hi - lo) * rng.f64();
+            }
+            state
+        })
+        .collect()
+}
+
+/// The grid of `counts` points over the box (corners included, the first
+/// state fastest), checked.
+fn grid(
+    counts: &[usize],
+    bounds: &[(usize, f64, f64)],
+    initial_state: &[f64],
+) -> Result<Vec<Vec<f64>>> {
     if counts.len() != bounds.len() {
         return Err(Error::invalid(
             "attractors.grid",
@@ -235,29 +261,22 @@ pub(super) fn resolve_starts(
         ));
     }
     let total = RawAttractors {
-        grid: Some(counts.clone()),
+        grid: Some(counts.to_vec()),
         ..RawAttractors::default()
     }
     .count();
     check_count(total, "attractors.grid")?;
-    // The first state of the box varies fastest.
-    let states = (0..total)
+    Ok((0..total)
         .map(|mut g| {
             let mut state = initial_state.to_vec();
-            for (&(i, lo, hi), &n) in bounds.iter().zip(&counts) {
+            for (&(i, lo, hi), &n) in bounds.iter().zip(counts) {
                 let j = g % n;
                 g /= n;
                 state[i] = linspace(lo, hi, n, j);
             }
             state
         })
-        .collect();
-    Ok(Starts {
-        layout: Layout::Grid { counts },
-        states,
-        max_period,
-        continuation,
-    })
+        .collect())
 }
 
 /// numpy's `linspace(lo, hi, n)[j]`: `lo + j·step`, the last point `hi`

@@ -288,30 +288,7 @@ where
             0.0
         };
         if let Some(iteration) = self.failed_at {
-            return LaneResult {
-                exponents: if self.lyapunov {
-                    vec![f64::NAN; D]
-                } else {
-                    Vec::new()
-                },
-                impacts_per_period: f64::NAN,
-                crossings_per_period: [f64::NAN; MAX_EVENTS],
-                period: self.period,
-                orbit_period: None,
-                orbit: Vec::new(),
-                orbit_term: f64::NAN,
-                bifurcation: self.bifurcation,
-                jacobians: self.jacobians.unwrap_or_default(),
-                grazing: self.grazing,
-                grazing_bound: f64::NAN,
-                error: f64::NAN,
-                plan: self.plan,
-                status: if self.no_return {
-                    LaneStatus::NoReturn { iteration }
-                } else {
-                    LaneStatus::NonFinite { iteration }
-                },
-            };
+            return self.failed(iteration);
         }
         // With relative noise ε_n in the smallest R_ii, ln R_ii is biased by
         // about -ε_n²/2 and scattered by ε_n; over N Jacobians (iterations ×
@@ -327,30 +304,7 @@ where
         let resolution_bound = (0.5 * mean_square + (mean_square / taken).sqrt()) / part_time;
         let averaging_time = self.averaging_time();
         let exponents = if self.lyapunov {
-            let mut e = if self.time > 0.0 {
-                self.qr.exponents_over(self.time)
-            } else {
-                self.qr.exponents(part_time)
-            }
-            .to_vec();
-            e.sort_by(|a, b| b.total_cmp(a));
-            // Directions beyond the certain ones that sliding phases may
-            // have collapsed: collapsed where the finite differences saw
-            // nothing in them above their own rounding, on average over
-            // the Jacobians (a direction that contracts for real is kept
-            // well above it by the sub-maps' plan, PART_NOISE).
-            if self.noise.is_some() && self.parts_done > 0 {
-                let floor = self.log_noise / taken + COLLAPSE_FLOOR.ln();
-                while self.rank_loss < self.rank_loss_bound
-                    && e[D - 1 - self.rank_loss] * part_time < floor
-                {
-                    self.rank_loss += 1;
-                }
-            }
-            for x in &mut e[D - self.rank_loss..] {
-                *x = f64::NEG_INFINITY;
-            }
-            e
+            self.frame_exponents(part_time, taken)
         } else {
             Vec::new()
         };
@@ -361,7 +315,93 @@ where
             f64::NAN
         };
         let grazing_bound = self.grazing_error / (self.done.max(1) as f64 * self.period);
-        let status = if self.chattering > 0 {
+        let status = self.status(resolution_bound, grazing_bound);
+        let orbit_period = self.recent.period();
+        LaneResult {
+            exponents,
+            impacts_per_period: self.impacts as f64 / self.iterations as f64,
+            crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
+            period: self.period,
+            orbit_period,
+            orbit: if self.keep_orbit {
+                self.recent.orbit(orbit_period)
+            } else {
+                Vec::new()
+            },
+            orbit_term,
+            bifurcation: self.bifurcation,
+            jacobians: self.jacobians.unwrap_or_default(),
+            grazing: self.grazing,
+            grazing_bound,
+            error,
+            plan: self.plan,
+            status,
+        }
+    }
+
+    /// The result of a lane that failed at `iteration`: no numbers, the
+    /// failure's status.
+    fn failed(self, iteration: usize) -> LaneResult {
+        LaneResult {
+            exponents: if self.lyapunov {
+                vec![f64::NAN; D]
+            } else {
+                Vec::new()
+            },
+            impacts_per_period: f64::NAN,
+            crossings_per_period: [f64::NAN; MAX_EVENTS],
+            period: self.period,
+            orbit_period: None,
+            orbit: Vec::new(),
+            orbit_term: f64::NAN,
+            bifurcation: self.bifurcation,
+            jacobians: self.jacobians.unwrap_or_default(),
+            grazing: self.grazing,
+            grazing_bound: f64::NAN,
+            error: f64::NAN,
+            plan: self.plan,
+            status: if self.no_return {
+                LaneStatus::NoReturn { iteration }
+            } else {
+                LaneStatus::NonFinite { iteration }
+            },
+        }
+    }
+
+    /// The exponents of the QR frame, largest first, with the directions
+    /// beyond the certain ones that sliding phases may have collapsed
+    /// written as -∞.
+    fn frame_exponents(&mut self, part_time: f64, taken: f64) -> Vec<f64> {
+        let mut e = if self.time > 0.0 {
+            self.qr.exponents_over(self.time)
+        } else {
+            self.qr.exponents(part_time)
+        }
+        .to_vec();
+        e.sort_by(|a, b| b.total_cmp(a));
+        // Directions beyond the certain ones that sliding phases may
+        // have collapsed: collapsed where the finite differences saw
+        // nothing in them above their own rounding, on average over
+        // the Jacobians (a direction that contracts for real is kept
+        // well above it by the sub-maps' plan, PART_NOISE).
+        if self.noise.is_some() && self.parts_done > 0 {
+            let floor = self.log_noise / taken + COLLAPSE_FLOOR.ln();
+            while self.rank_loss < self.rank_loss_bound
+                && e[D - 1 - self.rank_loss] * part_time < floor
+            {
+                self.rank_loss += 1;
+            }
+        }
+        for x in &mut e[D - self.rank_loss..] {
+            *x = f64::NEG_INFINITY;
+        }
+        e
+    }
+
+    /// The status of a lane that ran all its iterations: its first
+    /// failing check, in the order the statuses rank.
+    fn status(&self, resolution_bound: f64, grazing_bound: f64) -> LaneStatus {
+        if self.chattering > 0 {
             LaneStatus::Chattering {
                 iterations: self.chattering,
             }
@@ -384,27 +424,6 @@ where
             }
         } else {
             LaneStatus::Ok
-        };
-        let orbit_period = self.recent.period();
-        LaneResult {
-            exponents,
-            impacts_per_period: self.impacts as f64 / self.iterations as f64,
-            crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
-            period: self.period,
-            orbit_period,
-            orbit: if self.keep_orbit {
-                self.recent.orbit(orbit_period)
-            } else {
-                Vec::new()
-            },
-            orbit_term,
-            bifurcation: self.bifurcation,
-            jacobians: self.jacobians.unwrap_or_default(),
-            grazing: self.grazing,
-            grazing_bound,
-            error,
-            plan: self.plan,
-            status,
         }
     }
 }
