@@ -1,7 +1,7 @@
 //! What the sweep's kernels and the section's share on the device: the
-//! dispatch sizes, the compiled pipelines (once per process), their bind
-//! group entries, the buffers' reals in either precision, read-back, and a
-//! GPU run's result and timings.
+//! dispatch sizes, the compiled pipelines (once per process), the buffers'
+//! reals in either precision, read-back, and a GPU run's result and
+//! timings.
 
 use std::any::Any;
 use std::sync::{mpsc, Mutex};
@@ -176,34 +176,6 @@ pub(super) fn compiled_once<T: Clone + Send + 'static>(
     }
     compiled.push((key, Box::new(value.clone())));
     value
-}
-
-/// A storage buffer of a kernel's bind group.
-pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// The uniform `control` of a kernel's bind group.
-pub(super) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
 }
 
 /// The compute pipeline of one kernel of `variant` over bind group
