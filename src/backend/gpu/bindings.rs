@@ -25,6 +25,11 @@ macro_rules! control_struct {
         }
 
         impl $name {
+            /// Each field's name and offset in the Rust struct.
+            #[cfg(test)]
+            const FIELDS: &'static [(&'static str, usize)] =
+                &[$((stringify!($field), std::mem::offset_of!($name, $field))),*];
+
             /// The struct's WGSL declaration.
             pub const WGSL: &'static str = concat!(
                 "struct ", stringify!($wgsl), " {\n",
@@ -375,5 +380,47 @@ impl Bindings {
             .expect("a String takes text");
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The WGSL struct the kernels read has the Rust struct's fields at
+    /// the same offsets, and its size: WGSL's uniform layout and
+    /// `repr(C)` agree.
+    #[test]
+    fn each_control_struct_lies_in_wgsl_as_in_rust() {
+        let structs = [
+            (
+                SweepControl::WGSL,
+                SweepControl::FIELDS,
+                std::mem::size_of::<SweepControl>(),
+            ),
+            (
+                SectionControl::WGSL,
+                SectionControl::FIELDS,
+                std::mem::size_of::<SectionControl>(),
+            ),
+        ];
+        for (wgsl, fields, size) in structs {
+            let source = format!("{wgsl}@group(0) @binding(0) var<uniform> control: Control;\n");
+            let module = naga::front::wgsl::parse_str(&source).expect("valid WGSL");
+            let (_, ty) = module
+                .types
+                .iter()
+                .find(|(_, t)| t.name.as_deref() == Some("Control"))
+                .expect("the struct Control");
+            let naga::TypeInner::Struct { members, span } = &ty.inner else {
+                panic!("Control is a struct");
+            };
+            let offsets: Vec<(&str, usize)> = members
+                .iter()
+                .map(|m| (m.name.as_deref().unwrap_or(""), m.offset as usize))
+                .collect();
+            assert_eq!(offsets, fields, "{wgsl}");
+            assert_eq!(*span as usize, size, "{wgsl}");
+        }
     }
 }

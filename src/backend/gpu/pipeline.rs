@@ -198,6 +198,14 @@ pub(super) fn compute_pipeline(
     )
 }
 
+/// Bytes per real in `precision`.
+pub(super) fn real_size(precision: Precision) -> u64 {
+    match precision {
+        Precision::F64 => 8,
+        Precision::F32 => 4,
+    }
+}
+
 /// Reals in the precision of the variant, as bytes.
 pub(super) fn real_bytes(values: &[f64], precision: Precision) -> Vec<u8> {
     match precision {

@@ -32,7 +32,7 @@ use super::bindings::{
     Bindings, SectionControl, ADVANCE, CROSSED, DONE, MISSED, SECTION, SEEK, TRUNCATED,
 };
 use super::context::Gpu;
-use super::pipeline::{gpu_error, real_bytes, reals_from, Dispatch, GpuRun, Timings};
+use super::pipeline::{gpu_error, real_bytes, real_size, reals_from, Dispatch, GpuRun, Timings};
 use super::schedule::{self, buffer_of, buffer_with, Attempt, Ring, Run, Schedule, STORAGE};
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
@@ -63,9 +63,24 @@ pub fn run(
 ) -> Result<GpuRun> {
     debug_assert!(scene.lane_count() <= max_batch_lanes(gpu, scene, variant, settings, options));
     match scene.system.dimension() {
-        1 => schedule::run(gpu, variant, options, Section::<1, 2>::new(scene, settings)),
-        2 => schedule::run(gpu, variant, options, Section::<2, 3>::new(scene, settings)),
-        3 => schedule::run(gpu, variant, options, Section::<3, 4>::new(scene, settings)),
+        1 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<1, 2>::new(scene, variant, settings),
+        ),
+        2 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<2, 3>::new(scene, variant, settings),
+        ),
+        3 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<3, 4>::new(scene, variant, settings),
+        ),
         d => Err(gpu_error(format!(
             "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
         ))),
@@ -85,10 +100,7 @@ fn device_bytes_per_lane(
     } else {
         0
     };
-    let real = match variant.precision {
-        Precision::F64 => 8,
-        Precision::F32 => 4,
-    };
+    let real = real_size(variant.precision) as usize;
     (
         ((16 + 2 * real * (d + 1)) * trajectories) as u64,
         trajectories,
@@ -174,10 +186,7 @@ impl<'a> Stepper<'a> {
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
         let precision = run.variant.precision;
-        let real = match precision {
-            Precision::F64 => 8,
-            Precision::F32 => 4,
-        };
+        let real = real_size(precision);
         let lanes = buffer_with(
             gpu,
             "section lanes",
@@ -426,21 +435,17 @@ where
 struct Section<'a, const D: usize, const N: usize> {
     scene: &'a Scene,
     settings: &'a MethodSettings,
-    /// Trajectories per lane: the reference and its copies.
-    trajectories: usize,
+    /// Device bytes per lane in the round's buffers, and trajectories per
+    /// lane: the reference and its copies.
+    per_lane: (u64, usize),
 }
 
 impl<'a, const D: usize, const N: usize> Section<'a, D, N> {
-    fn new(scene: &'a Scene, settings: &'a MethodSettings) -> Self {
-        let trajectories = 1 + if settings.lyapunov {
-            settings.difference.copies(D)
-        } else {
-            0
-        };
+    fn new(scene: &'a Scene, variant: &Variant, settings: &'a MethodSettings) -> Self {
         Section {
             scene,
             settings,
-            trajectories,
+            per_lane: device_bytes_per_lane(scene, variant, settings),
         }
     }
 }
@@ -455,7 +460,7 @@ where
     /// software adapter [`SOFTWARE_CHUNK`].
     fn first_chunk(&self, run: &Run) -> usize {
         if run.gpu.summary.is_hardware() {
-            let capacity = self.scene.lane_count() * self.trajectories;
+            let capacity = self.scene.lane_count() * self.per_lane.1;
             (run.dispatch.lane_steps / capacity.max(1)).max(1)
         } else {
             SOFTWARE_CHUNK
@@ -475,7 +480,8 @@ where
             lane_data.extend_from_slice(&scene.lane_params(k).values);
             lane_data.push(lane.system.section().at);
         }
-        let mut stepper = Stepper::new(run, &lane_data, count * self.trajectories, N, chunk);
+        let (per_lane, trajectories) = self.per_lane;
+        let mut stepper = Stepper::new(run, &lane_data, count * trajectories, N, chunk);
         stepper.timings.setup = start.elapsed();
 
         let transient_start = Instant::now();
@@ -492,7 +498,6 @@ where
                 None => lane.accumulator.finish(),
             })
             .collect();
-        let (per_lane, _) = device_bytes_per_lane(scene, run.variant, settings);
         Ok(Attempt {
             lanes: Some(results),
             timings: stepper.timings,

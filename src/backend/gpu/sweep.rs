@@ -18,7 +18,9 @@ use super::bindings::{
     FLAG_TRUNCATED, SWEEP,
 };
 use super::context::Gpu;
-use super::pipeline::{read_back, real_bytes, reals_from, wait_for, Dispatch, GpuRun, Timings};
+use super::pipeline::{
+    read_back, real_bytes, real_size, reals_from, wait_for, Dispatch, GpuRun, Timings,
+};
 use super::schedule::{
     self, buffer_of, buffer_with, Attempt, Pending, Ring, Run, Schedule, READABLE, STORAGE,
 };
@@ -36,7 +38,7 @@ use crate::system::{IterationStats, Part};
 /// Steps per integrate dispatch with a wall on a software adapter. lavapipe
 /// caps the loop iterations of one invocation at 65 535 (every loop
 /// together, shared by a SIMD group; see `loop_budget_exhausted` in
-/// shaders/shared/bindings.wgsl), and a step with impacts runs many loops:
+/// shaders/shared/loop_budget.wgsl), and a step with impacts runs many loops:
 /// a dispatch of 1 300 steps with 3 700 impacts went past it. Quiet steps
 /// cost a few dozen iterations, so 256 leave room for ~60 impacts of 1 000
 /// each; a batch whose dispatches still ran past the cap is redone with
@@ -121,10 +123,7 @@ struct Layout {
 impl Layout {
     fn new(scene: &Scene, variant: &Variant, settings: &MethodSettings) -> Self {
         let dim = scene.system.dimension();
-        let real = match variant.precision {
-            Precision::F64 => 8,
-            Precision::F32 => 4,
-        };
+        let real = real_size(variant.precision);
         let strides = SWEEP.strides(scene.system, &variant.defines());
         Layout {
             traj: variant.trajectories(),
