@@ -1,5 +1,5 @@
-//! Poincaré maps on the GPU: the CPU's algorithm (`system::section`), with
-//! its RK4 steps on the device.
+//! Poincaré maps on the GPU, on `schedule`'s skeleton: the CPU's algorithm
+//! (`system::section`), with its RK4 steps on the device.
 //!
 //! One iteration of a section map is a return of the reference to the
 //! section, then the tangent map of that return in parts, each part a

@@ -1,12 +1,14 @@
-//! One GPU sweep: buffers, the dispatch schedule and the streaming readback.
+//! A period map's GPU schedule, on `schedule`'s skeleton: its buffers, its
+//! dispatches, and what a chunk's read-back turns into (host QR).
 //!
 //! Per map iteration, and per part of one when it is cut into sub-maps, the
 //! host encodes `ceil(steps / chunk_steps)` integrate dispatches and one
-//! finish dispatch; nothing crosses back to the host per iteration. The transient runs references only, with no readback. While
-//! averaging, each chunk of iterations writes its Jacobians, points and
-//! summaries into a ring of slots that is copied to one of two staging
-//! buffers; the host maps and accumulates QR for one chunk while the GPU
-//! computes the next.
+//! finish dispatch; nothing crosses back to the host per iteration. The
+//! transient runs references only, with no readback. While averaging, each
+//! chunk of iterations writes its Jacobians, points and summaries into a
+//! ring of slots that is copied to one of two staging buffers (the
+//! skeleton's read-back ring); the host maps and accumulates QR for one
+//! chunk while the GPU computes the next.
 
 use std::time::Instant;
 
@@ -14,8 +16,8 @@ use nalgebra::{Const, DimMin, SMatrix};
 use rayon::prelude::*;
 
 use super::bindings::{
-    SweepControl, FLAG_CHATTERING, FLAG_NONFINITE, FLAG_RANK_ONE, FLAG_RANK_TWO, FLAG_SLIDING,
-    FLAG_TRUNCATED, SWEEP,
+    Bindings, SweepControl, FLAG_CHATTERING, FLAG_NONFINITE, FLAG_RANK_ONE, FLAG_RANK_TWO,
+    FLAG_SLIDING, FLAG_TRUNCATED, SWEEP,
 };
 use super::context::Gpu;
 use super::pipeline::{
@@ -189,7 +191,7 @@ impl<const D: usize> Schedule for Sweep<'_, D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    const BINDINGS: &'static super::bindings::Bindings = &SWEEP;
+    const BINDINGS: &'static Bindings = &SWEEP;
 
     fn first_chunk(&self, run: &Run) -> usize {
         let software_stops = run.variant.wall && !run.gpu.summary.is_hardware();
