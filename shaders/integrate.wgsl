@@ -57,7 +57,7 @@ fn main(
 // compensation of the state, the forcing phase and counts[t]; with stops,
 // the slowest impact speed of the iteration so far; with surfaces, its
 // region of the switches and the part's Σ ln |det S| (the buffers' layout
-// is in bindings.wgsl).
+// is in bindings.wgsl and src/backend/gpu/bindings.rs).
 struct Trajectory {
     y: State,
     comp: State,

@@ -14,41 +14,11 @@
 // Each dispatch takes at most `chunk_steps` steps of every job, so no
 // dispatch trips a driver watchdog or lavapipe's loop cap.
 
-struct Control {
-    // Jobs in this round.
-    job_count: u32,
-    chunk_steps: u32,
-    // Always 0 (see bindings.wgsl's opaque_zero).
-    opaque_zero: u32,
-    pad: u32,
-}
-
-// Per lane: the system's parameters, then the section's `at`.
+// Its control struct, bindings, LANE_STRIDE and job modes are stated
+// once in src/backend/gpu/bindings.rs (`SECTION`), which writes them into
+// the generated prelude. Per lane: the system's parameters, then the
+// section's `at`.
 const LANE_AT: u32 = PARAM_COUNT;
-const LANE_STRIDE: u32 = PARAM_COUNT + 1u;
-
-// jobs[j].y, the job's mode; the host's twins are in section.rs.
-const DONE: u32 = 0u;
-const ADVANCE: u32 = 1u;
-const SEEK: u32 = 2u;
-const CROSSED: u32 = 3u;
-const MISSED: u32 = 4u;
-// Set (with the mode kept) when the adapter cut a dispatch's loops short:
-// that dispatch stored nothing, and the host shortens the next ones.
-const TRUNCATED: u32 = 0x100u;
-
-// Invocations per workgroup, set by the host when it builds the pipeline.
-override WORKGROUP_SIZE: u32 = 64u;
-
-@group(0) @binding(0) var<uniform> control: Control;
-@group(0) @binding(1) var<storage, read> lanes: array<real>;
-// Per job: (lane, mode, limit, steps taken).
-@group(0) @binding(2) var<storage, read_write> jobs: array<vec4<u32>>;
-// Per job: its step h.
-@group(0) @binding(3) var<storage, read> steps: array<real>;
-// Per job: the state (DIM), then for a crossing the state after the
-// crossing step (DIM); in f32, until then, the state's compensation.
-@group(0) @binding(4) var<storage, read_write> states: array<real>;
 
 fn load(base: u32) -> State {
     var y: State;

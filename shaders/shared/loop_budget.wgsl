@@ -1,4 +1,5 @@
-// Included after a kernel's `control` uniform, which has `opaque_zero`.
+// Reads the kernel's `control` uniform (its `opaque_zero`), which every
+// kernel's generated prelude declares (src/backend/gpu/bindings.rs).
 
 // lavapipe (Mesa's gallivm) caps the loop iterations of one shader
 // invocation at 65 535, counted over all its loops together and shared by

@@ -5,8 +5,10 @@
 //! Poincaré map's lanes run on their own schedule (`section`): the GPU
 //! steps, the host locates crossings and builds the factors.
 
+pub mod bindings;
 pub mod context;
 pub mod pipeline;
+pub mod schedule;
 pub mod section;
 pub mod seed;
 pub mod shader;

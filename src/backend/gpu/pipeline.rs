@@ -1,7 +1,7 @@
 //! What the sweep's kernels and the section's share on the device: the
-//! dispatch sizes, the compiled pipelines (once per process), their bind
-//! group entries, the buffers' reals in either precision, read-back, and a
-//! GPU run's result and timings.
+//! dispatch sizes, the compiled pipelines (once per process), the buffers'
+//! reals in either precision, read-back, and a GPU run's result and
+//! timings.
 
 use std::any::Any;
 use std::sync::{mpsc, Mutex};
@@ -178,34 +178,6 @@ pub(super) fn compiled_once<T: Clone + Send + 'static>(
     value
 }
 
-/// A storage buffer of a kernel's bind group.
-pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-/// The uniform `control` of a kernel's bind group.
-pub(super) fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 /// The compute pipeline of one kernel of `variant` over bind group
 /// `layout`, with `workgroup` invocations per workgroup.
 pub(super) fn compute_pipeline(
@@ -224,6 +196,14 @@ pub(super) fn compute_pipeline(
         &[("WORKGROUP_SIZE", f64::from(workgroup))],
         variant.precision,
     )
+}
+
+/// Bytes per real in `precision`.
+pub(super) fn real_size(precision: Precision) -> u64 {
+    match precision {
+        Precision::F64 => 8,
+        Precision::F32 => 4,
+    }
 }
 
 /// Reals in the precision of the variant, as bytes.

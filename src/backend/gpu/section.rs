@@ -1,5 +1,5 @@
-//! Poincaré maps on the GPU: the CPU's algorithm (`system::section`), with
-//! its RK4 steps on the device.
+//! Poincaré maps on the GPU, on `schedule`'s skeleton: the CPU's algorithm
+//! (`system::section`), with its RK4 steps on the device.
 //!
 //! One iteration of a section map is a return of the reference to the
 //! section, then the tangent map of that return in parts, each part a
@@ -28,11 +28,12 @@ use std::time::Instant;
 use nalgebra::{Const, DimMin, SMatrix};
 use rayon::prelude::*;
 
-use super::context::Gpu;
-use super::pipeline::{
-    compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, Dispatch, GpuRun, Timings, TRUNCATION_RETRY,
+use super::bindings::{
+    Bindings, SectionControl, ADVANCE, CROSSED, DONE, MISSED, SECTION, SEEK, TRUNCATED,
 };
+use super::context::Gpu;
+use super::pipeline::{gpu_error, real_bytes, real_size, reals_from, Dispatch, GpuRun, Timings};
+use super::schedule::{self, buffer_of, buffer_with, Attempt, Ring, Run, Schedule, STORAGE};
 use super::shader::{Kernel, Variant};
 use crate::backend::options::RunOptions;
 use crate::backend::progress::Progress;
@@ -51,14 +52,6 @@ use crate::system::{FlowSettings, IterationStats, System};
 /// with dispatches `TRUNCATION_RETRY` times shorter.
 const SOFTWARE_CHUNK: usize = 1024;
 
-// The kernel's job modes (`shaders/section.wgsl`).
-const DONE: u32 = 0;
-const ADVANCE: u32 = 1;
-const SEEK: u32 = 2;
-const CROSSED: u32 = 3;
-const MISSED: u32 = 4;
-const TRUNCATED: u32 = 0x100;
-
 /// Runs the lanes of `scene` (one device batch: at most
 /// [`max_batch_lanes`]) of a section model on the GPU.
 pub fn run(
@@ -69,17 +62,29 @@ pub fn run(
     options: &RunOptions,
 ) -> Result<GpuRun> {
     debug_assert!(scene.lane_count() <= max_batch_lanes(gpu, scene, variant, settings, options));
-    let mut run = match scene.system.dimension() {
-        1 => run_dim::<1, 2>(gpu, scene, variant, settings, options),
-        2 => run_dim::<2, 3>(gpu, scene, variant, settings, options),
-        3 => run_dim::<3, 4>(gpu, scene, variant, settings, options),
+    match scene.system.dimension() {
+        1 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<1, 2>::new(scene, variant, settings),
+        ),
+        2 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<2, 3>::new(scene, variant, settings),
+        ),
+        3 => schedule::run(
+            gpu,
+            variant,
+            options,
+            Section::<3, 4>::new(scene, variant, settings),
+        ),
         d => Err(gpu_error(format!(
             "a Poincaré map of dimension {d} is not supported on the GPU (1 to 3 are)"
         ))),
-    }?;
-    run.bytes_per_lane = device_bytes_per_lane(scene, variant, settings).0
-        + 8 * (scene.system.parameters.len() as u64 + 1);
-    Ok(run)
+    }
 }
 
 /// The bytes a lane takes in the round's buffers (every job's table entry
@@ -95,10 +100,7 @@ fn device_bytes_per_lane(
     } else {
         0
     };
-    let real = match variant.precision {
-        Precision::F64 => 8,
-        Precision::F32 => 4,
-    };
+    let real = real_size(variant.precision) as usize;
     (
         ((16 + 2 * real * (d + 1)) * trajectories) as u64,
         trajectories,
@@ -147,16 +149,6 @@ enum Outcome<const N: usize> {
     Missed,
 }
 
-/// `Control` in shaders/section.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Control {
-    job_count: u32,
-    chunk_steps: u32,
-    opaque_zero: u32,
-    pad: u32,
-}
-
 /// The kernel and its buffers, sized for `capacity` jobs.
 struct Stepper<'a> {
     gpu: &'a Gpu,
@@ -166,7 +158,9 @@ struct Stepper<'a> {
     jobs: wgpu::Buffer,
     steps: wgpu::Buffer,
     states: wgpu::Buffer,
-    readback: wgpu::Buffer,
+    /// One staging buffer: a round's table and states are read back
+    /// before its next dispatches.
+    readback: Ring,
     dispatch: Dispatch,
     /// The reals of the buffers.
     precision: Precision,
@@ -180,110 +174,52 @@ struct Stepper<'a> {
 }
 
 impl<'a> Stepper<'a> {
-    fn new(
-        gpu: &'a Gpu,
-        variant: &Variant,
-        lane_data: &[f64],
-        capacity: usize,
-        dim: usize,
-        dispatch: Dispatch,
-    ) -> Self {
-        let workgroup = dispatch.workgroup;
-        use wgpu::util::DeviceExt;
-        let device = &gpu.device;
-        let entries = [
-            uniform_entry(0),
-            storage_entry(1, true),
-            storage_entry(2, false),
-            storage_entry(3, true),
-            storage_entry(4, false),
-        ];
-        let (layout, pipeline) =
-            compiled_once(gpu, variant.source(Kernel::Section), workgroup, || {
-                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("section"),
-                    entries: &entries,
-                });
-                let pipeline =
-                    compute_pipeline(gpu, &layout, &entries, variant, Kernel::Section, workgroup);
-                (layout, pipeline)
-            });
-        let buffer = |label: &str, size: u64, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let rw = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC;
+    /// The kernel of `run` with its buffers for `capacity` jobs of states
+    /// of `dim` reals, at `chunk` steps per dispatch.
+    fn new(run: &Run<'a>, lane_data: &[f64], capacity: usize, dim: usize, chunk: usize) -> Self {
+        let gpu = run.gpu;
         let capacity = capacity as u64;
-        let control = buffer(
+        let control = buffer_of(
+            gpu,
             "section control",
-            std::mem::size_of::<Control>() as u64,
+            std::mem::size_of::<SectionControl>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         );
-        let precision = variant.precision;
-        let real = match precision {
-            Precision::F64 => 8,
-            Precision::F32 => 4,
-        };
-        let lanes = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("section lanes"),
-            contents: &real_bytes(lane_data, precision),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        let jobs = buffer("section jobs", 16 * capacity, rw);
-        let steps = buffer("section steps", real * capacity, rw);
-        let states = buffer("section states", 2 * real * dim as u64 * capacity, rw);
-        let readback = buffer(
-            "section readback",
-            (16 + 2 * real * dim as u64) * capacity,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        let precision = run.variant.precision;
+        let real = real_size(precision);
+        let lanes = buffer_with(
+            gpu,
+            "section lanes",
+            &real_bytes(lane_data, precision),
+            wgpu::BufferUsages::STORAGE,
         );
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("section"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: control.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: lanes.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: jobs.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: steps.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: states.as_entire_binding(),
-                },
-            ],
+        let jobs = buffer_of(gpu, "section jobs", 16 * capacity, STORAGE);
+        let steps = buffer_of(gpu, "section steps", real * capacity, STORAGE);
+        let states = buffer_of(
+            gpu,
+            "section states",
+            2 * real * dim as u64 * capacity,
+            STORAGE,
+        );
+        let readback = Ring::new(gpu, 1, (16 + 2 * real * dim as u64) * capacity);
+        let bind_group = run.kernels.bind_group(gpu, run.variant, |name| match name {
+            "control" => Some(&control),
+            "lanes" => Some(&lanes),
+            "jobs" => Some(&jobs),
+            "steps" => Some(&steps),
+            "states" => Some(&states),
+            _ => None,
         });
-        let chunk = if gpu.summary.is_hardware() {
-            (dispatch.lane_steps / capacity.max(1) as usize).max(1)
-        } else {
-            SOFTWARE_CHUNK
-        };
         Stepper {
             gpu,
-            pipeline,
+            pipeline: run.kernels.pipeline(Kernel::Section).clone(),
             bind_group,
             control,
             jobs,
             steps,
             states,
             readback,
-            dispatch,
+            dispatch: run.dispatch,
             precision,
             chunk,
             retries: 0,
@@ -323,18 +259,11 @@ impl<'a> Stepper<'a> {
                 // The adapter cut a dispatch's loops short: that dispatch
                 // stored nothing, so the jobs go on from where they were,
                 // with shorter dispatches.
-                if self.chunk == 1 {
-                    return Err(gpu_error(
-                        "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
-                         of 65 535 loop iterations per invocation): use backend = \"cpu\""
-                            .into(),
-                    ));
-                }
+                self.chunk = schedule::shorter(self.chunk)?;
                 for j in &mut table {
                     j[1] &= !TRUNCATED;
                 }
                 queue.write_buffer(&self.jobs, 0, bytemuck::cast_slice(&table));
-                self.chunk = (self.chunk / TRUNCATION_RETRY).max(1);
                 self.retries += 1;
                 continue;
             }
@@ -372,7 +301,7 @@ impl<'a> Stepper<'a> {
         states_bytes: u64,
     ) -> Result<(Vec<[u32; 4]>, Vec<f64>)> {
         let queue = &self.gpu.queue;
-        let control = Control {
+        let control = SectionControl {
             job_count: job_count as u32,
             chunk_steps: self.chunk as u32,
             opaque_zero: 0,
@@ -393,20 +322,19 @@ impl<'a> Stepper<'a> {
                 pass.dispatch_workgroups(x, y, 1);
             }
         }
-        encoder.copy_buffer_to_buffer(&self.jobs, 0, &self.readback, 0, jobs_bytes);
-        encoder.copy_buffer_to_buffer(&self.states, 0, &self.readback, jobs_bytes, states_bytes);
-        queue.submit([encoder.finish()]);
-        let wait = Instant::now();
-        let read = read_back(&self.gpu.device, &self.readback, |b| {
+        let staging = self.readback.slot(0);
+        encoder.copy_buffer_to_buffer(&self.jobs, 0, staging, 0, jobs_bytes);
+        encoder.copy_buffer_to_buffer(&self.states, 0, staging, jobs_bytes, states_bytes);
+        let pending = self.readback.submit(self.gpu, encoder, 0);
+        Ring::wait(self.gpu, &pending, &mut self.timings)?;
+        self.readback.read(pending, |b| {
             let jobs_part = &b[..jobs_bytes as usize];
             let states_part = &b[jobs_bytes as usize..(jobs_bytes + states_bytes) as usize];
             (
                 bytemuck::pod_collect_to_vec::<u8, [u32; 4]>(jobs_part),
                 reals_from(states_part, self.precision),
             )
-        })?;
-        self.timings.gpu_wait += wait.elapsed();
-        Ok(read)
+        })
     }
 
     /// What each job's table entry and states say happened.
@@ -501,56 +429,83 @@ where
     }
 }
 
-/// A batch of lanes of a Poincaré map on the GPU: the lanes planned, their
+/// A Poincaré map's schedule: per batch, the lanes planned, their
 /// transient, then their averaging iterations, each a round of returns
 /// (and of tangents) for every lane still running.
-fn run_dim<const D: usize, const N: usize>(
-    gpu: &Gpu,
-    scene: &Scene,
-    variant: &Variant,
-    settings: &MethodSettings,
-    options: &RunOptions,
-) -> Result<GpuRun>
+struct Section<'a, const D: usize, const N: usize> {
+    scene: &'a Scene,
+    settings: &'a MethodSettings,
+    /// Device bytes per lane in the round's buffers, and trajectories per
+    /// lane: the reference and its copies.
+    per_lane: (u64, usize),
+}
+
+impl<'a, const D: usize, const N: usize> Section<'a, D, N> {
+    fn new(scene: &'a Scene, variant: &Variant, settings: &'a MethodSettings) -> Self {
+        Section {
+            scene,
+            settings,
+            per_lane: device_bytes_per_lane(scene, variant, settings),
+        }
+    }
+}
+
+impl<const D: usize, const N: usize> Schedule for Section<'_, D, N>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let start = Instant::now();
-    let progress = options.progress.clone().unwrap_or_default();
-    let count = scene.lane_count();
-    let mut lanes = plan_lanes::<D, N>(scene, settings);
-    // Per lane: its parameters and the section's position.
-    let mut lane_data = Vec::new();
-    for (k, lane) in lanes.iter().enumerate() {
-        lane_data.extend_from_slice(&scene.lane_params(k).values);
-        lane_data.push(lane.system.section().at);
+    const BINDINGS: &'static Bindings = &SECTION;
+
+    /// On a hardware GPU the dispatch's lane-steps over every job; on a
+    /// software adapter [`SOFTWARE_CHUNK`].
+    fn first_chunk(&self, run: &Run) -> usize {
+        if run.gpu.summary.is_hardware() {
+            let capacity = self.scene.lane_count() * self.per_lane.1;
+            (run.dispatch.lane_steps / capacity.max(1)).max(1)
+        } else {
+            SOFTWARE_CHUNK
+        }
     }
-    let (_, trajectories) = device_bytes_per_lane(scene, variant, settings);
-    let dispatch = Dispatch::new(gpu, options);
-    let mut stepper = Stepper::new(gpu, variant, &lane_data, count * trajectories, N, dispatch);
-    stepper.timings.setup = start.elapsed();
 
-    let transient_start = Instant::now();
-    transient(&mut stepper, &mut lanes, settings, &progress)?;
-    stepper.timings.transient = transient_start.elapsed();
+    /// The whole batch: a round cut short is redone within it, with
+    /// shorter dispatches (`Stepper::run`), so a try always holds.
+    fn attempt(&mut self, run: &Run, chunk: usize) -> Result<Attempt> {
+        let (scene, settings) = (self.scene, self.settings);
+        let start = Instant::now();
+        let count = scene.lane_count();
+        let mut lanes = plan_lanes::<D, N>(scene, settings);
+        // Per lane: its parameters and the section's position.
+        let mut lane_data = Vec::new();
+        for (k, lane) in lanes.iter().enumerate() {
+            lane_data.extend_from_slice(&scene.lane_params(k).values);
+            lane_data.push(lane.system.section().at);
+        }
+        let (per_lane, trajectories) = self.per_lane;
+        let mut stepper = Stepper::new(run, &lane_data, count * trajectories, N, chunk);
+        stepper.timings.setup = start.elapsed();
 
-    let averaging = Instant::now();
-    average(&mut stepper, &mut lanes, settings, &progress)?;
-    stepper.timings.averaging = averaging.elapsed();
-    let results = lanes
-        .into_iter()
-        .map(|lane| match lane.result {
-            Some(result) => result,
-            None => lane.accumulator.finish(),
+        let transient_start = Instant::now();
+        transient(&mut stepper, &mut lanes, settings, &run.progress)?;
+        stepper.timings.transient = transient_start.elapsed();
+
+        let averaging = Instant::now();
+        average(&mut stepper, &mut lanes, settings, &run.progress)?;
+        stepper.timings.averaging = averaging.elapsed();
+        let results = lanes
+            .into_iter()
+            .map(|lane| match lane.result {
+                Some(result) => result,
+                None => lane.accumulator.finish(),
+            })
+            .collect();
+        Ok(Attempt {
+            lanes: Some(results),
+            timings: stepper.timings,
+            chunk_steps: stepper.chunk,
+            retries: stepper.retries,
+            bytes_per_lane: per_lane + 8 * (scene.system.parameters.len() as u64 + 1),
         })
-        .collect();
-    Ok(GpuRun {
-        lanes: results,
-        timings: stepper.timings,
-        chunk_steps: stepper.chunk,
-        retries: stepper.retries,
-        // (Set by `run`.)
-        bytes_per_lane: 0,
-    })
+    }
 }
 
 /// The lanes of `scene` (a batch), each planned; a lane whose plan is not

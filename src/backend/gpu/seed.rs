@@ -2,13 +2,10 @@
 //! constants, and each trajectory's first state, the copies perturbed in
 //! the precision the kernels run.
 
+use super::bindings::FLAG_BEHIND_WALL;
 use crate::integrate::clock::half_turn;
 use crate::method::MethodSettings;
 use crate::scene::{Precision, Scene};
-
-/// A copy that starts behind the wall (`FLAG_BEHIND_WALL` in
-/// shared/bindings.wgsl), flagged as the finish kernel seeds such copies.
-pub const FLAG_BEHIND_WALL: u32 = 32;
 
 /// Per lane of `scene` (a batch): parameters, h, cos(ωh/2), sin(ωh/2), ω,
 /// δ (`lane_stride` numbers), and the lanes' map periods.

@@ -1,5 +1,6 @@
 //! Composing the WGSL kernels: a generated prelude (the `real` type, the
-//! state dimension, which parts are present), the shared files, the system's
+//! state dimension, which parts are present, and the binding layout
+//! `bindings` states), the shared files, the system's
 //! own file and the kernel, through a small preprocessor (`#include`,
 //! `#ifdef`/`#ifndef`/`#else`/`#endif`) in the manner of vello's.
 
@@ -7,6 +8,7 @@ use std::borrow::Cow;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+use super::bindings::{Bindings, SECTION, SWEEP};
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
 use crate::scene::Precision;
@@ -71,6 +73,15 @@ impl Kernel {
             Kernel::Integrate => "integrate.wgsl",
             Kernel::Finish => "finish.wgsl",
             Kernel::Section => "section.wgsl",
+        }
+    }
+
+    /// The binding layout the kernel runs over: the period map's two
+    /// share one.
+    pub fn bindings(self) -> &'static Bindings {
+        match self {
+            Kernel::Integrate | Kernel::Finish => &SWEEP,
+            Kernel::Section => &SECTION,
         }
     }
 }
@@ -235,6 +246,7 @@ impl Variant {
             .source;
         let defines = self.defines();
         let mut out = self.prelude();
+        out.push_str(&kernel.bindings().wgsl(self.system, &defines));
         out.push_str(&preprocess(system, &defines));
         // A generated model's functions (`model::codegen::wgsl`): f64 builds them
         // from arithmetic; a system that calls none gets neither file. The

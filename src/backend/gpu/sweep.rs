@@ -1,30 +1,36 @@
-//! One GPU sweep: buffers, the dispatch schedule and the streaming readback.
+//! A period map's GPU schedule, on `schedule`'s skeleton: its buffers, its
+//! dispatches, and what a chunk's read-back turns into (host QR).
 //!
 //! Per map iteration, and per part of one when it is cut into sub-maps, the
 //! host encodes `ceil(steps / chunk_steps)` integrate dispatches and one
-//! finish dispatch; nothing crosses back to the host per iteration. The transient runs references only, with no readback. While
-//! averaging, each chunk of iterations writes its Jacobians, points and
-//! summaries into a ring of slots that is copied to one of two staging
-//! buffers; the host maps and accumulates QR for one chunk while the GPU
-//! computes the next.
+//! finish dispatch; nothing crosses back to the host per iteration. The
+//! transient runs references only, with no readback. While averaging, each
+//! chunk of iterations writes its Jacobians, points and summaries into a
+//! ring of slots that is copied to one of two staging buffers (the
+//! skeleton's read-back ring); the host maps and accumulates QR for one
+//! chunk while the GPU computes the next.
 
-use std::sync::mpsc;
 use std::time::Instant;
 
 use nalgebra::{Const, DimMin, SMatrix};
 use rayon::prelude::*;
-use wgpu::util::DeviceExt;
 
+use super::bindings::{
+    Bindings, SweepControl, FLAG_CHATTERING, FLAG_NONFINITE, FLAG_RANK_ONE, FLAG_RANK_TWO,
+    FLAG_SLIDING, FLAG_TRUNCATED, SWEEP,
+};
 use super::context::Gpu;
 use super::pipeline::{
-    compiled_once, compute_pipeline, gpu_error, read_back, real_bytes, reals_from, storage_entry,
-    uniform_entry, wait_for, Dispatch, GpuRun, Timings, TRUNCATION_RETRY,
+    read_back, real_bytes, real_size, reals_from, wait_for, Dispatch, GpuRun, Timings,
+};
+use super::schedule::{
+    self, buffer_of, buffer_with, Attempt, Pending, Ring, Run, Schedule, READABLE, STORAGE,
 };
 use super::seed::{lane_constants, Seeds};
 use super::shader::{Kernel, Variant};
 use super::stopwatch::{self, Stopwatch};
 use crate::backend::options::RunOptions;
-use crate::backend::progress::Progress;
+use crate::backend::progress::Attempt as Tally;
 use crate::error::{Error, Result};
 use crate::method::lane::{is_grazing, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
@@ -34,7 +40,7 @@ use crate::system::{IterationStats, Part};
 /// Steps per integrate dispatch with a wall on a software adapter. lavapipe
 /// caps the loop iterations of one invocation at 65 535 (every loop
 /// together, shared by a SIMD group; see `loop_budget_exhausted` in
-/// shaders/shared/bindings.wgsl), and a step with impacts runs many loops:
+/// shaders/shared/loop_budget.wgsl), and a step with impacts runs many loops:
 /// a dispatch of 1 300 steps with 3 700 impacts went past it. Quiet steps
 /// cost a few dozen iterations, so 256 leave room for ~60 impacts of 1 000
 /// each; a batch whose dispatches still ran past the cap is redone with
@@ -119,18 +125,15 @@ struct Layout {
 impl Layout {
     fn new(scene: &Scene, variant: &Variant, settings: &MethodSettings) -> Self {
         let dim = scene.system.dimension();
-        let real = match variant.precision {
-            Precision::F64 => 8,
-            Precision::F32 => 4,
-        };
+        let real = real_size(variant.precision);
+        let strides = SWEEP.strides(scene.system, &variant.defines());
         Layout {
             traj: variant.trajectories(),
             real,
-            lane_stride: scene.system.parameters.len() + 5,
-            // With surfaces, each trajectory's region and flux follow.
-            traj_stride: 2 * dim + 3 + 2 * usize::from(variant.surfaces()),
-            summary: 16 * (1 + u64::from(variant.wall)),
-            summary_stride: 1 + usize::from(variant.wall),
+            lane_stride: strides.lane,
+            traj_stride: strides.traj,
+            summary: 16 * strides.summary as u64,
+            summary_stride: strides.summary,
             jacobian: if variant.lyapunov {
                 (dim * dim) as u64 * real
             } else {
@@ -152,6 +155,7 @@ impl Layout {
     }
 }
 
+/// A batch of a period map's lanes on the schedule's skeleton.
 fn run_dim<const D: usize>(
     gpu: &Gpu,
     scene: &Scene,
@@ -162,145 +166,64 @@ fn run_dim<const D: usize>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let start = Instant::now();
-    let dispatch = Dispatch::new(gpu, options);
-    let pipelines = Pipelines::cached(gpu, variant, dispatch);
-    let stopwatch = Stopwatch::new(gpu);
-    let layout = Layout::new(scene, variant, settings);
-    let count = scene.lane_count();
-    debug_assert!(count <= max_batch_lanes(gpu, scene, variant, settings, options));
-    let mut timings = Timings {
-        setup: start.elapsed(),
-        ..Default::default()
+    debug_assert!(scene.lane_count() <= max_batch_lanes(gpu, scene, variant, settings, options));
+    let sweep = Sweep::<D> {
+        scene,
+        settings,
+        layout: Layout::new(scene, variant, settings),
+        stopwatch: Stopwatch::new(gpu),
+        dispatch_steps: options.dispatch_steps,
     };
-    let software_stops = variant.wall && !gpu.summary.is_hardware();
-    let default_chunk = if software_stops {
-        SOFTWARE_WALL_CHUNK
-    } else {
-        usize::MAX
-    };
-    let mut max_chunk = options.dispatch_steps.unwrap_or(default_chunk);
-    let mut retries = 0;
-    let progress = options.progress.clone().unwrap_or_default();
-    loop {
+    schedule::run(gpu, variant, options, sweep)
+}
+
+/// A period map's schedule: per try, a [`Batch`] of the scene's lanes.
+struct Sweep<'a, const D: usize> {
+    scene: &'a Scene,
+    settings: &'a MethodSettings,
+    layout: Layout,
+    stopwatch: Option<Stopwatch>,
+    /// The steps per dispatch the run asks for, if any.
+    dispatch_steps: Option<usize>,
+}
+
+impl<const D: usize> Schedule for Sweep<'_, D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    const BINDINGS: &'static Bindings = &SWEEP;
+
+    fn first_chunk(&self, run: &Run) -> usize {
+        let software_stops = run.variant.wall && !run.gpu.summary.is_hardware();
+        let default_chunk = if software_stops {
+            SOFTWARE_WALL_CHUNK
+        } else {
+            usize::MAX
+        };
+        self.dispatch_steps.unwrap_or(default_chunk)
+    }
+
+    fn attempt(&mut self, run: &Run, max_chunk: usize) -> Result<Attempt> {
+        let count = self.scene.lane_count();
         let batch = Batch::<D>::new(
-            gpu,
-            &pipelines,
-            stopwatch.as_ref(),
-            scene,
-            variant,
-            settings,
-            &layout,
-            count,
+            run,
+            self.stopwatch.as_ref(),
+            self.scene,
+            self.settings,
+            &self.layout,
             max_chunk,
         );
         let chunk_steps = batch.chunk_steps;
         let bytes_per_lane = batch.device_bytes / count as u64;
-        let (results, t) = batch.run(gpu, &pipelines, &progress)?;
-        timings.add(&t);
-        if let Some(lanes) = results {
-            return Ok(GpuRun {
-                lanes,
-                timings,
-                chunk_steps,
-                retries,
-                bytes_per_lane,
-            });
-        }
-        // The adapter cut a dispatch's loops short: the results are
-        // wrong, and shorter dispatches stay within its cap.
-        if chunk_steps == 1 {
-            return Err(gpu_error(
-                "the adapter cut the loops of a single RK4 step short (lavapipe's cap \
-                 of 65 535 loop iterations per invocation): use backend = \"cpu\""
-                    .into(),
-            ));
-        }
-        max_chunk = (chunk_steps / TRUNCATION_RETRY).max(1);
-        retries += 1;
+        let (lanes, timings) = batch.run(run)?;
+        Ok(Attempt {
+            lanes,
+            timings,
+            chunk_steps,
+            retries: 0,
+            bytes_per_lane,
+        })
     }
-}
-
-/// The two compute pipelines of a variant over one bind group layout.
-#[derive(Clone)]
-struct Pipelines {
-    layout: wgpu::BindGroupLayout,
-    integrate: wgpu::ComputePipeline,
-    finish: wgpu::ComputePipeline,
-    lyapunov: bool,
-    /// The per-stop impact counts (binding 8) of a variant with stops.
-    wall: bool,
-    /// The fluxes (binding 9) of a variant with general surfaces.
-    surfaces: bool,
-    dispatch: Dispatch,
-}
-
-impl Pipelines {
-    /// The pipelines of `variant` (compiled once per workgroup size), to
-    /// be dispatched as `dispatch` lays out.
-    fn cached(gpu: &Gpu, variant: &Variant, dispatch: Dispatch) -> Self {
-        let source = variant.source(Kernel::Integrate) + &variant.source(Kernel::Finish);
-        let compiled = compiled_once(gpu, source, dispatch.workgroup, || {
-            Self::new(gpu, variant, dispatch)
-        });
-        Pipelines {
-            dispatch,
-            ..compiled
-        }
-    }
-
-    fn new(gpu: &Gpu, variant: &Variant, dispatch: Dispatch) -> Self {
-        let workgroup = dispatch.workgroup;
-        let mut entries = vec![
-            uniform_entry(0),
-            storage_entry(1, true),
-            storage_entry(2, false),
-            storage_entry(3, false),
-            storage_entry(4, false),
-        ];
-        if variant.lyapunov {
-            entries.extend([storage_entry(5, false), storage_entry(6, false)]);
-        }
-        entries.push(storage_entry(7, false));
-        if variant.wall {
-            entries.push(storage_entry(8, false));
-        }
-        if variant.surfaces() {
-            entries.push(storage_entry(9, false));
-        }
-        let layout = gpu
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("sweep"),
-                entries: &entries,
-            });
-        let pipeline =
-            |kernel: Kernel| compute_pipeline(gpu, &layout, &entries, variant, kernel, workgroup);
-        Pipelines {
-            integrate: pipeline(Kernel::Integrate),
-            finish: pipeline(Kernel::Finish),
-            layout,
-            lyapunov: variant.lyapunov,
-            wall: variant.wall,
-            surfaces: variant.surfaces(),
-            dispatch,
-        }
-    }
-}
-
-/// `Control` in shared/bindings.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Control {
-    lane_count: u32,
-    steps_per_period: u32,
-    chunk_steps: u32,
-    transient: u32,
-    ring: u32,
-    /// Always 0; see `opaque_zero` in the WGSL.
-    opaque_zero: u32,
-    part_steps: u32,
-    parts: u32,
 }
 
 /// One batch of lanes with its buffers.
@@ -322,7 +245,7 @@ struct Batch<'a, const D: usize> {
     jac: Option<wgpu::Buffer>,
     points: wgpu::Buffer,
     fluxes: Option<wgpu::Buffer>,
-    staging: [wgpu::Buffer; 2],
+    staging: Ring,
     /// Where the staging buffers hold the chunk's pass timestamps.
     ticks_offset: u64,
     /// The transient passes' timestamps, read back after each submission.
@@ -351,18 +274,16 @@ where
     /// The batch of `scene`'s `count` lanes: their constants and
     /// starting trajectories uploaded, the ring of iterations read back per
     /// chunk sized, the dispatches' steps chosen and the buffers bound.
-    #[allow(clippy::too_many_arguments)]
     fn new(
-        gpu: &Gpu,
-        pipelines: &Pipelines,
+        run: &Run,
         stopwatch: Option<&'a Stopwatch>,
         scene: &'a Scene,
-        variant: &Variant,
         settings: &'a MethodSettings,
         layout: &'a Layout,
-        count: usize,
         max_chunk: usize,
     ) -> Self {
+        let (gpu, variant) = (run.gpu, run.variant);
+        let count = scene.lane_count();
         let precision = variant.precision;
         let steps = if scene.system.is_flow {
             settings.flow.steps_per_period
@@ -377,7 +298,7 @@ where
             scene,
             settings,
             (layout.traj, layout.traj_stride),
-            pipelines.surfaces,
+            variant.surfaces(),
             precision,
         );
         let per_iteration = layout.per_iteration() * count as u64;
@@ -387,12 +308,12 @@ where
         } else {
             ring.min((SOFTWARE_CHUNK_STEPS / (count * layout.traj * steps).max(1)).max(1))
         };
-        let lane_steps = pipelines.dispatch.lane_steps;
+        let lane_steps = run.dispatch.lane_steps;
         let chunk = |trajectories: usize| (lane_steps / trajectories.max(1)).clamp(1, steps);
         // While averaging a dispatch stops at the end of a part.
         let chunk_steps = chunk(count * layout.traj).min(part_steps).min(max_chunk);
         let transient_chunk_steps = chunk(count).min(max_chunk);
-        let control = |transient: bool, chunk_steps: usize| Control {
+        let control = |transient: bool, chunk_steps: usize| SweepControl {
             lane_count: count as u32,
             steps_per_period: steps as u32,
             chunk_steps: chunk_steps as u32,
@@ -410,10 +331,9 @@ where
         let ticks_offset = per_iteration * ring as u64;
         let b = Buffers::new(
             gpu,
-            pipelines,
+            variant,
             layout,
             stopwatch.is_some(),
-            precision,
             (count, slots, ticks_offset),
             &lane_data,
             &seeds,
@@ -439,8 +359,8 @@ where
             chunk_steps,
             transient_chunk_steps,
             ring,
-            transient_control: b.bind_group(gpu, pipelines, &b.transient_uniform),
-            averaging_control: b.bind_group(gpu, pipelines, &b.averaging_uniform),
+            transient_control: b.bind_group(run, &b.transient_uniform),
+            averaging_control: b.bind_group(run, &b.averaging_uniform),
             summary: b.summary,
             jac: b.jac,
             points: b.points,
@@ -460,7 +380,7 @@ where
     fn encode_iterations(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        pipelines: &Pipelines,
+        run: &Run,
         transient: bool,
         iterations: usize,
         slot: u32,
@@ -483,41 +403,56 @@ where
             )
         };
         let (invocations, lanes) = (
-            pipelines.dispatch.grid(invocations),
-            pipelines.dispatch.grid(self.count),
+            run.dispatch.grid(invocations),
+            run.dispatch.grid(self.count),
         );
+        let integrate = run.kernels.pipeline(Kernel::Integrate);
+        let finish = run.kernels.pipeline(Kernel::Finish);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(if transient { "transient" } else { "averaging" }),
             timestamp_writes: self.stopwatch.map(|s| s.writes(slot)),
         });
         pass.set_bind_group(0, bind_group, &[]);
         for _ in 0..iterations * parts {
-            pass.set_pipeline(&pipelines.integrate);
+            pass.set_pipeline(integrate);
             for _ in 0..part_steps.div_ceil(chunk) {
                 pass.dispatch_workgroups(invocations.0, invocations.1, 1);
             }
-            pass.set_pipeline(&pipelines.finish);
+            pass.set_pipeline(finish);
             pass.dispatch_workgroups(lanes.0, lanes.1, 1);
         }
     }
 
     /// The batch's lanes, or `None` when a dispatch ran past the adapter's
     /// loop cap (the lanes are then wrong and the batch must be redone).
-    #[allow(clippy::type_complexity)]
-    fn run(
-        self,
-        gpu: &Gpu,
-        pipelines: &Pipelines,
-        progress: &Progress,
-    ) -> Result<(Option<Vec<LaneResult>>, Timings)> {
-        let device = &gpu.device;
-        let queue = &gpu.queue;
-        let settings = self.settings;
+    fn run(self, run: &Run) -> Result<(Option<Vec<LaneResult>>, Timings)> {
         let mut timings = Timings::default();
-        let mut progress = progress.attempt();
-
-        // The transient: references only, no readback.
+        let mut progress = run.progress.attempt();
         let start = Instant::now();
+        self.transient(run, &mut progress, &mut timings)?;
+        // The reference points x_0 the first averaging iteration starts from,
+        // for re-estimating it should it graze.
+        let mut previous: Vec<Option<[f64; D]>> = vec![None; self.count];
+        if self.grazing.is_some() {
+            previous = self
+                .reference_states(run.gpu)?
+                .into_iter()
+                .map(Some)
+                .collect();
+        }
+        timings.transient = start.elapsed();
+        let start = Instant::now();
+        let lanes = self.average(run, &mut progress, &mut previous, &mut timings)?;
+        timings.averaging = start.elapsed();
+        if lanes.is_none() {
+            progress.undo();
+        }
+        Ok((lanes, timings))
+    }
+
+    /// The transient: references only, no readback.
+    fn transient(&self, run: &Run, progress: &mut Tally, timings: &mut Timings) -> Result<()> {
+        let (device, settings) = (&run.gpu.device, self.settings);
         let per_submit = (SUBMIT_LANE_STEPS / (self.count * self.steps).max(1)).max(1);
         let mut done = 0;
         while done < settings.transient {
@@ -527,11 +462,11 @@ where
             let n = per_submit.min(settings.transient - done);
             let mut encoder = device.create_command_encoder(&Default::default());
             let slot = stopwatch::TRANSIENT_SLOT;
-            self.encode_iterations(&mut encoder, pipelines, true, n, slot);
+            self.encode_iterations(&mut encoder, run, true, n, slot);
             if let (Some(s), Some(ticks)) = (self.stopwatch, &self.transient_ticks) {
                 s.copy_out(&mut encoder, slot, ticks, 0);
             }
-            let index = queue.submit([encoder.finish()]);
+            let index = run.gpu.queue.submit([encoder.finish()]);
             wait_for(device, index)?;
             if let (Some(s), Some(ticks)) = (self.stopwatch, &self.transient_ticks) {
                 let busy = read_back(device, ticks, |bytes| s.elapsed(bytes))?;
@@ -540,16 +475,20 @@ where
             done += n;
             progress.advance((self.count * n) as u64);
         }
-        // The reference points x_0 the first averaging iteration starts from,
-        // for re-estimating it should it graze.
-        let mut previous: Vec<Option<[f64; D]>> = vec![None; self.count];
-        if self.grazing.is_some() {
-            previous = self.reference_states(gpu)?.into_iter().map(Some).collect();
-        }
-        timings.transient = start.elapsed();
+        Ok(())
+    }
 
-        // Averaging, streamed in chunks of `ring` iterations.
-        let start = Instant::now();
+    /// Averaging, streamed in chunks of `ring` iterations through the
+    /// read-back ring: the lanes, or `None` when a dispatch ran past the
+    /// adapter's loop cap.
+    fn average(
+        &self,
+        run: &Run,
+        progress: &mut Tally,
+        previous: &mut [Option<[f64; D]>],
+        timings: &mut Timings,
+    ) -> Result<Option<Vec<LaneResult>>> {
+        let (gpu, settings) = (run.gpu, self.settings);
         let plan = LanePlan {
             steps_per_period: self.steps,
             parts: self.layout.parts,
@@ -565,59 +504,44 @@ where
             .collect();
         // Chunk c computes while the host reads and accumulates chunk c - 1.
         let mut pending: Option<Pending> = None;
-        for (c, &(_, n)) in chunks.iter().enumerate() {
-            if settings.stop.requested() {
-                // Let the chunk in flight finish before its buffers go.
-                if let Some(in_flight) = pending {
-                    wait_for(device, in_flight.index)?;
-                }
-                return Err(Error::Stopped);
-            }
-            let mut encoder = device.create_command_encoder(&Default::default());
-            let slot = (c % 2) as u32;
-            self.encode_iterations(&mut encoder, pipelines, false, n, slot);
-            self.copy_to_staging(&mut encoder, &self.staging[c % 2], n);
-            if let Some(s) = self.stopwatch {
-                s.copy_out(&mut encoder, slot, &self.staging[c % 2], self.ticks_offset);
-            }
-            let index = queue.submit([encoder.finish()]);
-            let submitted = Pending {
-                chunk: c,
-                receiver: self.map_staging(c % 2),
-                index,
-            };
-            if let Some(done) = pending.replace(submitted) {
-                let lanes = &mut accumulators;
-                let n = chunks[done.chunk].1;
-                if !self.collect(gpu, lanes, &mut previous, &chunks, done, &mut timings)? {
+        for c in 0..=chunks.len() {
+            let submitted = if c < chunks.len() {
+                if settings.stop.requested() {
                     // Let the chunk in flight finish before its buffers go.
-                    if let Some(in_flight) = pending {
-                        wait_for(device, in_flight.index)?;
+                    if let Some(in_flight) = &pending {
+                        Ring::wait(gpu, in_flight, timings)?;
                     }
-                    progress.undo();
-                    return Ok((None, timings));
+                    return Err(Error::Stopped);
                 }
-                progress.advance((self.count * n) as u64);
-            }
-        }
-        if let Some(last) = pending {
-            let lanes = &mut accumulators;
-            let n = chunks[last.chunk].1;
-            if !self.collect(gpu, lanes, &mut previous, &chunks, last, &mut timings)? {
-                progress.undo();
-                return Ok((None, timings));
+                let mut encoder = gpu.device.create_command_encoder(&Default::default());
+                let slot = (c % 2) as u32;
+                self.encode_iterations(&mut encoder, run, false, chunks[c].1, slot);
+                self.copy_to_staging(&mut encoder, self.staging.slot(c), chunks[c].1);
+                if let Some(s) = self.stopwatch {
+                    s.copy_out(&mut encoder, slot, self.staging.slot(c), self.ticks_offset);
+                }
+                Some(self.staging.submit(gpu, encoder, c))
+            } else {
+                None
+            };
+            let Some(done) = std::mem::replace(&mut pending, submitted) else {
+                continue;
+            };
+            let (first, n) = chunks[done.chunk];
+            if !self.collect(gpu, &mut accumulators, previous, (first, n), done, timings)? {
+                // Let the chunk in flight finish before its buffers go.
+                if let Some(in_flight) = &pending {
+                    Ring::wait(gpu, in_flight, timings)?;
+                }
+                return Ok(None);
             }
             progress.advance((self.count * n) as u64);
         }
-        timings.averaging = start.elapsed();
-        Ok((
-            Some(
-                accumulators
-                    .into_iter()
-                    .map(LaneAccumulator::finish)
-                    .collect(),
-            ),
-            timings,
+        Ok(Some(
+            accumulators
+                .into_iter()
+                .map(LaneAccumulator::finish)
+                .collect(),
         ))
     }
 
@@ -665,14 +589,6 @@ where
         }
     }
 
-    fn map_staging(&self, which: usize) -> MapReceiver {
-        let (sender, receiver) = mpsc::channel();
-        self.staging[which].map_async(wgpu::MapMode::Read, .., move |result| {
-            let _ = sender.send(result);
-        });
-        receiver
-    }
-
     /// Waits for a submitted chunk's staging copy, then accumulates QR for
     /// every lane straight from the mapped buffer, the lanes spread over
     /// the host's cores (each reads and converts its own slots, so the
@@ -683,47 +599,35 @@ where
         gpu: &Gpu,
         accumulators: &mut [LaneAccumulator<D>],
         previous: &mut [Option<[f64; D]>],
-        chunks: &[(usize, usize)],
+        (first_iteration, n): (usize, usize),
         pending: Pending,
         timings: &mut Timings,
     ) -> Result<bool> {
-        let (first_iteration, n) = chunks[pending.chunk];
+        Ring::wait(gpu, &pending, timings)?;
         let start = Instant::now();
-        wait_for(&gpu.device, pending.index)?;
-        timings.gpu_wait += start.elapsed();
-        let start = Instant::now();
-        pending
-            .receiver
-            .recv()
-            .map_err(|_| gpu_error("readback was cancelled".into()))?
-            .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
-        let staging = &self.staging[pending.chunk % 2];
-        let view = staging
-            .get_mapped_range(..)
-            .map_err(|e| gpu_error(format!("readback failed: {e}")))?;
-        let chunk = self.readback(&view, n);
-        if let Some(s) = self.stopwatch {
-            let busy = s.elapsed(&view[self.ticks_offset as usize..]);
-            *timings.gpu_busy.get_or_insert_default() += busy;
-        }
-        let stride = self.layout.summary_stride;
-        let truncated =
-            (0..chunk.slots).any(|slot| chunk.summary(stride * slot)[1] & FLAG_TRUNCATED != 0);
-        timings.readback += start.elapsed();
-        if !truncated {
-            let start = Instant::now();
-            accumulators
-                .par_iter_mut()
-                .zip(previous.par_iter_mut())
-                .enumerate()
-                .for_each(|(lane, (acc, x_n))| {
-                    self.accumulate(&chunk, lane, first_iteration, n, acc, x_n);
-                });
-            timings.host_qr += start.elapsed();
-        }
-        drop(view);
-        staging.unmap();
-        Ok(!truncated)
+        self.staging.read(pending, |view| {
+            let chunk = self.readback(view, n);
+            if let Some(s) = self.stopwatch {
+                let busy = s.elapsed(&view[self.ticks_offset as usize..]);
+                *timings.gpu_busy.get_or_insert_default() += busy;
+            }
+            let stride = self.layout.summary_stride;
+            let truncated =
+                (0..chunk.slots).any(|slot| chunk.summary(stride * slot)[1] & FLAG_TRUNCATED != 0);
+            timings.readback += start.elapsed();
+            if !truncated {
+                let start = Instant::now();
+                accumulators
+                    .par_iter_mut()
+                    .zip(previous.par_iter_mut())
+                    .enumerate()
+                    .for_each(|(lane, (acc, x_n))| {
+                        self.accumulate(&chunk, lane, first_iteration, n, acc, x_n);
+                    });
+                timings.host_qr += start.elapsed();
+            }
+            !truncated
+        })
     }
 
     /// The parts of a mapped staging buffer holding a chunk of `n`
@@ -952,7 +856,7 @@ struct Buffers {
     jac: Option<wgpu::Buffer>,
     points: wgpu::Buffer,
     fluxes: Option<wgpu::Buffer>,
-    staging: [wgpu::Buffer; 2],
+    staging: Ring,
     transient_ticks: Option<wgpu::Buffer>,
 }
 
@@ -963,89 +867,56 @@ impl Buffers {
     #[allow(clippy::too_many_arguments)]
     fn new(
         gpu: &Gpu,
-        pipelines: &Pipelines,
+        variant: &Variant,
         layout: &Layout,
         timed: bool,
-        precision: Precision,
         (count, slots, ticks_offset): (usize, u64, u64),
         lane_data: &[f64],
         seeds: &Seeds,
-        [transient, averaging]: [Control; 2],
+        [transient, averaging]: [SweepControl; 2],
     ) -> Buffers {
-        let device = &gpu.device;
-        let traj = layout.traj;
-        let storage = wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_SRC
-            | wgpu::BufferUsages::COPY_DST;
-        let init = |label: &str, contents: &[u8], usage| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents,
-                usage,
-            })
-        };
-        let empty = |label: &str, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let transient_uniform = init(
-            "control (transient)",
-            bytemuck::bytes_of(&transient),
-            wgpu::BufferUsages::UNIFORM,
-        );
-        let averaging_uniform = init(
-            "control (averaging)",
-            bytemuck::bytes_of(&averaging),
-            wgpu::BufferUsages::UNIFORM,
-        );
-        let lanes_buffer = init(
-            "lanes",
-            &real_bytes(lane_data, precision),
-            wgpu::BufferUsages::STORAGE,
-        );
-        let traj_buffer = init("trajectories", &real_bytes(&seeds.traj, precision), storage);
-        let counts = init("counts", bytemuck::cast_slice(&seeds.counts), storage);
-        // Per trajectory, its impacts on each stop: none yet.
-        let crossings = pipelines.wall.then(|| {
-            init(
-                "crossings",
-                bytemuck::cast_slice(&vec![[0u32; 4]; count * traj]),
-                storage,
+        let precision = variant.precision;
+        let uniform = |label: &str, control: &SweepControl| {
+            buffer_with(
+                gpu,
+                label,
+                bytemuck::bytes_of(control),
+                wgpu::BufferUsages::UNIFORM,
             )
-        });
-        let summary = empty("summary", layout.summary * slots, storage);
-        let deltas_buffer = pipelines
-            .lyapunov
-            .then(|| init("deltas", &real_bytes(&seeds.deltas, precision), storage));
-        let jac = pipelines
-            .lyapunov
-            .then(|| empty("jacobians", layout.jacobian * slots, storage));
-        let points = empty("points", layout.point * slots, storage);
-        let fluxes = pipelines
-            .surfaces
-            .then(|| empty("fluxes", layout.flux * slots, storage));
-        let readable = wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST;
+        };
+        let reals = |label: &str, values: &[f64]| {
+            buffer_with(gpu, label, &real_bytes(values, precision), STORAGE)
+        };
+        let results = |label: &str, bytes_per_slot: u64| {
+            buffer_of(gpu, label, bytes_per_slot * slots, STORAGE)
+        };
         let ticks_bytes = if timed { stopwatch::TICKS_BYTES } else { 0 };
-        let staging = [0, 1].map(|_| empty("staging", ticks_offset + ticks_bytes, readable));
-        let transient_ticks = timed.then(|| empty("transient ticks", ticks_bytes, readable));
         Buffers {
-            transient_uniform,
-            averaging_uniform,
-            lanes: lanes_buffer,
-            traj: traj_buffer,
-            counts,
-            crossings,
-            summary,
-            deltas: deltas_buffer,
-            jac,
-            points,
-            fluxes,
-            staging,
-            transient_ticks,
+            transient_uniform: uniform("control (transient)", &transient),
+            averaging_uniform: uniform("control (averaging)", &averaging),
+            lanes: buffer_with(
+                gpu,
+                "lanes",
+                &real_bytes(lane_data, precision),
+                wgpu::BufferUsages::STORAGE,
+            ),
+            traj: reals("trajectories", &seeds.traj),
+            counts: buffer_with(gpu, "counts", bytemuck::cast_slice(&seeds.counts), STORAGE),
+            // Per trajectory, its impacts on each stop: none yet.
+            crossings: variant.wall.then(|| {
+                let none = vec![[0u32; 4]; count * layout.traj];
+                buffer_with(gpu, "crossings", bytemuck::cast_slice(&none), STORAGE)
+            }),
+            summary: results("summary", layout.summary),
+            deltas: variant.lyapunov.then(|| reals("deltas", &seeds.deltas)),
+            jac: variant
+                .lyapunov
+                .then(|| results("jacobians", layout.jacobian)),
+            points: results("points", layout.point),
+            fluxes: variant.surfaces().then(|| results("fluxes", layout.flux)),
+            staging: Ring::new(gpu, 2, ticks_offset + ticks_bytes),
+            transient_ticks: timed
+                .then(|| buffer_of(gpu, "transient ticks", ticks_bytes, READABLE)),
         }
     }
 
@@ -1058,87 +929,27 @@ impl Buffers {
             .chain(&self.jac)
             .chain([&self.points])
             .chain(&self.fluxes)
-            .chain(&self.staging)
             .map(|b| b.size())
-            .sum()
+            .sum::<u64>()
+            + self.staging.device_bytes()
     }
 
-    /// The bind group of the sweep's kernels with `uniform` as the control.
-    fn bind_group(
-        &self,
-        gpu: &Gpu,
-        pipelines: &Pipelines,
-        uniform: &wgpu::Buffer,
-    ) -> wgpu::BindGroup {
-        let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: self.lanes.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: self.traj.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 3,
-                resource: self.counts.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: self.summary.as_entire_binding(),
-            },
-        ];
-        if let (Some(d), Some(j)) = (&self.deltas, &self.jac) {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 5,
-                resource: d.as_entire_binding(),
-            });
-            entries.push(wgpu::BindGroupEntry {
-                binding: 6,
-                resource: j.as_entire_binding(),
-            });
-        }
-        entries.push(wgpu::BindGroupEntry {
-            binding: 7,
-            resource: self.points.as_entire_binding(),
-        });
-        if let Some(c) = &self.crossings {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 8,
-                resource: c.as_entire_binding(),
-            });
-        }
-        if let Some(f) = &self.fluxes {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 9,
-                resource: f.as_entire_binding(),
-            });
-        }
-        gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sweep"),
-            layout: &pipelines.layout,
-            entries: &entries,
-        })
+    /// The bind group of the sweep's kernels with `uniform` as the control,
+    /// each buffer bound by its name in the kernels (`bindings::SWEEP`).
+    fn bind_group(&self, run: &Run, uniform: &wgpu::Buffer) -> wgpu::BindGroup {
+        run.kernels
+            .bind_group(run.gpu, run.variant, |name| match name {
+                "control" => Some(uniform),
+                "lanes" => Some(&self.lanes),
+                "traj" => Some(&self.traj),
+                "counts" => Some(&self.counts),
+                "summary" => Some(&self.summary),
+                "deltas" => self.deltas.as_ref(),
+                "jac" => self.jac.as_ref(),
+                "points" => Some(&self.points),
+                "crossings" => self.crossings.as_ref(),
+                "fluxes" => self.fluxes.as_ref(),
+                _ => None,
+            })
     }
 }
-
-/// Where a staging buffer's map_async reports.
-type MapReceiver = mpsc::Receiver<std::result::Result<(), wgpu::BufferAsyncError>>;
-
-/// A chunk of averaging iterations submitted and being mapped.
-struct Pending {
-    chunk: usize,
-    receiver: MapReceiver,
-    index: wgpu::SubmissionIndex,
-}
-
-const FLAG_CHATTERING: u32 = 1;
-const FLAG_NONFINITE: u32 = 2;
-const FLAG_RANK_ONE: u32 = 4;
-const FLAG_RANK_TWO: u32 = 8;
-const FLAG_TRUNCATED: u32 = 16;
-const FLAG_SLIDING: u32 = 64;
