@@ -71,28 +71,11 @@ fn stop_values(w: Stop, y: State) -> vec2<real> {
     return vec2<real>(gap(w, y), speed(w, y));
 }
 
-// The stop test of stops and surfaces alike: whether a step of size h whose
-// event value and rate go from `start` to `end` may cross (value > 0 across):
-// it ends across, or the rate turns from approaching to leaving inside it
-// within reach (an excursion between the ends). Twin of reaches_wall and
-// surface::may_cross, the same test written for each.
-fn may_meet(start: vec2<real>, end: vec2<real>, h: real) -> bool {
-    return end.x > real(0.0) || (start.y > real(0.0) && end.y < real(0.0) && may_turn_past(start.x, start.y, end.x, end.y, h));
-}
-
 // Whether a step of size h from y to y1 may meet the stop (twin of
-// reaches_wall).
+// reaches_wall): the stop test `may_meet` of the step program
+// (src/model/ir/step.rs), generated, shared with the surfaces.
 fn reaches(w: Stop, y: State, h: real, y1: State) -> bool {
     return may_meet(stop_values(w, y), stop_values(w, y1), h);
-}
-
-// Whether a step turning back inside (speed s0 > 0 to s1 < 0, gaps g0, g1
-// short of the stop) may pass it in between: not when both ends fall short
-// by twice the most the step's cubic can rise (twin of may_turn_past in
-// impact.rs, which says why that suffices).
-fn may_turn_past(g0: real, s0: real, g1: real, s1: real, h: real) -> bool {
-    let reach = TURN_REACH * h * (s0 - s1);
-    return !(g0 + reach < real(0.0) && g1 + reach < real(0.0));
 }
 
 // At rest on the stop: the sticking state, X = X_w and V = 0.

@@ -222,13 +222,11 @@ impl Variant {
              const PARAM_COUNT: u32 = {params}u;\n\
              const EPSILON: real = real({epsilon});\n\
              const MAX_REAL: real = real({max});\n\
-             const TURN_REACH: real = real({reach:?});\n\
              fn load_params(lane: u32) -> Params {{\n    let b = lane * LANE_STRIDE;\n    return Params({fields});\n}}\n",
             name = self.name(),
             traj = self.trajectories(),
             params = self.system.parameters.len(),
             fields = fields.join(", "),
-            reach = crate::integrate::impact::TURN_REACH,
         )
     }
 

@@ -8,7 +8,6 @@
 //! here: the same operations in the same order as the interpreter
 //! (`Tape::run`), `rk4::step_batch` and `integrate::steps`.
 
-use crate::integrate::impact::TURN_REACH;
 use crate::integrate::surface::Surface;
 use crate::model::codegen::print::{self, Inputs, Syntax};
 use crate::model::codegen::step::{self, CField, CValue};
@@ -359,9 +358,9 @@ impl WalkText<'_> {
             field: &mut field,
             indent: "    ",
         };
-        let half = CValue::Phase("hc".into(), "hs".into());
+        let half = CValue::Pair("hc".into(), "hs".into());
         for ((c, s), (c1, s1)) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
-            let phase = CValue::Phase(c.into(), s.into());
+            let phase = CValue::Pair(c.into(), s.into());
             let turned = text.inline(
                 out,
                 &program,
@@ -369,7 +368,7 @@ impl WalkText<'_> {
                 vec![phase, half.clone()],
                 &format!("{c1}_"),
             );
-            let [CValue::Phase(tc, ts)] = &turned[..] else {
+            let [CValue::Pair(tc, ts)] = &turned[..] else {
                 unreachable!("rotate gives a phase")
             };
             let _ = writeln!(out, "    const double {c1} = {tc}, {s1} = {ts};");
@@ -529,11 +528,14 @@ impl WalkText<'_> {
                 out,
                 "        {{ const double p = {p}, side = {side};\n          \
                  const double g0 = side * (y{ci}[k] - p), s0 = side * y{vi}[k];\n          \
-                 const double g1 = side * (z{ci}[k] - p), s1 = side * z{vi}[k];\n          \
-                 near |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | {crosses}) & live[k]; }}",
+                 const double g1 = side * (z{ci}[k] - p), s1 = side * z{vi}[k];",
                 p = self.row("walls", j),
                 side = literal(stop.side),
-                crosses = reaches_across(),
+            );
+            let crosses = self.may_meet(out);
+            let _ = writeln!(
+                out,
+                "          near |= (((y{ci}[k] == p) & (y{vi}[k] == 0.0)) | {crosses}) & live[k]; }}"
             );
         }
         for j in 0..self.kinds.len() {
@@ -542,10 +544,35 @@ impl WalkText<'_> {
                 out,
                 "        {{ const double o = so{j}[k];\n          \
                  const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
-                 const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];\n          \
-                 near |= {crosses} & live[k]; }}",
-                crosses = reaches_across(),
+                 const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];"
             );
+            let crosses = self.may_meet(out);
+            let _ = writeln!(out, "          near |= {crosses} & live[k]; }}");
+        }
+    }
+
+    /// The step program's `may_meet` of the values and rates `g0`, `s0`
+    /// to `g1`, `s1` over the step `hh` (C values in scope): whether the
+    /// step ends across or turns back within reach, a C int.
+    fn may_meet(&self, out: &mut String) -> String {
+        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
+        let mut text = step::C {
+            syntax: &C { calls: self.calls },
+            field: &mut field,
+            indent: "          ",
+        };
+        let pair = |g: &str, s: &str| CValue::Pair(g.into(), s.into());
+        let args = vec![
+            pair("g0", "s0"),
+            pair("g1", "s1"),
+            CValue::Real("hh".into()),
+        ];
+        match text
+            .inline(out, &integrator(), "may_meet", args, "m")
+            .remove(0)
+        {
+            CValue::Bool(meets) => meets,
+            other => unreachable!("may_meet gives a truth value, not {other:?}"),
         }
     }
 
@@ -588,18 +615,6 @@ impl WalkText<'_> {
     }
 }
 
-/// Whether a step whose oriented distance and rate go from `g0`, `s0` to
-/// `g1`, `s1` (C values in scope, as `hh`) ends across, or turns back
-/// within reach (`impact::may_turn_past`): the same operations, a C
-/// expression of 0 or 1.
-fn reaches_across() -> String {
-    format!(
-        "((g1 > 0.0) | ((s0 > 0.0) & (s1 < 0.0) \
-         & !((g0 + {reach} * hh * (s0 - s1) < 0.0) & (g1 + {reach} * hh * (s0 - s1) < 0.0))))",
-        reach = literal(TURN_REACH)
-    )
-}
-
 /// `rk4::step_batch`'s step of the slot whose states are `state`, with
 /// the field `tape` (its constants from `row`, its values named after
 /// `prefix`), inside a loop over the slots that has set `hh`; gives each
@@ -631,7 +646,7 @@ fn rk4_of(
     state: &[String],
     field: &mut CField,
 ) -> Vec<String> {
-    let phase = |c: &str, s: &str| CValue::Phase(c.into(), s.into());
+    let phase = |c: &str, s: &str| CValue::Pair(c.into(), s.into());
     let args = vec![
         phase("c", "s"),
         phase("mc", "ms"),

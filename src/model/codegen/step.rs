@@ -44,7 +44,8 @@ fn wgsl_type(ty: Ty) -> &'static str {
     match ty {
         Ty::Real => "real",
         Ty::State => "State",
-        Ty::Phase => "vec2<real>",
+        Ty::Pair => "vec2<real>",
+        Ty::Bool => "bool",
     }
 }
 
@@ -55,8 +56,12 @@ fn reads_field(program: &Program, f: &Function) -> bool {
         match e {
             Expr::Var(_) | Expr::Num(_) => false,
             Expr::Field { .. } => true,
-            Expr::Bin(_, a, b) | Expr::Phase(a, b) => reads(program, a) || reads(program, b),
-            Expr::Cos(a) | Expr::Sin(a) => reads(program, a),
+            Expr::Bin(_, a, b)
+            | Expr::Pair(a, b)
+            | Expr::Cmp(_, a, b)
+            | Expr::And(a, b)
+            | Expr::Or(a, b) => reads(program, a) || reads(program, b),
+            Expr::First(a) | Expr::Second(a) | Expr::Not(a) => reads(program, a),
             Expr::Call(name, args) => {
                 reads_field(program, program.function(name))
                     || args.iter().any(|a| reads(program, a))
@@ -130,9 +135,14 @@ fn wgsl_expr(program: &Program, syntax: &dyn Syntax, e: &Expr) -> (String, Optio
             let (a, b) = (wgsl_expr(program, syntax, a), wgsl_expr(program, syntax, b));
             (binary(*op, (&a.0, a.1), (&b.0, b.1)), Some(*op))
         }
-        Expr::Cos(a) => (format!("{}.x", text(a)), None),
-        Expr::Sin(a) => (format!("{}.y", text(a)), None),
-        Expr::Phase(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
+        Expr::First(a) => (format!("{}.x", text(a)), None),
+        Expr::Second(a) => (format!("{}.y", text(a)), None),
+        Expr::Pair(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
+        // Truth values in parentheses whole: no precedence to get wrong.
+        Expr::Cmp(cmp, a, b) => (format!("({} {} {})", text(a), cmp.symbol(), text(b)), None),
+        Expr::And(a, b) => (format!("({} && {})", text(a), text(b)), None),
+        Expr::Or(a, b) => (format!("({} || {})", text(a), text(b)), None),
+        Expr::Not(a) => (format!("!{}", text(a)), None),
         Expr::Field { phase, state } => (format!("rhs(p, {}, {})", text(phase), text(state)), None),
         Expr::Call(name, args) => {
             let mut list: Vec<String> = Vec::new();
@@ -145,13 +155,14 @@ fn wgsl_expr(program: &Program, syntax: &dyn Syntax, e: &Expr) -> (String, Optio
     }
 }
 
-/// A value of C text: a number, one a state component, or a phase's
-/// cosine and sine; each an atom (a name, an array element or a number).
+/// A value of C text: a number, one a state component, a pair's two
+/// numbers (a phase's cosine and sine), or a truth value (an `int`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum CValue {
     Real(String),
     State(Vec<String>),
-    Phase(String, String),
+    Pair(String, String),
+    Bool(String),
 }
 
 /// The field as C statements: appends the field's values at `state` and
@@ -212,8 +223,12 @@ impl C<'_> {
                     .map(|(i, v)| one(format!("{name}{i}"), v))
                     .collect(),
             ),
-            CValue::Phase(c, s) => {
-                CValue::Phase(one(format!("{name}_c"), &c), one(format!("{name}_s"), &s))
+            CValue::Pair(c, s) => {
+                CValue::Pair(one(format!("{name}_c"), &c), one(format!("{name}_s"), &s))
+            }
+            CValue::Bool(v) => {
+                let _ = writeln!(out, "{}const int {name} = {v};", self.indent);
+                CValue::Bool(name.to_string())
             }
         }
     }
@@ -230,7 +245,7 @@ impl C<'_> {
     ) -> CValue {
         match e {
             Expr::Field { phase, state } => {
-                let (Some(CValue::Phase(c, s)), Some(CValue::State(y))) =
+                let (Some(CValue::Pair(c, s)), Some(CValue::State(y))) =
                     (var(scope, phase), var(scope, state))
                 else {
                     panic!("the field is evaluated at a named phase and state")
@@ -238,10 +253,7 @@ impl C<'_> {
                 CValue::State((self.field)(out, &format!("{prefix}_"), &y, (&c, &s)))
             }
             Expr::Call(name, args) => {
-                let args = args
-                    .iter()
-                    .map(|a| var(scope, a).expect("a call's arguments are named values"))
-                    .collect();
+                let args = args.iter().map(|a| self.operand(scope, a)).collect();
                 let mut results = self.inline(out, program, name, args, &format!("{prefix}_"));
                 assert_eq!(results.len(), 1, "{name} has one result");
                 results.remove(0)
@@ -259,16 +271,37 @@ impl C<'_> {
         match e {
             Expr::Var(name) => (scope[name].clone(), None),
             Expr::Num(v) => (CValue::Real(self.syntax.literal(*v)), None),
-            Expr::Cos(a) | Expr::Sin(a) => match self.expr(scope, a).0 {
-                CValue::Phase(c, s) => (
-                    CValue::Real(if matches!(e, Expr::Cos(_)) { c } else { s }),
+            Expr::First(a) | Expr::Second(a) => match self.expr(scope, a).0 {
+                CValue::Pair(c, s) => (
+                    CValue::Real(if matches!(e, Expr::First(_)) { c } else { s }),
                     None,
                 ),
-                other => panic!("{other:?} is not a phase"),
+                other => panic!("{other:?} is not a pair"),
             },
-            Expr::Phase(c, s) => match (self.expr(scope, c), self.expr(scope, s)) {
-                ((CValue::Real(c), _), (CValue::Real(s), _)) => (CValue::Phase(c, s), None),
-                _ => panic!("a phase of two numbers"),
+            Expr::Pair(c, s) => match (self.operand(scope, c), self.operand(scope, s)) {
+                (CValue::Real(c), CValue::Real(s)) => (CValue::Pair(c, s), None),
+                _ => panic!("a pair of two numbers"),
+            },
+            // Truth values as C ints, in parentheses whole; `&` and `|`
+            // compute both operands, as `integrate::wall::may_reach` does.
+            Expr::Cmp(cmp, a, b) => match (self.operand(scope, a), self.operand(scope, b)) {
+                (CValue::Real(a), CValue::Real(b)) => {
+                    (CValue::Bool(format!("({a} {} {b})", cmp.symbol())), None)
+                }
+                _ => panic!("a comparison of two numbers"),
+            },
+            Expr::And(a, b) | Expr::Or(a, b) => {
+                let symbol = if matches!(e, Expr::And(..)) { '&' } else { '|' };
+                match (self.expr(scope, a).0, self.expr(scope, b).0) {
+                    (CValue::Bool(a), CValue::Bool(b)) => {
+                        (CValue::Bool(format!("({a} {symbol} {b})")), None)
+                    }
+                    _ => panic!("{symbol} of two truth values"),
+                }
+            }
+            Expr::Not(a) => match self.expr(scope, a).0 {
+                CValue::Bool(a) => (CValue::Bool(format!("!{a}")), None),
+                other => panic!("{other:?} is not a truth value"),
             },
             Expr::Bin(op, a, b) => {
                 let ((a, oa), (b, ob)) = (self.expr(scope, a), self.expr(scope, b));
@@ -288,6 +321,18 @@ impl C<'_> {
             Expr::Field { .. } | Expr::Call(..) => {
                 panic!("a field or a call is a named value of its own")
             }
+        }
+    }
+}
+
+impl C<'_> {
+    /// `e` as an operand: its text, in parentheses where it is an
+    /// operation (a number's only; a call's arguments and a comparison's
+    /// sides are read where they are used).
+    fn operand(&self, scope: &HashMap<&str, CValue>, e: &Expr) -> CValue {
+        match self.expr(scope, e) {
+            (CValue::Real(v), Some(_)) => CValue::Real(format!("({v})")),
+            (value, _) => value,
         }
     }
 }

@@ -755,7 +755,8 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
 /// The integrator's step program (`model::ir::step::integrator`) as
 /// WGSL functions: the clock's `rotate`, and for a flow (a system file
 /// with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment` and
-/// `rk4_step` with their `Stepped` result.
+/// `rk4_step` with their `Stepped` result, and the stop test
+/// (`may_turn_past`, `may_meet`).
 pub fn integrator(flow: bool) -> String {
     let mut program = crate::model::ir::step::integrator();
     if !flow {

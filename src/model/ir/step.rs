@@ -4,7 +4,8 @@
 //! loops, and as functions of the GPU's kernels in WGSL.
 //!
 //! A program is a list of functions, each a straight line of named values
-//! over three types (a number, a state vector, a forcing phase) ending in
+//! over four types (a number, a state vector, a pair of numbers such as a
+//! forcing phase or an event's value and rate, a truth value) ending in
 //! its results. The operations on states are componentwise, so a target
 //! without vectors (C, one scalar per component) and one with them (WGSL)
 //! perform the same IEEE operations in the same order. The model's field
@@ -24,8 +25,10 @@ pub enum Ty {
     Real,
     /// A state of the model's dimension.
     State,
-    /// A forcing phase (cos ωt, sin ωt).
-    Phase,
+    /// Two numbers: a forcing phase (cos ωt, sin ωt), or an event's
+    /// value and rate.
+    Pair,
+    Bool,
 }
 
 /// A value: an operation of named values and numbers.
@@ -35,12 +38,19 @@ pub enum Expr {
     Num(f64),
     /// `+ - * /`; on states componentwise, a number times a state scales it.
     Bin(Op, Box<Expr>, Box<Expr>),
-    /// A phase's cosine.
-    Cos(Box<Expr>),
-    /// A phase's sine.
-    Sin(Box<Expr>),
-    /// The phase of a cosine and a sine.
-    Phase(Box<Expr>, Box<Expr>),
+    /// A pair's first number (a phase's cosine).
+    First(Box<Expr>),
+    /// A pair's second number (a phase's sine).
+    Second(Box<Expr>),
+    /// The pair of two numbers.
+    Pair(Box<Expr>, Box<Expr>),
+    /// A comparison of two numbers.
+    Cmp(Cmp, Box<Expr>, Box<Expr>),
+    /// Truth values: both, either, not (without short circuits: every
+    /// operand is computed, as the vectorised C loops do).
+    And(Box<Expr>, Box<Expr>),
+    Or(Box<Expr>, Box<Expr>),
+    Not(Box<Expr>),
     /// The model's field at a phase and a state.
     Field {
         phase: Box<Expr>,
@@ -56,6 +66,21 @@ pub enum Op {
     Sub,
     Mul,
     Div,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cmp {
+    Less,
+    Greater,
+}
+
+impl Cmp {
+    pub fn symbol(self) -> &'static str {
+        match self {
+            Cmp::Less => "<",
+            Cmp::Greater => ">",
+        }
+    }
 }
 
 impl Op {
@@ -102,8 +127,9 @@ impl Program {
     pub fn type_of(&self, e: &Expr, scope: &dyn Fn(&str) -> Ty) -> Ty {
         match e {
             Expr::Var(name) => scope(name),
-            Expr::Num(_) | Expr::Cos(_) | Expr::Sin(_) => Ty::Real,
-            Expr::Phase(..) => Ty::Phase,
+            Expr::Num(_) | Expr::First(_) | Expr::Second(_) => Ty::Real,
+            Expr::Pair(..) => Ty::Pair,
+            Expr::Cmp(..) | Expr::And(..) | Expr::Or(..) | Expr::Not(_) => Ty::Bool,
             Expr::Field { .. } => Ty::State,
             Expr::Bin(op, a, b) => match (self.type_of(a, scope), self.type_of(b, scope)) {
                 (Ty::Real, Ty::Real) => Ty::Real,
@@ -199,11 +225,27 @@ fn num(v: f64) -> Expr {
 }
 
 fn cos(phase: &'static str) -> Expr {
-    Expr::Cos(Box::new(var(phase)))
+    Expr::First(Box::new(var(phase)))
 }
 
 fn sin(phase: &'static str) -> Expr {
-    Expr::Sin(Box::new(var(phase)))
+    Expr::Second(Box::new(var(phase)))
+}
+
+fn greater(a: Expr, b: Expr) -> Expr {
+    Expr::Cmp(Cmp::Greater, Box::new(a), Box::new(b))
+}
+
+fn less(a: Expr, b: Expr) -> Expr {
+    Expr::Cmp(Cmp::Less, Box::new(a), Box::new(b))
+}
+
+fn and(a: Expr, b: Expr) -> Expr {
+    Expr::And(Box::new(a), Box::new(b))
+}
+
+fn or(a: Expr, b: Expr) -> Expr {
+    Expr::Or(Box::new(a), Box::new(b))
 }
 
 fn field(phase: &'static str, state: &'static str) -> Expr {
@@ -233,10 +275,10 @@ fn call(name: &'static str, args: &[&'static str]) -> Expr {
 ///   twice (`half` is its (cos, sin)), the increment and the end's phase.
 /// - `rk4_step(phase, half, y, h)`: the step's end and phase.
 pub fn integrator() -> Program {
-    use Ty::{Phase, Real, State};
+    use Ty::{Pair, Real, State};
     let rotate = Function {
         name: "rotate",
-        params: vec![("phase", Phase), ("by", Phase)],
+        params: vec![("phase", Pair), ("by", Pair)],
         body: vec![
             ("c", cos("phase") * cos("by") - sin("phase") * sin("by")),
             ("s", sin("phase") * cos("by") + cos("phase") * sin("by")),
@@ -247,16 +289,16 @@ pub fn integrator() -> Program {
         ],
         results: vec![(
             "phase",
-            Expr::Phase(Box::new(var("c") * "scale"), Box::new(var("s") * "scale")),
+            Expr::Pair(Box::new(var("c") * "scale"), Box::new(var("s") * "scale")),
         )],
         returns: None,
     };
     let stages = Function {
         name: "rk4_stages",
         params: vec![
-            ("phase", Phase),
-            ("mid", Phase),
-            ("end", Phase),
+            ("phase", Pair),
+            ("mid", Pair),
+            ("end", Pair),
             ("y", State),
             ("h", Real),
         ],
@@ -296,7 +338,7 @@ pub fn integrator() -> Program {
         results: vec![("y", var("y") + "increment")],
         returns: None,
     };
-    let whole = [("phase", Phase), ("half", Phase), ("y", State), ("h", Real)];
+    let whole = [("phase", Pair), ("half", Pair), ("y", State), ("h", Real)];
     let increment = Function {
         name: "rk4_increment",
         params: whole.to_vec(),
@@ -317,9 +359,70 @@ pub fn integrator() -> Program {
         ],
         returns: Some("Stepped"),
     };
+    let [turn_past, meet] = crossing_tests();
     Program {
-        functions: vec![rotate, stages, update, increment, step],
+        functions: vec![rotate, stages, update, increment, step, turn_past, meet],
     }
+}
+
+/// The stop test of walls and surfaces alike (`integrate::wall::may_reach`,
+/// bounded):
+///
+/// - `may_turn_past(g0, s0, g1, s1, h)`: whether a step of size h turning
+///   back inside (rate s0 > 0 to s1 < 0, values g0, g1 short of the
+///   surface) may pass it in between: not when both ends fall short by
+///   `TURN_REACH`·h·(s0 - s1), twice the most the step's cubic can rise
+///   (`integrate::wall::may_turn_past`).
+/// - `may_meet(start, end, h)`: whether a step whose (value, rate) goes
+///   from `start` to `end` may cross (value > 0 across): it ends across,
+///   or turns back within reach.
+fn crossing_tests() -> [Function; 2] {
+    use Ty::{Pair, Real};
+    let turn_past = Function {
+        name: "may_turn_past",
+        params: vec![
+            ("g0", Real),
+            ("s0", Real),
+            ("g1", Real),
+            ("s1", Real),
+            ("h", Real),
+        ],
+        body: vec![(
+            "reach",
+            num(crate::integrate::wall::TURN_REACH) * "h" * (var("s0") - "s1"),
+        )],
+        results: vec![(
+            "passes",
+            Expr::Not(Box::new(and(
+                less(var("g0") + "reach", num(0.0)),
+                less(var("g1") + "reach", num(0.0)),
+            ))),
+        )],
+        returns: None,
+    };
+    let meet = Function {
+        name: "may_meet",
+        params: vec![("start", Pair), ("end", Pair), ("h", Real)],
+        body: vec![(
+            "turns",
+            Expr::Call(
+                "may_turn_past",
+                vec![cos("start"), sin("start"), cos("end"), sin("end"), var("h")],
+            ),
+        )],
+        results: vec![(
+            "meets",
+            or(
+                greater(cos("end"), num(0.0)),
+                and(
+                    and(greater(sin("start"), num(0.0)), less(sin("end"), num(0.0))),
+                    var("turns"),
+                ),
+            ),
+        )],
+        returns: None,
+    };
+    [turn_past, meet]
 }
 
 #[cfg(test)]
@@ -330,11 +433,13 @@ mod tests {
     fn every_function_is_well_typed() {
         let program = integrator();
         let expected = [
-            ("rotate", vec![Ty::Phase]),
+            ("rotate", vec![Ty::Pair]),
             ("rk4_stages", vec![Ty::State]),
             ("rk4_update", vec![Ty::State]),
-            ("rk4_increment", vec![Ty::State, Ty::Phase]),
-            ("rk4_step", vec![Ty::State, Ty::Phase]),
+            ("rk4_increment", vec![Ty::State, Ty::Pair]),
+            ("rk4_step", vec![Ty::State, Ty::Pair]),
+            ("may_turn_past", vec![Ty::Bool]),
+            ("may_meet", vec![Ty::Bool]),
         ];
         for (name, types) in expected {
             assert_eq!(
