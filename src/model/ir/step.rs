@@ -13,9 +13,11 @@
 //! is evaluated (C prints the field's tape in place, WGSL calls the system
 //! file's `rhs`).
 //!
-//! The Rust reference (`integrate::rk4`, `integrate::clock`) stays written
-//! by hand: it is the oracle the generated code is tested against, bit for
-//! bit (tests/step_loops.rs on the CPU, tests/gpu.rs on the GPU).
+//! The Rust reference (`integrate::rk4`, `integrate::clock`,
+//! `integrate::wall::may_reach`) stays written by hand: it is the oracle
+//! the generated code is tested against, bit for bit (the native library's
+//! tests and tests/step_loops.rs on the CPU, tests/gpu.rs and
+//! tests/gpu_models.rs on the GPU).
 
 use std::ops::{Add, Div, Mul, Sub};
 
