@@ -21,8 +21,8 @@ use crate::scene::Precision;
 /// fixed cost (its launch, every trajectory's state loaded and stored) stays
 /// small: with a smaller budget a sweep of 262 144 values (1.3 million
 /// trajectories) took 3 steps per dispatch, and lavapipe ran it seven times
-/// slower per lane-step than 4 096 values (docs/BENCHMARKS.md, "Throughput
-/// against sweep size").
+/// slower per lane-step than 4 096 values (this budget's throughput:
+/// docs/BENCHMARKS.md, "Throughput against sweep size").
 pub const DISPATCH_LANE_STEPS: usize = 1 << 26;
 
 /// How many times shorter the dispatches of a batch are made when the

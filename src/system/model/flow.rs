@@ -508,7 +508,7 @@ const EACH_CONSTANTS: usize = 32;
 /// in `scratch`'s first rows (as many as a slot has constants). Only those
 /// rows are written: zeroing the whole scratch (2 KiB at W = 8, a
 /// `memset` before every step and every surfaces' evaluation of a batch of
-/// lanes) cost the models 2 to 6 percent of their run (docs/BENCHMARKS.md).
+/// lanes) cost the models 2 to 6 percent of their run, when measured.
 #[inline(always)]
 fn side_by_side<'s, const W: usize>(
     slots: &[&[f64]; W],
