@@ -48,7 +48,7 @@ pub struct SystemInfo {
     pub gpu_refuses: fn(&Params) -> Option<String>,
     /// The system's WGSL twin (`shaders/system/<kind>.wgsl`): its `Params`
     /// struct (fields in the order of `parameters`) and `rhs` for a flow
-    /// (with its stops as `shaders/shared/impact.wgsl` reads them, `WALLS`
+    /// (with its stops as `shaders/shared/stops.wgsl` reads them, `WALLS`
     /// and per stop its coordinate, velocity, side, position and
     /// restitution, when it has any) or `map_step` for a map. `None`: no
     /// GPU backend for this system.

@@ -33,8 +33,20 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/clock.wgsl"),
     ),
     (
+        "shared/stops.wgsl",
+        include_str!("../../../shaders/shared/stops.wgsl"),
+    ),
+    (
         "shared/impact.wgsl",
         include_str!("../../../shaders/shared/impact.wgsl"),
+    ),
+    (
+        "shared/locate.wgsl",
+        include_str!("../../../shaders/shared/locate.wgsl"),
+    ),
+    (
+        "shared/surfaces.wgsl",
+        include_str!("../../../shaders/shared/surfaces.wgsl"),
     ),
     (
         "shared/math64.wgsl",
@@ -263,7 +275,12 @@ impl Variant {
             self.system.is_flow,
         ));
         if self.wall {
-            out.push_str(&preprocess(&include("shared/impact.wgsl"), &defines));
+            // The stops, the step loop that resolves their impacts, where
+            // a crossing lies, and the general surfaces.
+            for file in ["stops", "impact", "locate", "surfaces"] {
+                let path = format!("shared/{file}.wgsl");
+                out.push_str(&preprocess(&include(&path), &defines));
+            }
         }
         out.push_str(&preprocess(&include(kernel.file()), &defines));
         out

@@ -4,7 +4,7 @@
 //!
 //! The file has the hand-written files' shape: `struct Params` (every parameter, in
 //! the model's order), `fn rhs(p, phase, y) -> State` (one value per
-//! state) and, for a model with stops, what `shaders/shared/impact.wgsl`
+//! state) and, for a model with stops, what `shaders/shared/stops.wgsl`
 //! reads of them: `WALLS`, each stop's coordinate, velocity and side
 //! (`WALL_COORDINATE`, `WALL_VELOCITY`, `WALL_SIDE`, constants, so that the
 //! kernels' per-stop code folds to the seed's `y.x > X_w` for a stop on
@@ -39,7 +39,7 @@
 //!   the bit, so a model that calls one matches the CPU to rounding.
 //!
 //! For a model with general surfaces (events that are not stops, and
-//! switches) the file adds what the surface code of `impact.wgsl` reads:
+//! switches) the file adds what the surface code of `surfaces.wgsl` reads:
 //! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`),
 //! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
 //! field in force, the CPU surface tape's sum in its order),
@@ -295,7 +295,7 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
 
 /// The field: with surfaces, the field of p's region is `field`, and
 /// `rhs` (what RK4 steps) is it or, for a motion sliding on a switch, the
-/// sliding field of impact.wgsl built from it ([`surfaces`]).
+/// sliding field of surfaces.wgsl built from it ([`surfaces`]).
 fn equations(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
@@ -361,7 +361,7 @@ fn section_constants(w: &mut String, code: &Code, section: &crate::model::compil
     );
 }
 
-/// The stops of `code` as `shaders/shared/impact.wgsl` reads them: per
+/// The stops of `code` as `shaders/shared/stops.wgsl` reads them: per
 /// stop j, component j of the constants and of the two functions (the
 /// components past `WALLS` are never read, and are 0).
 fn stops(w: &mut String, code: &Code) -> Result<(), Unsupported> {
@@ -431,7 +431,7 @@ fn vec4(kind: &str, n: usize, each: &dyn Fn(usize) -> String, zero: &str) -> Str
 
 /// The general surfaces of `code` (events that are not stops, then the
 /// switches: the CPU's order, `Code::surfaces`) as the surface code of
-/// `shaders/shared/impact.wgsl` reads them: their count, each one's
+/// `shaders/shared/surfaces.wgsl` reads them: their count, each one's
 /// switch bit (or `EVENT`), the side of a switch, the field RK4 steps, and
 /// g; their rates ([`surface_values`]), gradients and resets
 /// ([`gradients_and_resets`]) follow.
@@ -514,7 +514,7 @@ fn surface_values(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
         "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region (its\n\
-         // sides: a sliding motion's rates are impact.wgsl's).\n\
+         // sides: a sliding motion's rates are surfaces.wgsl's).\n\
          fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
          let f = field(p, phase, y);"
     );
