@@ -351,24 +351,17 @@ impl WalkText<'_> {
     /// The phases of the step's middle and end (`rk4::stage_phases`):
     /// the step program's `rotate`, once for every slot.
     fn turn_clock(&self, out: &mut String) {
-        let program = integrator();
-        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
-        let mut text = step::C {
-            syntax: &C { calls: self.calls },
-            field: &mut field,
-            indent: "    ",
-        };
         let half = CValue::Pair("hc".into(), "hs".into());
         for ((c, s), (c1, s1)) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
             let phase = CValue::Pair(c.into(), s.into());
-            let turned = text.inline(
+            let turned = self.inline(
                 out,
-                &program,
                 "rotate",
                 vec![phase, half.clone()],
                 &format!("{c1}_"),
+                "    ",
             );
-            let [CValue::Pair(tc, ts)] = &turned[..] else {
+            let CValue::Pair(tc, ts) = turned else {
                 unreachable!("rotate gives a phase")
             };
             let _ = writeln!(out, "    const double {c1} = {tc}, {s1} = {ts};");
@@ -551,26 +544,41 @@ impl WalkText<'_> {
         }
     }
 
+    /// The step program's function `name`, one that reads no field (the
+    /// clock's rotation, the stop test), inlined at `args` with its values
+    /// named after `prefix`: its one result.
+    fn inline(
+        &self,
+        out: &mut String,
+        name: &str,
+        args: Vec<CValue>,
+        prefix: &str,
+        indent: &str,
+    ) -> CValue {
+        let mut no_field =
+            |_: &mut String, _: &str, _: &[String], _: (&str, &str)| -> Vec<String> {
+                unreachable!("{name} reads no field")
+            };
+        let mut text = step::C {
+            syntax: &C { calls: self.calls },
+            field: &mut no_field,
+            indent,
+        };
+        text.inline(out, &integrator(), name, args, prefix)
+            .remove(0)
+    }
+
     /// The step program's `may_meet` of the values and rates `g0`, `s0`
     /// to `g1`, `s1` over the step `hh` (C values in scope): whether the
     /// step ends across or turns back within reach, a C int.
     fn may_meet(&self, out: &mut String) -> String {
-        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
-        let mut text = step::C {
-            syntax: &C { calls: self.calls },
-            field: &mut field,
-            indent: "          ",
-        };
         let pair = |g: &str, s: &str| CValue::Pair(g.into(), s.into());
         let args = vec![
             pair("g0", "s0"),
             pair("g1", "s1"),
             CValue::Real("hh".into()),
         ];
-        match text
-            .inline(out, &integrator(), "may_meet", args, "m")
-            .remove(0)
-        {
+        match self.inline(out, "may_meet", args, "m", "          ") {
             CValue::Bool(meets) => meets,
             other => unreachable!("may_meet gives a truth value, not {other:?}"),
         }
