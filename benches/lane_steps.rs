@@ -866,6 +866,39 @@ fn workgroups(quick: bool) {
     }
 }
 
+/// One whole run through the command's entry: wall seconds, device
+/// seconds summed over the batches (adapters with timestamp queries), the
+/// lanes the sink saw, and their mean impacts per period (which differ
+/// between many starts and one: the starts reach the wall from anywhere in
+/// the box).
+fn timed_run(
+    scene: &lyapsweep::Scene,
+    options: &lyapsweep::RunOptions,
+) -> lyapsweep::Result<(f64, Option<f64>, usize, f64)> {
+    let (mut lanes, mut device, mut impacts) = (0, None, (0.0, 0));
+    let start = Instant::now();
+    let batch = lyapsweep::plan::batch_lanes(scene);
+    lyapsweep::run_streaming(scene, options, batch, |_, report| {
+        lanes += report.lanes.len();
+        if let Some(d) = device_seconds(report) {
+            *device.get_or_insert(0.0) += d;
+        }
+        for lane in report
+            .lanes
+            .iter()
+            .filter(|l| l.impacts_per_period.is_finite())
+        {
+            impacts.0 += lane.impacts_per_period;
+            impacts.1 += 1;
+        }
+        Ok(())
+    })
+    .map(|(_, _attractors)| {
+        let impacts = impacts.0 / impacts.1.max(1) as f64;
+        (start.elapsed().as_secs_f64(), device, lanes, impacts)
+    })
+}
+
 /// Section 9: many starts per value (`[attractors]`) against one start per
 /// value, at the same lane count: 4096 values of η × a grid of 8 × 8 starts
 /// over x ∈ [-3, 1.9], v ∈ [-3, 3] (A), and 262 144 values of η over the
@@ -923,35 +956,7 @@ fn attractors(repeats: usize) {
             })
         };
         let scenes = scenes_of(values);
-        // One whole run through the command's entry: wall seconds, device
-        // seconds summed over the batches (adapters with timestamp
-        // queries), the lanes the sink saw, and their mean impacts per
-        // period (which differ between A and B: A's starts reach the wall
-        // from anywhere in the box).
-        let timed = |scene: &lyapsweep::Scene| {
-            let (mut lanes, mut device, mut impacts) = (0, None, (0.0, 0));
-            let start = Instant::now();
-            let batch = lyapsweep::plan::batch_lanes(scene);
-            lyapsweep::run_streaming(scene, &options, batch, |_, report| {
-                lanes += report.lanes.len();
-                if let Some(d) = device_seconds(report) {
-                    *device.get_or_insert(0.0) += d;
-                }
-                for lane in report
-                    .lanes
-                    .iter()
-                    .filter(|l| l.impacts_per_period.is_finite())
-                {
-                    impacts.0 += lane.impacts_per_period;
-                    impacts.1 += 1;
-                }
-                Ok(())
-            })
-            .map(|(_, _attractors)| {
-                let impacts = impacts.0 / impacts.1.max(1) as f64;
-                (start.elapsed().as_secs_f64(), device, lanes, impacts)
-            })
-        };
+        let timed = |scene: &lyapsweep::Scene| timed_run(scene, &options);
         let path = format!("{backend} {precision}");
         // The warm-up (kernels compiled, threads started) on 64 values:
         // whole runs take minutes.

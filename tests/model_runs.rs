@@ -340,9 +340,9 @@ fn refused(scene: &str, extra: &[&str], message: &str) {
     );
 }
 
-#[test]
-fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
-    let cases: &[(&str, &str, &str)] = &[
+/// Edits of the pair model that make it malformed: (text, replacement,
+/// the message naming the key).
+const MALFORMED: &[(&str, &str, &str)] = &[
         (
             "v = \"-2*zeta*v - x + f*cos(eta*t)\"",
             "v = \"-2*zeta2*v - x + f*cos(eta*t)\"",
@@ -434,11 +434,18 @@ fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
             "zeta = { min = 0 }",
             "model.parameters.zeta: a parameter's table needs `value`",
         ),
-    ];
-    for (from, to, message) in cases {
+];
+
+#[test]
+fn a_malformed_model_is_refused_naming_its_key_and_nothing_is_written() {
+    for (from, to, message) in MALFORMED {
         assert!(PAIR.contains(from), "{from}");
         refused(&PAIR.replacen(from, to, 1), &[], message);
     }
+}
+
+#[test]
+fn a_value_a_model_cannot_take_is_refused_naming_where_it_came_from() {
     // A swept value at which the period is not > 0 is named.
     refused(
         &format!("{PAIR}[sweep]\nparameter = \"eta\"\nvalues = [0.8, -0.5]\n"),

@@ -493,41 +493,44 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
     }
 }
 
+/// The million-lane map's scene at 8 × 6 on `backend`, with `more` keys.
+fn small_map(backend: &str, more: &[&str]) -> lyapsweep::scene::Scene {
+    let backend = format!("run.backend=\"{backend}\"");
+    let mut keys = vec!["sweep.count=8", "sweep.second.count=6", backend.as_str()];
+    keys.extend(more);
+    common::committed_scene("million-map.toml", &keys)
+}
+
+/// Streams `scene` in batches of `batch` lanes into `dir/batches-of-{batch}`:
+/// the bytes of its grid.csv and the run's summary.
+fn write_map(
+    dir: &Path,
+    scene: &lyapsweep::scene::Scene,
+    batch: usize,
+    options: &lyapsweep::RunOptions,
+) -> (Vec<u8>, lyapsweep::Summary) {
+    use lyapsweep::output::{SetWriter, Staging};
+    let out = dir.join(format!("batches-of-{batch}"));
+    let _ = std::fs::remove_dir_all(&out);
+    let mut writer = SetWriter::new(scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
+    let (summary, _) =
+        lyapsweep::run_streaming(scene, options, batch, |b, r| writer.append(b, r)).unwrap();
+    writer.finish(None).unwrap();
+    assert_eq!(summary.lanes, 48);
+    (std::fs::read(out.join("grid.csv")).unwrap(), summary)
+}
+
 #[test]
 fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
-    use lyapsweep::output::{SetWriter, Staging};
     use lyapsweep::scene::Precision;
     use lyapsweep::RunOptions;
     let dir = tempfile::tempdir().unwrap();
-    // The million-lane map's scene at 8 × 6.
-    let scene = common::committed_scene(
-        "million-map.toml",
-        &[
-            "sweep.count=8",
-            "sweep.second.count=6",
-            "run.backend=\"cpu\"",
-        ],
-    );
-    let write_with = |scene: &lyapsweep::scene::Scene, batch: usize, options: &RunOptions| {
-        let out = dir.path().join(format!("batches-of-{batch}"));
-        let _ = std::fs::remove_dir_all(&out);
-        let mut writer = SetWriter::new(scene, Staging::prepare(&out, &[]).unwrap()).unwrap();
-        let (summary, _) =
-            lyapsweep::run_streaming(scene, options, batch, |b, r| writer.append(b, r)).unwrap();
-        writer.finish(None).unwrap();
-        assert_eq!(summary.lanes, 48);
-        (std::fs::read(out.join("grid.csv")).unwrap(), summary)
-    };
-    let write = |scene: &lyapsweep::scene::Scene, batch: usize| {
-        write_with(scene, batch, &RunOptions::default()).0
-    };
-    let whole = write(&scene, 48);
+    let scene = small_map("cpu", &[]);
+    let write = |batch: usize| write_map(dir.path(), &scene, batch, &RunOptions::default()).0;
+    let whole = write(48);
     assert_eq!(whole.iter().filter(|&&b| b == b'\n').count(), 49);
     for batch in [1, 5, 13] {
-        assert!(
-            write(&scene, batch) == whole,
-            "grid.csv in batches of {batch}"
-        );
+        assert!(write(batch) == whole, "grid.csv in batches of {batch}");
     }
     // On the GPU, the device runs a batch while the host writes the one
     // before: the same bytes as one batch, and an error writing a batch
@@ -536,16 +539,8 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
     // results' budget cuts the batches, overlapped alike; the values
     // validated are the run's, whatever its batches.
     if common::gpu_or_skip("streamed GPU batches", Precision::F64) {
-        let gpu = common::committed_scene(
-            "million-map.toml",
-            &[
-                "sweep.count=8",
-                "sweep.second.count=6",
-                "run.backend=\"gpu\"",
-                "run.validate=5",
-            ],
-        );
-        let (one, summary) = write_with(&gpu, 48, &RunOptions::default());
+        let gpu = small_map("gpu", &["run.validate=5"]);
+        let (one, summary) = write_map(dir.path(), &gpu, 48, &RunOptions::default());
         let report = summary.gpu.unwrap();
         assert_eq!(report.batches, 1);
         let validated = report.validation.unwrap().lanes;
@@ -561,7 +556,7 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
                 max_batch_lanes: device,
                 ..Default::default()
             };
-            let (bytes, summary) = write_with(&gpu, batch, &options);
+            let (bytes, summary) = write_map(dir.path(), &gpu, batch, &options);
             assert!(
                 bytes == one,
                 "GPU grid.csv in batches of {batch}, device batches of {device:?}"
@@ -585,10 +580,15 @@ fn a_two_parameter_map_streamed_in_any_batches_writes_the_bytes_of_one() {
         assert!(error.to_string().contains("the disk is full"), "{error}");
         assert_eq!(batches, 2);
     }
+}
 
-    write(&scene, 48);
+#[test]
+fn a_two_parameter_map_figure_names_the_row_that_is_wrong_or_missing() {
     // The map's figure reads λ1 back a record at a time, and says which
     // row is wrong, or that rows are missing.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = small_map("cpu", &[]);
+    let (whole, _) = write_map(dir.path(), &scene, 48, &Default::default());
     let set = dir.path().join("batches-of-48");
     let text = String::from_utf8(whole).unwrap();
     let mut lines: Vec<&str> = text.lines().collect();
