@@ -8,9 +8,10 @@ pub mod summary;
 
 use std::path::{Path, PathBuf};
 
-use crate::attractor::{run_streaming, Attractors};
+use crate::attractor::Attractors;
 use crate::backend::gpu::context::{self, AdapterSummary};
-use crate::backend::{RunOptions, Summary};
+use crate::backend::RunOptions;
+use crate::driver::{run_streaming, Summary};
 use crate::error::{clip, Error, Result};
 use crate::model::{self, compiled::Code, Model};
 use crate::output::{SetWriter, Staging};
