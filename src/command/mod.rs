@@ -162,6 +162,6 @@ pub fn check_model_table(
 /// The GPU adapters wgpu finds, with what the backend needs of them.
 /// `WGPU_BACKEND` is checked first: a name wgpu does not know is an error.
 pub fn devices() -> Result<Vec<AdapterSummary>> {
-    context::backends_from_env()?;
+    crate::environment::wgpu_backends()?;
     Ok(context::list())
 }

@@ -41,8 +41,7 @@ impl Runner {
     pub fn new(scene: &Scene, options: &RunOptions) -> Result<Runner> {
         let mut options = options.clone();
         if options.dispatch_lane_steps.is_none() {
-            options.dispatch_lane_steps =
-                crate::backend::options::dispatch_lane_steps_from_environment()?;
+            options.dispatch_lane_steps = crate::environment::dispatch_lane_steps()?;
         }
         let options = &options;
         let (plan, precision, choice) = plan(scene, options.device)?;
