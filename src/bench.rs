@@ -18,7 +18,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::backend::{self, RunOptions};
+use crate::backend::RunOptions;
+use crate::driver;
 use crate::error::{Error, Result};
 use crate::integrate::ImpactLocation;
 use crate::method::jacobian::Difference;
@@ -281,7 +282,7 @@ impl Measurement {
 /// Runs the study, reporting progress on stderr.
 pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
     let exact_scene = plan.scene(&["run.backend=\"exact\"".into()])?;
-    let exact = backend::run(&exact_scene)?;
+    let exact = driver::run(&exact_scene)?;
     // Lanes compared per exponent with exact, and lanes whose sum rule counts.
     let (periodic, sums): (Vec<usize>, Vec<usize>) = match plan.subject {
         Subject::Seed => (
@@ -306,11 +307,11 @@ pub fn run(plan: &Plan) -> Result<Vec<Measurement>> {
             describe(config)
         );
         // The warm-up: shader compilation, thread pool, caches.
-        let mut report = backend::run_with(&scene, &RunOptions::default())?;
+        let mut report = driver::run_with(&scene, &RunOptions::default())?;
         let (mut times, mut device) = (Vec::new(), Vec::new());
         for _ in 0..plan.repeats {
             let start = Instant::now();
-            report = backend::run_with(&scene, &RunOptions::default())?;
+            report = driver::run_with(&scene, &RunOptions::default())?;
             times.push(start.elapsed().as_secs_f64());
             device.extend(
                 report

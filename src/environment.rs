@@ -7,6 +7,11 @@
 //! C compiler does not run or the cache cannot be written the interpreter
 //! runs the model (the same bits, slower), and an adapter name that matches
 //! nothing is an error, naming the adapters found, when a GPU is chosen.
+//!
+//! The GPU's variables (`WGPU_BACKEND`, `LYAPSWEEP_DISPATCH_LANE_STEPS`) are
+//! parsed here, and the backend reads them through the same parsers
+//! ([`wgpu_backends`], [`dispatch_lane_steps`]), so that the check and the
+//! run read a value alike.
 
 use crate::error::{clip, Error, Result};
 
@@ -32,8 +37,8 @@ pub fn check() -> Result<()> {
     step_loops_interpreter()?;
     without_avx2()?;
     threads()?;
-    crate::backend::options::dispatch_lane_steps_from_environment()?;
-    crate::backend::gpu::context::backends_from_env()?;
+    dispatch_lane_steps()?;
+    wgpu_backends()?;
     text("WGPU_ADAPTER_NAME")?;
     if let Some(dir) = text("LYAPSWEEP_SHADER_DIR")? {
         if !std::path::Path::new(&dir).is_dir() {
@@ -133,4 +138,55 @@ fn threads() -> Result<()> {
             ),
         )),
     }
+}
+
+/// RK4 lane-steps per GPU integrate dispatch at most
+/// (`backend::RunOptions::dispatch_lane_steps`, which it sets when that is
+/// unset).
+pub const DISPATCH_LANE_STEPS: &str = "LYAPSWEEP_DISPATCH_LANE_STEPS";
+
+/// [`DISPATCH_LANE_STEPS`], when set.
+pub fn dispatch_lane_steps() -> Result<Option<usize>> {
+    let text = std::env::var(DISPATCH_LANE_STEPS).unwrap_or_default();
+    if text.trim().is_empty() {
+        return Ok(None);
+    }
+    match text.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(Some(n)),
+        _ => Err(Error::Invalid {
+            key: DISPATCH_LANE_STEPS.into(),
+            reason: format!(
+                "\"{}\" is not a whole number of RK4 lane-steps of at least 1",
+                clip(&text)
+            ),
+        }),
+    }
+}
+
+/// The backends `WGPU_BACKEND` names (all when unset); a name wgpu does not
+/// know is an error here (wgpu ignores it, finds no adapter, and the message
+/// would blame the driver).
+pub fn wgpu_backends() -> Result<wgpu::Backends> {
+    const KNOWN: [&str; 10] = [
+        "vulkan", "vk", "dx12", "d3d12", "metal", "mtl", "opengl", "gles", "gl", "webgpu",
+    ];
+    // Unset or empty: every backend, as wgpu reads it.
+    let text = match std::env::var("WGPU_BACKEND") {
+        Ok(text) if !text.trim().is_empty() => text,
+        Err(std::env::VarError::NotUnicode(_)) => {
+            return Err(Error::invalid("WGPU_BACKEND", "is not UTF-8 text"))
+        }
+        _ => return Ok(wgpu::Backends::all()),
+    };
+    if let Some(unknown) = text
+        .split(',')
+        .map(|b| b.trim().to_lowercase())
+        .find(|b| !KNOWN.contains(&b.as_str()))
+    {
+        return Err(Error::invalid(
+            "WGPU_BACKEND",
+            format!("{unknown:?} is not a backend (vulkan, metal, dx12, gl or webgpu; several separated by commas)"),
+        ));
+    }
+    Ok(wgpu::Backends::from_comma_list(&text))
 }

@@ -10,15 +10,17 @@
 //! Modules follow the mathematics: [`system`] (the models), [`integrate`]
 //! (RK4, impact location, the closed-form propagator), [`method`] (the
 //! perturbation Jacobian and the QR accumulation), [`backend`] (where lanes
-//! run), [`scene`] (the input contract) and [`output`] (the CSV files and
-//! the figures); [`command`] is what the command line and the Python
-//! package do with them.
+//! run), [`driver`] (a scene run: batches, checks, reports, continuation),
+//! [`scene`] (the input contract) and [`output`] (the CSV files and the
+//! figures); [`command`] is what the command line and the Python package
+//! do with them.
 
 pub mod array;
 pub mod attractor;
 pub mod backend;
 pub mod bench;
 pub mod command;
+pub mod driver;
 pub mod environment;
 pub mod error;
 pub mod integrate;
@@ -31,7 +33,8 @@ pub mod plan;
 pub mod scene;
 pub mod system;
 
-pub use attractor::{run_streaming, Attractors};
-pub use backend::{run, run_with, Progress, Report, RunOptions, Summary};
+pub use attractor::Attractors;
+pub use backend::{Progress, RunOptions};
+pub use driver::{run, run_streaming, run_with, Report, Summary};
 pub use error::{Error, Result};
 pub use scene::Scene;

@@ -8,7 +8,7 @@
 //! A run holds its sweep values (8 bytes per value of each axis) and the
 //! results of one batch of lanes: the lanes are streamed through the output
 //! in batches of at most [`BATCH_BYTES`] of results (see
-//! `attractor::run_streaming`), so only the values and one lane's kept
+//! `driver::run_streaming`), so only the values and one lane's kept
 //! points grow without bound (with `[attractors]`, also each value's
 //! attractors, one lane's result each, and 8 bytes per lane for its branch).
 

@@ -466,7 +466,7 @@ fn the_window_s_attractors_on_the_gpu_are_the_cpu_s() {
             &format!("backend = \"gpu\"\nprecision = \"{name}\"\nvalidate = 4"),
         );
         let gpu = attractors_of(&common::scene(&gpu_text, &[]));
-        let tolerance = lyapsweep::backend::validation_tolerance(precision);
+        let tolerance = lyapsweep::driver::validation_tolerance(precision);
         let points = if precision == Precision::F64 {
             1e-6
         } else {

@@ -194,7 +194,7 @@ fn models_run_in_f32_close_to_f64() {
     // contracting orbits the difference measured at most 1e-4. (Near a
     // bifurcation, λ1 → 0, it grows: 1.04e-3 at f = 1.0 of the pendulum,
     // λ1 = -0.007, which the tool then marks gpu-mismatch.)
-    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let tolerance = lyapsweep::driver::validation_tolerance(Precision::F32);
     let lanes = |values: &str| {
         format!(
             "[sweep]\nparameter = \"f\"\nvalues = {values}\n\
@@ -510,7 +510,7 @@ fn models_with_stops_run_in_f32_close_to_f64() {
     // rounding moves their orbits (the pair at η = 0.6 differed by 1.3e-2
     // and met the stops 2.12 and 2.02 times per period against 2.015 and
     // 2.075).
-    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let tolerance = lyapsweep::driver::validation_tolerance(Precision::F32);
     for (name, values) in [
         ("impact-pair.toml", "[0.5, 0.8, 0.9, 1.4, 1.8]"),
         ("two-mass-chain.toml", "[0.6, 0.8, 1.0, 1.3, 2.5]"),
@@ -776,7 +776,7 @@ fn switches_and_general_events_run_in_f32_close_to_f64() {
     // tolerance (1e-3), with the same crossings of every event column
     // (measured: the pair with a spring within 8.3e-4 at η = 0.4, where it
     // meets the stops and the spring 11 times a period).
-    let tolerance = lyapsweep::backend::validation_tolerance(Precision::F32);
+    let tolerance = lyapsweep::driver::validation_tolerance(Precision::F32);
     let body = |values: &str| {
         format!(
             "[sweep]\nparameter = \"eta\"\nvalues = {values}\n[integration]\n\

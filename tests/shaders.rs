@@ -291,7 +291,7 @@ fn variants_leave_out_what_the_scene_does_not_need() {
 
 #[test]
 fn a_scene_picks_only_the_parts_it_needs() {
-    use lyapsweep::backend::variant;
+    use lyapsweep::backend::gpu::plan::variant;
     let scene = |extra: &str| {
         let text = format!("[system]\nkind = \"impact-oscillator\"\n{extra}");
         lyapsweep::scene::parse(&text, "test", "test", &[]).unwrap()

@@ -148,7 +148,7 @@ fn stiff_damping_without_impacts_gives_both_closed_form_exponents() {
             // 50 iterations span 50·T·|λ_slow| of the slow mode's time
             // scales: under 10 (ζ = 200, η ≥ 0.1) the row says so.
             let scales = 50.0 * period * (zeta - kappa);
-            if scales < lyapsweep::backend::SHORT_AVERAGE {
+            if scales < lyapsweep::driver::SHORT_AVERAGE {
                 assert!(
                     matches!(a.status, LaneStatus::ShortAverage { .. }),
                     "ζ = {zeta}, η = {eta}: {}",

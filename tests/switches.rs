@@ -874,7 +874,7 @@ fn collapsed_exponents_are_minus_infinity_as_many_as_the_jacobians_lose() {
              [run]\nbackend = \"cpu\"\n"
         );
         let scene = model_scene(&file("two-block-belt.toml"), &body, sets);
-        let report = lyapsweep::backend::run_with(&scene, &keep).expect("runs");
+        let report = lyapsweep::driver::run_with(&scene, &keep).expect("runs");
         for lane in &report.lanes {
             let lost = lane
                 .jacobians

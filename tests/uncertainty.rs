@@ -43,7 +43,7 @@ fn an_average_short_against_the_motion_says_so_and_its_error_covers_it() {
             (lane.exponent_sum() + 0.1).abs() < 1e-6,
             "η = {eta}: the sum rule"
         );
-        if spanned < lyapsweep::backend::SHORT_AVERAGE {
+        if spanned < lyapsweep::driver::SHORT_AVERAGE {
             match lane.status {
                 LaneStatus::ShortAverage { scales } => {
                     assert!(
@@ -164,7 +164,7 @@ fn a_row_whose_error_passes_its_tolerance_is_uncertain() {
         short.exponents[0] > 0.0 && long.exponents[0] > 0.0,
         "chaotic"
     );
-    let tolerance = lyapsweep::backend::error_tolerance(&short);
+    let tolerance = lyapsweep::driver::error_tolerance(&short);
     assert!(
         short.error > tolerance,
         "{} against {tolerance}",

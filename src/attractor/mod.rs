@@ -11,13 +11,17 @@
 //! pass finds nothing new. A branch that only continuation reaches takes a
 //! pass per value it extends over; one the starts already found costs one
 //! pass of a lane per neighbour.
+//!
+//! This module only tells lanes apart and matches them, as pure functions
+//! of the lanes' results: [`Found`] takes in each batch of lanes and says
+//! which lanes the next pass starts; the driver runs the passes
+//! (`crate::driver::continuation`).
 
 pub mod branch;
 pub mod group;
 
-use crate::backend::{Report, RunOptions, Runner, Summary};
-use crate::error::Result;
-use crate::scene::{Scene, Seed};
+use crate::method::LaneResult;
+use crate::scene::{Precision, Scene, Seed};
 use group::{Member, Rule, ValueAttractors};
 
 /// The attractors of a whole sweep.
@@ -53,65 +57,23 @@ impl Attractors {
     }
 }
 
-/// Runs a whole sweep streamed: its lanes in batches of at most
-/// `batch_lanes`, each handed to `sink` (with the scene restricted to it,
-/// see `Scene::batch`) and dropped, so that the results held at once stay
-/// bounded; the backend is chosen and opened once, and every batch runs
-/// with the whole run's plan. With `[attractors]`, each value's lanes are
-/// told apart into attractors as they come, the continuation passes follow
-/// (their batches to `sink` too), and the attractors, matched into
-/// branches, come back with the summary.
-pub fn run_streaming(
+/// The attractors of a run's lanes held at once (its own lanes, no
+/// continuation; `lanes` and their `expected_sums` in the scene's order,
+/// computed in `precision`): `None` for a scene without `[attractors]`.
+pub fn found_in(
     scene: &Scene,
-    options: &RunOptions,
-    batch_lanes: usize,
-    mut sink: impl FnMut(&Scene, &Report) -> Result<()>,
-) -> Result<(Summary, Option<Attractors>)> {
-    let runner = Runner::new(scene, options)?;
-    runner.progress().start(runner.work(scene));
-    let mut summary = None;
-    let Some(starts) = &scene.sweep.starts else {
-        runner.stream(scene, batch_lanes, &mut summary, sink)?;
-        return Ok((summary.expect("a scene has at least one lane"), None));
-    };
-    let mut found = Found::new(scene).expect("a scene with starts");
-    let mut frontier = Vec::new();
-    runner.stream(scene, batch_lanes, &mut summary, |batch, report| {
-        frontier.extend(found.absorb(batch, report));
-        sink(batch, report)
-    })?;
-    let (mut passes, mut continued_lanes) = (0, 0);
-    loop {
-        let seeds = found.seeds(scene, &frontier, starts.continuation);
-        if seeds.is_empty() {
-            break;
-        }
-        continued_lanes += seeds.len();
-        passes += 1;
-        let pass = scene.continued(seeds);
-        runner.progress().extend(runner.work(&pass));
-        frontier.clear();
-        runner.stream(&pass, batch_lanes, &mut summary, |batch, report| {
-            frontier.extend(found.absorb(batch, report));
-            sink(batch, report)
-        })?;
-    }
-    Ok((
-        summary.expect("a scene has at least one lane"),
-        Some(found.into_attractors(scene, passes, continued_lanes)),
-    ))
-}
-
-/// The attractors of a run held in one report (its own lanes, no
-/// continuation): `None` for a scene without `[attractors]`.
-pub fn found_in(scene: &Scene, report: &Report) -> Option<Attractors> {
+    lanes: &[LaneResult],
+    expected_sums: &[f64],
+    precision: Precision,
+) -> Option<Attractors> {
     let mut found = Found::new(scene)?;
-    found.absorb(scene, report);
+    found.absorb(scene, lanes, expected_sums, precision);
     Some(found.into_attractors(scene, 0, 0))
 }
 
-/// The attractors found so far, value by value.
-struct Found {
+/// The attractors found so far, value by value: what the continuation
+/// passes take each batch of lanes into, and start their next pass from.
+pub struct Found {
     values: Vec<ValueAttractors>,
     starts: usize,
     dim: usize,
@@ -121,7 +83,9 @@ struct Found {
 }
 
 impl Found {
-    fn new(scene: &Scene) -> Option<Found> {
+    /// None found yet, at any value of `scene` (`None` for a scene without
+    /// `[attractors]`).
+    pub fn new(scene: &Scene) -> Option<Found> {
         Some(Found {
             values: vec![ValueAttractors::default(); scene.sweep.points()],
             starts: scene.sweep.starts.as_ref()?.states.len(),
@@ -131,7 +95,7 @@ impl Found {
     }
 
     /// The attractors found, matched into branches.
-    fn into_attractors(
+    pub fn into_attractors(
         mut self,
         scene: &Scene,
         passes: usize,
@@ -148,22 +112,29 @@ impl Found {
         }
     }
 
-    /// Adds a batch's lanes to their values' attractors; returns the
-    /// attractors that are new, as (grid point, index).
-    fn absorb(&mut self, batch: &Scene, report: &Report) -> Vec<(usize, usize)> {
-        let rule = Rule::new(self.dim, report.precision.rounding_unit());
+    /// Adds a batch's lanes (with their expected sums, computed in
+    /// `precision`) to their values' attractors; returns the attractors
+    /// that are new, as (grid point, index).
+    pub fn absorb(
+        &mut self,
+        batch: &Scene,
+        lanes: &[LaneResult],
+        expected_sums: &[f64],
+        precision: Precision,
+    ) -> Vec<(usize, usize)> {
+        let rule = Rule::new(self.dim, precision.rounding_unit());
         let mut new = Vec::new();
-        for (j, lane) in report.lanes.iter().enumerate() {
+        for (j, lane) in lanes.iter().enumerate() {
             let point = batch.sweep.point_of(batch.sweep_lane(j));
             let start = batch.lane_start(j);
             let member = Member {
                 start,
-                lane: crate::method::LaneResult {
+                lane: LaneResult {
                     bifurcation: Vec::new(),
                     jacobians: Vec::new(),
                     ..lane.clone()
                 },
-                expected_sum: report.expected_sums[j],
+                expected_sum: expected_sums[j],
             };
             let (index, is_new) = self.values[point].join(member, start < self.starts, rule);
             if let Some(&(from, attractor)) = self.sources.get(&(point, start)) {
@@ -180,7 +151,7 @@ impl Found {
     /// `frontier` started at its neighbours along the first axis (the next
     /// value up, the one before down) from its final state, where that
     /// state may start a lane there.
-    fn seeds(
+    pub fn seeds(
         &mut self,
         scene: &Scene,
         frontier: &[(usize, usize)],

@@ -2,7 +2,6 @@
 //! display, the adapter, the workgroup and dispatch sizes, a way to stop it.
 
 use super::progress::Progress;
-use crate::error::{clip, Error, Result};
 use crate::method::Stop;
 
 /// Options of a run that are not part of a scene.
@@ -31,32 +30,11 @@ pub struct RunOptions {
     pub workgroups_per_row: Option<u32>,
     /// RK4 lane-steps per GPU integrate dispatch at most (default
     /// [`super::gpu::pipeline::DISPATCH_LANE_STEPS`], or the environment's
-    /// [`DISPATCH_LANE_STEPS_VARIABLE`]): a card with no watchdog can take
+    /// `crate::environment::DISPATCH_LANE_STEPS`): a card with no watchdog can take
     /// longer dispatches, each loading and storing every trajectory fewer
     /// times.
     pub dispatch_lane_steps: Option<usize>,
     /// Ends the run early when requested: it then returns
     /// [`crate::Error::Stopped`], and a front end writes nothing.
     pub stop: Stop,
-}
-
-/// The environment variable of [`RunOptions::dispatch_lane_steps`].
-pub const DISPATCH_LANE_STEPS_VARIABLE: &str = "LYAPSWEEP_DISPATCH_LANE_STEPS";
-
-/// [`RunOptions::dispatch_lane_steps`] from the environment, when set.
-pub(crate) fn dispatch_lane_steps_from_environment() -> Result<Option<usize>> {
-    let text = std::env::var(DISPATCH_LANE_STEPS_VARIABLE).unwrap_or_default();
-    if text.trim().is_empty() {
-        return Ok(None);
-    }
-    match text.trim().parse::<usize>() {
-        Ok(n) if n >= 1 => Ok(Some(n)),
-        _ => Err(Error::Invalid {
-            key: DISPATCH_LANE_STEPS_VARIABLE.into(),
-            reason: format!(
-                "\"{}\" is not a whole number of RK4 lane-steps of at least 1",
-                clip(&text)
-            ),
-        }),
-    }
 }

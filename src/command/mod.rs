@@ -8,9 +8,10 @@ pub mod summary;
 
 use std::path::{Path, PathBuf};
 
-use crate::attractor::{run_streaming, Attractors};
+use crate::attractor::Attractors;
 use crate::backend::gpu::context::{self, AdapterSummary};
-use crate::backend::{RunOptions, Summary};
+use crate::backend::RunOptions;
+use crate::driver::{run_streaming, Summary};
 use crate::error::{clip, Error, Result};
 use crate::model::{self, compiled::Code, Model};
 use crate::output::{SetWriter, Staging};
@@ -161,6 +162,6 @@ pub fn check_model_table(
 /// The GPU adapters wgpu finds, with what the backend needs of them.
 /// `WGPU_BACKEND` is checked first: a name wgpu does not know is an error.
 pub fn devices() -> Result<Vec<AdapterSummary>> {
-    context::backends_from_env()?;
+    crate::environment::wgpu_backends()?;
     Ok(context::list())
 }

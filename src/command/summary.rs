@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use super::Outcome;
 use crate::backend::gpu::pipeline::Timings;
-use crate::backend::Summary;
+use crate::driver::Summary;
 use crate::error::number;
 use crate::method::lane::MAX_STEP_RATE;
 use crate::scene::{Backend, Precision, Scene};

@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::attractor::{self, Attractors};
-use crate::backend::Report;
+use crate::driver::Report;
 use crate::error::{Error, Result};
 use crate::model::compiled::event_column;
 use crate::scene::Scene;
@@ -253,7 +253,12 @@ impl SetWriter {
 pub fn write(scene: &Scene, report: &Report, dir: &Path) -> Result<Vec<PathBuf>> {
     let mut writer = SetWriter::new(scene, Staging::prepare(dir, &scene.files)?)?;
     writer.append(scene, report)?;
-    let found = attractor::found_in(scene, report);
+    let found = attractor::found_in(
+        scene,
+        &report.lanes,
+        &report.expected_sums,
+        report.precision,
+    );
     writer.finish(found.as_ref())
 }
 

@@ -93,36 +93,8 @@ fn quiet_mesa() {
     });
 }
 
-/// The backends `WGPU_BACKEND` names (all when unset); a name wgpu does not
-/// know is an error here (wgpu ignores it, finds no adapter, and the message
-/// would blame the driver).
-pub fn backends_from_env() -> Result<wgpu::Backends> {
-    const KNOWN: [&str; 10] = [
-        "vulkan", "vk", "dx12", "d3d12", "metal", "mtl", "opengl", "gles", "gl", "webgpu",
-    ];
-    // Unset or empty: every backend, as wgpu reads it.
-    let text = match std::env::var("WGPU_BACKEND") {
-        Ok(text) if !text.trim().is_empty() => text,
-        Err(std::env::VarError::NotUnicode(_)) => {
-            return Err(Error::invalid("WGPU_BACKEND", "is not UTF-8 text"))
-        }
-        _ => return Ok(wgpu::Backends::all()),
-    };
-    if let Some(unknown) = text
-        .split(',')
-        .map(|b| b.trim().to_lowercase())
-        .find(|b| !KNOWN.contains(&b.as_str()))
-    {
-        return Err(Error::invalid(
-            "WGPU_BACKEND",
-            format!("{unknown:?} is not a backend (vulkan, metal, dx12, gl or webgpu; several separated by commas)"),
-        ));
-    }
-    Ok(wgpu::Backends::from_comma_list(&text))
-}
-
 fn all_adapters() -> Vec<wgpu::Adapter> {
-    adapters_of(backends_from_env().unwrap_or(wgpu::Backends::all()))
+    adapters_of(crate::environment::wgpu_backends().unwrap_or(wgpu::Backends::all()))
 }
 
 /// Every adapter wgpu finds (after `WGPU_BACKEND`), for `lyapsweep devices`.
@@ -247,13 +219,14 @@ pub fn choose(
     device: Option<usize>,
 ) -> Result<Option<(wgpu::Adapter, AdapterSummary)>> {
     super::shader::check_source_dir()?;
-    let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> = adapters_of(backends_from_env()?)
-        .into_iter()
-        .map(|a| {
-            let s = AdapterSummary::of(&a);
-            (a, s)
-        })
-        .collect();
+    let mut candidates: Vec<(wgpu::Adapter, AdapterSummary)> =
+        adapters_of(crate::environment::wgpu_backends()?)
+            .into_iter()
+            .map(|a| {
+                let s = AdapterSummary::of(&a);
+                (a, s)
+            })
+            .collect();
     if let Some(n) = device {
         if n >= candidates.len() {
             return Err(Error::invalid(

@@ -8,6 +8,7 @@
 pub mod bindings;
 pub mod context;
 pub mod pipeline;
+pub mod plan;
 pub mod schedule;
 pub mod section;
 pub mod seed;
@@ -43,7 +44,7 @@ pub fn run(
 /// The most lanes of `scene` that one device batch holds: the device's
 /// limits on one dispatch and one storage binding decide, and
 /// `options.max_batch_lanes`. A run of more lanes is cut into batches by
-/// the runner (`crate::backend::Runner::stream`).
+/// the runner (`crate::driver::Runner::stream`).
 pub fn max_batch_lanes(
     gpu: &Gpu,
     scene: &Scene,

@@ -290,7 +290,7 @@ where
         } else {
             1
         };
-        // The backend makes the steps a multiple of the parts (`gpu_plan`).
+        // The backend makes the steps a multiple of the parts (`gpu::plan::lane_plan`).
         assert_eq!(steps % layout.parts, 0, "steps are whole parts");
         let part_steps = steps / layout.parts;
         let (lane_data, periods) = lane_constants(scene, settings, layout.lane_stride, steps);

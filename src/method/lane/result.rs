@@ -49,7 +49,7 @@ pub enum LaneStatus {
         bound: f64,
     },
     /// A GPU lane that its CPU recomputation contradicts (see
-    /// `backend::validation_difference`) beyond the precision's tolerance.
+    /// `driver::validation_difference`) beyond the precision's tolerance.
     Mismatch {
         difference: f64,
     },
@@ -65,20 +65,20 @@ pub enum LaneStatus {
         needed: usize,
     },
     /// The exponents' sum misses the sum rule by `miss` per unit time, more
-    /// than the precision's tolerance (`backend::sum_rule_tolerance`): an
+    /// than the precision's tolerance (`driver::sum_rule_tolerance`): an
     /// error no other check caught, which every exponent may carry.
     SumRule {
         miss: f64,
     },
     /// The averaging time is short against the flow's own time scales:
     /// `scales` of its slowest mode's 1/|μ| (`SystemInfo::slowest_rate`),
-    /// fewer than `backend::SHORT_AVERAGE`. The exponents are an average
+    /// fewer than `driver::SHORT_AVERAGE`. The exponents are an average
     /// over a stretch of the motion, not yet its asymptotic rates.
     ShortAverage {
         scales: f64,
     },
     /// The row's error estimate (`LaneResult::error`) is above its
-    /// tolerance (`backend::error_tolerance`), or could not be made.
+    /// tolerance (`driver::error_tolerance`), or could not be made.
     Uncertain {
         error: f64,
     },
