@@ -955,111 +955,230 @@ surface = "-1.2 - x + 0.1*cos(eta*t)"
 reset = { v = "-0.9*v" }
 "#;
 
-    /// The regions' loop for W slots in `layout`, slot k in its own
-    /// region, against each slot stepped alone by its region's native
-    /// step (`ModelFlow::step_each_in`'s) with its surfaces'
-    /// values at each step's end and the integrator's detection (at rest
-    /// on or reaching a stop, `impact::reaches_wall`; crossing a surface,
-    /// `surface::may_cross`): the steps taken, the states, the phase and
-    /// the surfaces' values where it stopped, to the bit; walked on from
-    /// each stop one plain step at a time, as the integrator does.
-    fn same_as_stepped<const W: usize>(code: &crate::model::compiled::Code, layout: Layout) {
-        use crate::integrate::{impact, rk4, surface};
-        let loops = code
-            .switch_loops
-            .as_ref()
-            .expect("a period map with surfaces")
-            .as_ref()
-            .expect("built by the C compiler");
-        let each = layout == Layout::Each;
-        let per_slot = if each { W } else { 1 };
-        let defaults = &code.model.defaults;
-        let params: Vec<Vec<f64>> = (0..per_slot)
-            .map(|k| {
-                let mut p = defaults.clone();
-                p[2] = 0.8 + 0.01 * k as f64;
-                p
-            })
-            .collect();
-        let walls = crate::model::compiled::walls_at(code, &params[0]);
-        let regions = code.regions.len();
-        // Each region's constants, per slot of the layout; then side by
-        // side (row j: constant j of every slot) for `Each`.
-        let constants = |r: usize, surfaces: bool| -> Vec<Vec<f64>> {
-            let field = &code.regions[r];
-            let tape = if surfaces {
-                &field.surfaces
-            } else {
-                &field.equations
+    /// What the regions' loop and its reference share: each slot's
+    /// parameters (η apart), each region's constants per slot, the step
+    /// sizes, the stops' positions and the grid's half turn.
+    struct Switching<'a> {
+        code: &'a crate::model::compiled::Code,
+        each: bool,
+        field_constants: Vec<Vec<Vec<f64>>>,
+        surface_constants: Vec<Vec<Vec<f64>>>,
+        h: Vec<f64>,
+        walls: Vec<crate::integrate::wall::Wall>,
+        half: Phase,
+    }
+
+    impl<'a> Switching<'a> {
+        fn new(code: &'a crate::model::compiled::Code, layout: Layout, w: usize) -> Self {
+            let each = layout == Layout::Each;
+            let per_slot = if each { w } else { 1 };
+            let params: Vec<Vec<f64>> = (0..per_slot)
+                .map(|k| {
+                    let mut p = code.model.defaults.clone();
+                    p[2] = 0.8 + 0.01 * k as f64;
+                    p
+                })
+                .collect();
+            let constants = |surfaces: bool| -> Vec<Vec<Vec<f64>>> {
+                let tape = |r: usize| {
+                    let field = &code.regions[r];
+                    if surfaces {
+                        &field.surfaces
+                    } else {
+                        &field.equations
+                    }
+                };
+                (0..code.regions.len())
+                    .map(|r| {
+                        let tape = tape(r);
+                        params
+                            .iter()
+                            .map(|p| tape.lane_values(p).constants)
+                            .collect()
+                    })
+                    .collect()
             };
-            params
-                .iter()
-                .map(|p| tape.lane_values(p).constants)
-                .collect()
-        };
-        let laid_out = |c: &[Vec<f64>]| -> Vec<f64> {
-            (0..c[0].len())
-                .flat_map(|j| c.iter().map(move |slot| slot[j]))
-                .collect()
-        };
-        let field_constants: Vec<Vec<Vec<f64>>> =
-            (0..regions).map(|r| constants(r, false)).collect();
-        let surface_constants: Vec<Vec<Vec<f64>>> =
-            (0..regions).map(|r| constants(r, true)).collect();
-        let laid: Vec<[Vec<f64>; 2]> = (0..regions)
-            .map(|r| {
-                [
-                    laid_out(&field_constants[r]),
-                    laid_out(&surface_constants[r]),
-                ]
-            })
-            .collect();
-        let lanes: Vec<[*const f64; 2]> =
-            laid.iter().map(|[a, b]| [a.as_ptr(), b.as_ptr()]).collect();
-        let h: Vec<f64> = (0..per_slot)
-            .map(|k| std::f64::consts::TAU / params[k][2] / 200.0)
-            .collect();
-        let positions: Vec<f64> = walls
-            .iter()
-            .flat_map(|w| std::iter::repeat_n(w.position, per_slot))
-            .collect();
-        let half = crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0);
-        let slot = |k: usize| if each { k } else { 0 };
-        // One slot's step and its surfaces' values at the end, alone.
-        let step = |r: usize, k: usize, phase: &[f64; 2], y: &[f64; 2]| {
-            let field = &code.regions[r];
-            let stages = rk4::stage_phases(phase, &half);
-            let y: [[f64; 1]; 2] = [[y[0]], [y[1]]];
-            let z: [[f64; 1]; 2] = field.native.as_ref().unwrap().call(
-                Kind::Step,
-                Layout::Shared,
-                &y,
-                stages.as_flattened(),
-                &field_constants[r][slot(k)],
-                &[h[slot(k)]],
-            );
-            let values: [[f64; 1]; 8] = field.surfaces_native.as_ref().unwrap().call(
-                Kind::Rhs,
-                Layout::Shared,
-                &z,
-                &stages[2],
-                &surface_constants[r][slot(k)],
-                &[],
-            );
-            ([z[0][0], z[1][0]], values.map(|v| v[0]), stages[2])
-        };
-        let values_at = |r: usize, k: usize, phase: &[f64; 2], y: &[f64; 2]| -> [f64; 8] {
-            let field = &code.regions[r];
+            Switching {
+                code,
+                each,
+                field_constants: constants(false),
+                surface_constants: constants(true),
+                h: params
+                    .iter()
+                    .map(|p| std::f64::consts::TAU / p[2] / 200.0)
+                    .collect(),
+                walls: crate::model::compiled::walls_at(code, &params[0]),
+                half: crate::integrate::clock::cos_sin(std::f64::consts::PI / 200.0),
+            }
+        }
+
+        /// Slot k's row of the per-slot values.
+        fn slot(&self, k: usize) -> usize {
+            if self.each {
+                k
+            } else {
+                0
+            }
+        }
+
+        /// Region r's constants laid out for the loop (row j: constant j
+        /// of every slot), the field's then the surfaces'.
+        fn laid_out(&self, r: usize) -> [Vec<f64>; 2] {
+            let lay = |c: &[Vec<f64>]| -> Vec<f64> {
+                (0..c[0].len())
+                    .flat_map(|j| c.iter().map(move |slot| slot[j]))
+                    .collect()
+            };
+            [
+                lay(&self.field_constants[r]),
+                lay(&self.surface_constants[r]),
+            ]
+        }
+
+        /// The surfaces' values and rates of region r at a state, slot k.
+        fn values_at(&self, r: usize, k: usize, phase: &[f64; 2], y: &[f64; 2]) -> [f64; 8] {
+            let field = &self.code.regions[r];
             let y: [[f64; 1]; 2] = [[y[0]], [y[1]]];
             let values: [[f64; 1]; 8] = field.surfaces_native.as_ref().unwrap().call(
                 Kind::Rhs,
                 Layout::Shared,
                 &y,
                 phase,
-                &surface_constants[r][slot(k)],
+                &self.surface_constants[r][self.slot(k)],
                 &[],
             );
             values.map(|v| v[0])
+        }
+
+        /// One slot's step in region r alone: its end, the surfaces'
+        /// values there, and the end's phase.
+        fn step(
+            &self,
+            r: usize,
+            k: usize,
+            phase: &Phase,
+            y: &[f64; 2],
+        ) -> ([f64; 2], [f64; 8], Phase) {
+            let stages = rk4::stage_phases(phase, &self.half);
+            let y: [[f64; 1]; 2] = [[y[0]], [y[1]]];
+            let z: [[f64; 1]; 2] = self.code.regions[r].native.as_ref().unwrap().call(
+                Kind::Step,
+                Layout::Shared,
+                &y,
+                stages.as_flattened(),
+                &self.field_constants[r][self.slot(k)],
+                &[self.h[self.slot(k)]],
+            );
+            let z = [z[0][0], z[1][0]];
+            (z, self.values_at(r, k, &stages[2], &z), stages[2])
+        }
+
+        /// Whether slot k's step from `y0` (surfaces' values `before`) to
+        /// `z` (values `after`) meets something, by the integrator's
+        /// detection: at rest on or reaching a stop
+        /// (`impact::reaches_wall`), crossing a surface
+        /// (`surface::may_cross`).
+        fn meets(
+            &self,
+            region: u32,
+            k: usize,
+            y0: &[f64; 2],
+            z: &[f64; 2],
+            before: [f64; 8],
+            after: [f64; 8],
+        ) -> bool {
+            use crate::integrate::{impact, surface};
+            let h = self.h[self.slot(k)];
+            impact::resting_on(&self.walls, y0).is_some()
+                || self.walls.iter().any(|w| impact::reaches_wall(w, y0, h, z))
+                || self.code.kinds.iter().enumerate().any(|(j, &kind)| {
+                    surface::may_cross(
+                        kind,
+                        region,
+                        (before[2 * j], before[2 * j + 1]),
+                        (after[2 * j], after[2 * j + 1]),
+                        h,
+                    )
+                })
+        }
+    }
+
+    /// The states, phase and surfaces' values of W slots.
+    type Slots<const W: usize> = ([[f64; W]; 2], Phase, [[f64; W]; 8]);
+
+    /// The reference walk: every slot stepped alone in its region, up to
+    /// the step where a live slot meets something or `most` steps; the
+    /// steps taken, `at` left before that step.
+    fn reference_walk<const W: usize>(
+        fixture: &Switching,
+        region: &[u32; W],
+        live: u32,
+        most: usize,
+        at: &mut Slots<W>,
+    ) -> usize {
+        let column = |v: &[[f64; W]; 8], k: usize| -> [f64; 8] { std::array::from_fn(|m| v[m][k]) };
+        for steps in 0..most {
+            let (y, phase, values) = &*at;
+            let mut next: Slots<W> = (*y, *phase, *values);
+            let mut meets = false;
+            for k in 0..W {
+                let r = region[k] as usize;
+                let y0 = [y[0][k], y[1][k]];
+                let (z, after, end) = fixture.step(r, k, phase, &y0);
+                next.1 = end;
+                next.0[0][k] = z[0];
+                next.0[1][k] = z[1];
+                for (row, a) in next.2.iter_mut().zip(after) {
+                    row[k] = a;
+                }
+                let hit = fixture.meets(region[k], k, &y0, &z, column(values, k), after);
+                meets |= hit && live >> k & 1 == 1;
+            }
+            if meets {
+                return steps;
+            }
+            *at = next;
+        }
+        most
+    }
+
+    /// The regions' loop for W slots in `layout`, slot k in its own
+    /// region, against each slot stepped alone by its region's native
+    /// step (`ModelFlow::step_each_in`'s) with its surfaces' values at
+    /// each step's end and the integrator's detection
+    /// ([`Switching::meets`]): the steps taken, the states, the phase and
+    /// the surfaces' values where it stopped, to the bit; walked on from
+    /// each stop one plain step at a time, as the integrator does.
+    fn same_as_stepped<const W: usize>(code: &crate::model::compiled::Code, layout: Layout) {
+        let loops = code
+            .switch_loops
+            .as_ref()
+            .expect("a period map with surfaces")
+            .as_ref()
+            .expect("built by the C compiler");
+        let fixture = Switching::new(code, layout, W);
+        let laid: Vec<[Vec<f64>; 2]> = (0..code.regions.len())
+            .map(|r| fixture.laid_out(r))
+            .collect();
+        let lanes: Vec<[*const f64; 2]> =
+            laid.iter().map(|[a, b]| [a.as_ptr(), b.as_ptr()]).collect();
+        let per_slot = fixture.h.len();
+        let positions: Vec<f64> = fixture
+            .walls
+            .iter()
+            .flat_map(|w| std::iter::repeat_n(w.position, per_slot))
+            .collect();
+        let half = fixture.half;
+        let bits = |(y, p, v): &Slots<W>| -> Vec<u64> {
+            let mut b: Vec<u64> = y.as_flattened().iter().map(|v| v.to_bits()).collect();
+            b.extend(p.iter().map(|v| v.to_bits()));
+            b.extend(
+                v[..2 * code.kinds.len()]
+                    .as_flattened()
+                    .iter()
+                    .map(|v| v.to_bits()),
+            );
+            b
         };
         let mut stopped = 0;
         for region_of in [
@@ -1069,120 +1188,55 @@ reset = { v = "-0.9*v" }
         ] {
             let region: [u32; W] = crate::array::from_fn(region_of);
             for live in [(1u32 << W) - 1, 0b1010] {
-                let start: [[f64; W]; 2] = [
+                let y: [[f64; W]; 2] = [
                     crate::array::from_fn(|k| 0.05 * k as f64 - 0.3),
                     crate::array::from_fn(|k| 0.02 * k as f64 - 0.1),
                 ];
                 let phase0 = [0.3f64.cos(), 0.3f64.sin()];
-                // The walk, from every stop on by one plain step.
-                let (mut y, mut clock) = (start, [phase0[0], phase0[1], half[0], half[1]]);
                 let mut values = [[0.0; W]; 8];
                 for k in 0..W {
-                    let v = values_at(region[k] as usize, k, &phase0, &[y[0][k], y[1][k]]);
+                    let v = fixture.values_at(region[k] as usize, k, &phase0, &[y[0][k], y[1][k]]);
                     for m in 0..8 {
                         values[m][k] = v[m];
                     }
                 }
-                // The reference, slot by slot.
-                let mut reference_y = start;
-                let mut reference_phase = phase0;
-                let mut reference_values = values;
+                // The walk, from every stop on by one plain step, and the
+                // reference, slot by slot.
+                let mut walked: Slots<W> = (y, phase0, values);
+                let mut reference = walked;
                 for _ in 0..6 {
+                    let (y, phase, values) = &mut walked;
+                    let mut clock = [phase[0], phase[1], half[0], half[1]];
                     let taken = loops
                         .walk(
-                            layout,
-                            &mut y,
-                            &mut clock,
-                            &lanes,
-                            &h,
-                            &positions,
-                            live,
-                            400,
-                            &region,
-                            &mut values,
+                            layout, y, &mut clock, &lanes, &fixture.h, &positions, live, 400,
+                            &region, values,
                         )
                         .expect("a loop for W");
-                    // The reference to the step where a live slot stops.
-                    let mut steps = 0;
-                    loop {
-                        let mut next_y = reference_y;
-                        let mut next_values = reference_values;
-                        let mut end = reference_phase;
-                        let mut meets = false;
-                        for k in 0..W {
-                            let r = region[k] as usize;
-                            let y0 = [reference_y[0][k], reference_y[1][k]];
-                            let (z, after, e) = step(r, k, &reference_phase, &y0);
-                            end = e;
-                            next_y[0][k] = z[0];
-                            next_y[1][k] = z[1];
-                            for m in 0..8 {
-                                next_values[m][k] = after[m];
-                            }
-                            let hit = impact::resting_on(&walls, &y0).is_some()
-                                || walls
-                                    .iter()
-                                    .any(|w| impact::reaches_wall(w, &y0, h[slot(k)], &z))
-                                || code.kinds.iter().enumerate().any(|(j, &kind)| {
-                                    surface::may_cross(
-                                        kind,
-                                        region[k],
-                                        (
-                                            reference_values[2 * j][k],
-                                            reference_values[2 * j + 1][k],
-                                        ),
-                                        (after[2 * j], after[2 * j + 1]),
-                                        h[slot(k)],
-                                    )
-                                });
-                            meets |= hit && live >> k & 1 == 1;
-                        }
-                        if meets || steps == 400 {
-                            break;
-                        }
-                        reference_y = next_y;
-                        reference_values = next_values;
-                        reference_phase = end;
-                        steps += 1;
-                    }
-                    let bits = |y: &[[f64; W]; 2], p: &[f64], v: &[[f64; W]; 8]| -> Vec<u64> {
-                        let mut b: Vec<u64> =
-                            y.as_flattened().iter().map(|v| v.to_bits()).collect();
-                        b.extend(p[..2].iter().map(|v| v.to_bits()));
-                        b.extend(
-                            v[..2 * code.kinds.len()]
-                                .as_flattened()
-                                .iter()
-                                .map(|v| v.to_bits()),
-                        );
-                        b
-                    };
+                    *phase = [clock[0], clock[1]];
+                    let steps = reference_walk(&fixture, &region, live, 400, &mut reference);
                     let context = format!("W = {W}, {layout:?}, regions {region:?}, live {live:b}");
                     assert_eq!(taken, steps, "{context}");
-                    assert_eq!(
-                        bits(&y, &clock, &values),
-                        bits(&reference_y, &reference_phase, &reference_values),
-                        "{context}"
-                    );
+                    assert_eq!(bits(&walked), bits(&reference), "{context}");
                     if taken == 400 {
                         break;
                     }
                     stopped += 1;
                     // One plain step past the stop, on both.
+                    let (y, phase, values) = &mut walked;
+                    let mut end = *phase;
                     for k in 0..W {
                         let r = region[k] as usize;
-                        let (z, after, end) = step(r, k, &reference_phase, &[y[0][k], y[1][k]]);
+                        let (z, after, e) = fixture.step(r, k, phase, &[y[0][k], y[1][k]]);
                         y[0][k] = z[0];
                         y[1][k] = z[1];
                         for m in 0..8 {
                             values[m][k] = after[m];
                         }
-                        clock[0] = end[0];
-                        clock[1] = end[1];
+                        end = e;
                     }
-                    reference_y = y;
-                    reference_values = values;
-                    reference_phase = [clock[0], clock[1]];
+                    *phase = end;
+                    reference = walked;
                 }
             }
         }
@@ -1438,12 +1492,9 @@ reset = { v = "-0.9*v" }
         assert_eq!(bits(&interpreted), bits(&compiled), "each, W = 8");
     }
 
-    /// The step loop takes the steps [`Kind::Step`] takes, from the phases
-    /// `rk4::stage_phases` turns, to the bit, and stops before the step in
-    /// which the step loop's detection (`integrate::steps`) finds a live
-    /// slot meeting the stop; a slot not live is not watched.
-    #[test]
-    fn the_step_loop_is_the_step_function_to_the_bit_and_stops_where_detection_does() {
+    /// The seed's oscillator's tape, and its native code with step loops
+    /// for a stop at x = wall (`side` 1: from below; -1: from above).
+    fn stepping(side: f64) -> (Tape, Native) {
         let names = Names {
             states: vec!["x".into(), "v".into()],
             parameters: vec!["zeta".into(), "f".into(), "eta".into()],
@@ -1452,99 +1503,112 @@ reset = { v = "-0.9*v" }
         let parse = |t: &str| Expr::parse(t, &names).unwrap();
         let exprs = [parse("v"), parse("-2*zeta*v - x + f*cos(eta*t)")];
         let tape = Tape::compile(&exprs, 2, Some(parse("eta"))).unwrap();
-        let stop = |side| StopCode {
+        let stop = StopCode {
             coordinate: 0,
             velocity: 1,
             side,
         };
         let native =
-            Native::compile_stepping(&tape, Some(&[stop(1.0)])).expect("the C compiler builds it");
-        let (eta, steps) = (0.8, 400);
+            Native::compile_stepping(&tape, Some(&[stop])).expect("the C compiler builds it");
+        (tape, native)
+    }
+
+    /// The step loop of `integrate::steps`, one step at a time: the
+    /// steps taken before the first that meets the stop in a live slot.
+    #[allow(clippy::too_many_arguments)]
+    fn by_steps<const W: usize>(
+        native: &Native,
+        c: &[f64],
+        (h, half): (f64, Phase),
+        (wall, side): (f64, f64),
+        live: u32,
+        steps: usize,
+        y: &mut [[f64; W]; 2],
+        phase: &mut Phase,
+    ) -> usize {
+        for n in 0..steps {
+            let stages = rk4::stage_phases(phase, &half);
+            let y1: [[f64; W]; 2] = native.call(
+                Kind::Step,
+                Layout::Shared,
+                y,
+                stages.as_flattened(),
+                c,
+                &[h],
+            );
+            let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
+                let (g0, s0) = (side * (y[0][k] - wall), side * y[1][k]);
+                let (g1, s1) = (side * (y1[0][k] - wall), side * y1[1][k]);
+                (y[0][k] == wall && y[1][k] == 0.0)
+                    || g1 > 0.0
+                    || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
+            });
+            if hit {
+                return n;
+            }
+            *y = y1;
+            *phase = stages[2];
+        }
+        steps
+    }
+
+    /// The step loop of W slots against [`by_steps`]: the steps taken,
+    /// the states and the phase where it stopped.
+    fn check<const W: usize>(
+        native: &Native,
+        c: &[f64],
+        step: (f64, Phase),
+        (wall, side): (f64, f64),
+    ) {
+        // Slots from near rest, a little apart; the last one beyond
+        // the stop and not live.
+        let mut y: [[f64; W]; 2] = [
+            crate::array::from_fn(|k| 0.01 * k as f64),
+            crate::array::from_fn(|k| -0.003 * k as f64),
+        ];
+        y[0][W - 1] = wall + 3.0 * side;
+        let live = (1u32 << (W - 1)) - 1;
+        let start = [0.3f64.cos(), 0.3f64.sin()];
+        let (mut expected, mut phase) = (y, start);
+        let stop = (wall, side);
+        let taken = by_steps(native, c, step, stop, live, 400, &mut expected, &mut phase);
+        let mut clock = [start[0], start[1], step.1[0], step.1[1]];
+        let walls = [wall];
+        let n = native
+            .walk(
+                Layout::Shared,
+                &mut y,
+                &mut clock,
+                c,
+                &[step.0],
+                &walls,
+                live,
+                400,
+            )
+            .expect("a loop for W");
+        assert_eq!(n, taken, "W = {W}, wall {wall}, side {side}");
+        assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
+        assert_eq!(clock[..2], phase);
+        // The motion turns back about every 90 steps: those turns
+        // stop the loop only within reach of the stop.
+        let reached = wall.abs() < 10.0;
+        assert_eq!(n < 400, reached, "W = {W}, wall {wall}: {n} steps");
+    }
+
+    /// The step loop takes the steps [`Kind::Step`] takes, from the phases
+    /// `rk4::stage_phases` turns, to the bit, and stops before the step in
+    /// which the step loop's detection (`integrate::steps`) finds a live
+    /// slot meeting the stop; a slot not live is not watched.
+    #[test]
+    fn the_step_loop_is_the_step_function_to_the_bit_and_stops_where_detection_does() {
+        let (tape, native) = stepping(1.0);
+        let (_, below) = stepping(-1.0);
+        let eta = 0.8;
         let c = tape.lane_values(&[0.05, 1.0, eta]).constants;
         let h = std::f64::consts::TAU / eta / 200.0;
         let half = crate::integrate::clock::cos_sin(0.5 * eta * h);
-        // The step loop of `integrate::steps`, one step at a time: the
-        // steps taken before the first that meets the stop in a live slot.
-        #[allow(clippy::too_many_arguments)]
-        fn by_steps<const W: usize>(
-            native: &Native,
-            c: &[f64],
-            (h, half): (f64, Phase),
-            (wall, side): (f64, f64),
-            live: u32,
-            steps: usize,
-            y: &mut [[f64; W]; 2],
-            phase: &mut Phase,
-        ) -> usize {
-            for n in 0..steps {
-                let stages = rk4::stage_phases(phase, &half);
-                let y1: [[f64; W]; 2] = native.call(
-                    Kind::Step,
-                    Layout::Shared,
-                    y,
-                    stages.as_flattened(),
-                    c,
-                    &[h],
-                );
-                let hit = (0..W).filter(|k| live >> k & 1 == 1).any(|k| {
-                    let (g0, s0) = (side * (y[0][k] - wall), side * y[1][k]);
-                    let (g1, s1) = (side * (y1[0][k] - wall), side * y1[1][k]);
-                    (y[0][k] == wall && y[1][k] == 0.0)
-                        || g1 > 0.0
-                        || (s0 > 0.0 && s1 < 0.0 && may_turn_past(g0, s0, g1, s1, h))
-                });
-                if hit {
-                    return n;
-                }
-                *y = y1;
-                *phase = stages[2];
-            }
-            steps
-        }
-        fn check<const W: usize>(
-            native: &Native,
-            c: &[f64],
-            step: (f64, Phase),
-            (wall, side): (f64, f64),
-        ) {
-            // Slots from near rest, a little apart; the last one beyond
-            // the stop and not live.
-            let mut y: [[f64; W]; 2] = [
-                crate::array::from_fn(|k| 0.01 * k as f64),
-                crate::array::from_fn(|k| -0.003 * k as f64),
-            ];
-            y[0][W - 1] = wall + 3.0 * side;
-            let live = (1u32 << (W - 1)) - 1;
-            let start = [0.3f64.cos(), 0.3f64.sin()];
-            let (mut expected, mut phase) = (y, start);
-            let stop = (wall, side);
-            let taken = by_steps(native, c, step, stop, live, 400, &mut expected, &mut phase);
-            let mut clock = [start[0], start[1], step.1[0], step.1[1]];
-            let walls = [wall];
-            let n = native
-                .walk(
-                    Layout::Shared,
-                    &mut y,
-                    &mut clock,
-                    c,
-                    &[step.0],
-                    &walls,
-                    live,
-                    400,
-                )
-                .expect("a loop for W");
-            assert_eq!(n, taken, "W = {W}, wall {wall}, side {side}");
-            assert_eq!(bits(&y), bits(&expected), "W = {W}, wall {wall}");
-            assert_eq!(clock[..2], phase);
-            // The motion turns back about every 90 steps: those turns
-            // stop the loop only within reach of the stop.
-            let reached = wall.abs() < 10.0;
-            assert_eq!(n < 400, reached, "W = {W}, wall {wall}: {n} steps");
-        }
         // A stop reached within the steps, and one out of reach (whose
         // turns the loop walks through), from either side.
-        let below =
-            Native::compile_stepping(&tape, Some(&[stop(-1.0)])).expect("the C compiler builds it");
         for wall in [0.9, 50.0] {
             check::<4>(&native, &c, (h, half), (wall, 1.0));
             check::<8>(&native, &c, (h, half), (wall, 1.0));
@@ -1553,8 +1617,20 @@ reset = { v = "-0.9*v" }
             check::<8>(&below, &c, (h, half), (-wall, -1.0));
             check::<16>(&below, &c, (h, half), (-wall, -1.0));
         }
-        // One trajectory of each of 8 lanes: each its own η (so its own
-        // constants and step size) and wall, all with the grid's phase.
+    }
+
+    /// The step loop of 8 lanes, each its own η (so its own constants and
+    /// step size) and stop, is each lane's step to the bit, and stops where
+    /// detection does; no loop is built without stops, nor for widths
+    /// without one.
+    #[test]
+    fn the_step_loop_of_lanes_side_by_side_is_each_lane_s_step() {
+        let (tape, native) = stepping(1.0);
+        let steps = 400;
+        let c = tape.lane_values(&[0.05, 1.0, 0.8]).constants;
+        let h = std::f64::consts::TAU / 0.8 / 200.0;
+        let half = crate::integrate::clock::cos_sin(0.5 * 0.8 * h);
+        // All with the grid's phase.
         let etas: [f64; 8] = crate::array::from_fn(|k| 0.7 + 0.05 * k as f64);
         let lanes = etas.map(|eta| tape.lane_values(&[0.05, 1.0, eta]).constants);
         let hs = etas.map(|eta| std::f64::consts::TAU / eta / 200.0);
