@@ -11,7 +11,7 @@
 use crate::integrate::surface::Surface;
 use crate::model::codegen::print::{self, Inputs, Syntax};
 use crate::model::codegen::step::{self, CField, CValue};
-use crate::model::ir::step::integrator;
+use crate::model::ir::integrator::integrator;
 use crate::model::ir::tape::{Code, Tape};
 use crate::model::language::expr::Func;
 use crate::model::native::abi::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};

@@ -1,0 +1,301 @@
+//! The integrator's step programs (in the language of `model::ir::step`):
+//! the clock's rotation and its (cos, sin), RK4 of the model's field and
+//! of the held flow, and the stop test, each written once here and printed
+//! to C and to WGSL by `model::codegen::step`.
+//!
+//! The hand-written Rust they follow operation for operation is their
+//! oracle: `integrate::clock`, `integrate::rk4`, `integrate::wall`.
+
+use super::step::build::*;
+use super::step::{Expr, Field, Function, Program, Stmt, Ty};
+
+/// The integrator's step: the clock (`integrate::clock`) and the
+/// classical RK4 step (`integrate::rk4`), whose stages take the phases of
+/// the step's start, middle and end.
+///
+/// - `rotate(phase, by)`: the phase turned through the angle whose (cos,
+///   sin) is `by`, renormalised to the unit circle by one Newton step for
+///   1/√(c² + s²), so rounding cannot make the forcing's amplitude drift.
+/// - `cos_sin(angle)`: (cos, sin) of an angle from arithmetic alone (see
+///   [`cos_sin`]).
+/// - `rk4_stages(phase, mid, end, y, h)`: the increment y(t + h) - y(t),
+///   kept apart from the update so that the f32 kernels can compensate
+///   the sum.
+/// - `rk4_update(phase, mid, end, y, h)`: the step's end, y + the
+///   increment.
+/// - `rk4_increment(phase, half, y, h)`: the phases turned through ωh/2
+///   twice (`half` is its (cos, sin)), the increment and the end's phase.
+/// - `rk4_step(phase, half, y, h)`: the step's end and phase.
+/// - `sub_step(phase, omega, y, s)`: a step of any size s from a phase,
+///   its half turn (cos, sin)(ωs/2) from [`cos_sin`]: the re-steps of a
+///   crossing's location.
+/// - `held_stages`, `held_update`, `held_step`, `held_sub_step`: the same
+///   RK4 of the held flow ([`Field::Held`], `integrate::impact`'s
+///   `rk4::step` of `Held`).
+/// - the stop test, see [`crossing_tests`].
+pub fn integrator() -> Program {
+    use Ty::Pair;
+    let rotate = Function {
+        name: "rotate",
+        params: vec![("phase", Pair), ("by", Pair)],
+        body: lets(vec![
+            ("c", cos("phase") * cos("by") - sin("phase") * sin("by")),
+            ("s", sin("phase") * cos("by") + cos("phase") * sin("by")),
+            (
+                "scale",
+                num(1.5) - num(0.5) * (var("c") * "c" + var("s") * "s"),
+            ),
+        ]),
+        results: vec![("phase", pair(var("c") * "scale", var("s") * "scale"))],
+        returns: None,
+    };
+    let [stages, update, step, sub_step] = rk4(
+        Field::Model,
+        ["rk4_stages", "rk4_update", "rk4_step", "sub_step"],
+    );
+    let increment = Function {
+        name: "rk4_increment",
+        body: turned(),
+        results: vec![
+            ("y", call("rk4_stages", &["phase", "mid", "end", "y", "h"])),
+            ("phase", var("end")),
+        ],
+        ..step.clone()
+    };
+    let held = rk4(
+        Field::Held,
+        ["held_stages", "held_update", "held_step", "held_sub_step"],
+    );
+    let [turn_past, meet] = crossing_tests();
+    let mut functions = vec![rotate, cos_sin(), stages, update, increment, step, sub_step];
+    functions.extend(held);
+    functions.extend([turn_past, meet]);
+    Program { functions }
+}
+
+/// The phases of the step's middle and end: what every whole step takes,
+/// apart from where the phases are turned (the native step loops turn
+/// them once for all slots).
+fn turned() -> Vec<Stmt> {
+    lets(vec![
+        ("mid", call("rotate", &["phase", "half"])),
+        ("end", call("rotate", &["mid", "half"])),
+    ])
+}
+
+/// RK4 of the field `of` (`integrate::rk4::step`), as the functions named
+/// `names`: its stages (the increment at the three phases given), its
+/// update (the step's end from them), its whole step (the phases turned
+/// through `half` = the (cos, sin) of ωh/2, the end and its phase), and
+/// its step of any size s from a phase (`half` from ω: the re-steps of a
+/// crossing's location, `integrate::locate`'s `rk4::step` with
+/// `cos_sin(0.5 ω s)`).
+fn rk4(of: Field, [stages, update, step, sub_step]: [&'static str; 4]) -> [Function; 4] {
+    use Ty::{Pair, Real, State};
+    let at = [
+        ("phase", Pair),
+        ("mid", Pair),
+        ("end", Pair),
+        ("y", State),
+        ("h", Real),
+    ];
+    let stages = Function {
+        name: stages,
+        params: at.to_vec(),
+        body: lets(vec![
+            ("h2", num(0.5) * "h"),
+            ("k1", field(of, "phase", var("y"))),
+            ("y2", var("y") + var("h2") * "k1"),
+            ("k2", field(of, "mid", var("y2"))),
+            ("y3", var("y") + var("h2") * "k2"),
+            ("k3", field(of, "mid", var("y3"))),
+            ("y4", var("y") + var("h") * "k3"),
+            ("k4", field(of, "end", var("y4"))),
+            ("sixth", var("h") / 6.0),
+        ]),
+        results: vec![(
+            "increment",
+            var("sixth") * (var("k1") + num(2.0) * (var("k2") + "k3") + "k4"),
+        )],
+        returns: None,
+    };
+    let update = Function {
+        name: update,
+        params: at.to_vec(),
+        body: lets(vec![(
+            "increment",
+            call(stages.name, &["phase", "mid", "end", "y", "h"]),
+        )]),
+        results: vec![("y", var("y") + "increment")],
+        returns: None,
+    };
+    let step = Function {
+        name: step,
+        params: vec![("phase", Pair), ("half", Pair), ("y", State), ("h", Real)],
+        body: turned(),
+        results: vec![
+            ("y", call(update.name, &["phase", "mid", "end", "y", "h"])),
+            ("phase", var("end")),
+        ],
+        returns: Some("Stepped"),
+    };
+    let mut from_omega = vec![Stmt::Let(
+        "half",
+        Expr::Call("cos_sin", vec![num(0.5) * "omega" * "s"]),
+    )];
+    from_omega.extend(turned());
+    let sub_step = Function {
+        name: sub_step,
+        params: vec![("phase", Pair), ("omega", Real), ("y", State), ("s", Real)],
+        body: from_omega,
+        results: vec![
+            ("y", call(update.name, &["phase", "mid", "end", "y", "s"])),
+            ("phase", var("end")),
+        ],
+        returns: Some("Stepped"),
+    };
+    [stages, update, step, sub_step]
+}
+
+/// `cos_sin(angle)`: (cos φ, sin φ) by Taylor polynomials to φ^14 and
+/// φ^15, halving φ (at most 8 times) until |φ| ≤ 1/2 and doubling back,
+/// as `integrate::clock::cos_sin` (WGSL's transcendental builtins are
+/// undefined on f64 under Vulkan). The Horner sums are written out term
+/// by term (the Rust's loop over a table of 1/n!, which WGSL has no
+/// constant arrays for).
+fn cos_sin() -> Function {
+    use crate::integrate::clock::{INV_FACT, TAYLOR_TOP};
+    let mut body = vec![
+        Stmt::Var("phi", var("angle")),
+        Stmt::Var("halvings", count(0)),
+        Stmt::Loop(vec![
+            break_unless(and(
+                greater(abs(var("phi")), num(0.5)),
+                less(var("halvings"), count(8)),
+            )),
+            Stmt::Set("phi", var("phi") * 0.5),
+            Stmt::Set("halvings", var("halvings") + count(1)),
+        ]),
+        Stmt::Let("x2", var("phi") * "phi"),
+        Stmt::Var("c", num(TAYLOR_TOP[0])),
+        Stmt::Var("s", num(TAYLOR_TOP[1])),
+    ];
+    for k in (0..7).rev() {
+        body.push(Stmt::Set("c", num(INV_FACT[2 * k]) - var("x2") * "c"));
+        body.push(Stmt::Set("s", num(INV_FACT[2 * k + 1]) - var("x2") * "s"));
+    }
+    body.extend([
+        Stmt::Var("result", pair(var("c"), var("phi") * "s")),
+        Stmt::Var("doublings", count(0)),
+        Stmt::Loop(vec![
+            break_unless(less(var("doublings"), var("halvings"))),
+            Stmt::Let("rc", first(var("result"))),
+            Stmt::Let("rs", second(var("result"))),
+            Stmt::Set(
+                "result",
+                pair(var("rc") * "rc" - var("rs") * "rs", num(2.0) * "rs" * "rc"),
+            ),
+            Stmt::Set("doublings", var("doublings") + count(1)),
+        ]),
+    ]);
+    Function {
+        name: "cos_sin",
+        params: vec![("angle", Ty::Real)],
+        body,
+        results: vec![("phase", var("result"))],
+        returns: None,
+    }
+}
+
+/// The stop test of walls and surfaces alike (`integrate::wall::may_reach`,
+/// bounded):
+///
+/// - `may_turn_past(g0, s0, g1, s1, h)`: whether a step of size h turning
+///   back inside (rate s0 > 0 to s1 < 0, values g0, g1 short of the
+///   surface) may pass it in between: not when both ends fall short by
+///   `TURN_REACH`·h·(s0 - s1), twice the most the step's cubic can rise
+///   (`integrate::wall::may_turn_past`).
+/// - `may_meet(start, end, h)`: whether a step whose (value, rate) goes
+///   from `start` to `end` may cross (value > 0 across): it ends across,
+///   or turns back within reach.
+fn crossing_tests() -> [Function; 2] {
+    use Ty::{Pair, Real};
+    let turn_past = Function {
+        name: "may_turn_past",
+        params: vec![
+            ("g0", Real),
+            ("s0", Real),
+            ("g1", Real),
+            ("s1", Real),
+            ("h", Real),
+        ],
+        body: lets(vec![(
+            "reach",
+            num(crate::integrate::wall::TURN_REACH) * "h" * (var("s0") - "s1"),
+        )]),
+        results: vec![(
+            "passes",
+            not(and(
+                less(var("g0") + "reach", num(0.0)),
+                less(var("g1") + "reach", num(0.0)),
+            )),
+        )],
+        returns: None,
+    };
+    let meet = Function {
+        name: "may_meet",
+        params: vec![("start", Pair), ("end", Pair), ("h", Real)],
+        body: lets(vec![(
+            "turns",
+            Expr::Call(
+                "may_turn_past",
+                vec![cos("start"), sin("start"), cos("end"), sin("end"), var("h")],
+            ),
+        )]),
+        results: vec![(
+            "meets",
+            or(
+                greater(cos("end"), num(0.0)),
+                and(
+                    and(greater(sin("start"), num(0.0)), less(sin("end"), num(0.0))),
+                    var("turns"),
+                ),
+            ),
+        )],
+        returns: None,
+    };
+    [turn_past, meet]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_function_is_well_typed() {
+        let program = integrator();
+        let expected = [
+            ("rotate", vec![Ty::Pair]),
+            ("cos_sin", vec![Ty::Pair]),
+            ("rk4_stages", vec![Ty::State]),
+            ("rk4_update", vec![Ty::State]),
+            ("rk4_increment", vec![Ty::State, Ty::Pair]),
+            ("rk4_step", vec![Ty::State, Ty::Pair]),
+            ("sub_step", vec![Ty::State, Ty::Pair]),
+            ("held_stages", vec![Ty::State]),
+            ("held_update", vec![Ty::State]),
+            ("held_step", vec![Ty::State, Ty::Pair]),
+            ("held_sub_step", vec![Ty::State, Ty::Pair]),
+            ("may_turn_past", vec![Ty::Bool]),
+            ("may_meet", vec![Ty::Bool]),
+        ];
+        assert_eq!(program.functions.len(), expected.len());
+        for (name, types) in expected {
+            assert_eq!(
+                program.function(name).result_types(&program),
+                types,
+                "{name}"
+            );
+        }
+    }
+}
