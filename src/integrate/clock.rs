@@ -6,9 +6,9 @@
 //! stroboscopic section puts ωt ≡ 0) and advanced by exact rotations:
 //! a grid step by the host-computed rotation through ωh/2 twice, a partial
 //! step (to an impact) by the rotation through ωs from [`cos_sin`]. The
-//! Rust here is the reference for the rotation of the step program
-//! (`model::ir::integrator`) and the twin of
-//! `shaders/shared/clock.wgsl`'s `cos_sin`.
+//! Rust here is the reference for the clock's step programs, `rotate`
+//! and `cos_sin` (`model::ir::integrator`), which the kernels run
+//! generated.
 
 /// (cos ωt, sin ωt).
 pub type Phase = [f64; 2];

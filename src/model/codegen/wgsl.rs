@@ -752,20 +752,21 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
     }
 }
 
-/// The integrator's step program (`model::ir::integrator`) as
-/// WGSL functions: the clock's `rotate`, and for a flow (a system file
-/// with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment` and
-/// `rk4_step` with their `Stepped` result, and the stop test
-/// (`may_turn_past`, `may_meet`).
-pub fn integrator(flow: bool) -> String {
+/// The integrator's step program (`model::ir::integrator`) as WGSL
+/// functions: the clock's `rotate` and `cos_sin`; for a flow (a system
+/// file with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment`,
+/// `rk4_step` and `sub_step` with their `Stepped` result, and the stop
+/// test (`may_turn_past`, `may_meet`); with stops (`held`: the kernels'
+/// `Stop` and `held_rhs`), RK4 of the held flow (`held_*`).
+pub fn integrator(flow: bool, held: bool) -> String {
     let mut program = crate::model::ir::integrator::integrator();
-    // Still hand-written in shaders/shared/: the clock's cos_sin and the
-    // held flow's step.
-    program
-        .functions
-        .retain(|f| !["cos_sin", "sub_step"].contains(&f.name) && !f.name.starts_with("held_"));
     if !flow {
-        program.functions.retain(|f| f.name == "rotate");
+        program
+            .functions
+            .retain(|f| ["rotate", "cos_sin"].contains(&f.name));
+    }
+    if !held {
+        program.functions.retain(|f| !f.name.starts_with("held_"));
     }
     format!(
         "// Generated from the integrator's step program (model::ir::integrator).\n\n{}",

@@ -26,7 +26,7 @@ use super::step::{Expr, Field, Function, Program, Stmt, Ty};
 /// - `rk4_increment(phase, half, y, h)`: the phases turned through ωh/2
 ///   twice (`half` is its (cos, sin)), the increment and the end's phase.
 /// - `rk4_step(phase, half, y, h)`: the step's end and phase.
-/// - `sub_step(phase, omega, y, s)`: a step of any size s from a phase,
+/// - `sub_step(omega, phase, y, s)`: a step of any size s from a phase,
 ///   its half turn (cos, sin)(ωs/2) from [`cos_sin`]: the re-steps of a
 ///   crossing's location.
 /// - `held_stages`, `held_update`, `held_step`, `held_sub_step`: the same
@@ -146,7 +146,7 @@ fn rk4(of: Field, [stages, update, step, sub_step]: [&'static str; 4]) -> [Funct
     from_omega.extend(turned());
     let sub_step = Function {
         name: sub_step,
-        params: vec![("phase", Pair), ("omega", Real), ("y", State), ("s", Real)],
+        params: vec![("omega", Real), ("phase", Pair), ("y", State), ("s", Real)],
         body: from_omega,
         results: vec![
             ("y", call(update.name, &["phase", "mid", "end", "y", "s"])),
