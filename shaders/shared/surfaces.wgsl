@@ -32,7 +32,8 @@ fn is_sliding(region: u32) -> bool {
 // The equivalent control of a motion sliding on one switch (Filippov's
 // convex combination, surface::equivalent_on with one switch): the sides'
 // fields lo and hi, their rates a and b along ∇g, α = a/(a - b), the field
-// lo + α(hi - lo), and the stick margins (L - m, L + m), m = (a + b)/2, L
+// lo + α(hi - lo) (filippov_alpha and filippov_field, generated from the
+// step program), and the stick margins (L - m, L + m), m = (a + b)/2, L
 // the stick limit or the half jump (a - b)/2.
 struct Equivalent {
     field: State,
@@ -42,8 +43,8 @@ struct Equivalent {
 
 fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
     let s = switch_sides(p, firstTrailingBit(p.region >> SLIDING_SHIFT), phase, y);
-    let alpha = s.a / (s.a - s.b);
-    return Equivalent(s.lo + alpha * (s.hi - s.lo), alpha, s.margins);
+    let alpha = filippov_alpha(s.a, s.b);
+    return Equivalent(filippov_field(s.lo, s.hi, alpha), alpha, s.margins);
 }
 
 // Switch j's two sides at y, for a trajectory on either side of it or

@@ -190,6 +190,8 @@ impl Wgsl<'_> {
         let text = |e: &Expr| self.expr(e).0;
         match e {
             Expr::Var(name) => (name.to_string(), None),
+            // A constant that is not finite is a shader-creation error.
+            Expr::Num(v) if !v.is_finite() => panic!("WGSL has no constant {v}"),
             Expr::Num(v) => (self.syntax.literal(*v), None),
             Expr::Count(n) => (format!("{n}u"), None),
             Expr::Bin(op, a, b) => {
@@ -197,6 +199,15 @@ impl Wgsl<'_> {
                 (binary(*op, (&a.0, a.1), (&b.0, b.1)), Some(*op))
             }
             Expr::Abs(a) => (self.syntax.call(Func::Abs, &text(a), ""), None),
+            // The kernels' prelude defines MAX_REAL, the largest `real`.
+            Expr::Finite(a) => (
+                format!(
+                    "({} <= MAX_REAL)",
+                    self.syntax.call(Func::Abs, &text(a), "")
+                ),
+                None,
+            ),
+            Expr::Fill(a) => (format!("State({})", text(a)), None),
             Expr::First(a) => (format!("{}.x", text(a)), None),
             Expr::Second(a) => (format!("{}.y", text(a)), None),
             Expr::Pair(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
@@ -467,6 +478,25 @@ impl C<'_> {
                 CValue::Real(a) => (CValue::Real(self.syntax.call(Func::Abs, &a, "0.0")), None),
                 other => panic!("|{other:?}|"),
             },
+            Expr::Finite(a) => match self.expr(scope, a).0 {
+                CValue::Real(a) => (CValue::Bool(format!("__builtin_isfinite({a})")), None),
+                other => panic!("finite {other:?}"),
+            },
+            // As many components as a state in scope has (a program's
+            // states have the model's dimension).
+            Expr::Fill(a) => match self.operand(scope, a) {
+                CValue::Real(a) => {
+                    let d = scope
+                        .values()
+                        .find_map(|v| match v {
+                            CValue::State(y) => Some(y.len()),
+                            _ => None,
+                        })
+                        .expect("a filled state where a state is in scope");
+                    (CValue::State(vec![a; d]), None)
+                }
+                other => panic!("a state filled with {other:?}"),
+            },
             Expr::First(a) | Expr::Second(a) => match self.expr(scope, a).0 {
                 CValue::Pair(c, s) => (
                     CValue::Real(if matches!(e, Expr::First(_)) { c } else { s }),
@@ -590,9 +620,23 @@ mod tests {
         }
     }
 
+    /// The integrator's program as the kernels print it.
+    fn kernels() -> Program {
+        let mut program = integrator();
+        let c_only = crate::model::ir::integrator::C_ONLY;
+        program.functions.retain(|f| !c_only.contains(&f.name));
+        program
+    }
+
+    #[test]
+    #[should_panic(expected = "WGSL has no constant NaN")]
+    fn wgsl_refuses_a_constant_nan() {
+        wgsl(&integrator(), &Plain);
+    }
+
     #[test]
     fn rk4_prints_its_sum_in_the_reference_order() {
-        let wgsl = wgsl(&integrator(), &Plain);
+        let wgsl = wgsl(&kernels(), &Plain);
         assert!(
             wgsl.contains("let increment = rk4_stages(p, phase, mid, end, y, h);"),
             "{wgsl}"
@@ -725,7 +769,7 @@ f_z1 = ((f_x > 0.0) ? (Y1 + Y1) : Y1);
 
     #[test]
     fn the_clock_s_cos_sin_prints_its_loops() {
-        let text = wgsl(&integrator(), &Plain);
+        let text = wgsl(&kernels(), &Plain);
         assert!(
             text.contains("fn cos_sin(angle: real) -> vec2<real> {"),
             "{text}"

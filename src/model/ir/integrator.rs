@@ -7,7 +7,7 @@
 //! oracle: `integrate::clock`, `integrate::rk4`, `integrate::wall`.
 
 use super::step::build::*;
-use super::step::{Expr, Field, Function, Program, Stmt, Ty};
+use super::step::{Cmp, Expr, Field, Function, Program, Stmt, Ty};
 
 /// The integrator's step: the clock (`integrate::clock`) and the
 /// classical RK4 step (`integrate::rk4`), whose stages take the phases of
@@ -66,11 +66,128 @@ pub fn integrator() -> Program {
         Field::Held,
         ["held_stages", "held_update", "held_step", "held_sub_step"],
     );
-    let [turn_past, meet] = crossing_tests();
     let mut functions = vec![rotate, cos_sin(), stages, update, increment, step, sub_step];
     functions.extend(held);
-    functions.extend([turn_past, meet]);
+    functions.extend(crossing_tests());
+    functions.extend(sliding());
     Program { functions }
+}
+
+/// The functions only C prints: the sliding fields, NaN where the
+/// control does not exist (WGSL has no constant NaN; the kernels slide on
+/// one switch only and test α where they use it).
+pub const C_ONLY: [&str; 2] = ["sliding_field_1", "sliding_field_2"];
+
+/// The sliding motion's field (`integrate::surface::equivalent_on`),
+/// from the fields F₀ of the base region and F_m of the region with
+/// switch m's bit set, and their rates along the switches' gradients
+/// (summed by the caller, who knows where a gradient lies):
+///
+/// - `filippov_alpha(a, b)`: on one switch, α = a/(a - b), a = ∇g·F₀,
+///   b = ∇g·F₁ (Filippov's convex combination).
+/// - `filippov_field(lo, hi, alpha)`: F₀ + α(F₁ - F₀).
+/// - `sliding_field_1(lo, hi, a, b)`: that field where α is finite, else
+///   NaN in every component.
+/// - `sliding_field_2(f0, f1, f2, a0, a1, d00, d01, d10, d11)`: on two
+///   switches at once, `surface::solve`'s elimination with partial
+///   pivoting of (a_j - d_jk) u = a (a_j = ∇g_j·F₀, d_jk = ∇g_j·F_{k+1}),
+///   then F₀ + u₀(F₁ - F₀) + u₁(F₂ - F₀); NaN where a pivot is 0 or u is
+///   not finite.
+fn sliding() -> [Function; 4] {
+    use Ty::{Real, State};
+    let alpha = Function {
+        name: "filippov_alpha",
+        params: vec![("a", Real), ("b", Real)],
+        body: Vec::new(),
+        results: vec![("alpha", var("a") / (var("a") - "b"))],
+        returns: None,
+    };
+    let field = Function {
+        name: "filippov_field",
+        params: vec![("lo", State), ("hi", State), ("alpha", Real)],
+        body: Vec::new(),
+        results: vec![("field", var("lo") + var("alpha") * (var("hi") - "lo"))],
+        returns: None,
+    };
+    let one = Function {
+        name: "sliding_field_1",
+        params: vec![("lo", State), ("hi", State), ("a", Real), ("b", Real)],
+        body: lets(vec![
+            ("alpha", call("filippov_alpha", &["a", "b"])),
+            ("field", call("filippov_field", &["lo", "hi", "alpha"])),
+        ]),
+        results: vec![(
+            "sliding",
+            select(finite(var("alpha")), var("field"), fill(num(f64::NAN))),
+        )],
+        returns: None,
+    };
+    [alpha, field, one, two_switches()]
+}
+
+/// `sliding_field_2` (see [`sliding`]): the pivot of column 0 is the row
+/// with the larger |M_j0| in `total_cmp`'s order (NaN above all), the
+/// second on a tie (`max_by` keeps the last maximum); after the swap the
+/// pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr]; elimination,
+/// then back-substitution, in `solve`'s order. Selections, not branches:
+/// every value is computed, as C's `?:` did.
+fn two_switches() -> Function {
+    use Ty::{Real, State};
+    let is_nan = |x: &'static str| cmp(Cmp::NotEqual, var(x), var(x));
+    let pick = |a: &'static str, b: &'static str| select(var("swap"), var(a), var(b));
+    let mut params = vec![("f0", State), ("f1", State), ("f2", State)];
+    for name in ["a0", "a1", "d00", "d01", "d10", "d11"] {
+        params.push((name, Real));
+    }
+    Function {
+        name: "sliding_field_2",
+        params,
+        body: lets(vec![
+            ("m00", var("a0") - "d00"),
+            ("m01", var("a0") - "d01"),
+            ("m10", var("a1") - "d10"),
+            ("m11", var("a1") - "d11"),
+            ("x0", abs(var("m00"))),
+            ("x1", abs(var("m10"))),
+            (
+                "swap",
+                or(
+                    is_nan("x1"),
+                    and(not(is_nan("x0")), cmp(Cmp::GreaterEq, var("x1"), var("x0"))),
+                ),
+            ),
+            ("p0", pick("m10", "m00")),
+            ("p1", pick("m11", "m01")),
+            ("pr", pick("a1", "a0")),
+            ("q0", pick("m00", "m10")),
+            ("q1", pick("m01", "m11")),
+            ("qr", pick("a0", "a1")),
+            ("k", var("q0") / "p0"),
+            ("e1", var("q1") - var("k") * "p1"),
+            ("er", var("qr") - var("k") * "pr"),
+            ("u1", var("er") / "e1"),
+            ("u0", (var("pr") - var("p1") * "u1") / "p0"),
+            (
+                "ok",
+                and(
+                    and(
+                        cmp(Cmp::NotEqual, var("p0"), num(0.0)),
+                        cmp(Cmp::NotEqual, var("e1"), num(0.0)),
+                    ),
+                    and(finite(var("u0")), finite(var("u1"))),
+                ),
+            ),
+            (
+                "field",
+                var("f0") + var("u0") * (var("f1") - "f0") + var("u1") * (var("f2") - "f0"),
+            ),
+        ]),
+        results: vec![(
+            "sliding",
+            select(var("ok"), var("field"), fill(num(f64::NAN))),
+        )],
+        returns: None,
+    }
 }
 
 /// The phases of the step's middle and end: what every whole step takes,
@@ -288,6 +405,10 @@ mod tests {
             ("held_sub_step", vec![Ty::State, Ty::Pair]),
             ("may_turn_past", vec![Ty::Bool]),
             ("may_meet", vec![Ty::Bool]),
+            ("filippov_alpha", vec![Ty::Real]),
+            ("filippov_field", vec![Ty::State]),
+            ("sliding_field_1", vec![Ty::State]),
+            ("sliding_field_2", vec![Ty::State]),
         ];
         assert_eq!(program.functions.len(), expected.len());
         for (name, types) in expected {

@@ -70,6 +70,10 @@ pub enum Expr {
     Bin(Op, Box<Expr>, Box<Expr>),
     /// |x| of a number.
     Abs(Box<Expr>),
+    /// Whether a number is neither infinite nor NaN.
+    Finite(Box<Expr>),
+    /// The state with every component this number.
+    Fill(Box<Expr>),
     /// A pair's first number (a phase's cosine).
     First(Box<Expr>),
     /// A pair's second number (a phase's sine).
@@ -218,6 +222,14 @@ impl Program {
             Expr::Abs(a) => {
                 expect(a, Ty::Real, "|x|");
                 Ty::Real
+            }
+            Expr::Finite(a) => {
+                expect(a, Ty::Real, "finite");
+                Ty::Bool
+            }
+            Expr::Fill(a) => {
+                expect(a, Ty::Real, "a filled state");
+                Ty::State
             }
             Expr::First(a) | Expr::Second(a) => {
                 expect(a, Ty::Pair, "a number of a pair");
@@ -388,7 +400,12 @@ impl Expr {
             | Expr::Cmp(_, a, b)
             | Expr::And(a, b)
             | Expr::Or(a, b) => vec![a, b],
-            Expr::Abs(a) | Expr::First(a) | Expr::Second(a) | Expr::Not(a) => vec![a],
+            Expr::Abs(a)
+            | Expr::Finite(a)
+            | Expr::Fill(a)
+            | Expr::First(a)
+            | Expr::Second(a)
+            | Expr::Not(a) => vec![a],
             Expr::Select {
                 cond,
                 then,
@@ -466,6 +483,14 @@ pub mod build {
 
     pub fn abs(a: Expr) -> Expr {
         Expr::Abs(Box::new(a))
+    }
+
+    pub fn finite(a: Expr) -> Expr {
+        Expr::Finite(Box::new(a))
+    }
+
+    pub fn fill(a: Expr) -> Expr {
+        Expr::Fill(Box::new(a))
     }
 
     pub fn first(a: Expr) -> Expr {
