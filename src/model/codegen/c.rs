@@ -475,13 +475,6 @@ impl WalkText<'_> {
     /// surface's test (`surface::may_cross`) is the same: the plain one
     /// first. Breaks out of the loop over the steps where one fires.
     fn detect(&self, out: &mut String) {
-        let crossing = |j: usize| {
-            let (g, rate) = (2 * j, 2 * j + 1);
-            format!(
-                "(((so{j}[k] * sa{g}[k]) > 0.0) | (((so{j}[k] * sb{rate}[k]) > 0.0) \
-                 & ((so{j}[k] * sa{rate}[k]) < 0.0)))"
-            )
-        };
         for (j, stop) in self.stops.iter().enumerate() {
             let (ci, vi) = (stop.coordinate, stop.velocity);
             let (out_of, into) = if stop.side > 0.0 {
@@ -498,7 +491,8 @@ impl WalkText<'_> {
             );
         }
         for j in 0..self.kinds.len() {
-            let _ = writeln!(out, "      hit |= {} & live[k];", crossing(j));
+            let test = self.surface_test(out, j, "oriented_ends_across", false, "      ");
+            let _ = writeln!(out, "      hit |= {test} & live[k];");
         }
         let _ = writeln!(
             out,
@@ -533,15 +527,33 @@ impl WalkText<'_> {
             );
         }
         for j in 0..self.kinds.len() {
-            let (g, rate) = (2 * j, 2 * j + 1);
-            let _ = writeln!(
-                out,
-                "        {{ const double o = so{j}[k];\n          \
-                 const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
-                 const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];"
-            );
-            let crosses = self.may_meet(out);
-            let _ = writeln!(out, "          near |= {crosses} & live[k]; }}");
+            let crosses = self.surface_test(out, j, "oriented_may_meet", true, "        ");
+            let _ = writeln!(out, "        near |= {crosses} & live[k];");
+        }
+    }
+
+    /// The step program's surface test `name` of surface j in slot k
+    /// (`oriented_ends_across`, or with the step `hh`, `with_step`,
+    /// `oriented_may_meet`): its orientation, and its value and rate at
+    /// the step's start and end, as a C int.
+    fn surface_test(
+        &self,
+        out: &mut String,
+        j: usize,
+        name: &str,
+        with_step: bool,
+        indent: &str,
+    ) -> String {
+        let (g, rate) = (2 * j, 2 * j + 1);
+        let at = |row: &str| CValue::Pair(format!("{row}{g}[k]"), format!("{row}{rate}[k]"));
+        let mut args = vec![CValue::Real(format!("so{j}[k]")), at("sb"), at("sa")];
+        if with_step {
+            args.push(CValue::Real("hh".into()));
+        }
+        let prefix = format!("{}{j}_", if with_step { "near" } else { "plain" });
+        match inline(out, self.calls, name, args, &prefix, indent) {
+            CValue::Bool(test) => test,
+            other => unreachable!("{name} gives a truth value, not {other:?}"),
         }
     }
 

@@ -32,7 +32,8 @@ use super::step::{Cmp, Expr, Field, Function, Program, Stmt, Ty};
 /// - `held_stages`, `held_update`, `held_step`, `held_sub_step`: the same
 ///   RK4 of the held flow ([`Field::Held`], `integrate::impact`'s
 ///   `rk4::step` of `Held`).
-/// - the stop test, see [`crossing_tests`].
+/// - the stop test, see [`crossing_tests`], and a surface's, see
+///   [`surface_tests`].
 pub fn integrator() -> Program {
     use Ty::Pair;
     let rotate = Function {
@@ -69,6 +70,7 @@ pub fn integrator() -> Program {
     let mut functions = vec![rotate, cos_sin(), stages, update, increment, step, sub_step];
     functions.extend(held);
     functions.extend(crossing_tests());
+    functions.extend(surface_tests());
     functions.extend(sliding());
     Program { functions }
 }
@@ -384,6 +386,57 @@ fn crossing_tests() -> [Function; 2] {
     [turn_past, meet]
 }
 
+/// A general surface's tests (`integrate::surface::may_cross`) on its
+/// (value, rate) before and after a step, in the trajectory's region,
+/// where the surface's orientation o (±1, `Surface::orientation`) turns
+/// them so that > 0 lies across:
+///
+/// - `orient(o, v)`: the pair times o, exactly.
+/// - `oriented_ends_across(o, before, after)`: the step ends across, or
+///   its rate turns from approaching to leaving: the native step loops'
+///   first, plain pass over the slots (`may_meet` without the reach,
+///   which a few steps in a hundred need).
+/// - `oriented_may_meet(o, before, after, h)`: `may_meet` of the
+///   oriented pairs.
+fn surface_tests() -> [Function; 3] {
+    use Ty::{Pair, Real};
+    let orient = Function {
+        name: "orient",
+        params: vec![("o", Real), ("v", Pair)],
+        body: Vec::new(),
+        results: vec![("oriented", pair(var("o") * cos("v"), var("o") * sin("v")))],
+        returns: None,
+    };
+    let params = vec![("o", Real), ("before", Pair), ("after", Pair)];
+    let oriented = lets(vec![
+        ("start", call("orient", &["o", "before"])),
+        ("end", call("orient", &["o", "after"])),
+    ]);
+    let across = Function {
+        name: "oriented_ends_across",
+        params: params.clone(),
+        body: oriented.clone(),
+        results: vec![(
+            "across",
+            or(
+                greater(cos("end"), num(0.0)),
+                and(greater(sin("start"), num(0.0)), less(sin("end"), num(0.0))),
+            ),
+        )],
+        returns: None,
+    };
+    let mut with_h = params;
+    with_h.push(("h", Real));
+    let meet = Function {
+        name: "oriented_may_meet",
+        params: with_h,
+        body: oriented,
+        results: vec![("meets", call("may_meet", &["start", "end", "h"]))],
+        returns: None,
+    };
+    [orient, across, meet]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -405,6 +458,9 @@ mod tests {
             ("held_sub_step", vec![Ty::State, Ty::Pair]),
             ("may_turn_past", vec![Ty::Bool]),
             ("may_meet", vec![Ty::Bool]),
+            ("orient", vec![Ty::Pair]),
+            ("oriented_ends_across", vec![Ty::Bool]),
+            ("oriented_may_meet", vec![Ty::Bool]),
             ("filippov_alpha", vec![Ty::Real]),
             ("filippov_field", vec![Ty::State]),
             ("sliding_field_1", vec![Ty::State]),
