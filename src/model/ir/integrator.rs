@@ -1,10 +1,12 @@
 //! The integrator's step programs (in the language of `model::ir::step`):
 //! the clock's rotation and its (cos, sin), RK4 of the model's field and
-//! of the held flow, and the stop test, each written once here and printed
-//! to C and to WGSL by `model::codegen::step`.
+//! of the held flow, the stop test of stops and of surfaces, and the
+//! sliding field's algebra, each written once here and printed to C and to
+//! WGSL by `model::codegen::step`.
 //!
 //! The hand-written Rust they follow operation for operation is their
-//! oracle: `integrate::clock`, `integrate::rk4`, `integrate::wall`.
+//! oracle: `integrate::clock`, `integrate::rk4`, `integrate::wall`,
+//! `integrate::surface`.
 
 use super::step::build::*;
 use super::step::{Cmp, Expr, Field, Function, Program, Stmt, Ty};
