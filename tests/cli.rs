@@ -509,7 +509,7 @@ fn a_run_with_many_starts_counts_its_values_with_several_attractors() {
 fn a_shader_folder_with_a_broken_source_names_the_file() {
     let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
     for (broken, bytes) in [
-        ("shared/clock.wgsl", &b"fn \xff\xfe broken"[..]),
+        ("shared/dispatch.wgsl", &b"fn \xff\xfe broken"[..]),
         ("shared/impact.wgsl", &b"\n"[..]),
     ] {
         let dir = tempfile::tempdir().unwrap();
@@ -550,9 +550,9 @@ fn a_shader_folder_whose_kernels_do_not_parse_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("shaders");
     copy_folder(&shaders, &copy);
-    let clock = copy.join("shared/clock.wgsl");
-    let text = std::fs::read_to_string(&clock).unwrap();
-    std::fs::write(&clock, text + "\nfn broken( {\n").unwrap();
+    let dispatch = copy.join("shared/dispatch.wgsl");
+    let text = std::fs::read_to_string(&dispatch).unwrap();
+    std::fs::write(&dispatch, text + "\nfn broken( {\n").unwrap();
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, BASE).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_lyapsweep"))

@@ -1,7 +1,9 @@
 //! shaders/shared/math64.wgsl: f64 sin, cos, tan, exp, log, tanh, atan2 and
 //! pow built from arithmetic (WGSL's own are undefined on f64 under Vulkan),
 //! run on the GPU adapter and compared with Rust's over the ranges the
-//! model kernels will use. Measured on lavapipe; on a machine without an f64
+//! model kernels will use; and the kernels' generated `cos_sin` (the
+//! forcing clock's step program) against its oracle, integrate::clock,
+//! to the bit. Measured on lavapipe; on a machine without an f64
 //! adapter the test says SKIPPED, and fails in CI (LYAPSWEEP_REQUIRE_GPU).
 
 mod common;
@@ -61,8 +63,32 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 "#;
 
+/// The generated clock (`model::codegen::wgsl::integrator`, a map's: the
+/// rotation and `cos_sin`) behind the same bindings: op 0 gives the
+/// cosine of each input, op 1 its sine.
+const CLOCK_KERNEL: &str = r#"
+@group(0) @binding(0) var<storage, read> input: array<vec2<f64>>;
+@group(0) @binding(1) var<storage, read_write> output: array<f64>;
+@group(0) @binding(2) var<uniform> op: vec4<u32>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if (i >= arrayLength(&output)) {
+        return;
+    }
+    let phase = cos_sin(input[i].x);
+    output[i] = select(phase.y, phase.x, op.x == 0u);
+}
+"#;
+
 /// Evaluates function `op` of the library at `inputs` on the GPU.
 fn on_gpu(gpu: &context::Gpu, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
+    run(gpu, &format!("{LIBRARY}\n{KERNEL}"), op, inputs)
+}
+
+/// Runs `source`'s kernel (the bindings of [`KERNEL`]) with `op` at `inputs`.
+fn run(gpu: &context::Gpu, source: &str, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
     let device = &gpu.device;
     let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
         binding,
@@ -85,14 +111,7 @@ fn on_gpu(gpu: &context::Gpu, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
     });
     // As the kernels are compiled (contraction forbidden where the driver
     // allows it to be).
-    let pipeline = gpu.compute_pipeline(
-        "math64",
-        &layout,
-        &entries,
-        &format!("{LIBRARY}\n{KERNEL}"),
-        &[],
-        Precision::F64,
-    );
+    let pipeline = gpu.compute_pipeline("math64", &layout, &entries, source, &[], Precision::F64);
     let input = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: None,
         contents: bytemuck::cast_slice(inputs),
@@ -263,4 +282,69 @@ fn f64_functions_from_arithmetic_match_rust_within_a_few_ulp() {
     assert!(ulps(p[0], -8.0) <= 4.0 && ulps(p[1], 4.0) <= 4.0, "{p:?}");
     assert_eq!(p[2], 1.0);
     assert!(p[3].is_nan());
+}
+
+/// The kernels' `cos_sin`, generated from the step program, gives the bits
+/// of its oracle, `integrate::clock::cos_sin`, on a software adapter (and
+/// wherever contraction is forbidden): over the angles the clock turns
+/// through (a step's, a period's), past the eight halvings' reach, and at
+/// the edges (0, -0, NaN, infinities).
+#[test]
+fn the_generated_cos_sin_is_the_clock_s_to_the_bit() {
+    if !common::gpu_or_skip(
+        "the_generated_cos_sin_is_the_clock_s_to_the_bit",
+        Precision::F64,
+    ) {
+        return;
+    }
+    let (adapter, summary) = context::choose(Want::Any, Precision::F64, None)
+        .expect("an f64 adapter")
+        .expect("Want::Any yields one");
+    let software = summary.device_type == format!("{:?}", wgpu::DeviceType::Cpu);
+    let gpu = context::open(adapter, summary, Precision::F64).expect("device");
+    if !(software || gpu.exact_rounding()) {
+        println!("SKIPPED: a hardware driver may fuse the series' multiply-adds");
+        return;
+    }
+    let source = format!(
+        "alias real = f64;\n{}\n{CLOCK_KERNEL}",
+        lyapsweep::model::codegen::wgsl::integrator(false, false)
+    );
+    let mut angles: Vec<f64> = (0..4001)
+        .map(|k| -7.0 + 14.0 * (k as f64 + 0.37) / 4001.0)
+        .collect();
+    angles.extend((0..200).map(|k| 1e-6 * 1.1f64.powi(k)));
+    angles.extend([
+        0.0,
+        -0.0,
+        1e-300,
+        300.0,
+        -1e5,
+        f64::NAN,
+        f64::INFINITY,
+        -f64::INFINITY,
+    ]);
+    let inputs: Vec<[f64; 2]> = angles.iter().map(|&a| [a, 0.0]).collect();
+    let (cos, sin) = (
+        run(&gpu, &source, 0, &inputs),
+        run(&gpu, &source, 1, &inputs),
+    );
+    for (k, &angle) in angles.iter().enumerate() {
+        let [c, s] = lyapsweep::integrate::clock::cos_sin(angle);
+        // A NaN's payload is the hardware's; that it is NaN is the code's.
+        let bits = |x: f64| {
+            if x.is_nan() {
+                f64::NAN.to_bits()
+            } else {
+                x.to_bits()
+            }
+        };
+        assert_eq!(
+            (bits(cos[k]), bits(sin[k])),
+            (bits(c), bits(s)),
+            "cos_sin({angle:e}): GPU ({}, {}), CPU ({c}, {s})",
+            cos[k],
+            sin[k]
+        );
+    }
 }

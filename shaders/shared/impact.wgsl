@@ -56,21 +56,13 @@ fn held_rhs(p: Params, w: Stop, phase: vec2<real>, y: State) -> State {
 
 // The state held on the stop for s from `rest` at `phase`: `rest` itself
 // with two states, else one RK4 step of the held flow for the others
-// (rk4_step's arithmetic, as the CPU's rk4::step of Held).
+// (held_sub_step, generated from the step program, as the CPU's rk4::step
+// of Held).
 fn held_for(p: Params, w: Stop, omega: real, phase: vec2<real>, rest: State, s: real) -> State {
     if (DIM == 2u) {
         return rest;
     }
-    let half = cos_sin(real(0.5) * omega * s);
-    let mid = rotate(phase, half);
-    let end = rotate(mid, half);
-    let h2 = real(0.5) * s;
-    let k1 = held_rhs(p, w, phase, rest);
-    let k2 = held_rhs(p, w, mid, rest + h2 * k1);
-    let k3 = held_rhs(p, w, mid, rest + h2 * k2);
-    let k4 = held_rhs(p, w, end, rest + s * k3);
-    let sixth = s / real(6.0);
-    return rest + sixth * (k1 + real(2.0) * (k2 + k3) + k4);
+    return held_sub_step(p, w, omega, phase, rest, s).y;
 }
 
 // A step of size h from rest on stop j (y moved onto it): the mass stays
@@ -132,11 +124,6 @@ fn state_scale(y: State) -> real {
         scale = max(scale, abs(y[i]));
     }
     return scale;
-}
-
-// An RK4 step of any size s from a given phase: the re-steps of impact location.
-fn sub_step(p: Params, omega: real, phase: vec2<real>, y: State, s: real) -> Stepped {
-    return rk4_step(p, phase, cos_sin(real(0.5) * omega * s), y, s);
 }
 
 // The per-stop code below is written out per stop rather than as loops

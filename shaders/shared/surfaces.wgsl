@@ -32,7 +32,8 @@ fn is_sliding(region: u32) -> bool {
 // The equivalent control of a motion sliding on one switch (Filippov's
 // convex combination, surface::equivalent_on with one switch): the sides'
 // fields lo and hi, their rates a and b along ∇g, α = a/(a - b), the field
-// lo + α(hi - lo), and the stick margins (L - m, L + m), m = (a + b)/2, L
+// lo + α(hi - lo) (filippov_alpha and filippov_field, generated from the
+// step program), and the stick margins (L - m, L + m), m = (a + b)/2, L
 // the stick limit or the half jump (a - b)/2.
 struct Equivalent {
     field: State,
@@ -42,8 +43,8 @@ struct Equivalent {
 
 fn equivalent(p: Params, phase: vec2<real>, y: State) -> Equivalent {
     let s = switch_sides(p, firstTrailingBit(p.region >> SLIDING_SHIFT), phase, y);
-    let alpha = s.a / (s.a - s.b);
-    return Equivalent(s.lo + alpha * (s.hi - s.lo), alpha, s.margins);
+    let alpha = filippov_alpha(s.a, s.b);
+    return Equivalent(filippov_field(s.lo, s.hi, alpha), alpha, s.margins);
 }
 
 // Switch j's two sides at y, for a trajectory on either side of it or
@@ -224,16 +225,22 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
 
 // Whether a step of size h from values `before` to `after` may cross
 // surface j: its end lies across, or its rate turns from approaching to
-// leaving inside it within reach of the surface (surface::may_cross).
+// leaving inside it within reach of the surface (surface::may_cross; the
+// step program's oriented_may_meet, as the native step loops test it).
 fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
-    return may_meet(oriented(region, j, before), oriented(region, j, after), h);
+    return oriented_may_meet(orientation(region, j), surface_pair(j, before), surface_pair(j, after), h);
+}
+
+// Surface j's (g, rate) in values v.
+fn surface_pair(j: u32, v: SurfaceValues) -> vec2<real> {
+    return vec2<real>(v.g[j], v.rate[j]);
 }
 
 // Surface j's (g, rate) in values v, oriented so that > 0 lies across it
 // for a trajectory in `region`: the value and rate its crossing is
 // detected and located on, as a stop's (gap, speed) is.
 fn oriented(region: u32, j: u32, v: SurfaceValues) -> vec2<real> {
-    return orientation(region, j) * vec2<real>(v.g[j], v.rate[j]);
+    return orient(orientation(region, j), surface_pair(j, v));
 }
 
 // The step loop's test over every surface, written out per surface as the

@@ -6,9 +6,9 @@
 //! stroboscopic section puts ωt ≡ 0) and advanced by exact rotations:
 //! a grid step by the host-computed rotation through ωh/2 twice, a partial
 //! step (to an impact) by the rotation through ωs from [`cos_sin`]. The
-//! Rust here is the reference for the rotation of the step program
-//! (`model::ir::step::integrator`) and the twin of
-//! `shaders/shared/clock.wgsl`'s `cos_sin`.
+//! Rust here is the reference for the clock's step programs, `rotate`
+//! and `cos_sin` (`model::ir::integrator`), which the kernels run
+//! generated.
 
 /// (cos ωt, sin ωt).
 pub type Phase = [f64; 2];
@@ -58,8 +58,7 @@ pub fn cos_sin(angle: f64) -> Phase {
     let x2 = phi * phi;
     // cos φ = Σ (-1)^k φ^{2k}/(2k)!, sin φ = φ Σ (-1)^k φ^{2k}/(2k+1)!, to φ^14 and φ^15:
     // the first omitted terms are below 1e-19 for |φ| ≤ 1/2.
-    let mut c = 1.0 / 87_178_291_200.0;
-    let mut s = 1.0 / 1_307_674_368_000.0;
+    let [mut c, mut s] = TAYLOR_TOP;
     for k in (0..7).rev() {
         c = INV_FACT[2 * k] - x2 * c;
         s = INV_FACT[2 * k + 1] - x2 * s;
@@ -72,8 +71,13 @@ pub fn cos_sin(angle: f64) -> Phase {
     result
 }
 
+/// The Taylor polynomials' last coefficients, 1/14! and 1/15!, where
+/// [`cos_sin`]'s Horner sums start (the step program's `cos_sin` reads
+/// them and [`INV_FACT`] from here).
+pub const TAYLOR_TOP: [f64; 2] = [1.0 / 87_178_291_200.0, 1.0 / 1_307_674_368_000.0];
+
 /// 1/n! for n = 0..=13.
-const INV_FACT: [f64; 14] = [
+pub const INV_FACT: [f64; 14] = [
     1.0,
     1.0,
     1.0 / 2.0,

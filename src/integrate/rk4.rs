@@ -1,6 +1,6 @@
 //! The classical fourth-order Runge–Kutta step (the paper's integrator),
 //! the reference for the step program that the generated C and WGSL print
-//! (`model::ir::step::integrator`).
+//! (`model::ir::integrator`).
 
 use super::clock::{rotate, Phase};
 

@@ -29,10 +29,6 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/loop_budget.wgsl"),
     ),
     (
-        "shared/clock.wgsl",
-        include_str!("../../../shaders/shared/clock.wgsl"),
-    ),
-    (
         "shared/stops.wgsl",
         include_str!("../../../shaders/shared/stops.wgsl"),
     ),
@@ -270,9 +266,11 @@ impl Variant {
                 &defines,
             ));
         }
-        out.push_str(&preprocess(&include("shared/clock.wgsl"), &defines));
+        // The clock, RK4 and the stop test (of the held flow too where
+        // the impact code holds a mass on a stop), generated.
         out.push_str(&crate::model::codegen::wgsl::integrator(
             self.system.is_flow,
+            self.wall,
         ));
         if self.wall {
             // The stops, the step loop that resolves their impacts, where

@@ -11,7 +11,7 @@
 use crate::integrate::surface::Surface;
 use crate::model::codegen::print::{self, Inputs, Syntax};
 use crate::model::codegen::step::{self, CField, CValue};
-use crate::model::ir::step::integrator;
+use crate::model::ir::integrator::integrator;
 use crate::model::ir::tape::{Code, Tape};
 use crate::model::language::expr::Func;
 use crate::model::native::abi::{Kind, Layout, StopCode, WALK_WIDTHS, WIDTHS};
@@ -354,8 +354,9 @@ impl WalkText<'_> {
         let half = CValue::Pair("hc".into(), "hs".into());
         for ((c, s), (c1, s1)) in [(("c", "s"), ("mc", "ms")), (("mc", "ms"), ("ec", "es"))] {
             let phase = CValue::Pair(c.into(), s.into());
-            let turned = self.inline(
+            let turned = inline(
                 out,
+                self.calls,
                 "rotate",
                 vec![phase, half.clone()],
                 &format!("{c1}_"),
@@ -474,13 +475,6 @@ impl WalkText<'_> {
     /// surface's test (`surface::may_cross`) is the same: the plain one
     /// first. Breaks out of the loop over the steps where one fires.
     fn detect(&self, out: &mut String) {
-        let crossing = |j: usize| {
-            let (g, rate) = (2 * j, 2 * j + 1);
-            format!(
-                "(((so{j}[k] * sa{g}[k]) > 0.0) | (((so{j}[k] * sb{rate}[k]) > 0.0) \
-                 & ((so{j}[k] * sa{rate}[k]) < 0.0)))"
-            )
-        };
         for (j, stop) in self.stops.iter().enumerate() {
             let (ci, vi) = (stop.coordinate, stop.velocity);
             let (out_of, into) = if stop.side > 0.0 {
@@ -497,7 +491,8 @@ impl WalkText<'_> {
             );
         }
         for j in 0..self.kinds.len() {
-            let _ = writeln!(out, "      hit |= {} & live[k];", crossing(j));
+            let test = self.surface_test(out, j, "oriented_ends_across", false, "      ");
+            let _ = writeln!(out, "      hit |= {test} & live[k];");
         }
         let _ = writeln!(
             out,
@@ -532,40 +527,34 @@ impl WalkText<'_> {
             );
         }
         for j in 0..self.kinds.len() {
-            let (g, rate) = (2 * j, 2 * j + 1);
-            let _ = writeln!(
-                out,
-                "        {{ const double o = so{j}[k];\n          \
-                 const double g0 = o * sb{g}[k], s0 = o * sb{rate}[k];\n          \
-                 const double g1 = o * sa{g}[k], s1 = o * sa{rate}[k];"
-            );
-            let crosses = self.may_meet(out);
-            let _ = writeln!(out, "          near |= {crosses} & live[k]; }}");
+            let crosses = self.surface_test(out, j, "oriented_may_meet", true, "        ");
+            let _ = writeln!(out, "        near |= {crosses} & live[k];");
         }
     }
 
-    /// The step program's function `name`, one that reads no field (the
-    /// clock's rotation, the stop test), inlined at `args` with its values
-    /// named after `prefix`: its one result.
-    fn inline(
+    /// The step program's surface test `name` of surface j in slot k
+    /// (`oriented_ends_across`, or with the step `hh`, `with_step`,
+    /// `oriented_may_meet`): its orientation, and its value and rate at
+    /// the step's start and end, as a C int.
+    fn surface_test(
         &self,
         out: &mut String,
+        j: usize,
         name: &str,
-        args: Vec<CValue>,
-        prefix: &str,
+        with_step: bool,
         indent: &str,
-    ) -> CValue {
-        let mut no_field =
-            |_: &mut String, _: &str, _: &[String], _: (&str, &str)| -> Vec<String> {
-                unreachable!("{name} reads no field")
-            };
-        let mut text = step::C {
-            syntax: &C { calls: self.calls },
-            field: &mut no_field,
-            indent,
-        };
-        text.inline(out, &integrator(), name, args, prefix)
-            .remove(0)
+    ) -> String {
+        let (g, rate) = (2 * j, 2 * j + 1);
+        let at = |row: &str| CValue::Pair(format!("{row}{g}[k]"), format!("{row}{rate}[k]"));
+        let mut args = vec![CValue::Real(format!("so{j}[k]")), at("sb"), at("sa")];
+        if with_step {
+            args.push(CValue::Real("hh".into()));
+        }
+        let prefix = format!("{}{j}_", if with_step { "near" } else { "plain" });
+        match inline(out, self.calls, name, args, &prefix, indent) {
+            CValue::Bool(test) => test,
+            other => unreachable!("{name} gives a truth value, not {other:?}"),
+        }
     }
 
     /// The step program's `may_meet` of the values and rates `g0`, `s0`
@@ -578,7 +567,7 @@ impl WalkText<'_> {
             pair("g1", "s1"),
             CValue::Real("hh".into()),
         ];
-        match self.inline(out, "may_meet", args, "m", "          ") {
+        match inline(out, self.calls, "may_meet", args, "m", "          ") {
             CValue::Bool(meets) => meets,
             other => unreachable!("may_meet gives a truth value, not {other:?}"),
         }
@@ -621,6 +610,29 @@ impl WalkText<'_> {
         }
         out.push_str("  clock[0] = c;\n  clock[1] = s;\n  return n;\n}\n");
     }
+}
+
+/// The step program's function `name`, one that reads no field (the
+/// clock's rotation, the stop test, the sliding field's algebra), inlined
+/// at `args` with its values named after `prefix`: its one result.
+fn inline(
+    out: &mut String,
+    calls: &[Func],
+    name: &str,
+    args: Vec<CValue>,
+    prefix: &str,
+    indent: &str,
+) -> CValue {
+    let mut no_field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| -> Vec<String> {
+        unreachable!("{name} reads no field")
+    };
+    let mut text = step::C {
+        syntax: &C { calls },
+        field: &mut no_field,
+        indent,
+    };
+    text.inline(out, &integrator(), name, args, prefix)
+        .remove(0)
 }
 
 /// `rk4::step_batch`'s step of the slot whose states are `state`, with
@@ -680,14 +692,13 @@ fn rk4_of(
 /// once (one or two), from the region `base` (their bits clear), whose
 /// field is F₀, F_m the field with bit m set: `rk4::step_at` of
 /// `surface::Sliding`, whose field is `surface::equivalent_on`'s,
-/// operation for operation. One switch: a = ∇g·F₀ and b = ∇g·F₁ (summed
-/// as Rust's `sum` does, from `zero`), α = a/(a - b), F₀ + α(F₁ - F₀).
-/// Two: `surface::solve`'s elimination with partial pivoting of
-/// (a_j - c_jk) u = a (a_j = ∇g_j·F₀, c_jk = ∇g_j·F_k), then F₀ +
-/// u₀(F₁ - F₀) + u₁(F₂ - F₀). NaN where the control is singular or not
-/// finite. `lc{m}` points to the constants of F_m, `g{m}` to switch m's
-/// constant gradient (the last ones unused with one switch); the clock
-/// holds the three stages' phases.
+/// operation for operation: the rates of the fields along the gradients
+/// (∇g_j·F_m, summed as Rust's `sum` does, from `zero`), then the step
+/// program's `sliding_field_1` or `sliding_field_2` of them (Filippov's
+/// combination on one switch, the elimination on two; NaN where the
+/// control is singular or not finite). `lc{m}` points to the constants of
+/// F_m, `g{m}` to switch m's constant gradient (the last ones unused with
+/// one switch); the clock holds the three stages' phases.
 fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zero: f64) {
     let d = tapes[0].states;
     let n = tapes.len() - 1;
@@ -726,64 +737,38 @@ fn slide_step(out: &mut String, calls: &[Func], name: &str, tapes: &[&Tape], zer
                     )
                 })
                 .collect();
-            let v = |x: &str| format!("{prefix}{x}");
-            // C statements with this stage's names: `$x` is `{prefix}x`.
-            let mut line = |text: &str| {
-                let _ = writeln!(out, "      {}", text.replace('$', prefix));
+            // The rates along the switches' constant gradients, named:
+            // a_j of F₀, and with two switches d_jk of F_{k+1}.
+            let mut rate = |name: String, m: usize, f: &[String]| {
+                let _ = writeln!(out, "      const double {name} = {};", dot(m, f));
+                CValue::Real(name)
             };
-            if n == 1 {
-                line(&format!("const double $p = {};", dot(0, &f[0])));
-                line(&format!("const double $q = {};", dot(0, &f[1])));
-                line("const double $u0 = $p / ($p - $q);");
-                line("const int $ok = __builtin_isfinite($u0);");
+            let state = |m: usize| CValue::State(f[m].clone());
+            let args = if n == 1 {
+                let a = rate(format!("{prefix}a"), 0, &f[0]);
+                let b = rate(format!("{prefix}b"), 0, &f[1]);
+                vec![state(0), state(1), a, b]
             } else {
-                // a_j, and the matrix M = a_j - c_jk, as equivalent_on.
+                let mut args = vec![state(0), state(1), state(2)];
                 for j in 0..2 {
-                    line(&format!("const double $a{j} = {};", dot(j, &f[0])));
+                    args.push(rate(format!("{prefix}a{j}"), j, &f[0]));
+                }
+                for j in 0..2 {
                     for k in 0..2 {
-                        line(&format!(
-                            "const double $m{j}{k} = $a{j} - {};",
-                            dot(j, &f[k + 1])
-                        ));
+                        args.push(rate(format!("{prefix}d{j}{k}"), j, &f[k + 1]));
                     }
                 }
-                // The pivot of column 0: the row with the larger |M_j0| in
-                // `total_cmp`'s order (NaN above all), the second on a tie
-                // (`max_by` keeps the last maximum); after the swap the
-                // pivot's row is [p0 p1 | pr], the other's [q0 q1 | qr].
-                line("const double $x0 = __builtin_fabs($m00), $x1 = __builtin_fabs($m10);");
-                line("const int $sw = __builtin_isnan($x1) || (!__builtin_isnan($x0) && $x1 >= $x0);");
-                line("const double $p0 = $sw ? $m10 : $m00, $p1 = $sw ? $m11 : $m01, $pr = $sw ? $a1 : $a0;");
-                line("const double $q0 = $sw ? $m00 : $m10, $q1 = $sw ? $m01 : $m11, $qr = $sw ? $a0 : $a1;");
-                // Elimination, then back-substitution, in solve's order.
-                line("const double $k = $q0 / $p0;");
-                line("const double $e1 = $q1 - $k * $p1, $er = $qr - $k * $pr;");
-                line("const double $u1 = $er / $e1;");
-                line("const double $u0 = ($pr - $p1 * $u1) / $p0;");
-                line(
-                    "const int $ok = $p0 != 0.0 && $e1 != 0.0 \
-                 && __builtin_isfinite($u0) && __builtin_isfinite($u1);",
-                );
+                args
+            };
+            let name = if n == 1 {
+                "sliding_field_1"
+            } else {
+                "sliding_field_2"
+            };
+            match inline(out, calls, name, args, prefix, "      ") {
+                CValue::State(v) => v,
+                other => unreachable!("{name} gives a state, not {other:?}"),
             }
-            (0..d)
-                .map(|i| {
-                    let name = v(&format!("v{i}"));
-                    let mut field = f[0][i].clone();
-                    for m in 0..n {
-                        field = format!(
-                            "({field} + {u} * ({} - {}))",
-                            f[m + 1][i],
-                            f[0][i],
-                            u = v(&format!("u{m}"))
-                        );
-                    }
-                    line(&format!(
-                        "const double $v{i} = $ok ? {field} : {};",
-                        literal(f64::NAN)
-                    ));
-                    name
-                })
-                .collect()
         },
     );
     for (i, v) in end.iter().enumerate() {

@@ -12,7 +12,8 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use super::print::Syntax;
-use crate::model::ir::step::{Expr, Function, Op, Program, Ty};
+use crate::model::ir::step::{Expr, Field, Function, Op, Program, Stmt, Ty};
+use crate::model::language::expr::Func;
 
 /// How tightly an operation binds, for parentheses.
 fn precedence(op: Op) -> u8 {
@@ -39,6 +40,23 @@ fn binary(op: Op, a: (&str, Option<Op>), b: (&str, Option<Op>)) -> String {
     format!("{left} {} {right}", op.symbol())
 }
 
+/// `text` in parentheses where it is an operation.
+fn wrap(text: &str, op: Option<Op>) -> String {
+    match op {
+        Some(_) => format!("({text})"),
+        None => text.to_string(),
+    }
+}
+
+/// `e`'s text as an `if`'s condition: truth operations print in
+/// parentheses whole already, anything else gets them.
+fn condition(e: &Expr, text: String) -> String {
+    match e {
+        Expr::Cmp(..) | Expr::And(..) | Expr::Or(..) => text,
+        _ => format!("({text})"),
+    }
+}
+
 /// The WGSL type of `ty`.
 fn wgsl_type(ty: Ty) -> &'static str {
     match ty {
@@ -46,36 +64,52 @@ fn wgsl_type(ty: Ty) -> &'static str {
         Ty::State => "State",
         Ty::Pair => "vec2<real>",
         Ty::Bool => "bool",
+        Ty::Count => "u32",
     }
 }
 
-/// Whether `f` evaluates the field, itself or through the functions it
-/// calls: a WGSL function that does takes the lane's `Params`.
-fn reads_field(program: &Program, f: &Function) -> bool {
-    fn reads(program: &Program, e: &Expr) -> bool {
+/// The fields `f` evaluates, itself or through the functions it calls.
+fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
+    fn read(program: &Program, e: &Expr, out: &mut Vec<Field>) {
         match e {
-            Expr::Var(_) | Expr::Num(_) => false,
-            Expr::Field { .. } => true,
-            Expr::Bin(_, a, b)
-            | Expr::Pair(a, b)
-            | Expr::Cmp(_, a, b)
-            | Expr::And(a, b)
-            | Expr::Or(a, b) => reads(program, a) || reads(program, b),
-            Expr::First(a) | Expr::Second(a) | Expr::Not(a) => reads(program, a),
-            Expr::Call(name, args) => {
-                reads_field(program, program.function(name))
-                    || args.iter().any(|a| reads(program, a))
+            Expr::Field { of, .. } if !out.contains(of) => out.push(*of),
+            Expr::Call(name, _) => {
+                for of in fields_read(program, program.function(name)) {
+                    if !out.contains(&of) {
+                        out.push(of);
+                    }
+                }
             }
+            _ => {}
+        }
+        for a in e.operands() {
+            read(program, a, out);
         }
     }
-    f.body
-        .iter()
-        .chain(&f.results)
-        .any(|(_, e)| reads(program, e))
+    let mut out = Vec::new();
+    for e in f.exprs() {
+        read(program, e, &mut out);
+    }
+    out
+}
+
+/// What a WGSL function takes before its own parameters, as (name,
+/// type): the lane's `Params` where it evaluates a field, and the stop
+/// `w` too where it evaluates the held flow.
+fn context(program: &Program, f: &Function) -> &'static [(&'static str, &'static str)] {
+    let read = fields_read(program, f);
+    if read.contains(&Field::Held) {
+        &[("p", "Params"), ("w", "Stop")]
+    } else if read.is_empty() {
+        &[]
+    } else {
+        &[("p", "Params")]
+    }
 }
 
 /// The program's functions in WGSL, and the structures of their results;
-/// the field is the system file's `rhs(p, phase, y)`.
+/// the model's field is the system file's `rhs(p, phase, y)`, the held
+/// flow the kernels' `held_rhs(p, w, phase, y)`.
 pub fn wgsl(program: &Program, syntax: &dyn Syntax) -> String {
     let mut out = String::new();
     let mut structures: Vec<&str> = Vec::new();
@@ -89,29 +123,20 @@ pub fn wgsl(program: &Program, syntax: &dyn Syntax) -> String {
             }
             out.push_str("}\n\n");
         }
-        let mut params: Vec<String> = Vec::new();
-        if reads_field(program, f) {
-            params.push("p: Params".into());
-        }
-        params.extend(
-            f.params
-                .iter()
-                .map(|(n, t)| format!("{n}: {}", wgsl_type(*t))),
-        );
+        let params: Vec<String> = context(program, f)
+            .iter()
+            .map(|(n, t)| format!("{n}: {t}"))
+            .chain(
+                f.params
+                    .iter()
+                    .map(|(n, t)| format!("{n}: {}", wgsl_type(*t))),
+            )
+            .collect();
         let returns = f.returns.unwrap_or_else(|| wgsl_type(types[0]));
         let _ = writeln!(out, "fn {}({}) -> {returns} {{", f.name, params.join(", "));
-        for (name, value) in &f.body {
-            let _ = writeln!(
-                out,
-                "    let {name} = {};",
-                wgsl_expr(program, syntax, value).0
-            );
-        }
-        let results: Vec<String> = f
-            .results
-            .iter()
-            .map(|(_, e)| wgsl_expr(program, syntax, e).0)
-            .collect();
+        let text = Wgsl { program, syntax };
+        text.block(&mut out, &f.body, "    ");
+        let results: Vec<String> = f.results.iter().map(|(_, e)| text.expr(e).0).collect();
         match f.returns {
             Some(name) => {
                 let _ = writeln!(out, "    return {name}({});", results.join(", "));
@@ -125,44 +150,138 @@ pub fn wgsl(program: &Program, syntax: &dyn Syntax) -> String {
     out
 }
 
-/// `e` in WGSL, and its outermost operation (for parentheses).
-fn wgsl_expr(program: &Program, syntax: &dyn Syntax, e: &Expr) -> (String, Option<Op>) {
-    let text = |e: &Expr| wgsl_expr(program, syntax, e).0;
-    match e {
-        Expr::Var(name) => (name.to_string(), None),
-        Expr::Num(v) => (syntax.literal(*v), None),
-        Expr::Bin(op, a, b) => {
-            let (a, b) = (wgsl_expr(program, syntax, a), wgsl_expr(program, syntax, b));
-            (binary(*op, (&a.0, a.1), (&b.0, b.1)), Some(*op))
+/// A program's text in WGSL.
+struct Wgsl<'a> {
+    program: &'a Program,
+    syntax: &'a dyn Syntax,
+}
+
+impl Wgsl<'_> {
+    /// `block`'s statements, one a line at `indent`.
+    fn block(&self, out: &mut String, block: &[Stmt], indent: &str) {
+        let inner = format!("{indent}    ");
+        for stmt in block {
+            let _ = match stmt {
+                Stmt::Let(name, e) => writeln!(out, "{indent}let {name} = {};", self.expr(e).0),
+                Stmt::Var(name, e) => writeln!(out, "{indent}var {name} = {};", self.expr(e).0),
+                Stmt::Set(name, e) => writeln!(out, "{indent}{name} = {};", self.expr(e).0),
+                Stmt::If(cond, then, otherwise) => {
+                    let cond = condition(cond, self.expr(cond).0);
+                    let _ = writeln!(out, "{indent}if {cond} {{");
+                    self.block(out, then, &inner);
+                    if !otherwise.is_empty() {
+                        let _ = writeln!(out, "{indent}}} else {{");
+                        self.block(out, otherwise, &inner);
+                    }
+                    writeln!(out, "{indent}}}")
+                }
+                Stmt::Loop(body) => {
+                    let _ = writeln!(out, "{indent}loop {{");
+                    self.block(out, body, &inner);
+                    writeln!(out, "{indent}}}")
+                }
+                Stmt::Break => writeln!(out, "{indent}break;"),
+            };
         }
-        Expr::First(a) => (format!("{}.x", text(a)), None),
-        Expr::Second(a) => (format!("{}.y", text(a)), None),
-        Expr::Pair(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
-        // Truth values in parentheses whole: no precedence to get wrong.
-        Expr::Cmp(cmp, a, b) => (format!("({} {} {})", text(a), cmp.symbol(), text(b)), None),
-        Expr::And(a, b) => (format!("({} && {})", text(a), text(b)), None),
-        Expr::Or(a, b) => (format!("({} || {})", text(a), text(b)), None),
-        Expr::Not(a) => (format!("!{}", text(a)), None),
-        Expr::Field { phase, state } => (format!("rhs(p, {}, {})", text(phase), text(state)), None),
-        Expr::Call(name, args) => {
-            let mut list: Vec<String> = Vec::new();
-            if reads_field(program, program.function(name)) {
-                list.push("p".into());
+    }
+
+    /// `e` in WGSL, and its outermost operation (for parentheses).
+    fn expr(&self, e: &Expr) -> (String, Option<Op>) {
+        let text = |e: &Expr| self.expr(e).0;
+        match e {
+            Expr::Var(name) => (name.to_string(), None),
+            // A constant that is not finite is a shader-creation error.
+            Expr::Num(v) if !v.is_finite() => panic!("WGSL has no constant {v}"),
+            Expr::Num(v) => (self.syntax.literal(*v), None),
+            Expr::Count(n) => (format!("{n}u"), None),
+            Expr::Bin(op, a, b) => {
+                let (a, b) = (self.expr(a), self.expr(b));
+                (binary(*op, (&a.0, a.1), (&b.0, b.1)), Some(*op))
             }
-            list.extend(args.iter().map(text));
-            (format!("{name}({})", list.join(", ")), None)
+            Expr::Abs(a) => (self.syntax.call(Func::Abs, &text(a), ""), None),
+            // The kernels' prelude defines MAX_REAL, the largest `real`.
+            Expr::Finite(a) => (
+                format!(
+                    "({} <= MAX_REAL)",
+                    self.syntax.call(Func::Abs, &text(a), "")
+                ),
+                None,
+            ),
+            Expr::Fill(a) => (format!("State({})", text(a)), None),
+            Expr::First(a) => (format!("{}.x", text(a)), None),
+            Expr::Second(a) => (format!("{}.y", text(a)), None),
+            Expr::Pair(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
+            // Truth values in parentheses whole: no precedence to get wrong.
+            Expr::Cmp(cmp, a, b) => (format!("({} {} {})", text(a), cmp.symbol(), text(b)), None),
+            Expr::And(a, b) => (format!("({} && {})", text(a), text(b)), None),
+            Expr::Or(a, b) => (format!("({} || {})", text(a), text(b)), None),
+            Expr::Not(a) => (format!("!{}", text(a)), None),
+            Expr::Select {
+                cond,
+                then,
+                otherwise,
+            } => (
+                format!(
+                    "select({}, {}, {})",
+                    text(otherwise),
+                    text(then),
+                    text(cond)
+                ),
+                None,
+            ),
+            Expr::Field { of, phase, state } => {
+                let f = match of {
+                    Field::Model => "rhs(p",
+                    Field::Held => "held_rhs(p, w",
+                };
+                (format!("{f}, {}, {})", text(phase), text(state)), None)
+            }
+            Expr::Call(name, args) => {
+                let list: Vec<String> = context(self.program, self.program.function(name))
+                    .iter()
+                    .map(|(n, _)| n.to_string())
+                    .chain(args.iter().map(text))
+                    .collect();
+                (format!("{name}({})", list.join(", ")), None)
+            }
         }
     }
 }
 
 /// A value of C text: a number, one a state component, a pair's two
-/// numbers (a phase's cosine and sine), or a truth value (an `int`).
+/// numbers (a phase's cosine and sine), a truth value (an `int`), or a
+/// counter (a `uint32_t`).
 #[derive(Clone, Debug, PartialEq)]
 pub enum CValue {
     Real(String),
     State(Vec<String>),
     Pair(String, String),
     Bool(String),
+    Count(String),
+}
+
+impl CValue {
+    /// The C text of each number.
+    fn parts(&self) -> Vec<&str> {
+        match self {
+            CValue::Real(v) | CValue::Bool(v) | CValue::Count(v) => vec![v],
+            CValue::State(vs) => vs.iter().map(String::as_str).collect(),
+            CValue::Pair(c, s) => vec![c, s],
+        }
+    }
+
+    /// The same kind of value with these parts.
+    fn with_parts(&self, parts: Vec<String>) -> CValue {
+        let mut parts = parts.into_iter();
+        let mut next = || parts.next().expect("as many parts");
+        match self {
+            CValue::Real(_) => CValue::Real(next()),
+            CValue::Bool(_) => CValue::Bool(next()),
+            CValue::Count(_) => CValue::Count(next()),
+            CValue::Pair(..) => CValue::Pair(next(), next()),
+            CValue::State(vs) => CValue::State(vs.iter().map(|_| next()).collect()),
+        }
+    }
 }
 
 /// The field as C statements: appends the field's values at `state` and
@@ -170,12 +289,19 @@ pub enum CValue {
 /// outputs.
 pub type CField<'a> = dyn FnMut(&mut String, &str, &[String], (&str, &str)) -> Vec<String> + 'a;
 
-/// Where a program is inlined into C.
+/// Where a program is inlined into C. The native step loops are loops
+/// over the slots that the C compiler vectorises: what they inline is
+/// straight-line code (a branch or a loop per slot would keep the loop
+/// scalar), and a choice in it a [`Expr::Select`]; the statements with
+/// branches and loops are for the C that runs one trajectory at a time.
 pub struct C<'a> {
     pub syntax: &'a dyn Syntax,
     pub field: &'a mut CField<'a>,
     pub indent: &'a str,
 }
+
+/// The C names in scope while a function is inlined.
+type Scope = HashMap<&'static str, CValue>;
 
 impl C<'_> {
     /// Appends `name`'s statements at `args`, every value it names
@@ -191,46 +317,95 @@ impl C<'_> {
     ) -> Vec<CValue> {
         let f = program.function(name);
         assert_eq!(f.params.len(), args.len(), "{name}'s arguments");
-        let mut scope: HashMap<&str, CValue> = f.params.iter().map(|(n, _)| *n).zip(args).collect();
-        for (value_name, value) in &f.body {
-            let value = self.value(
-                out,
-                program,
-                &scope,
-                value,
-                &format!("{prefix}{value_name}"),
-            );
-            let named = self.declare(out, &format!("{prefix}{value_name}"), value);
-            scope.insert(value_name, named);
-        }
+        let mut scope: Scope = f.params.iter().map(|(n, _)| *n).zip(args).collect();
+        let indent = self.indent.to_string();
+        self.block(out, program, &mut scope, &f.body, prefix, &indent);
         f.results
             .iter()
             .map(|(result, e)| self.value(out, program, &scope, e, &format!("{prefix}{result}")))
             .collect()
     }
 
-    /// Names `value` `name` (components `{name}{i}`, `{name}_c`, `{name}_s`).
-    fn declare(&self, out: &mut String, name: &str, value: CValue) -> CValue {
-        let mut one = |n: String, v: &str| {
-            let _ = writeln!(out, "{}{}", self.indent, self.syntax.declare(&n, v));
-            n
-        };
-        match value {
-            CValue::Real(v) => CValue::Real(one(name.to_string(), &v)),
-            CValue::State(vs) => CValue::State(
-                vs.iter()
-                    .enumerate()
-                    .map(|(i, v)| one(format!("{name}{i}"), v))
-                    .collect(),
-            ),
-            CValue::Pair(c, s) => {
-                CValue::Pair(one(format!("{name}_c"), &c), one(format!("{name}_s"), &s))
-            }
-            CValue::Bool(v) => {
-                let _ = writeln!(out, "{}const int {name} = {v};", self.indent);
-                CValue::Bool(name.to_string())
+    /// Appends `block`'s statements at `indent`, adding what it declares
+    /// to `scope`. A value set by a call or a field names that call's
+    /// values after its statement's place in the block, so that two sets
+    /// of one name do not declare the same C names.
+    fn block(
+        &mut self,
+        out: &mut String,
+        program: &Program,
+        scope: &mut Scope,
+        block: &[Stmt],
+        prefix: &str,
+        indent: &str,
+    ) {
+        let inner = format!("{indent}  ");
+        for (place, stmt) in block.iter().enumerate() {
+            match stmt {
+                Stmt::Let(name, e) | Stmt::Var(name, e) => {
+                    let named = format!("{prefix}{name}");
+                    let value = self.value(out, program, scope, e, &named);
+                    let mutable = matches!(stmt, Stmt::Var(..));
+                    let value = self.declare(out, indent, &named, value, mutable);
+                    scope.insert(name, value);
+                }
+                Stmt::Set(name, e) => {
+                    let at = format!("{prefix}{name}_{}_{place}", indent.len());
+                    let value = self.value(out, program, scope, e, &at);
+                    assign(out, self.syntax, indent, &scope[name], &value);
+                }
+                Stmt::If(cond, then, otherwise) => {
+                    let text = match self.expr(scope, cond).0 {
+                        CValue::Bool(c) => c,
+                        other => panic!("{other:?} is not a truth value"),
+                    };
+                    let _ = writeln!(out, "{indent}if {} {{", condition(cond, text));
+                    self.block(out, program, &mut scope.clone(), then, prefix, &inner);
+                    if !otherwise.is_empty() {
+                        let _ = writeln!(out, "{indent}}} else {{");
+                        self.block(out, program, &mut scope.clone(), otherwise, prefix, &inner);
+                    }
+                    let _ = writeln!(out, "{indent}}}");
+                }
+                Stmt::Loop(body) => {
+                    let _ = writeln!(out, "{indent}for (;;) {{");
+                    self.block(out, program, &mut scope.clone(), body, prefix, &inner);
+                    let _ = writeln!(out, "{indent}}}");
+                }
+                Stmt::Break => {
+                    let _ = writeln!(out, "{indent}break;");
+                }
             }
         }
+    }
+
+    /// Names `value` `name` (components `{name}{i}`, `{name}_c`,
+    /// `{name}_s`), fixed or, `mutable`, for later statements to set.
+    fn declare(
+        &self,
+        out: &mut String,
+        indent: &str,
+        name: &str,
+        value: CValue,
+        mutable: bool,
+    ) -> CValue {
+        let names: Vec<String> = match &value {
+            CValue::State(vs) => (0..vs.len()).map(|i| format!("{name}{i}")).collect(),
+            CValue::Pair(..) => vec![format!("{name}_c"), format!("{name}_s")],
+            _ => vec![name.to_string()],
+        };
+        for (n, v) in names.iter().zip(value.parts()) {
+            let line = match (&value, mutable) {
+                (CValue::Bool(_), m) => format!("{}int {n} = {v};", if m { "" } else { "const " }),
+                (CValue::Count(_), m) => {
+                    format!("{}uint32_t {n} = {v};", if m { "" } else { "const " })
+                }
+                (_, true) => format!("double {n} = {v};"),
+                (_, false) => self.syntax.declare(n, v),
+            };
+            let _ = writeln!(out, "{indent}{line}");
+        }
+        value.with_parts(names)
     }
 
     /// `e` as C text; a field or a call it makes is written out first, its
@@ -239,14 +414,19 @@ impl C<'_> {
         &mut self,
         out: &mut String,
         program: &Program,
-        scope: &HashMap<&str, CValue>,
+        scope: &Scope,
         e: &Expr,
         prefix: &str,
     ) -> CValue {
         match e {
-            Expr::Field { phase, state } => {
+            Expr::Field { of, phase, state } => {
+                assert_eq!(
+                    *of,
+                    Field::Model,
+                    "C evaluates the model's field only (the CPU holds a mass in Rust)"
+                );
                 let (Some(CValue::Pair(c, s)), Some(CValue::State(y))) =
-                    (var(scope, phase), var(scope, state))
+                    (named(scope, phase), named(scope, state))
                 else {
                     panic!("the field is evaluated at a named phase and state")
                 };
@@ -264,13 +444,59 @@ impl C<'_> {
             }
         }
     }
+}
 
+/// `target = value`: at once for one number; for several, each new
+/// number named first, so that none is read after it was set (a phase's
+/// doubling reads both old numbers).
+fn assign(out: &mut String, syntax: &dyn Syntax, indent: &str, target: &CValue, value: &CValue) {
+    let (targets, values) = (target.parts(), value.parts());
+    assert_eq!(targets.len(), values.len(), "{target:?} = {value:?}");
+    if let ([t], [v]) = (&targets[..], &values[..]) {
+        let _ = writeln!(out, "{indent}{t} = {v};");
+        return;
+    }
+    let _ = writeln!(out, "{indent}{{");
+    for (t, v) in targets.iter().zip(&values) {
+        let _ = writeln!(out, "{indent}  {}", syntax.declare(&format!("{t}_new"), v));
+    }
+    for t in &targets {
+        let _ = writeln!(out, "{indent}  {t} = {t}_new;");
+    }
+    let _ = writeln!(out, "{indent}}}");
+}
+
+impl C<'_> {
     /// `e`, an operation of named values and numbers, as C text per
     /// component, with its outermost operation.
-    fn expr(&self, scope: &HashMap<&str, CValue>, e: &Expr) -> (CValue, Option<Op>) {
+    fn expr(&self, scope: &Scope, e: &Expr) -> (CValue, Option<Op>) {
         match e {
             Expr::Var(name) => (scope[name].clone(), None),
             Expr::Num(v) => (CValue::Real(self.syntax.literal(*v)), None),
+            Expr::Count(n) => (CValue::Count(format!("{n}u")), None),
+            Expr::Abs(a) => match self.expr(scope, a).0 {
+                CValue::Real(a) => (CValue::Real(self.syntax.call(Func::Abs, &a, "0.0")), None),
+                other => panic!("|{other:?}|"),
+            },
+            Expr::Finite(a) => match self.expr(scope, a).0 {
+                CValue::Real(a) => (CValue::Bool(format!("__builtin_isfinite({a})")), None),
+                other => panic!("finite {other:?}"),
+            },
+            // As many components as a state in scope has (a program's
+            // states have the model's dimension).
+            Expr::Fill(a) => match self.operand(scope, a) {
+                CValue::Real(a) => {
+                    let d = scope
+                        .values()
+                        .find_map(|v| match v {
+                            CValue::State(y) => Some(y.len()),
+                            _ => None,
+                        })
+                        .expect("a filled state where a state is in scope");
+                    (CValue::State(vec![a; d]), None)
+                }
+                other => panic!("a state filled with {other:?}"),
+            },
             Expr::First(a) | Expr::Second(a) => match self.expr(scope, a).0 {
                 CValue::Pair(c, s) => (
                     CValue::Real(if matches!(e, Expr::First(_)) { c } else { s }),
@@ -285,10 +511,10 @@ impl C<'_> {
             // Truth values as C ints, in parentheses whole; `&` and `|`
             // compute both operands, as `integrate::wall::may_reach` does.
             Expr::Cmp(cmp, a, b) => match (self.operand(scope, a), self.operand(scope, b)) {
-                (CValue::Real(a), CValue::Real(b)) => {
+                (CValue::Real(a), CValue::Real(b)) | (CValue::Count(a), CValue::Count(b)) => {
                     (CValue::Bool(format!("({a} {} {b})", cmp.symbol())), None)
                 }
-                _ => panic!("a comparison of two numbers"),
+                _ => panic!("a comparison of two numbers or two counters"),
             },
             Expr::And(a, b) | Expr::Or(a, b) => {
                 let symbol = if matches!(e, Expr::And(..)) { '&' } else { '|' };
@@ -303,11 +529,17 @@ impl C<'_> {
                 CValue::Bool(a) => (CValue::Bool(format!("!{a}")), None),
                 other => panic!("{other:?} is not a truth value"),
             },
+            Expr::Select {
+                cond,
+                then,
+                otherwise,
+            } => self.select(scope, cond, then, otherwise),
             Expr::Bin(op, a, b) => {
                 let ((a, oa), (b, ob)) = (self.expr(scope, a), self.expr(scope, b));
                 let both = |x: &str, y: &str| binary(*op, (x, oa), (y, ob));
                 let value = match (a, b) {
                     (CValue::Real(x), CValue::Real(y)) => CValue::Real(both(&x, &y)),
+                    (CValue::Count(x), CValue::Count(y)) => CValue::Count(both(&x, &y)),
                     (CValue::State(x), CValue::State(y)) => {
                         CValue::State(x.iter().zip(&y).map(|(x, y)| both(x, y)).collect())
                     }
@@ -323,21 +555,42 @@ impl C<'_> {
             }
         }
     }
-}
 
-impl C<'_> {
+    /// `cond ? then : otherwise`, per component: C's choice without a
+    /// branch, which the compiler vectorises as a blend.
+    fn select(
+        &self,
+        scope: &Scope,
+        cond: &Expr,
+        then: &Expr,
+        otherwise: &Expr,
+    ) -> (CValue, Option<Op>) {
+        let CValue::Bool(c) = self.expr(scope, cond).0 else {
+            panic!("a selection's condition is a truth value")
+        };
+        let ((a, oa), (b, ob)) = (self.expr(scope, then), self.expr(scope, otherwise));
+        let parts = a
+            .parts()
+            .iter()
+            .zip(b.parts())
+            .map(|(x, y)| format!("({c} ? {} : {})", wrap(x, oa), wrap(y, ob)))
+            .collect();
+        (a.with_parts(parts), None)
+    }
+
     /// `e` as an operand: its text, in parentheses where it is an
-    /// operation (a number's only; a call's arguments and a comparison's
-    /// sides are read where they are used).
-    fn operand(&self, scope: &HashMap<&str, CValue>, e: &Expr) -> CValue {
+    /// operation (a number's or a counter's only; a call's arguments and a
+    /// comparison's sides are read where they are used).
+    fn operand(&self, scope: &Scope, e: &Expr) -> CValue {
         match self.expr(scope, e) {
             (CValue::Real(v), Some(_)) => CValue::Real(format!("({v})")),
+            (CValue::Count(v), Some(_)) => CValue::Count(format!("({v})")),
             (value, _) => value,
         }
     }
 }
 
-fn var(scope: &HashMap<&str, CValue>, e: &Expr) -> Option<CValue> {
+fn named(scope: &Scope, e: &Expr) -> Option<CValue> {
     match e {
         Expr::Var(name) => scope.get(name).cloned(),
         _ => None,
@@ -347,7 +600,11 @@ fn var(scope: &HashMap<&str, CValue>, e: &Expr) -> Option<CValue> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::ir::step::integrator;
+    use crate::model::ir::integrator::integrator;
+    use crate::model::ir::step::build::{
+        abs, and, break_unless, cmp, count, first, greater, less, lets, num, pair, second, select,
+        var,
+    };
 
     struct Plain;
 
@@ -358,14 +615,28 @@ mod tests {
         fn declare(&self, name: &str, value: &str) -> String {
             format!("{name} = {value};")
         }
-        fn call(&self, _: crate::model::language::expr::Func, _: &str, _: &str) -> String {
-            unreachable!()
+        fn call(&self, f: Func, a: &str, _: &str) -> String {
+            format!("{}({a})", f.name())
         }
+    }
+
+    /// The integrator's program as the kernels print it.
+    fn kernels() -> Program {
+        let mut program = integrator();
+        let c_only = crate::model::ir::integrator::C_ONLY;
+        program.functions.retain(|f| !c_only.contains(&f.name));
+        program
+    }
+
+    #[test]
+    #[should_panic(expected = "WGSL has no constant NaN")]
+    fn wgsl_refuses_a_constant_nan() {
+        wgsl(&integrator(), &Plain);
     }
 
     #[test]
     fn rk4_prints_its_sum_in_the_reference_order() {
-        let wgsl = wgsl(&integrator(), &Plain);
+        let wgsl = wgsl(&kernels(), &Plain);
         assert!(
             wgsl.contains("let increment = rk4_stages(p, phase, mid, end, y, h);"),
             "{wgsl}"
@@ -382,13 +653,158 @@ mod tests {
         );
     }
 
+    /// A program with every statement: a counted loop that halves a
+    /// number, a branch, a selection of states and a phase set from its
+    /// own old value.
+    fn counted() -> Program {
+        let body = vec![
+            Stmt::Var("x", var("a")),
+            Stmt::Var("n", count(0)),
+            Stmt::Loop(vec![
+                break_unless(and(
+                    greater(abs(var("x")), num(0.5)),
+                    less(var("n"), count(8)),
+                )),
+                Stmt::Set("x", var("x") * 0.5),
+                Stmt::Set("n", var("n") + count(1)),
+            ]),
+            Stmt::Var("q", pair(var("x"), var("a"))),
+            Stmt::If(
+                cmp(crate::model::ir::step::Cmp::Equal, var("n"), count(0)),
+                vec![Stmt::Set("q", pair(second(var("q")), first(var("q"))))],
+                vec![Stmt::Set("x", num(2.0) * "x")],
+            ),
+            Stmt::Let(
+                "z",
+                select(greater(var("x"), num(0.0)), var("y") + "y", var("y")),
+            ),
+        ];
+        Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("a", Ty::Real), ("y", Ty::State)],
+                body,
+                results: vec![("r", var("x") * "z")],
+                returns: None,
+            }],
+        }
+    }
+
+    #[test]
+    fn statements_print_as_wgsl_statements() {
+        let text = wgsl(&counted(), &Plain);
+        let expected = "\
+fn f(a: real, y: State) -> State {
+    var x = a;
+    var n = 0u;
+    loop {
+        if (!((abs(x) > 0.5) && (n < 8u))) {
+            break;
+        }
+        x = x * 0.5;
+        n = n + 1u;
+    }
+    var q = vec2<real>(x, a);
+    if (n == 0u) {
+        q = vec2<real>(q.y, q.x);
+    } else {
+        x = 2.0 * x;
+    }
+    let z = select(y, y + y, (x > 0.0));
+    return x * z;
+}
+
+";
+        assert_eq!(text, expected);
+    }
+
+    #[test]
+    fn statements_inline_into_c_with_every_component_named() {
+        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
+        let mut c = C {
+            syntax: &Plain,
+            field: &mut field,
+            indent: "",
+        };
+        let mut out = String::new();
+        let args = vec![
+            CValue::Real("A".into()),
+            CValue::State(vec!["Y0".into(), "Y1".into()]),
+        ];
+        let results = c.inline(&mut out, &counted(), "f", args, "f_");
+        let expected = "\
+double f_x = A;
+uint32_t f_n = 0u;
+for (;;) {
+  if (!((abs(f_x) > 0.5) & (f_n < 8u))) {
+    break;
+  }
+  f_x = f_x * 0.5;
+  f_n = f_n + 1u;
+}
+double f_q_c = f_x;
+double f_q_s = A;
+if (f_n == 0u) {
+  {
+    f_q_c_new = f_q_s;
+    f_q_s_new = f_q_c;
+    f_q_c = f_q_c_new;
+    f_q_s = f_q_s_new;
+  }
+} else {
+  f_x = 2.0 * f_x;
+}
+f_z0 = ((f_x > 0.0) ? (Y0 + Y0) : Y0);
+f_z1 = ((f_x > 0.0) ? (Y1 + Y1) : Y1);
+";
+        assert_eq!(out, expected);
+        assert_eq!(
+            results,
+            vec![CValue::State(vec![
+                "f_x * f_z0".into(),
+                "f_x * f_z1".into()
+            ])]
+        );
+    }
+
+    #[test]
+    fn the_clock_s_cos_sin_prints_its_loops() {
+        let text = wgsl(&kernels(), &Plain);
+        assert!(
+            text.contains("fn cos_sin(angle: real) -> vec2<real> {"),
+            "{text}"
+        );
+        assert!(text.contains("        phi = phi * 0.5;\n"), "{text}");
+        assert!(
+            text.contains("    c = 1.0 - x2 * c;\n    s = 1.0 - x2 * s;\n"),
+            "{text}"
+        );
+        assert!(
+            text.contains("result = vec2<real>(rc * rc - rs * rs, 2.0 * rs * rc);"),
+            "{text}"
+        );
+        // The held flow's RK4 takes the stop.
+        assert!(
+            text.contains("fn held_step(p: Params, w: Stop, phase: vec2<real>, half: vec2<real>, y: State, h: real) -> Stepped {"),
+            "{text}"
+        );
+        assert!(
+            text.contains("let k1 = held_rhs(p, w, phase, y);"),
+            "{text}"
+        );
+        assert!(
+            text.contains("return Stepped(held_update(p, w, phase, mid, end, y, h), end);"),
+            "{text}"
+        );
+    }
+
     #[test]
     fn inlined_c_names_each_component_and_keeps_right_operands_apart() {
         let program = Program {
             functions: vec![Function {
                 name: "f",
                 params: vec![("a", Ty::Real), ("y", Ty::State)],
-                body: vec![("z", Expr::from("a") - (Expr::from("a") - "a") * "y")],
+                body: lets(vec![("z", Expr::from("a") - (Expr::from("a") - "a") * "y")]),
                 results: vec![("r", Expr::from("z") + "y")],
                 returns: None,
             }],

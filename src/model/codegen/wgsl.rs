@@ -752,18 +752,27 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
     }
 }
 
-/// The integrator's step program (`model::ir::step::integrator`) as
-/// WGSL functions: the clock's `rotate`, and for a flow (a system file
-/// with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment` and
-/// `rk4_step` with their `Stepped` result, and the stop test
-/// (`may_turn_past`, `may_meet`).
-pub fn integrator(flow: bool) -> String {
-    let mut program = crate::model::ir::step::integrator();
+/// The integrator's step program (`model::ir::integrator`) as WGSL
+/// functions: the clock's `rotate` and `cos_sin`; for a flow (a system
+/// file with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment`,
+/// `rk4_step` and `sub_step` with their `Stepped` result, the stop
+/// test (`may_turn_past`, `may_meet`) and Filippov's sliding field on one
+/// switch (`filippov_alpha`, `filippov_field`); with stops (`held`: the kernels'
+/// `Stop` and `held_rhs`), RK4 of the held flow (`held_*`).
+pub fn integrator(flow: bool, held: bool) -> String {
+    let mut program = crate::model::ir::integrator::integrator();
+    let c_only = crate::model::ir::integrator::C_ONLY;
+    program.functions.retain(|f| !c_only.contains(&f.name));
     if !flow {
-        program.functions.retain(|f| f.name == "rotate");
+        program
+            .functions
+            .retain(|f| ["rotate", "cos_sin"].contains(&f.name));
+    }
+    if !held {
+        program.functions.retain(|f| !f.name.starts_with("held_"));
     }
     format!(
-        "// Generated from the integrator's step program (model::ir::step).\n\n{}",
+        "// Generated from the integrator's step program (model::ir::integrator).\n\n{}",
         super::step::wgsl(&program, &Wgsl)
     )
 }

@@ -1,6 +1,8 @@
 //! The one intermediate representation every generated target is printed
 //! from: the lowered instruction tape of a model's expressions and its
-//! interpreter, the reference ([`tape`]).
+//! interpreter, the reference ([`tape`]); the step programs' language
+//! ([`step`]) and the integrator's programs written in it ([`integrator`]).
 
+pub mod integrator;
 pub mod step;
 pub mod tape;

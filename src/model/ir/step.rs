@@ -1,17 +1,26 @@
 //! Step programs: the integrator's arithmetic around a model's field,
 //! written once as data and printed to every generated target
 //! (`model::codegen::step`): inlined into the C of the CPU's native step
-//! loops, and as functions of the GPU's kernels in WGSL.
+//! loops, and as functions of the GPU's kernels in WGSL. The programs
+//! themselves are in `model::ir::integrator`; this is their language.
 //!
-//! A program is a list of functions, each a straight line of named values
-//! over four types (a number, a state vector, a pair of numbers such as a
-//! forcing phase or an event's value and rate, a truth value) ending in
-//! its results. The operations on states are componentwise, so a target
-//! without vectors (C, one scalar per component) and one with them (WGSL)
-//! perform the same IEEE operations in the same order. The model's field
-//! is an operation of its own ([`Expr::Field`]): each target says how it
-//! is evaluated (C prints the field's tape in place, WGSL calls the system
-//! file's `rhs`).
+//! A program is a list of functions, each a block of statements ending in
+//! its results. Values have five types (a number, a state vector, a pair
+//! of numbers such as a forcing phase or an event's value and rate, a
+//! truth value, and a counter, an unsigned integer that bounds a loop).
+//! The statements are what the integrator's loops need and no more: named
+//! values ([`Stmt::Let`]), values that change ([`Stmt::Var`],
+//! [`Stmt::Set`]), branches ([`Stmt::If`]) and loops left by a break
+//! ([`Stmt::Loop`], [`Stmt::Break`]). A branch-free choice
+//! ([`Expr::Select`]) is an expression of its own: a C loop over the slots
+//! that branches per slot is not vectorised, one that selects is.
+//!
+//! The operations on states are componentwise, so a target without
+//! vectors (C, one scalar per component) and one with them (WGSL) perform
+//! the same IEEE operations in the same order. A field is an operation of
+//! its own ([`Expr::Field`], the model's or the held flow's): each target
+//! says how it is evaluated (C prints the model's tape in place, WGSL
+//! calls the system file's `rhs` or the kernels' `held_rhs`).
 //!
 //! The Rust reference (`integrate::rk4`, `integrate::clock`,
 //! `integrate::wall::may_reach`) stays written by hand: it is the oracle
@@ -31,6 +40,22 @@ pub enum Ty {
     /// value and rate.
     Pair,
     Bool,
+    /// An unsigned integer (WGSL's `u32`, C's `uint32_t`): what counts a
+    /// loop's passes, so that every loop has a bound the program states.
+    Count,
+}
+
+/// Which field a [`Expr::Field`] evaluates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Field {
+    /// The model's field (WGSL's `rhs(p, phase, y)`).
+    Model,
+    /// The flow of a mass held at rest on a stop, its position and
+    /// velocity fixed (`Held` of `integrate::impact::resolve`; WGSL's
+    /// `held_rhs(p, w, phase, y)`, the stop `w` a parameter of every
+    /// function that reads it). Only the kernels hold a mass in generated
+    /// code: the CPU holds it in Rust.
+    Held,
 }
 
 /// A value: an operation of named values and numbers.
@@ -38,23 +63,41 @@ pub enum Ty {
 pub enum Expr {
     Var(&'static str),
     Num(f64),
-    /// `+ - * /`; on states componentwise, a number times a state scales it.
+    /// A counter's value.
+    Count(u32),
+    /// `+ - * /`; on states componentwise, a number times a state scales
+    /// it; `+ -` on counters.
     Bin(Op, Box<Expr>, Box<Expr>),
+    /// |x| of a number.
+    Abs(Box<Expr>),
+    /// Whether a number is neither infinite nor NaN.
+    Finite(Box<Expr>),
+    /// The state with every component this number.
+    Fill(Box<Expr>),
     /// A pair's first number (a phase's cosine).
     First(Box<Expr>),
     /// A pair's second number (a phase's sine).
     Second(Box<Expr>),
     /// The pair of two numbers.
     Pair(Box<Expr>, Box<Expr>),
-    /// A comparison of two numbers.
+    /// A comparison of two numbers, or of two counters.
     Cmp(Cmp, Box<Expr>, Box<Expr>),
     /// Truth values: both, either, not (without short circuits: every
     /// operand is computed, as the vectorised C loops do).
     And(Box<Expr>, Box<Expr>),
     Or(Box<Expr>, Box<Expr>),
     Not(Box<Expr>),
-    /// The model's field at a phase and a state.
+    /// `then` where `cond` holds, else `otherwise`, both computed: a
+    /// choice without a branch, which a C loop over the slots keeps
+    /// vectorised (an [`Stmt::If`] there would not be).
+    Select {
+        cond: Box<Expr>,
+        then: Box<Expr>,
+        otherwise: Box<Expr>,
+    },
+    /// A field at a phase and a state.
     Field {
+        of: Field,
         phase: Box<Expr>,
         state: Box<Expr>,
     },
@@ -74,6 +117,10 @@ pub enum Op {
 pub enum Cmp {
     Less,
     Greater,
+    LessEq,
+    GreaterEq,
+    Equal,
+    NotEqual,
 }
 
 impl Cmp {
@@ -81,6 +128,10 @@ impl Cmp {
         match self {
             Cmp::Less => "<",
             Cmp::Greater => ">",
+            Cmp::LessEq => "<=",
+            Cmp::GreaterEq => ">=",
+            Cmp::Equal => "==",
+            Cmp::NotEqual => "!=",
         }
     }
 }
@@ -96,14 +147,37 @@ impl Op {
     }
 }
 
-/// A function of a program: its parameters, its named values in order,
-/// and its results, named (a target that returns several values as a
-/// structure names it [`Function::returns`] with these fields).
+/// A statement of a function's body. Every name is declared once in a
+/// function (no shadowing), so a target that names every value after its
+/// function's call site (the C inliner) cannot make two the same.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stmt {
+    /// A named value, fixed once computed.
+    Let(&'static str, Expr),
+    /// A value that later statements may change.
+    Var(&'static str, Expr),
+    /// A new value of a [`Stmt::Var`], of the same type.
+    Set(&'static str, Expr),
+    /// The first block where the condition holds, else the second (empty
+    /// for none). Its declarations end with it.
+    If(Expr, Vec<Stmt>, Vec<Stmt>),
+    /// The block again and again until a [`Stmt::Break`] in it (not in a
+    /// loop inside it) leaves. A loop has one, and a bound: a counter it
+    /// tests (lavapipe caps a kernel's loop passes, and a loop that cannot
+    /// end is a bug on any target).
+    Loop(Vec<Stmt>),
+    /// Leaves the innermost loop.
+    Break,
+}
+
+/// A function of a program: its parameters, its statements, and its
+/// results, named (a target that returns several values as a structure
+/// names it [`Function::returns`] with these fields).
 #[derive(Clone, Debug)]
 pub struct Function {
     pub name: &'static str,
     pub params: Vec<(&'static str, Ty)>,
-    pub body: Vec<(&'static str, Expr)>,
+    pub body: Vec<Stmt>,
     pub results: Vec<(&'static str, Expr)>,
     /// The structure of several results (`None` with one).
     pub returns: Option<&'static str>,
@@ -113,6 +187,15 @@ pub struct Function {
 #[derive(Clone, Debug, Default)]
 pub struct Program {
     pub functions: Vec<Function>,
+}
+
+/// A name in scope while a function is typed.
+#[derive(Clone, Copy, Debug)]
+struct Binding {
+    name: &'static str,
+    ty: Ty,
+    /// A [`Stmt::Var`], which [`Stmt::Set`] may change.
+    mutable: bool,
 }
 
 impl Program {
@@ -127,55 +210,219 @@ impl Program {
     /// gives; panics on an ill-typed program (a program is a constant of
     /// the source, and `tests` type every one).
     pub fn type_of(&self, e: &Expr, scope: &dyn Fn(&str) -> Ty) -> Ty {
+        let ty = |e: &Expr| self.type_of(e, scope);
+        let expect = |e: &Expr, want: Ty, what: &str| {
+            let got = ty(e);
+            assert_eq!(got, want, "{what} of {got:?}");
+        };
         match e {
             Expr::Var(name) => scope(name),
-            Expr::Num(_) | Expr::First(_) | Expr::Second(_) => Ty::Real,
-            Expr::Pair(..) => Ty::Pair,
-            Expr::Cmp(..) | Expr::And(..) | Expr::Or(..) | Expr::Not(_) => Ty::Bool,
-            Expr::Field { .. } => Ty::State,
-            Expr::Bin(op, a, b) => match (self.type_of(a, scope), self.type_of(b, scope)) {
+            Expr::Num(_) => Ty::Real,
+            Expr::Count(_) => Ty::Count,
+            Expr::Abs(a) => {
+                expect(a, Ty::Real, "|x|");
+                Ty::Real
+            }
+            Expr::Finite(a) => {
+                expect(a, Ty::Real, "finite");
+                Ty::Bool
+            }
+            Expr::Fill(a) => {
+                expect(a, Ty::Real, "a filled state");
+                Ty::State
+            }
+            Expr::First(a) | Expr::Second(a) => {
+                expect(a, Ty::Pair, "a number of a pair");
+                Ty::Real
+            }
+            Expr::Pair(a, b) => {
+                expect(a, Ty::Real, "a pair");
+                expect(b, Ty::Real, "a pair");
+                Ty::Pair
+            }
+            Expr::Cmp(cmp, a, b) => match (ty(a), ty(b)) {
+                (Ty::Real, Ty::Real) | (Ty::Count, Ty::Count) => Ty::Bool,
+                (a, b) => panic!("{a:?} {} {b:?} is not a comparison", cmp.symbol()),
+            },
+            Expr::And(a, b) | Expr::Or(a, b) => {
+                expect(a, Ty::Bool, "a truth operation");
+                expect(b, Ty::Bool, "a truth operation");
+                Ty::Bool
+            }
+            Expr::Not(a) => {
+                expect(a, Ty::Bool, "not");
+                Ty::Bool
+            }
+            Expr::Select {
+                cond,
+                then,
+                otherwise,
+            } => {
+                expect(cond, Ty::Bool, "a selection's condition");
+                let t = ty(then);
+                expect(otherwise, t, "a selection's other value");
+                t
+            }
+            Expr::Field { phase, state, .. } => {
+                expect(phase, Ty::Pair, "a field's phase");
+                expect(state, Ty::State, "a field's state");
+                Ty::State
+            }
+            Expr::Bin(op, a, b) => match (ty(a), ty(b)) {
                 (Ty::Real, Ty::Real) => Ty::Real,
                 (Ty::State, Ty::State) if matches!(op, Op::Add | Op::Sub) => Ty::State,
+                (Ty::Count, Ty::Count) if matches!(op, Op::Add | Op::Sub) => Ty::Count,
                 (Ty::Real, Ty::State) if *op == Op::Mul => Ty::State,
                 (a, b) => panic!("{a:?} {} {b:?} is not a step operation", op.symbol()),
             },
-            Expr::Call(name, _) => {
+            Expr::Call(name, args) => {
                 let f = self.function(name);
                 assert!(f.returns.is_none(), "{name} has several results");
+                assert_eq!(args.len(), f.params.len(), "{name}'s arguments");
+                for (arg, (param, want)) in args.iter().zip(&f.params) {
+                    expect(arg, *want, &format!("{name}'s {param}"));
+                }
                 f.result_types(self)[0]
             }
         }
     }
 
-    /// The type of each named value of `f`, parameters first.
-    pub fn types(&self, f: &Function) -> Vec<(&'static str, Ty)> {
-        let mut types = f.params.clone();
-        for (name, value) in &f.body {
-            let ty = self.type_of(value, &|n| lookup(&types, n));
-            types.push((name, ty));
+    /// Types `block`'s statements with `scope` in force, adding to it
+    /// what it declares (dropped by the caller where the block ends);
+    /// `loops` counts the loops around it. Panics on an ill-typed
+    /// statement, a name declared twice, a `Set` of a fixed value, a
+    /// `Break` outside a loop, or a loop without one.
+    fn check(&self, block: &[Stmt], scope: &mut Vec<Binding>, loops: usize) {
+        for stmt in block {
+            let ty = |e: &Expr, scope: &[Binding]| self.type_of(e, &|n| lookup(scope, n).ty);
+            match stmt {
+                Stmt::Let(name, e) | Stmt::Var(name, e) => {
+                    assert!(
+                        scope.iter().all(|b| b.name != *name),
+                        "{name} is declared twice"
+                    );
+                    let ty = ty(e, scope);
+                    let mutable = matches!(stmt, Stmt::Var(..));
+                    scope.push(Binding { name, ty, mutable });
+                }
+                Stmt::Set(name, e) => {
+                    let target = lookup(scope, name);
+                    assert!(target.mutable, "{name} is not a var");
+                    assert_eq!(ty(e, scope), target.ty, "{name}'s new value");
+                }
+                Stmt::If(cond, then, otherwise) => {
+                    assert_eq!(ty(cond, scope), Ty::Bool, "a condition");
+                    for block in [then, otherwise] {
+                        let outer = scope.len();
+                        self.check(block, scope, loops);
+                        scope.truncate(outer);
+                    }
+                }
+                Stmt::Loop(body) => {
+                    assert!(breaks(body), "a loop without a break");
+                    let outer = scope.len();
+                    self.check(body, scope, loops + 1);
+                    scope.truncate(outer);
+                }
+                Stmt::Break => assert!(loops > 0, "a break outside a loop"),
+            }
         }
-        types
     }
+
+    /// The names in scope at the end of `f`'s body, parameters first,
+    /// every statement typed on the way.
+    fn scope_at_end(&self, f: &Function) -> Vec<Binding> {
+        let mut scope: Vec<Binding> = f
+            .params
+            .iter()
+            .map(|&(name, ty)| Binding {
+                name,
+                ty,
+                mutable: false,
+            })
+            .collect();
+        self.check(&f.body, &mut scope, 0);
+        scope
+    }
+}
+
+/// Whether `block` leaves its loop: a break in it, or in a branch of it
+/// (one in a loop inside it leaves that loop).
+fn breaks(block: &[Stmt]) -> bool {
+    block.iter().any(|s| match s {
+        Stmt::Break => true,
+        Stmt::If(_, a, b) => breaks(a) || breaks(b),
+        _ => false,
+    })
 }
 
 impl Function {
     /// The type of each result.
     pub fn result_types(&self, program: &Program) -> Vec<Ty> {
-        let types = program.types(self);
+        let scope = program.scope_at_end(self);
         self.results
             .iter()
-            .map(|(_, e)| program.type_of(e, &|n| lookup(&types, n)))
+            .map(|(_, e)| program.type_of(e, &|n| lookup(&scope, n).ty))
             .collect()
+    }
+
+    /// Every expression of the function, its statements' (in branches
+    /// and loops too) and its results'.
+    pub fn exprs(&self) -> Vec<&Expr> {
+        fn of<'a>(block: &'a [Stmt], out: &mut Vec<&'a Expr>) {
+            for s in block {
+                match s {
+                    Stmt::Let(_, e) | Stmt::Var(_, e) | Stmt::Set(_, e) => out.push(e),
+                    Stmt::If(c, a, b) => {
+                        out.push(c);
+                        of(a, out);
+                        of(b, out);
+                    }
+                    Stmt::Loop(body) => of(body, out),
+                    Stmt::Break => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        of(&self.body, &mut out);
+        out.extend(self.results.iter().map(|(_, e)| e));
+        out
     }
 }
 
-fn lookup(types: &[(&'static str, Ty)], name: &str) -> Ty {
-    types
+impl Expr {
+    /// The expressions this one is an operation of.
+    pub fn operands(&self) -> Vec<&Expr> {
+        match self {
+            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) => Vec::new(),
+            Expr::Bin(_, a, b)
+            | Expr::Pair(a, b)
+            | Expr::Cmp(_, a, b)
+            | Expr::And(a, b)
+            | Expr::Or(a, b) => vec![a, b],
+            Expr::Abs(a)
+            | Expr::Finite(a)
+            | Expr::Fill(a)
+            | Expr::First(a)
+            | Expr::Second(a)
+            | Expr::Not(a) => vec![a],
+            Expr::Select {
+                cond,
+                then,
+                otherwise,
+            } => vec![cond, then, otherwise],
+            Expr::Field { phase, state, .. } => vec![phase, state],
+            Expr::Call(_, args) => args.iter().collect(),
+        }
+    }
+}
+
+fn lookup(scope: &[Binding], name: &str) -> Binding {
+    *scope
         .iter()
         .rev()
-        .find(|(n, _)| *n == name)
+        .find(|b| b.name == name)
         .unwrap_or_else(|| panic!("{name} is not in scope"))
-        .1
 }
 
 impl<T: Into<Expr>> Add<T> for Expr {
@@ -218,238 +465,130 @@ impl From<&'static str> for Expr {
     }
 }
 
-fn var(name: &'static str) -> Expr {
-    Expr::Var(name)
-}
+/// Short forms that keep the programs readable.
+pub mod build {
+    use super::{Cmp, Expr, Field, Stmt};
 
-fn num(v: f64) -> Expr {
-    Expr::Num(v)
-}
-
-fn cos(phase: &'static str) -> Expr {
-    Expr::First(Box::new(var(phase)))
-}
-
-fn sin(phase: &'static str) -> Expr {
-    Expr::Second(Box::new(var(phase)))
-}
-
-fn greater(a: Expr, b: Expr) -> Expr {
-    Expr::Cmp(Cmp::Greater, Box::new(a), Box::new(b))
-}
-
-fn less(a: Expr, b: Expr) -> Expr {
-    Expr::Cmp(Cmp::Less, Box::new(a), Box::new(b))
-}
-
-fn and(a: Expr, b: Expr) -> Expr {
-    Expr::And(Box::new(a), Box::new(b))
-}
-
-fn or(a: Expr, b: Expr) -> Expr {
-    Expr::Or(Box::new(a), Box::new(b))
-}
-
-fn field(phase: &'static str, state: &'static str) -> Expr {
-    Expr::Field {
-        phase: Box::new(var(phase)),
-        state: Box::new(var(state)),
+    pub fn var(name: &'static str) -> Expr {
+        Expr::Var(name)
     }
-}
 
-fn call(name: &'static str, args: &[&'static str]) -> Expr {
-    Expr::Call(name, args.iter().map(|&a| var(a)).collect())
-}
-
-/// The integrator's step: the clock's rotation (`integrate::clock::rotate`)
-/// and the classical RK4 step (`integrate::rk4`), whose stages take the
-/// phases of the step's start, middle and end.
-///
-/// - `rotate(phase, by)`: the phase turned through the angle whose (cos,
-///   sin) is `by`, renormalised to the unit circle by one Newton step for
-///   1/√(c² + s²), so rounding cannot make the forcing's amplitude drift.
-/// - `rk4_stages(phase, mid, end, y, h)`: the increment y(t + h) - y(t),
-///   kept apart from the update so that the f32 kernels can compensate
-///   the sum.
-/// - `rk4_update(phase, mid, end, y, h)`: the step's end, y + the
-///   increment.
-/// - `rk4_increment(phase, half, y, h)`: the phases turned through ωh/2
-///   twice (`half` is its (cos, sin)), the increment and the end's phase.
-/// - `rk4_step(phase, half, y, h)`: the step's end and phase.
-pub fn integrator() -> Program {
-    use Ty::{Pair, Real, State};
-    let rotate = Function {
-        name: "rotate",
-        params: vec![("phase", Pair), ("by", Pair)],
-        body: vec![
-            ("c", cos("phase") * cos("by") - sin("phase") * sin("by")),
-            ("s", sin("phase") * cos("by") + cos("phase") * sin("by")),
-            (
-                "scale",
-                num(1.5) - num(0.5) * (var("c") * "c" + var("s") * "s"),
-            ),
-        ],
-        results: vec![(
-            "phase",
-            Expr::Pair(Box::new(var("c") * "scale"), Box::new(var("s") * "scale")),
-        )],
-        returns: None,
-    };
-    let stages = Function {
-        name: "rk4_stages",
-        params: vec![
-            ("phase", Pair),
-            ("mid", Pair),
-            ("end", Pair),
-            ("y", State),
-            ("h", Real),
-        ],
-        body: vec![
-            ("h2", num(0.5) * "h"),
-            ("k1", field("phase", "y")),
-            ("y2", var("y") + var("h2") * "k1"),
-            ("k2", field("mid", "y2")),
-            ("y3", var("y") + var("h2") * "k2"),
-            ("k3", field("mid", "y3")),
-            ("y4", var("y") + var("h") * "k3"),
-            ("k4", field("end", "y4")),
-            ("sixth", var("h") / 6.0),
-        ],
-        results: vec![(
-            "increment",
-            var("sixth") * (var("k1") + num(2.0) * (var("k2") + "k3") + "k4"),
-        )],
-        returns: None,
-    };
-    // The phases of the step's middle and end, and the update: what every
-    // step takes, apart from where the phases are turned (the native step
-    // loops turn them once for all slots).
-    let turned = || {
-        vec![
-            ("mid", call("rotate", &["phase", "half"])),
-            ("end", call("rotate", &["mid", "half"])),
-        ]
-    };
-    let update = Function {
-        name: "rk4_update",
-        params: stages.params.clone(),
-        body: vec![(
-            "increment",
-            call("rk4_stages", &["phase", "mid", "end", "y", "h"]),
-        )],
-        results: vec![("y", var("y") + "increment")],
-        returns: None,
-    };
-    let whole = [("phase", Pair), ("half", Pair), ("y", State), ("h", Real)];
-    let increment = Function {
-        name: "rk4_increment",
-        params: whole.to_vec(),
-        body: turned(),
-        results: vec![
-            ("y", call("rk4_stages", &["phase", "mid", "end", "y", "h"])),
-            ("phase", var("end")),
-        ],
-        returns: Some("Stepped"),
-    };
-    let step = Function {
-        name: "rk4_step",
-        params: whole.to_vec(),
-        body: turned(),
-        results: vec![
-            ("y", call("rk4_update", &["phase", "mid", "end", "y", "h"])),
-            ("phase", var("end")),
-        ],
-        returns: Some("Stepped"),
-    };
-    let [turn_past, meet] = crossing_tests();
-    Program {
-        functions: vec![rotate, stages, update, increment, step, turn_past, meet],
+    pub fn num(v: f64) -> Expr {
+        Expr::Num(v)
     }
-}
 
-/// The stop test of walls and surfaces alike (`integrate::wall::may_reach`,
-/// bounded):
-///
-/// - `may_turn_past(g0, s0, g1, s1, h)`: whether a step of size h turning
-///   back inside (rate s0 > 0 to s1 < 0, values g0, g1 short of the
-///   surface) may pass it in between: not when both ends fall short by
-///   `TURN_REACH`·h·(s0 - s1), twice the most the step's cubic can rise
-///   (`integrate::wall::may_turn_past`).
-/// - `may_meet(start, end, h)`: whether a step whose (value, rate) goes
-///   from `start` to `end` may cross (value > 0 across): it ends across,
-///   or turns back within reach.
-fn crossing_tests() -> [Function; 2] {
-    use Ty::{Pair, Real};
-    let turn_past = Function {
-        name: "may_turn_past",
-        params: vec![
-            ("g0", Real),
-            ("s0", Real),
-            ("g1", Real),
-            ("s1", Real),
-            ("h", Real),
-        ],
-        body: vec![(
-            "reach",
-            num(crate::integrate::wall::TURN_REACH) * "h" * (var("s0") - "s1"),
-        )],
-        results: vec![(
-            "passes",
-            Expr::Not(Box::new(and(
-                less(var("g0") + "reach", num(0.0)),
-                less(var("g1") + "reach", num(0.0)),
-            ))),
-        )],
-        returns: None,
-    };
-    let meet = Function {
-        name: "may_meet",
-        params: vec![("start", Pair), ("end", Pair), ("h", Real)],
-        body: vec![(
-            "turns",
-            Expr::Call(
-                "may_turn_past",
-                vec![cos("start"), sin("start"), cos("end"), sin("end"), var("h")],
-            ),
-        )],
-        results: vec![(
-            "meets",
-            or(
-                greater(cos("end"), num(0.0)),
-                and(
-                    and(greater(sin("start"), num(0.0)), less(sin("end"), num(0.0))),
-                    var("turns"),
-                ),
-            ),
-        )],
-        returns: None,
-    };
-    [turn_past, meet]
+    pub fn count(n: u32) -> Expr {
+        Expr::Count(n)
+    }
+
+    pub fn abs(a: Expr) -> Expr {
+        Expr::Abs(Box::new(a))
+    }
+
+    pub fn finite(a: Expr) -> Expr {
+        Expr::Finite(Box::new(a))
+    }
+
+    pub fn fill(a: Expr) -> Expr {
+        Expr::Fill(Box::new(a))
+    }
+
+    pub fn first(a: Expr) -> Expr {
+        Expr::First(Box::new(a))
+    }
+
+    pub fn second(a: Expr) -> Expr {
+        Expr::Second(Box::new(a))
+    }
+
+    /// A phase's cosine.
+    pub fn cos(phase: &'static str) -> Expr {
+        first(var(phase))
+    }
+
+    /// A phase's sine.
+    pub fn sin(phase: &'static str) -> Expr {
+        second(var(phase))
+    }
+
+    pub fn pair(a: Expr, b: Expr) -> Expr {
+        Expr::Pair(Box::new(a), Box::new(b))
+    }
+
+    pub fn cmp(cmp: Cmp, a: Expr, b: Expr) -> Expr {
+        Expr::Cmp(cmp, Box::new(a), Box::new(b))
+    }
+
+    pub fn greater(a: Expr, b: Expr) -> Expr {
+        cmp(Cmp::Greater, a, b)
+    }
+
+    pub fn less(a: Expr, b: Expr) -> Expr {
+        cmp(Cmp::Less, a, b)
+    }
+
+    pub fn and(a: Expr, b: Expr) -> Expr {
+        Expr::And(Box::new(a), Box::new(b))
+    }
+
+    pub fn or(a: Expr, b: Expr) -> Expr {
+        Expr::Or(Box::new(a), Box::new(b))
+    }
+
+    pub fn not(a: Expr) -> Expr {
+        Expr::Not(Box::new(a))
+    }
+
+    pub fn select(cond: Expr, then: Expr, otherwise: Expr) -> Expr {
+        Expr::Select {
+            cond: Box::new(cond),
+            then: Box::new(then),
+            otherwise: Box::new(otherwise),
+        }
+    }
+
+    pub fn field(of: Field, phase: &'static str, state: Expr) -> Expr {
+        Expr::Field {
+            of,
+            phase: Box::new(var(phase)),
+            state: Box::new(state),
+        }
+    }
+
+    pub fn call(name: &'static str, args: &[&'static str]) -> Expr {
+        Expr::Call(name, args.iter().map(|&a| var(a)).collect())
+    }
+
+    /// Named values in order.
+    pub fn lets(values: Vec<(&'static str, Expr)>) -> Vec<Stmt> {
+        values.into_iter().map(|(n, e)| Stmt::Let(n, e)).collect()
+    }
+
+    /// Leaves the loop unless `cond` holds: a `while`'s test.
+    pub fn break_unless(cond: Expr) -> Stmt {
+        Stmt::If(not(cond), vec![Stmt::Break], Vec::new())
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::build::*;
     use super::*;
 
-    #[test]
-    fn every_function_is_well_typed() {
-        let program = integrator();
-        let expected = [
-            ("rotate", vec![Ty::Pair]),
-            ("rk4_stages", vec![Ty::State]),
-            ("rk4_update", vec![Ty::State]),
-            ("rk4_increment", vec![Ty::State, Ty::Pair]),
-            ("rk4_step", vec![Ty::State, Ty::Pair]),
-            ("may_turn_past", vec![Ty::Bool]),
-            ("may_meet", vec![Ty::Bool]),
-        ];
-        for (name, types) in expected {
-            assert_eq!(
-                program.function(name).result_types(&program),
-                types,
-                "{name}"
-            );
+    fn one(params: Vec<(&'static str, Ty)>, body: Vec<Stmt>, result: Expr) -> Program {
+        Program {
+            functions: vec![Function {
+                name: "f",
+                params,
+                body,
+                results: vec![("r", result)],
+                returns: None,
+            }],
         }
+    }
+
+    fn result_type(program: &Program) -> Ty {
+        program.function("f").result_types(program)[0]
     }
 
     #[test]
@@ -458,5 +597,80 @@ mod tests {
         let program = Program::default();
         let scope = |_: &str| Ty::State;
         program.type_of(&(var("y") * "y"), &scope);
+    }
+
+    #[test]
+    fn a_counted_loop_with_a_select_is_typed() {
+        let program = one(
+            vec![("x", Ty::Real), ("y", Ty::State)],
+            vec![
+                Stmt::Var("n", count(0)),
+                Stmt::Var("z", var("y")),
+                Stmt::Loop(vec![
+                    break_unless(less(var("n"), count(3))),
+                    Stmt::Let("big", greater(abs(var("x")), num(1.0))),
+                    Stmt::Set("z", select(var("big"), var("z") + "y", var("z"))),
+                    Stmt::Set("n", var("n") + count(1)),
+                ]),
+                Stmt::If(
+                    cmp(Cmp::Equal, var("n"), count(3)),
+                    vec![Stmt::Set("z", var("x") * "z")],
+                    Vec::new(),
+                ),
+            ],
+            var("z"),
+        );
+        assert_eq!(result_type(&program), Ty::State);
+    }
+
+    #[test]
+    #[should_panic(expected = "big is not in scope")]
+    fn a_loop_s_values_end_with_it() {
+        let body = vec![Stmt::Loop(vec![
+            Stmt::Let("big", greater(var("x"), num(1.0))),
+            Stmt::Break,
+        ])];
+        result_type(&one(vec![("x", Ty::Real)], body, var("big")));
+    }
+
+    #[test]
+    #[should_panic(expected = "x is not a var")]
+    fn a_parameter_is_not_set() {
+        let body = vec![Stmt::Set("x", num(1.0))];
+        result_type(&one(vec![("x", Ty::Real)], body, var("x")));
+    }
+
+    #[test]
+    #[should_panic(expected = "n's new value")]
+    fn a_counter_holds_no_number() {
+        let body = vec![Stmt::Var("n", count(0)), Stmt::Set("n", num(1.0))];
+        result_type(&one(vec![("x", Ty::Real)], body, var("x")));
+    }
+
+    #[test]
+    #[should_panic(expected = "a loop without a break")]
+    fn a_loop_has_a_break() {
+        let body = vec![Stmt::Var("n", count(0)), Stmt::Loop(Vec::new())];
+        result_type(&one(vec![("x", Ty::Real)], body, var("x")));
+    }
+
+    #[test]
+    #[should_panic(expected = "a break outside a loop")]
+    fn a_break_is_in_a_loop() {
+        result_type(&one(vec![("x", Ty::Real)], vec![Stmt::Break], var("x")));
+    }
+
+    #[test]
+    #[should_panic(expected = "x is declared twice")]
+    fn a_name_is_declared_once() {
+        let body = vec![Stmt::Let("x", num(1.0))];
+        result_type(&one(vec![("x", Ty::Real)], body, var("x")));
+    }
+
+    #[test]
+    #[should_panic(expected = "a selection's other value")]
+    fn a_selection_chooses_between_values_of_one_type() {
+        let e = select(greater(var("x"), num(0.0)), var("x"), var("y"));
+        result_type(&one(vec![("x", Ty::Real), ("y", Ty::State)], vec![], e));
     }
 }
