@@ -273,3 +273,109 @@ fn the_henon_fixed_point_branch_passes_its_fold_and_both_bifurcations_are_locate
     // Past the fold the other fixed point runs off to infinity as a → 0⁻.
     assert_eq!(branch.end, BranchEnd::MaxPoints);
 }
+
+/// The seed's impacting period-1 orbit, found by its attractor at η = 0.6
+/// (800 iterations from rest), followed in η: a closed branch (an isola)
+/// with two folds, the stable orbit born at one with the unstable one and
+/// both lost at the other. Each fold is checked against an independent
+/// computation on the exact backend's closed form
+/// (`integrate::closed_form`, through `System::iterate_exact`): its exact
+/// map and exact Jacobian, the fold solved as U(x) = x, det(DU - I) = 0
+/// by Newton in (x, η).
+#[test]
+fn the_seed_s_impacting_orbit_is_an_isola_whose_folds_match_the_closed_form() {
+    let (params, settings, index) = seed(0.6);
+    let system = Seed::new(&params);
+    let flow = lyapsweep::orbit::map::flow_of(&system, &settings);
+    let mut x = [0.0, 0.0];
+    for _ in 0..800 {
+        x = system.iterate(&x, &flow, &mut Default::default());
+    }
+    let orbit = solve(&system, &settings, &newton(), &x, 1).expect("orbit");
+    assert_eq!(orbit.stats.impacts, 1);
+    let continuation = ContinuationSettings::over(index, (0.5, 1.5));
+    let branch = continue_branch::<2, Seed>(
+        &params,
+        &settings,
+        &newton(),
+        &continuation,
+        &orbit.state,
+        1,
+    );
+    assert_eq!(branch.end, BranchEnd::Closed);
+    assert!(branch.points.iter().all(|p| p.orbit.stats.impacts == 1));
+    // The sum rule (-2ζ: elastic impacts) on stable and unstable points.
+    for p in &branch.points {
+        assert!(
+            p.floquet.sum_error().abs() < 1e-9,
+            "η = {}: {:e}",
+            p.parameter,
+            p.floquet.sum_error()
+        );
+    }
+    let found = bifurcations::<2, Seed>(
+        &params,
+        &settings,
+        &newton(),
+        &continuation,
+        &branch.points,
+        1e-10,
+    );
+    let kinds: Vec<(Kind, f64)> = found.iter().map(|b| (b.kind, b.point.parameter)).collect();
+    assert_eq!(found.len(), 2, "{kinds:?}");
+    for b in &found {
+        assert_eq!(b.kind, Kind::Fold);
+        let exact = closed_form_fold(&params, index, b.point.orbit.state, b.point.parameter);
+        let error = (b.point.parameter - exact).abs();
+        assert!(
+            error < 1e-8,
+            "fold at {} against {exact}: {error:e}",
+            b.point.parameter
+        );
+    }
+    let mut etas: Vec<f64> = kinds.iter().map(|k| k.1).collect();
+    etas.sort_by(f64::total_cmp);
+    assert!(
+        (etas[0] - 0.5712).abs() < 1e-4 && (etas[1] - 0.6170).abs() < 1e-4,
+        "{etas:?}"
+    );
+}
+
+/// The fold of the closed form's period-1 orbit near (x, η): Newton on
+/// G(x, η) = (U(x) - x, det(DU(x) - I)) with U and DU the closed form's,
+/// G's own Jacobian by central differences (Newton converges to G's zero
+/// whatever that Jacobian's small error).
+fn closed_form_fold(base: &Params, index: usize, x: [f64; 2], eta: f64) -> f64 {
+    use lyapsweep::system::Part;
+    let g = |y: [f64; 3]| {
+        let system = Seed::new(&params_at(base, index, y[2]));
+        let mut stats = Default::default();
+        let (image, j) = system
+            .iterate_exact(&[y[0], y[1]], Part::WHOLE, &mut stats)
+            .expect("the seed has a closed form");
+        let det = (j[(0, 0)] - 1.0) * (j[(1, 1)] - 1.0) - j[(0, 1)] * j[(1, 0)];
+        [image[0] - y[0], image[1] - y[1], det]
+    };
+    let mut y = [x[0], x[1], eta];
+    for _ in 0..20 {
+        let r = g(y);
+        if r.iter().all(|v| v.abs() < 1e-14) {
+            break;
+        }
+        let h = 1e-7;
+        let jac = nalgebra::Matrix3::from_fn(|row, col| {
+            let (mut up, mut down) = (y, y);
+            up[col] += h;
+            down[col] -= h;
+            (g(up)[row] - g(down)[row]) / (up[col] - down[col])
+        });
+        let dy = jac
+            .lu()
+            .solve(&nalgebra::Vector3::new(-r[0], -r[1], -r[2]))
+            .expect("regular at a fold");
+        for i in 0..3 {
+            y[i] += dy[i];
+        }
+    }
+    y[2]
+}

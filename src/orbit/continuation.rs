@@ -73,6 +73,9 @@ pub enum BranchEnd {
     StepTooSmall { parameter: f64, failure: Failure },
     /// [`ContinuationSettings::max_points`] reached.
     MaxPoints,
+    /// It came back to its first point: a closed branch (an isola, such
+    /// as the seed's impacting period-1 orbit between its two folds).
+    Closed,
 }
 
 /// A followed branch: its points in the order followed, and its end.
@@ -238,6 +241,9 @@ where
     let mut points = vec![point::<D, S>(base, settings, index, start, first)];
     let mut step = continuation.step;
     let mut last_failure;
+    // Whether the branch has gone further from its first point than a
+    // few of its steps: only then can it close on it.
+    let mut left = false;
     while points.len() < continuation.max_points {
         let here = points.last().expect("a branch has its first point");
         let y = DVector::from_fn(D + 1, |i, _| {
@@ -275,6 +281,12 @@ where
                         }
                         let steps = orbit.steps;
                         points.push(point::<D, S>(base, settings, index, lambda, orbit));
+                        if closes(&points, &t, &mut left, step) {
+                            return Branch {
+                                points,
+                                end: BranchEnd::Closed,
+                            };
+                        }
                         step = if steps <= 2 {
                             step * 1.5
                         } else if steps > 3 {
@@ -309,6 +321,32 @@ where
         points,
         end: BranchEnd::MaxPoints,
     }
+}
+
+/// Whether the branch's newest point is back at its first: within the
+/// step just taken of it, heading the way the branch left it, after having
+/// been further than three steps away.
+fn closes<const D: usize>(
+    points: &[BranchPoint<D>],
+    t: &DVector<f64>,
+    left: &mut bool,
+    step: f64,
+) -> bool {
+    let y = |p: &BranchPoint<D>| {
+        DVector::from_fn(
+            D + 1,
+            |i, _| if i < D { p.orbit.state[i] } else { p.parameter },
+        )
+    };
+    let (first, last) = (y(&points[0]), y(points.last().expect("a point")));
+    let distance = (&last - &first).norm();
+    if distance > 3.0 * step {
+        *left = true;
+        return false;
+    }
+    // Back near the start, moving on past it (not towards it, which is
+    // the branch turning back on itself within a step).
+    *left && t.dot(&(&last - &first)) >= 0.0
 }
 
 /// A solved orbit at λ as a branch point, its multipliers from the δ
