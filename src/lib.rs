@@ -27,6 +27,7 @@ pub mod integrate;
 pub mod limits;
 pub mod method;
 pub mod model;
+pub mod orbit;
 pub mod output;
 pub mod perturbation;
 pub mod plan;

@@ -1,0 +1,84 @@
+//! An orbit's Floquet multipliers (the eigenvalues μ_i of DU^p) and its
+//! asymptotic exponents ln|μ_i| / (p·T), stable and unstable orbits alike,
+//! with the sum rule checked as for every lane's row.
+
+use nalgebra::{Complex, Const, DMatrix, DimMin};
+
+use super::ladder::refined_jacobian;
+use super::newton::Orbit;
+use crate::method::MethodSettings;
+use crate::system::{Params, System};
+
+/// What the multipliers say of an orbit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Floquet {
+    /// The eigenvalues of DU^p, largest modulus first (a complex pair
+    /// adjacent, positive imaginary part first).
+    pub multipliers: Vec<Complex<f64>>,
+    /// ln|μ_i| / time, in the multipliers' order (largest first).
+    pub exponents: Vec<f64>,
+    /// The exponent sum the system's volume law predicts for the orbit's
+    /// crossings per unit time, plus its flux term (a state-dependent
+    /// divergence, a section's return): what a lane's row is checked
+    /// against.
+    pub expected_sum: f64,
+    /// The change in ln|μ_i| between the δ ladder's rungs around the one
+    /// kept ([`super::ladder`]); 0 where the orbit's own estimate was used.
+    pub ladder_error: f64,
+}
+
+impl Floquet {
+    /// Σ exponents - expected sum.
+    pub fn sum_error(&self) -> f64 {
+        self.exponents.iter().sum::<f64>() - self.expected_sum
+    }
+
+    /// Whether every multiplier lies inside the unit circle.
+    pub fn stable(&self) -> bool {
+        self.multipliers.iter().all(|m| m.norm() < 1.0)
+    }
+}
+
+/// The multipliers and exponents of `orbit` of the system at `params`.
+pub fn floquet<const D: usize>(orbit: &Orbit<D>, params: &Params) -> Floquet {
+    let j = DMatrix::from_fn(D, D, |r, c| orbit.jacobian[(r, c)]);
+    let mut multipliers: Vec<Complex<f64>> = j.complex_eigenvalues().iter().copied().collect();
+    multipliers.sort_by(|a, b| b.norm().total_cmp(&a.norm()).then(b.im.total_cmp(&a.im)));
+    let exponents = multipliers
+        .iter()
+        .map(|m| m.norm().ln() / orbit.time)
+        .collect();
+    let rates: Vec<f64> = orbit
+        .stats
+        .crossings
+        .iter()
+        .map(|&c| f64::from(c) / orbit.time)
+        .collect();
+    let expected_sum =
+        (params.info.expected_sum)(params, &rates) + orbit.stats.log_flux / orbit.time;
+    Floquet {
+        multipliers,
+        exponents,
+        expected_sum,
+        ladder_error: 0.0,
+    }
+}
+
+/// [`floquet`] of the orbit's Jacobian re-estimated over the δ ladder
+/// ([`refined_jacobian`]), which replaces the orbit's own.
+pub fn refined_floquet<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    params: &Params,
+    orbit: &mut Orbit<D>,
+) -> Floquet
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let (jacobian, error) = refined_jacobian(system, settings, orbit);
+    orbit.jacobian = jacobian;
+    Floquet {
+        ladder_error: error,
+        ..floquet(orbit, params)
+    }
+}

@@ -1,0 +1,35 @@
+//! Periodic orbits of a system's map, stable or not: solved by Newton on
+//! U^p(x) - x = 0 with the Jacobian DU^p from the method's perturbed
+//! copies (`newton`, `map`), their Floquet multipliers and exponents with
+//! the sum rule (`floquet`, from the Jacobian re-estimated over a δ ladder,
+//! `ladder`), followed in one parameter by pseudo-arclength
+//! continuation through folds (`continuation`), and the zeros of test
+//! functions on a branch located to a tolerance in the parameter
+//! (`locate`), grazing a wall among them (`extremum`), and the folds,
+//! period doublings and Neimark–Sacker points on a branch from its
+//! multipliers (`bifurcation`).
+//!
+//! A sweep sees what attracts; these are the orbits between: the unstable
+//! middle of a hysteresis loop, and where an orbit is born or lost.
+//! Everything is generic over the system (`S: System<D>`); the grazing
+//! test functions read the flow's walls (`S: Flow<D>`).
+
+pub mod bifurcation;
+pub mod continuation;
+pub mod extremum;
+pub mod floquet;
+pub mod ladder;
+pub mod locate;
+pub mod map;
+pub mod newton;
+
+pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
+pub use continuation::{
+    continue_branch, params_at, Branch, BranchEnd, BranchPoint, ContinuationSettings,
+};
+pub use extremum::{largest, wall_excess};
+pub use floquet::{floquet, refined_floquet, Floquet};
+pub use ladder::refined_jacobian;
+pub use locate::{locate_zero, Located};
+pub use map::{evaluate, Evaluation};
+pub use newton::{relative_residual, solve, Failure, NewtonSettings, Orbit};
