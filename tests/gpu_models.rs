@@ -125,7 +125,7 @@ fn the_forced_pendulum_on_the_gpu_agrees_with_the_cpu_in_f64() {
     // sin64, the same bits on lavapipe): with the C library's sin on the
     // CPU, an ulp apart, the paths differed by up to 2.4e-9 at δ = 1e-6.
     // Now 8.0e-12 at δ = 1e-6 and 6.1e-14 at 1e-4 (measured), within
-    // the 1e-10 of issue 14 at both.
+    // the required 1e-10 at both.
     let (cpu, gpu) = pair("1e-4");
     for (k, (c, g)) in cpu.lanes.iter().zip(&gpu.lanes).enumerate() {
         // At δ = 1e-4 the differences' truncation misses the sum rule by
@@ -440,7 +440,7 @@ fn the_impact_pair_on_the_gpu_agrees_with_the_cpu_in_f64() {
     ) {
         return;
     }
-    // Issue 14 asks for 1e-9. Measured on lavapipe: 0, every lane bit for
+    // The requirement is 1e-9. Measured on lavapipe: 0, every lane bit for
     // bit the CPU's (the generated rhs has the CPU tape's association, and
     // the same stops' arithmetic in the same order, down to the bisection
     // of a release from rest); another adapter contracting differently
@@ -617,7 +617,7 @@ fn the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64() {
             &[&format!("run.backend=\"{backend}\"")],
         )
     };
-    // Issue 15 asks for 1e-9. Measured on lavapipe: 0, every lane bit for
+    // The requirement is 1e-9. Measured on lavapipe: 0, every lane bit for
     // bit the CPU's (the generated field reads the region's bit where the
     // CPU's tape has it folded in, 0 or 1, which changes no rounding; the
     // crossings are located by the same Newton on the same re-steps).
@@ -629,7 +629,7 @@ fn the_soft_stop_s_switch_on_the_gpu_agrees_with_the_cpu_in_f64() {
     // 2.7e-9 on the CPU; measured 1.9e-9 on both paths here).
     assert!(gpu_sum <= 1e-8, "{gpu_sum:e}");
     // With both below 1e-9 (3600 steps, δ = 3e-6; tests/switches.rs), the
-    // GPU keeps the sum rule to issue 15's 1e-9 too.
+    // GPU keeps the sum rule to the required 1e-9 too.
     let fine = |backend: &str| {
         model_scene(
             "soft-stop.toml",
