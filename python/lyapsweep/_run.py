@@ -265,6 +265,8 @@ class Run:
     flagged lanes by status in ``flagged_by_status``, of which those with no
     exponents in ``failures``), ``scene`` the scene as run, and ``folder`` where
     the set lies (``out``, or a temporary folder removed with the Run).
+    ``to_xarray()`` labels the tables by the swept parameters, the start and
+    the exponent; ``write_netcdf(path)`` writes them to a file.
     """
 
     def __init__(
