@@ -35,3 +35,10 @@ class RunError(RuntimeError):
         super().__init__(message)
         self.key = key
         self.column = column
+
+
+class InterpreterWarning(RuntimeWarning):
+    """A run whose model the host's C compiler did not build (none found,
+    ``CC`` names none, it failed, or the host is not Unix): the CPU path ran
+    it on the interpreter, to the same bits, 8 to 10 times slower. A wheel
+    brings no C compiler; the command line warns on stderr likewise."""

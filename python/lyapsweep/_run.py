@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 import threading
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Union
@@ -12,7 +13,7 @@ from typing import Any, Callable, Mapping, Optional, Union
 import pandas
 
 from . import _lyapsweep
-from ._errors import RunError
+from ._errors import InterpreterWarning, RunError
 
 Scene = Union[str, "os.PathLike[str]", Mapping[str, Any]]
 
@@ -94,7 +95,7 @@ def run(
     try:
         with _writing(folder):
             ran = _lyapsweep.run(source, overrides, folder, bar or progress)
-            result = Run(folder, ran["summary"], ran["scene"], scratch)
+            result = Run(folder, ran["summary"], ran["scene"], scratch, axes=ran["axes"])
     except BaseException as e:
         written = getattr(e, "lyapsweep_written", None)
         if scratch is not None:
@@ -107,7 +108,24 @@ def run(
     finally:
         if bar is not None:
             bar.close()
+    _warn_interpreted(result.summary)
     return result
+
+
+def _warn_interpreted(summary: dict) -> None:
+    """The command line's warning that the model ran on the interpreter,
+    as a Python warning: a wheel installs without a C compiler, and its
+    results are then right but slower."""
+    fallback = summary.get("interpreter_fallback")
+    if fallback:
+        warnings.warn(
+            InterpreterWarning(
+                f"lyapsweep: {fallback}. The results are the same to the bit. This package "
+                "needs no C compiler, but with one (gcc or clang on PATH as cc, or named "
+                "by CC) the CPU path runs models at full speed"
+            ),
+            stacklevel=3,
+        )
 
 
 def _tqdm() -> Optional[type]:
@@ -247,6 +265,8 @@ class Run:
     flagged lanes by status in ``flagged_by_status``, of which those with no
     exponents in ``failures``), ``scene`` the scene as run, and ``folder`` where
     the set lies (``out``, or a temporary folder removed with the Run).
+    ``to_xarray()`` labels the tables by the swept parameters, the start and
+    the exponent; ``write_netcdf(path)`` writes them to a file.
     """
 
     def __init__(
@@ -255,10 +275,14 @@ class Run:
         summary: dict,
         scene: dict,
         scratch: Optional[tempfile.TemporaryDirectory] = None,
+        axes: Optional[list] = None,
     ):
         self.folder = folder
         self.summary = summary
         self.scene = scene
+        # Each swept parameter's name and values, as the library made them:
+        # the labels of to_xarray's grid.
+        self.axes = axes
         # Kept so that the temporary folder lasts as long as the Run.
         self._scratch = scratch
         spectrum = [folder / name for name in _SPECTRUM_FILES]
@@ -281,6 +305,44 @@ class Run:
         with _writing(Path(folder)):
             written = _lyapsweep.copy_set(self.folder, Path(folder))
         return [Path(p) for p in written]
+
+    def to_xarray(self, table: str = "spectrum"):
+        """The run as an ``xarray.Dataset`` (xarray is the extra
+        ``lyapsweep[xarray]``, imported only here).
+
+        ``table="spectrum"``: the exponents on the sweep's grid. Its
+        dimensions are the swept parameters (named after them, their values
+        as coordinates, in sweep order), ``start`` (with ``[attractors]``:
+        the start's index, continuation lanes from the number of starts
+        up) and ``exponent`` (1 to N). ``lambda`` holds the exponents over
+        all of them; every other column of spectrum.csv (grid.csv), such as
+        ``status``, ``period``, ``branch`` and ``lambda_sum``, is a variable
+        over the grid and the start, its values the file's to the bit. A
+        value with fewer continuation lanes than another leaves cells no
+        lane filled: NaN there (integer columns become floats then), and
+        ``""`` for ``status``.
+
+        ``table="attractors"``: attractors.csv's rows along ``attractor``,
+        their exponents in ``lambda`` over ``exponent``, every other column
+        a variable of the row.
+        """
+        from . import _xarray
+
+        if table == "spectrum":
+            return _xarray.spectrum(self)
+        if table == "attractors":
+            return _xarray.attractors(self)
+        raise ValueError(f'table is "spectrum" or "attractors", not {table!r}')
+
+    def write_netcdf(self, path: Union[str, "os.PathLike[str]"]) -> Path:
+        """Writes ``to_xarray()`` to the netCDF-4 file ``path`` and, with
+        ``[attractors]``, ``to_xarray("attractors")`` to its group
+        ``attractors`` (``xarray.open_dataset(path, group="attractors")``
+        reads it). It writes with h5netcdf, installed by the extra
+        ``lyapsweep[xarray]``. Returns the path."""
+        from . import _xarray
+
+        return Path(_xarray.write_netcdf(self, path))
 
     def plot(self):
         """A matplotlib figure of the sweep: the bifurcation diagram (when

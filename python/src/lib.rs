@@ -22,6 +22,15 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
 mod _lyapsweep {
     #[pymodule_export]
     use super::{check_model, copy_set, devices, run};
+
+    use pyo3::prelude::*;
+
+    #[pymodule_init]
+    fn init(m: &Bound<'_, PyModule>) -> PyResult<()> {
+        // The package's version: this crate's, which is the wheel's (maturin
+        // reads it from Cargo.toml) and the library's (the tests check).
+        m.add("__version__", env!("CARGO_PKG_VERSION"))
+    }
 }
 
 /// Runs `scene` (a `pathlib.Path`, TOML text or a dict) with `overrides`
@@ -30,8 +39,10 @@ mod _lyapsweep {
 /// or a lyapsweep output folder. `progress` is False (no display), True
 /// (the command line's display on stderr) or a callable given
 /// `(done, total)` lane-iterations a few times a second. Returns a dict:
-/// `summary`, `scene` (the resolved scene as written to scene.toml) and
-/// `written` (the paths).
+/// `summary`, `scene` (the resolved scene as written to scene.toml),
+/// `written` (the paths), `axes` (each swept parameter's name and values,
+/// in sweep order) and `starts` (the starts per value, None without
+/// `[attractors]`'s).
 ///
 /// The run has a thread of its own and the GIL is released while it runs,
 /// so that other Python threads go on; the calling thread wakes every
@@ -133,6 +144,16 @@ fn run<'py>(
     result.set_item("summary", summary(py, &RunSummary::of(&scene, &outcome))?)?;
     result.set_item("scene", resolved(py, &scene)?)?;
     result.set_item("written", outcome.written)?;
+    // The grid the lanes cover, for labelled arrays: its values as the
+    // library generated them, bit for bit, rather than computed again.
+    let axes: Vec<(String, Vec<f64>)> = scene
+        .sweep
+        .axes()
+        .map(|axis| (axis.parameter.clone(), axis.values.clone()))
+        .collect();
+    result.set_item("axes", axes)?;
+    let starts = scene.sweep.starts.as_ref().map(|s| s.states.len());
+    result.set_item("starts", starts)?;
     Ok(result)
 }
 
