@@ -8,7 +8,7 @@ use plotters::coord::{ReverseCoordTranslate, Shift};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::panel::{frame, mesh, padded, Chart};
+use super::panel::{drawable, frame, mesh, padded, Chart};
 use super::render::Drawn;
 use super::style::{
     pretty, BAR_WIDTH, COLOUR_BAR_AREA, FONT, LEGEND_ROW, MARGIN, TICK_LABEL_PX, TITLE_PX,
@@ -52,7 +52,7 @@ pub(super) fn draw_cells<DB: DrawingBackend>(
         .margin(MARGIN)
         .x_label_area_size(X_LABEL_AREA)
         .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(span(&x_cells), span(&y_cells))?;
+        .build_cartesian_2d(drawable(span(&x_cells)), drawable(span(&y_cells)))?;
     // Grid lines over a heat map are noise: axes only.
     mesh(&mut chart)
         .disable_mesh()
@@ -146,7 +146,7 @@ pub(super) fn draw_colour_bar<DB: DrawingBackend>(
         .margin(MARGIN)
         .x_label_area_size(X_LABEL_AREA)
         .right_y_label_area_size(COLOUR_BAR_AREA - 2 * MARGIN - BAR_WIDTH)
-        .build_cartesian_2d(0.0..1.0, range)?;
+        .build_cartesian_2d(0.0..1.0, drawable(range))?;
     mesh(&mut chart)
         .disable_mesh()
         .disable_x_axis()

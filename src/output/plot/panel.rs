@@ -54,7 +54,73 @@ pub(super) fn panel<'a, DB: DrawingBackend>(
             TICKS_ONLY_AREA
         })
         .y_label_area_size(Y_LABEL_AREA)
-        .build_cartesian_2d(x_range, y_range)
+        .build_cartesian_2d(drawable(x_range), drawable(y_range))
+}
+
+/// `range` as an axis can draw it. plotters looks for its ticks by
+/// halving a step until enough fit, which never ends on an axis whose
+/// end or span is not finite (a swept value near f64::MAX, padded) or
+/// whose span is below the rounding of its values (two neighbouring
+/// floats): the ends are held within ±f64::MAX/4, so the span stays
+/// finite, and a span under 1e-12 of the values' magnitude (a few
+/// thousand roundings) is widened to that about its middle. An ordinary range comes back as it is.
+pub(super) fn drawable(range: Range<f64>) -> Range<f64> {
+    const LIMIT: f64 = f64::MAX / 4.0;
+    let (low, high) = (
+        range.start.clamp(-LIMIT, LIMIT),
+        range.end.clamp(-LIMIT, LIMIT),
+    );
+    let magnitude = low.abs().max(high.abs());
+    if magnitude == 0.0 {
+        return -1.0..1.0;
+    }
+    let least = 1e-12 * magnitude;
+    if high - low >= least {
+        return low..high;
+    }
+    let middle = 0.5 * low + 0.5 * high;
+    middle - 0.5 * least..middle + 0.5 * least
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ordinary_range_is_drawn_as_it_is() {
+        for range in [0.5..1.5, -3.0..-2.0, -1e-12..1e-12, 1e300..2e300] {
+            assert_eq!(drawable(range.clone()), range);
+        }
+    }
+
+    #[test]
+    fn an_axis_plotters_cannot_tick_is_made_one_it_can() {
+        let max = f64::MAX;
+        // Ends beyond f64::MAX (a padded extreme value), and a span that
+        // overflows.
+        let r = drawable(4.6e16..f64::INFINITY);
+        assert_eq!(r, 4.6e16..max / 4.0);
+        let r = drawable(-max..max);
+        assert!((r.end - r.start).is_finite());
+        // Two neighbouring floats, and one value.
+        let r = drawable(1e17..1e17 + 16.0);
+        assert!(r.end - r.start >= 1e5 - 16.0 && r.start < 1e17 && r.end > 1e17);
+        assert_eq!(drawable(0.0..0.0), -1.0..1.0);
+        // plotters finds their ticks (it looped for ever on each).
+        for range in [
+            4.6e16..f64::INFINITY,
+            -max..max,
+            1e17..1e17 + 16.0,
+            1.0..1.0 + 1e-13,
+        ] {
+            let r = drawable(range);
+            let ticks = plotters::coord::ranged1d::Ranged::key_points(
+                &plotters::coord::types::RangedCoordf64::from(r.clone()),
+                10,
+            );
+            assert!(!ticks.is_empty() && ticks.len() <= 10, "{r:?}: {ticks:?}");
+        }
+    }
 }
 
 /// A panel's axes: the y axis named `y_name`, the x axis the swept
@@ -170,7 +236,8 @@ pub(super) fn extent(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 
 /// An axis range around `extent`, widened by `fraction` of its span on each
 /// side; a single value is widened by that fraction of itself (±0.5 around
-/// zero), and no value at all gives [-1, 1].
+/// zero), and no value at all gives [-1, 1]; always a range an axis can
+/// draw ([`drawable`]).
 pub(super) fn padded(extent: Option<(f64, f64)>, fraction: f64) -> Range<f64> {
     let Some((low, high)) = extent else {
         return -1.0..1.0;
@@ -182,7 +249,7 @@ pub(super) fn padded(extent: Option<(f64, f64)>, fraction: f64) -> Range<f64> {
     } else {
         0.5
     };
-    low - pad..high + pad
+    drawable(low - pad..high + pad)
 }
 
 /// The lines through `points`, broken wherever a value is missing: a failed
