@@ -843,6 +843,17 @@ const uint32_t f_moved = ((R ^ (R >> (B + 1u))) | 2u) + 1u;
     }
 
     #[test]
+    fn the_region_walk_s_orientation_prints_its_bit_test() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = "\
+fn orientation(region: u32, bit: u32) -> real {
+    return select(1.0, -1.0, ((bit != 4294967295u) && (((region >> bit) & 1u) == 1u)));
+}
+";
+        assert!(text.contains(expected), "{text}");
+    }
+
+    #[test]
     fn the_clock_s_cos_sin_prints_its_loops() {
         let text = wgsl(&kernels(), &Plain);
         assert!(
