@@ -137,7 +137,7 @@ fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
                 if (k == j) {
                     continue;
                 }
-                let o = orientation(sides.region, k);
+                let o = orientation(sides.region, SURFACE_BIT[k]);
                 if (o * after.g[k] > real(0.0) && !(SURFACE_BIT[k] == EVENT && o * before.g[k] > real(0.0))) {
                     flagged = true;
                 }
@@ -176,16 +176,6 @@ fn slide(p: Params, omega: real, phase: vec2<real>, y: State, h: real) -> Slid {
         region = region & ~(1u << bit);
     }
     return Slid(true, hi, exit, region, flagged);
-}
-
-// +1 where the crossing to watch for is g rising through 0 (an event, or a
-// switch on its negative side), -1 where it is g falling (Surface::orientation).
-fn orientation(region: u32, j: u32) -> real {
-    let bit = SURFACE_BIT[j];
-    if (bit != EVENT && ((region >> bit) & 1u) == 1u) {
-        return real(-1.0);
-    }
-    return real(1.0);
 }
 
 // The region of y: bit b set where switch b's g > 0 (surface::region_of).
@@ -228,7 +218,7 @@ fn jumped(p: Params, phase: vec2<real>, y: State, after: State) -> u32 {
 // leaving inside it within reach of the surface (surface::may_cross; the
 // step program's oriented_may_meet, as the native step loops test it).
 fn may_cross(region: u32, j: u32, before: SurfaceValues, after: SurfaceValues, h: real) -> bool {
-    return oriented_may_meet(orientation(region, j), surface_pair(j, before), surface_pair(j, after), h);
+    return oriented_may_meet(orientation(region, SURFACE_BIT[j]), surface_pair(j, before), surface_pair(j, after), h);
 }
 
 // Surface j's (g, rate) in values v.
@@ -240,7 +230,7 @@ fn surface_pair(j: u32, v: SurfaceValues) -> vec2<real> {
 // for a trajectory in `region`: the value and rate its crossing is
 // detected and located on, as a stop's (gap, speed) is.
 fn oriented(region: u32, j: u32, v: SurfaceValues) -> vec2<real> {
-    return orient(orientation(region, j), surface_pair(j, v));
+    return orient(orientation(region, SURFACE_BIT[j]), surface_pair(j, v));
 }
 
 // The step loop's test over every surface, written out per surface as the
@@ -354,7 +344,7 @@ fn cross(p: Params, j: u32, phase: vec2<real>, y: State) -> Crossing {
     let bit = SURFACE_BIT[j];
     let before = surface_values(p, phase, y);
     let approach_rate = before.rate[j];
-    var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, j) * approach_rate, false, false, false, false);
+    var out = Crossing(false, y, p.region, real(0.0), true, orientation(p.region, SURFACE_BIT[j]) * approach_rate, false, false, false, false);
     if (bit == EVENT) {
         let r = reset(p, phase, y, j);
         // The reset may jump across a switch: what follows is that side's

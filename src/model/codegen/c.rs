@@ -326,14 +326,34 @@ impl WalkText<'_> {
             "  int64_t present = 0;\n  for (int k = 0; k < {w}; k++) present |= (int64_t)1 << region[k];"
         );
         for (j, kind) in self.kinds.iter().enumerate() {
-            let o = match kind {
-                Surface::Switch { bit } => format!("((region[k] >> {bit}) & 1) ? -1.0 : 1.0"),
-                Surface::Event => "1.0".into(),
-            };
             let _ = writeln!(
                 out,
-                "  double so{j}[{w}];\n  for (int k = 0; k < {w}; k++) so{j}[k] = {o};"
+                "  double so{j}[{w}];\n  for (int k = 0; k < {w}; k++) {{"
             );
+            // An event is +1 in every region: its bit, `EVENT`, is no
+            // shift C may compute.
+            let o = match kind {
+                Surface::Switch { bit } => {
+                    let args = vec![
+                        CValue::Count("region[k]".into()),
+                        CValue::Count(format!("{bit}u")),
+                    ];
+                    let o = inline(
+                        out,
+                        self.calls,
+                        "orientation",
+                        args,
+                        &format!("so{j}_"),
+                        "    ",
+                    );
+                    let CValue::Real(o) = o else {
+                        unreachable!("an orientation is a number")
+                    };
+                    o
+                }
+                Surface::Event => "1.0".into(),
+            };
+            let _ = writeln!(out, "    so{j}[k] = {o};\n  }}");
         }
         for m in 0..self.rows() {
             let _ = writeln!(

@@ -15,9 +15,14 @@ use super::print::Syntax;
 use crate::model::ir::step::{Expr, Field, Function, Op, Program, Stmt, Ty};
 use crate::model::language::expr::Func;
 
-/// How tightly an operation binds, for parentheses.
+/// How tightly an operation binds, for parentheses. The bit operations
+/// bind least: C and WGSL order them differently among themselves and
+/// against comparisons (WGSL refuses them mixed), so every operation that
+/// is an operand of one, or one of them that is an operand, is
+/// parenthesised.
 fn precedence(op: Op) -> u8 {
     match op {
+        Op::Shr | Op::BitAnd | Op::BitOr | Op::BitXor => 0,
         Op::Add | Op::Sub => 1,
         Op::Mul | Op::Div => 2,
     }
@@ -30,10 +35,12 @@ fn precedence(op: Op) -> u8 {
 fn binary(op: Op, a: (&str, Option<Op>), b: (&str, Option<Op>)) -> String {
     let p = precedence(op);
     let left = match a.1 {
+        Some(_) if op.is_bitwise() => format!("({})", a.0),
         Some(o) if precedence(o) < p => format!("({})", a.0),
         _ => a.0.to_string(),
     };
     let right = match b.1 {
+        Some(_) if op.is_bitwise() => format!("({})", b.0),
         Some(o) if precedence(o) <= p => format!("({})", b.0),
         _ => b.0.to_string(),
     };
@@ -45,6 +52,15 @@ fn wrap(text: &str, op: Option<Op>) -> String {
     match op {
         Some(_) => format!("({text})"),
         None => text.to_string(),
+    }
+}
+
+/// A comparison's side: a bit operation in parentheses (C's `==` binds
+/// tighter than `&`; WGSL refuses the two unparenthesised).
+fn side((text, op): (String, Option<Op>)) -> String {
+    match op {
+        Some(o) if o.is_bitwise() => format!("({text})"),
+        _ => text,
     }
 }
 
@@ -212,7 +228,10 @@ impl Wgsl<'_> {
             Expr::Second(a) => (format!("{}.y", text(a)), None),
             Expr::Pair(c, s) => (format!("vec2<real>({}, {})", text(c), text(s)), None),
             // Truth values in parentheses whole: no precedence to get wrong.
-            Expr::Cmp(cmp, a, b) => (format!("({} {} {})", text(a), cmp.symbol(), text(b)), None),
+            Expr::Cmp(cmp, a, b) => {
+                let (a, b) = (side(self.expr(a)), side(self.expr(b)));
+                (format!("({a} {} {b})", cmp.symbol()), None)
+            }
             Expr::And(a, b) => (format!("({} && {})", text(a), text(b)), None),
             Expr::Or(a, b) => (format!("({} || {})", text(a), text(b)), None),
             Expr::Not(a) => (format!("!{}", text(a)), None),
@@ -602,8 +621,8 @@ mod tests {
     use super::*;
     use crate::model::ir::integrator::integrator;
     use crate::model::ir::step::build::{
-        abs, and, break_unless, cmp, count, first, greater, less, lets, num, pair, second, select,
-        var,
+        abs, and, bit_and, bit_or, bit_xor, break_unless, cmp, count, first, greater, less, lets,
+        num, pair, second, select, shr, var,
     };
 
     struct Plain;
@@ -765,6 +784,73 @@ f_z1 = ((f_x > 0.0) ? (Y1 + Y1) : Y1);
                 "f_x * f_z1".into()
             ])]
         );
+    }
+
+    /// A function of a region's bits: a bit tested, a bit flipped, a
+    /// bit operation inside a sum and a sum inside a bit operation.
+    fn bits() -> Program {
+        use crate::model::ir::step::Cmp;
+        let side = bit_and(shr(var("region"), var("bit")), count(1));
+        let flipped = bit_xor(var("region"), shr(var("region"), var("bit") + count(1)));
+        let body = vec![
+            Stmt::Let("up", cmp(Cmp::Equal, side, count(1))),
+            Stmt::Let("moved", bit_or(flipped, count(2)) + count(1)),
+        ];
+        let result = select(var("up"), var("moved"), var("region"));
+        let program = Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("region", Ty::Count), ("bit", Ty::Count)],
+                body,
+                results: vec![("r", result)],
+                returns: None,
+            }],
+        };
+        assert_eq!(program.function("f").result_types(&program), [Ty::Count]);
+        program
+    }
+
+    #[test]
+    fn bit_operations_print_in_parentheses_in_wgsl() {
+        let text = wgsl(&bits(), &Plain);
+        let expected = "\
+fn f(region: u32, bit: u32) -> u32 {
+    let up = (((region >> bit) & 1u) == 1u);
+    let moved = ((region ^ (region >> (bit + 1u))) | 2u) + 1u;
+    return select(region, moved, up);
+}
+";
+        assert!(text.contains(expected), "{text}");
+    }
+
+    #[test]
+    fn bit_operations_inline_into_c_in_parentheses() {
+        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
+        let mut c = C {
+            syntax: &Plain,
+            field: &mut field,
+            indent: "",
+        };
+        let mut out = String::new();
+        let args = vec![CValue::Count("R".into()), CValue::Count("B".into())];
+        let results = c.inline(&mut out, &bits(), "f", args, "f_");
+        let expected = "\
+const int f_up = (((R >> B) & 1u) == 1u);
+const uint32_t f_moved = ((R ^ (R >> (B + 1u))) | 2u) + 1u;
+";
+        assert_eq!(out, expected);
+        assert_eq!(results, vec![CValue::Count("(f_up ? f_moved : R)".into())]);
+    }
+
+    #[test]
+    fn the_region_walk_s_orientation_prints_its_bit_test() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = "\
+fn orientation(region: u32, bit: u32) -> real {
+    return select(1.0, -1.0, ((bit != 4294967295u) && (((region >> bit) & 1u) == 1u)));
+}
+";
+        assert!(text.contains(expected), "{text}");
     }
 
     #[test]

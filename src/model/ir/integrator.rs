@@ -1,6 +1,7 @@
 //! The integrator's step programs (in the language of `model::ir::step`):
 //! the clock's rotation and its (cos, sin), RK4 of the model's field and
-//! of the held flow, the stop test of stops and of surfaces, and the
+//! of the held flow, the stop test of stops and of surfaces, a surface's
+//! orientation in a region (the region walk's bit test), and the
 //! sliding field's algebra, each written once here and printed to C and to
 //! WGSL by `model::codegen::step`.
 //!
@@ -35,7 +36,7 @@ use super::step::{Cmp, Expr, Field, Function, Program, Stmt, Ty};
 ///   RK4 of the held flow ([`Field::Held`], `integrate::impact`'s
 ///   `rk4::step` of `Held`).
 /// - the stop test, see [`crossing_tests`], and a surface's, see
-///   [`surface_tests`].
+///   [`surface_tests`], oriented by `orientation` (see [`orientation`]).
 pub fn integrator() -> Program {
     use Ty::Pair;
     let rotate = Function {
@@ -73,6 +74,7 @@ pub fn integrator() -> Program {
     functions.extend(held);
     functions.extend(crossing_tests());
     functions.extend(surface_tests());
+    functions.push(orientation());
     functions.extend(sliding());
     Program { functions }
 }
@@ -439,6 +441,29 @@ fn surface_tests() -> [Function; 3] {
     [orient, across, meet]
 }
 
+/// A surface's bit that marks an event (WGSL's `EVENT`): no region bit.
+pub const EVENT: u32 = u32::MAX;
+
+/// `orientation(region, bit)`: +1 where the crossing to watch for is g
+/// rising through 0 (an event, or a switch whose `bit` is clear in
+/// `region`, on its negative side), -1 where it is g falling
+/// (`Surface::orientation`): what the region walk's stop tests orient
+/// their values by, in the kernels and the native step loops.
+fn orientation() -> Function {
+    let side = bit_and(shr(var("region"), var("bit")), count(1));
+    let above = and(
+        cmp(Cmp::NotEqual, var("bit"), count(EVENT)),
+        cmp(Cmp::Equal, side, count(1)),
+    );
+    Function {
+        name: "orientation",
+        params: vec![("region", Ty::Count), ("bit", Ty::Count)],
+        body: Vec::new(),
+        results: vec![("o", select(above, num(-1.0), num(1.0)))],
+        returns: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -463,6 +488,7 @@ mod tests {
             ("orient", vec![Ty::Pair]),
             ("oriented_ends_across", vec![Ty::Bool]),
             ("oriented_may_meet", vec![Ty::Bool]),
+            ("orientation", vec![Ty::Real]),
             ("filippov_alpha", vec![Ty::Real]),
             ("filippov_field", vec![Ty::State]),
             ("sliding_field_1", vec![Ty::State]),

@@ -66,7 +66,7 @@ pub enum Expr {
     /// A counter's value.
     Count(u32),
     /// `+ - * /`; on states componentwise, a number times a state scales
-    /// it; `+ -` on counters.
+    /// it; `+ -` and the bit operations `>> & | ^` on counters.
     Bin(Op, Box<Expr>, Box<Expr>),
     /// |x| of a number.
     Abs(Box<Expr>),
@@ -111,6 +111,12 @@ pub enum Op {
     Sub,
     Mul,
     Div,
+    /// A counter's bits shifted right (a region's bit `b` is `r >> b & 1`).
+    Shr,
+    /// A counter's bits: both, either, one of the two.
+    BitAnd,
+    BitOr,
+    BitXor,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -137,13 +143,23 @@ impl Cmp {
 }
 
 impl Op {
-    pub fn symbol(self) -> char {
+    /// The operation's text, the same in C and WGSL.
+    pub fn symbol(self) -> &'static str {
         match self {
-            Op::Add => '+',
-            Op::Sub => '-',
-            Op::Mul => '*',
-            Op::Div => '/',
+            Op::Add => "+",
+            Op::Sub => "-",
+            Op::Mul => "*",
+            Op::Div => "/",
+            Op::Shr => ">>",
+            Op::BitAnd => "&",
+            Op::BitOr => "|",
+            Op::BitXor => "^",
         }
+    }
+
+    /// An operation on a counter's bits, which only counters have.
+    pub fn is_bitwise(self) -> bool {
+        matches!(self, Op::Shr | Op::BitAnd | Op::BitOr | Op::BitXor)
     }
 }
 
@@ -269,6 +285,8 @@ impl Program {
                 Ty::State
             }
             Expr::Bin(op, a, b) => match (ty(a), ty(b)) {
+                (Ty::Count, Ty::Count) if op.is_bitwise() => Ty::Count,
+                _ if op.is_bitwise() => panic!("{} is an operation of two counters", op.symbol()),
                 (Ty::Real, Ty::Real) => Ty::Real,
                 (Ty::State, Ty::State) if matches!(op, Op::Add | Op::Sub) => Ty::State,
                 (Ty::Count, Ty::Count) if matches!(op, Op::Add | Op::Sub) => Ty::Count,
@@ -467,7 +485,7 @@ impl From<&'static str> for Expr {
 
 /// Short forms that keep the programs readable.
 pub mod build {
-    use super::{Cmp, Expr, Field, Stmt};
+    use super::{Cmp, Expr, Field, Op, Stmt};
 
     pub fn var(name: &'static str) -> Expr {
         Expr::Var(name)
@@ -479,6 +497,23 @@ pub mod build {
 
     pub fn count(n: u32) -> Expr {
         Expr::Count(n)
+    }
+
+    /// `a >> b`, `a & b`, `a | b`, `a ^ b` of two counters.
+    pub fn shr(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::Shr, Box::new(a), Box::new(b))
+    }
+
+    pub fn bit_and(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::BitAnd, Box::new(a), Box::new(b))
+    }
+
+    pub fn bit_or(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::BitOr, Box::new(a), Box::new(b))
+    }
+
+    pub fn bit_xor(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::BitXor, Box::new(a), Box::new(b))
     }
 
     pub fn abs(a: Expr) -> Expr {
@@ -672,5 +707,27 @@ mod tests {
     fn a_selection_chooses_between_values_of_one_type() {
         let e = select(greater(var("x"), num(0.0)), var("x"), var("y"));
         result_type(&one(vec![("x", Ty::Real), ("y", Ty::State)], vec![], e));
+    }
+
+    #[test]
+    fn bit_operations_of_counters_are_counters() {
+        let params = vec![("region", Ty::Count), ("bit", Ty::Count)];
+        let side = bit_and(shr(var("region"), var("bit")), count(1));
+        let e = bit_xor(bit_or(var("region"), side), count(4));
+        assert_eq!(result_type(&one(params, vec![], e)), Ty::Count);
+    }
+
+    #[test]
+    #[should_panic(expected = ">> is an operation of two counters")]
+    fn a_number_has_no_bits() {
+        let e = shr(var("x"), var("x"));
+        result_type(&one(vec![("x", Ty::Real)], vec![], e));
+    }
+
+    #[test]
+    #[should_panic(expected = "& is an operation of two counters")]
+    fn a_counter_and_a_number_have_no_common_bits() {
+        let e = bit_and(var("n"), var("x"));
+        result_type(&one(vec![("n", Ty::Count), ("x", Ty::Real)], vec![], e));
     }
 }
