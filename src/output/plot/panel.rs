@@ -82,47 +82,6 @@ pub(super) fn drawable(range: Range<f64>) -> Range<f64> {
     middle - 0.5 * least..middle + 0.5 * least
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_ordinary_range_is_drawn_as_it_is() {
-        for range in [0.5..1.5, -3.0..-2.0, -1e-12..1e-12, 1e300..2e300] {
-            assert_eq!(drawable(range.clone()), range);
-        }
-    }
-
-    #[test]
-    fn an_axis_plotters_cannot_tick_is_made_one_it_can() {
-        let max = f64::MAX;
-        // Ends beyond f64::MAX (a padded extreme value), and a span that
-        // overflows.
-        let r = drawable(4.6e16..f64::INFINITY);
-        assert_eq!(r, 4.6e16..max / 4.0);
-        let r = drawable(-max..max);
-        assert!((r.end - r.start).is_finite());
-        // Two neighbouring floats, and one value.
-        let r = drawable(1e17..1e17 + 16.0);
-        assert!(r.end - r.start >= 1e5 - 16.0 && r.start < 1e17 && r.end > 1e17);
-        assert_eq!(drawable(0.0..0.0), -1.0..1.0);
-        // plotters finds their ticks (it looped for ever on each).
-        for range in [
-            4.6e16..f64::INFINITY,
-            -max..max,
-            1e17..1e17 + 16.0,
-            1.0..1.0 + 1e-13,
-        ] {
-            let r = drawable(range);
-            let ticks = plotters::coord::ranged1d::Ranged::key_points(
-                &plotters::coord::types::RangedCoordf64::from(r.clone()),
-                10,
-            );
-            assert!(!ticks.is_empty() && ticks.len() <= 10, "{r:?}: {ticks:?}");
-        }
-    }
-}
-
 /// A panel's axes: the y axis named `y_name`, the x axis the swept
 /// `parameter` where `labelled`, ticks only otherwise.
 pub(super) fn draw_axes<DB: DrawingBackend>(
@@ -259,4 +218,45 @@ pub(super) fn segments(points: &[(f64, f64)]) -> impl Iterator<Item = Vec<(f64, 
         .split(|p| !p.1.is_finite())
         .filter(|segment| segment.len() > 1)
         .map(<[_]>::to_vec)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_ordinary_range_is_drawn_as_it_is() {
+        for range in [0.5..1.5, -3.0..-2.0, -1e-12..1e-12, 1e300..2e300] {
+            assert_eq!(drawable(range.clone()), range);
+        }
+    }
+
+    #[test]
+    fn an_axis_plotters_cannot_tick_is_made_one_it_can() {
+        let max = f64::MAX;
+        // Ends beyond f64::MAX (a padded extreme value), and a span that
+        // overflows.
+        let r = drawable(4.6e16..f64::INFINITY);
+        assert_eq!(r, 4.6e16..max / 4.0);
+        let r = drawable(-max..max);
+        assert!((r.end - r.start).is_finite());
+        // Two neighbouring floats, and one value.
+        let r = drawable(1e17..1e17 + 16.0);
+        assert!(r.end - r.start >= 1e5 - 16.0 && r.start < 1e17 && r.end > 1e17);
+        assert_eq!(drawable(0.0..0.0), -1.0..1.0);
+        // plotters finds their ticks (it looped for ever on each).
+        for range in [
+            4.6e16..f64::INFINITY,
+            -max..max,
+            1e17..1e17 + 16.0,
+            1.0..1.0 + 1e-13,
+        ] {
+            let r = drawable(range);
+            let ticks = plotters::coord::ranged1d::Ranged::key_points(
+                &plotters::coord::types::RangedCoordf64::from(r.clone()),
+                10,
+            );
+            assert!(!ticks.is_empty() && ticks.len() <= 10, "{r:?}: {ticks:?}");
+        }
+    }
 }
