@@ -7,10 +7,9 @@
 
 use nalgebra::{Const, DimMin, SMatrix};
 
-use crate::integrate::clock::ZERO_PHASE;
-use crate::method::lane::{estimate_resolving_grazing, plan_lane};
+use crate::method::lane::{estimated_iteration, plan_lane};
 use crate::method::MethodSettings;
-use crate::system::{FlowSettings, IterationStats, Part, System};
+use crate::system::{FlowSettings, IterationStats, System};
 
 /// U^p(x), with DU^p(x) where asked for, and what happened on the way.
 #[derive(Clone, Copy, Debug)]
@@ -104,32 +103,7 @@ where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let mut factors = Vec::new();
-    if let Some(next) = system.tangent_factors(
-        x,
-        flow,
-        settings.perturbation,
-        settings.difference,
-        stats,
-        &mut factors,
-    ) {
-        let j = factors.iter().fold(SMatrix::identity(), |j, f| f * j);
-        return (next, j);
-    }
-    let (mut y, mut phase, mut j) = (*x, ZERO_PHASE, SMatrix::identity());
-    for part in Part::all(parts) {
-        let mut part_stats = IterationStats::default();
-        let (next, jp) = estimate_resolving_grazing(
-            system,
-            flow,
-            settings,
-            part,
-            &mut phase,
-            &y,
-            &mut part_stats,
-        );
-        stats.merge(&part_stats);
-        j = jp * j;
-        y = next;
-    }
-    (y, j)
+    let next = estimated_iteration(system, flow, settings, parts, x, stats, &mut factors);
+    let j = factors.iter().fold(SMatrix::identity(), |j, f| f * j);
+    (next, j)
 }

@@ -130,34 +130,54 @@ where
             y
         }
         Tangent::FiniteDifference if settings.lyapunov => {
-            if let Some(next) = system.tangent_factors(
-                x,
-                flow,
-                settings.perturbation,
-                settings.difference,
-                stats,
-                jacobians,
-            ) {
-                return next;
-            }
-            let (mut y, mut phase) = (*x, ZERO_PHASE);
-            for part in Part::all(plan.parts) {
-                let mut part_stats = IterationStats::default();
-                let (next, j) = estimate_resolving_grazing(
-                    system,
-                    flow,
-                    settings,
-                    part,
-                    &mut phase,
-                    &y,
-                    &mut part_stats,
-                );
-                stats.merge(&part_stats);
-                jacobians.push(j);
-                y = next;
-            }
-            y
+            estimated_iteration(system, flow, settings, plan.parts, x, stats, jacobians)
         }
         Tangent::FiniteDifference => system.iterate(x, flow, stats),
     }
+}
+
+/// One iteration's image, with the Jacobians of its parts pushed onto
+/// `jacobians` in order: a section's tangent factors where the system
+/// gives them, else each part's estimate from the perturbed copies, with
+/// the grazing ladder. The lanes' exponents and the periodic orbits'
+/// Newton steps both take their Jacobians from here.
+pub fn estimated_iteration<const D: usize, S: System<D>>(
+    system: &S,
+    flow: &FlowSettings,
+    settings: &MethodSettings,
+    parts: usize,
+    x: &[f64; D],
+    stats: &mut IterationStats,
+    jacobians: &mut Vec<SMatrix<f64, D, D>>,
+) -> [f64; D]
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    if let Some(next) = system.tangent_factors(
+        x,
+        flow,
+        settings.perturbation,
+        settings.difference,
+        stats,
+        jacobians,
+    ) {
+        return next;
+    }
+    let (mut y, mut phase) = (*x, ZERO_PHASE);
+    for part in Part::all(parts) {
+        let mut part_stats = IterationStats::default();
+        let (next, j) = estimate_resolving_grazing(
+            system,
+            flow,
+            settings,
+            part,
+            &mut phase,
+            &y,
+            &mut part_stats,
+        );
+        stats.merge(&part_stats);
+        jacobians.push(j);
+        y = next;
+    }
+    y
 }

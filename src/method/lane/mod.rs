@@ -33,7 +33,7 @@ mod uncertainty;
 
 pub use crate::perturbation::perturbation_at;
 pub use accumulator::{LaneAccumulator, RESOLUTION_BOUND};
-pub use driver::{run_lane, Lane};
+pub use driver::{estimated_iteration, run_lane, Lane};
 pub use grazing::{estimate_resolving_grazing, is_grazing, reestimate_of, GRAZING_ERROR};
 pub use lockstep::run_lanes;
 pub use orbit::{return_tolerance, RecentPoints};
