@@ -82,6 +82,29 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 "#;
 
+/// The generated Hermite guess (`model::ir::events::location`) behind the
+/// same bindings: case k reads (g0, v0), (g1, v1), (h, _) from inputs 3k
+/// to 3k + 2 and writes the interpolant's peak (-1 where none), its first
+/// root in [0, 1], and its first root before the peak (0 where none).
+const HERMITE_KERNEL: &str = r#"
+@group(0) @binding(0) var<storage, read> input: array<vec2<f64>>;
+@group(0) @binding(1) var<storage, read_write> output: array<f64>;
+@group(0) @binding(2) var<uniform> op: vec4<u32>;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = 3u * gid.x;
+    if (k + 2u >= arrayLength(&output)) {
+        return;
+    }
+    let c = hermite_new(input[k].x, input[k].y, input[k + 1u].x, input[k + 1u].y, input[k + 2u].x);
+    let peak = hermite_peak(c);
+    output[k] = peak;
+    output[k + 1u] = hermite_first_root(c, 0.0, 1.0);
+    output[k + 2u] = select(0.0, hermite_first_root(c, 0.0, peak), peak >= 0.0);
+}
+"#;
+
 /// Evaluates function `op` of the library at `inputs` on the GPU.
 fn on_gpu(gpu: &context::Gpu, op: u32, inputs: &[[f64; 2]]) -> Vec<f64> {
     run(gpu, &format!("{LIBRARY}\n{KERNEL}"), op, inputs)
@@ -308,7 +331,7 @@ fn the_generated_cos_sin_is_the_clock_s_to_the_bit() {
     }
     let source = format!(
         "alias real = f64;\n{}\n{CLOCK_KERNEL}",
-        lyapsweep::model::codegen::wgsl::integrator(false, false)
+        lyapsweep::model::codegen::wgsl::integrator(false, false, false)
     );
     let mut angles: Vec<f64> = (0..4001)
         .map(|k| -7.0 + 14.0 * (k as f64 + 0.37) / 4001.0)
@@ -346,5 +369,87 @@ fn the_generated_cos_sin_is_the_clock_s_to_the_bit() {
             cos[k],
             sin[k]
         );
+    }
+}
+
+/// The kernels' Hermite guess of a crossing (`hermite_peak`,
+/// `hermite_first_root`), generated from the step program, gives the bits
+/// of its oracle, `integrate::Hermite`, on a software adapter: over steps
+/// that end across, turn back short of the surface or beyond it, or start
+/// on it.
+#[test]
+fn the_generated_hermite_guess_is_the_locate_s_to_the_bit() {
+    let name = "the_generated_hermite_guess_is_the_locate_s_to_the_bit";
+    if !common::gpu_or_skip(name, Precision::F64) {
+        return;
+    }
+    let (adapter, summary) = context::choose(Want::Any, Precision::F64, None)
+        .expect("an f64 adapter")
+        .expect("Want::Any yields one");
+    let software = summary.device_type == format!("{:?}", wgpu::DeviceType::Cpu);
+    let gpu = context::open(adapter, summary, Precision::F64).expect("device");
+    if !(software || gpu.exact_rounding()) {
+        println!("SKIPPED: a hardware driver may fuse the cubic's multiply-adds");
+        return;
+    }
+    let functions = [
+        "hermite_new",
+        "hermite_value",
+        "hermite_slope",
+        "hermite_peak",
+        "hermite_first_root",
+    ];
+    let source = format!(
+        "alias real = f64;\n{}\n{HERMITE_KERNEL}",
+        lyapsweep::model::codegen::wgsl::step_functions(&functions, &["Hermite"])
+    );
+    // A fixed pseudo-random walk over (g0, v0, g1, v1, h), and flat steps.
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut next = |scale: f64| {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        scale * ((state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0)
+    };
+    let mut cases: Vec<[f64; 5]> = (0..2000)
+        .map(|_| {
+            let h = 0.5 * (next(1.0) + 1.0) + 1e-3;
+            [-next(1.0).abs(), next(3.0), next(1.0), next(3.0), h]
+        })
+        .collect();
+    // (Not a flat step at 0: -g(0)/(g(1) - g(0)) is NaN there, which
+    // Rust's clamp keeps and WGSL's clamps; the location never asks, its
+    // bracket has g(0) <= 0 < g(1).)
+    cases.extend([[-1.0, 2.0, -1.0, -2.0, 0.1], [0.0, 1.0, 0.5, -1.0, 0.1]]);
+    let inputs: Vec<[f64; 2]> = cases
+        .iter()
+        .flat_map(|&[g0, v0, g1, v1, h]| [[g0, v0], [g1, v1], [h, 0.0]])
+        .collect();
+    let got = run(&gpu, &source, 0, &inputs);
+    for (k, &[g0, v0, g1, v1, h]) in cases.iter().enumerate() {
+        let hermite = lyapsweep::integrate::Hermite::new(g0, v0, g1, v1, h);
+        let peak = hermite.peak().unwrap_or(-1.0);
+        let before = if peak >= 0.0 {
+            hermite.first_root(0.0, peak)
+        } else {
+            0.0
+        };
+        let want = [peak, hermite.first_root(0.0, 1.0), before];
+        let bits = |x: f64| {
+            if x.is_nan() {
+                f64::NAN.to_bits()
+            } else {
+                x.to_bits()
+            }
+        };
+        for (i, w) in want.iter().enumerate() {
+            assert_eq!(
+                bits(got[3 * k + i]),
+                bits(*w),
+                "case {:?}, value {i}: GPU {}, CPU {w}",
+                cases[k],
+                got[3 * k + i]
+            );
+        }
     }
 }

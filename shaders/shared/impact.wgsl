@@ -11,8 +11,10 @@
 // j), and the step goes on from there; a sliding motion slides the rest
 // of the step, or until it leaves the switch.
 //
-// The stops are in stops.wgsl, the location of a crossing in locate.wgsl,
-// the general surfaces and sliding in surfaces.wgsl.
+// The stops' functions and the location of a crossing are generated from
+// the step program (src/model/ir/events.rs), reading stops.wgsl's stops
+// and locate.wgsl's event values; the general surfaces and sliding are in
+// surfaces.wgsl.
 
 const MAX_IMPACTS_PER_STEP: u32 = 64u;
 // See ACCUMULATION_FRACTION in src/integrate/impact/hold.rs.
@@ -36,22 +38,6 @@ struct WallStep {
     stuck: u32,
     rest_at: real,
     rest_phase: vec2<real>,
-}
-
-// The acceleration towards the stop at rest on it (y moved onto it at
-// speed 0) at `phase`: > 0 presses the mass into the stop (pressing in
-// impact.rs).
-fn pressing(p: Params, w: Stop, phase: vec2<real>, y: State) -> real {
-    return w.side * rhs(p, phase, on_stop(w, y, real(0.0)))[w.velocity];
-}
-
-// The flow with a mass held at rest on the stop (Held in
-// src/integrate/impact/): its position and velocity do not move.
-fn held_rhs(p: Params, w: Stop, phase: vec2<real>, y: State) -> State {
-    var f = rhs(p, phase, y);
-    f[w.coordinate] = real(0.0);
-    f[w.velocity] = real(0.0);
-    return f;
 }
 
 // The state held on the stop for s from `rest` at `phase`: `rest` itself
@@ -110,87 +96,14 @@ fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y
     return WallStep(out, 0u, vec4<u32>(), false, rank_loss, NO_IMPACT, WALLS, h, phase);
 }
 
-struct Hit {
-    found: bool,
-    s: real,
-    y: State,
-}
-
-// max(1, |y_i|): the size of a state, which a surface's tolerances are
-// relative to (the CPU's fold over the state).
-fn state_scale(y: State) -> real {
-    var scale = real(1.0);
-    for (var i = 0u; i < DIM; i = i + 1u) {
-        scale = max(scale, abs(y[i]));
-    }
-    return scale;
-}
+// Generated from the step program (src/model/ir/events.rs): `Hit`, a
+// crossing located in a step; the held flow `held_rhs` and `pressing`,
+// `pressed` and `pressed_on`; `clamp_to`, `clamp_to_stops`,
+// `behind_a_stop` and `state_scale`.
 
 // The per-stop code below is written out per stop rather than as loops
 // over them, as in the step loop's tests: a loop of one pass (the seed's
 // single stop) still cost lavapipe 10% of the whole kernel's time.
-
-// y moved back onto a stop it lies behind, moving towards it at most
-// (clamp_to_wall).
-fn clamp_to(w: Stop, y: State) -> State {
-    if (gap(w, y) > real(0.0)) {
-        return on_stop(w, y, min(speed(w, y), real(0.0)));
-    }
-    return y;
-}
-
-// y moved back onto every stop it lies behind, in their order.
-fn clamp_to_stops(walls: Stops, y: State) -> State {
-    var out = clamp_to(stop(walls, 0u), y);
-    if (WALLS > 1u) {
-        out = clamp_to(stop(walls, 1u), out);
-    }
-    if (WALLS > 2u) {
-        out = clamp_to(stop(walls, 2u), out);
-    }
-    if (WALLS > 3u) {
-        out = clamp_to(stop(walls, 3u), out);
-    }
-    return out;
-}
-
-// Whether y lies behind a stop (a sliding motion meeting one is flagged, as
-// in the CPU's slide).
-fn behind_a_stop(walls: Stops, y: State) -> bool {
-    var behind = WALLS > 0u && gap(stop(walls, 0u), y) > real(0.0);
-    if (WALLS > 1u) {
-        behind = behind || gap(stop(walls, 1u), y) > real(0.0);
-    }
-    if (WALLS > 2u) {
-        behind = behind || gap(stop(walls, 2u), y) > real(0.0);
-    }
-    if (WALLS > 3u) {
-        behind = behind || gap(stop(walls, 3u), y) > real(0.0);
-    }
-    return behind;
-}
-
-// The first stop y lies on with a force pressing it there, or WALLS.
-fn pressed_on(p: Params, walls: Stops, phase: vec2<real>, y: State) -> u32 {
-    var on = WALLS;
-    if (WALLS > 3u && pressed(p, stop(walls, 3u), phase, y)) {
-        on = 3u;
-    }
-    if (WALLS > 2u && pressed(p, stop(walls, 2u), phase, y)) {
-        on = 2u;
-    }
-    if (WALLS > 1u && pressed(p, stop(walls, 1u), phase, y)) {
-        on = 1u;
-    }
-    if (pressed(p, stop(walls, 0u), phase, y)) {
-        on = 0u;
-    }
-    return on;
-}
-
-fn pressed(p: Params, w: Stop, phase: vec2<real>, y: State) -> bool {
-    return y[w.coordinate] == w.position && pressing(p, w, phase, y) > real(0.0);
-}
 
 // Event `which`'s crossing in the rest of a step [0, h] from (phase0, y0)
 // to y1, if any, given its value and rate at both ends (`start`, `end`).

@@ -238,12 +238,12 @@ fn newton_from<const D: usize>(
 
 /// The cubic Hermite interpolant of g = X - X_w over one step, in θ ∈ [0, 1],
 /// from the values and derivatives (velocities) at both ends.
-pub(crate) struct Hermite {
+pub struct Hermite {
     c: [f64; 4],
 }
 
 impl Hermite {
-    pub(crate) fn new(g0: f64, v0: f64, g1: f64, v1: f64, h: f64) -> Self {
+    pub fn new(g0: f64, v0: f64, g1: f64, v1: f64, h: f64) -> Self {
         let (d0, d1) = (v0 * h, v1 * h);
         // g(θ) = c0 + c1 θ + c2 θ² + c3 θ³
         let c2 = 3.0 * (g1 - g0) - 2.0 * d0 - d1;
@@ -253,12 +253,12 @@ impl Hermite {
         }
     }
 
-    pub(crate) fn value(&self, th: f64) -> f64 {
+    pub fn value(&self, th: f64) -> f64 {
         let c = &self.c;
         c[0] + th * (c[1] + th * (c[2] + th * c[3]))
     }
 
-    pub(crate) fn slope(&self, th: f64) -> f64 {
+    pub fn slope(&self, th: f64) -> f64 {
         let c = &self.c;
         c[1] + th * (2.0 * c[2] + th * 3.0 * c[3])
     }
@@ -273,7 +273,7 @@ impl Hermite {
     /// bracket closed by bisection): at one call per oscillation and
     /// trajectory, 7 percent of the CPU path's time on a 200-step sweep
     /// of the seed's oscillator. Twin of `hermite_peak`.
-    pub(crate) fn peak(&self) -> Option<f64> {
+    pub fn peak(&self) -> Option<f64> {
         if !(self.slope(0.0) > 0.0 && self.slope(1.0) < 0.0) {
             return None;
         }
@@ -292,7 +292,7 @@ impl Hermite {
 
     /// The first upward root of the cubic in [a, b] (g(a) <= 0 < g(b)), by
     /// bisection refined with Newton; used only as Newton's starting guess.
-    pub(crate) fn first_root(&self, mut a: f64, mut b: f64) -> f64 {
+    pub fn first_root(&self, mut a: f64, mut b: f64) -> f64 {
         let mut th =
             a + (b - a) * (-self.value(a) / (self.value(b) - self.value(a))).clamp(0.0, 1.0);
         for _ in 0..8 {

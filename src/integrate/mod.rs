@@ -22,6 +22,9 @@ pub mod wall;
 // the child module of its layer (this file only drives the step loop).
 pub use flow::{EventHoldValues, Flow, InRegion, Reset, Switching};
 pub use iteration::{FlowSettings, ImpactLocation, IterationStats, Part, MAX_EVENTS};
+/// The cubic Hermite interpolant of a step, the oracle of the kernels'
+/// generated `hermite_*` (tests/math64.rs holds them to the bit).
+pub use locate::Hermite;
 pub use region::{Surface, SurfaceBatch, SurfaceValues};
 pub use wall::Wall;
 

@@ -271,6 +271,7 @@ impl Variant {
         out.push_str(&crate::model::codegen::wgsl::integrator(
             self.system.is_flow,
             self.wall,
+            self.impact_location != ImpactLocation::Linear,
         ));
         if self.wall {
             // The stops, the step loop that resolves their impacts, where

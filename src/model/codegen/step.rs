@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use super::print::Syntax;
-use crate::model::ir::step::{Expr, Field, Function, Op, Program, Stmt, Ty};
+use crate::model::ir::step::{Expr, Field, Function, Math, Op, Program, Stmt, Ty};
 use crate::model::language::expr::Func;
 
 /// How tightly an operation binds, for parentheses. The bit operations
@@ -81,6 +81,7 @@ fn wgsl_type(ty: Ty) -> &'static str {
         Ty::Pair => "vec2<real>",
         Ty::Bool => "bool",
         Ty::Count => "u32",
+        Ty::Struct(name) => name,
     }
 }
 
@@ -89,6 +90,7 @@ fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
     fn read(program: &Program, e: &Expr, out: &mut Vec<Field>) {
         match e {
             Expr::Field { of, .. } if !out.contains(of) => out.push(*of),
+            Expr::Call(name, _) if is_extern(program, name) => {}
             Expr::Call(name, _) => {
                 for of in fields_read(program, program.function(name)) {
                     if !out.contains(&of) {
@@ -109,18 +111,34 @@ fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
     out
 }
 
+/// Whether `name` is a function the kernels define.
+fn is_extern(program: &Program, name: &str) -> bool {
+    use crate::model::ir::step::Extern;
+    program
+        .externs
+        .iter()
+        .any(|e| matches!(e, Extern::Fn { name: n, .. } if *n == name))
+}
+
 /// What a WGSL function takes before its own parameters, as (name,
 /// type): the lane's `Params` where it evaluates a field, and the stop
 /// `w` too where it evaluates the held flow.
-fn context(program: &Program, f: &Function) -> &'static [(&'static str, &'static str)] {
+/// A function that takes `p` (or `w`) as a parameter of its own passes
+/// it on by name.
+fn context(program: &Program, f: &Function) -> Vec<(&'static str, &'static str)> {
     let read = fields_read(program, f);
-    if read.contains(&Field::Held) {
+    let implied: &[(&str, &str)] = if read.contains(&Field::Held) {
         &[("p", "Params"), ("w", "Stop")]
     } else if read.is_empty() {
         &[]
     } else {
         &[("p", "Params")]
-    }
+    };
+    implied
+        .iter()
+        .filter(|(n, _)| f.params.iter().all(|(p, _)| p != n))
+        .copied()
+        .collect()
 }
 
 /// The program's functions in WGSL, and the structures of their results;
@@ -128,6 +146,13 @@ fn context(program: &Program, f: &Function) -> &'static [(&'static str, &'static
 /// flow the kernels' `held_rhs(p, w, phase, y)`.
 pub fn wgsl(program: &Program, syntax: &dyn Syntax) -> String {
     let mut out = String::new();
+    for s in program.structures.iter().filter(|s| !s.members.is_empty()) {
+        let _ = writeln!(out, "struct {} {{", s.name);
+        for (member, ty) in &s.members {
+            let _ = writeln!(out, "    {member}: {},", wgsl_type(*ty));
+        }
+        out.push_str("}\n\n");
+    }
     let mut structures: Vec<&str> = Vec::new();
     for f in &program.functions {
         let types = f.result_types(program);
@@ -197,6 +222,10 @@ impl Wgsl<'_> {
                     writeln!(out, "{indent}}}")
                 }
                 Stmt::Break => writeln!(out, "{indent}break;"),
+                Stmt::SetAt(name, i, e) => {
+                    let (i, e) = (self.expr(i).0, self.expr(e).0);
+                    writeln!(out, "{indent}{name}[{i}] = {e};")
+                }
             };
         }
     }
@@ -256,12 +285,38 @@ impl Wgsl<'_> {
                 (format!("{f}, {}, {})", text(phase), text(state)), None)
             }
             Expr::Call(name, args) => {
-                let list: Vec<String> = context(self.program, self.program.function(name))
+                let before = if is_extern(self.program, name) {
+                    Vec::new()
+                } else {
+                    context(self.program, self.program.function(name))
+                };
+                let list: Vec<String> = before
                     .iter()
                     .map(|(n, _)| n.to_string())
                     .chain(args.iter().map(text))
                     .collect();
                 (format!("{name}({})", list.join(", ")), None)
+            }
+            Expr::Truth(v) => (v.to_string(), None),
+            Expr::Neg(a) => {
+                let (a, op) = self.expr(a);
+                (format!("-{}", wrap(&a, op)), None)
+            }
+            Expr::Math(f, args) => {
+                let list: Vec<String> = args.iter().map(text).collect();
+                (format!("{}({})", f.name(), list.join(", ")), None)
+            }
+            Expr::Member(a, member) => {
+                let (a, op) = self.expr(a);
+                (format!("{}.{member}", wrap(&a, op)), None)
+            }
+            Expr::Make(name, args) => {
+                let list: Vec<String> = args.iter().map(text).collect();
+                (format!("{name}({})", list.join(", ")), None)
+            }
+            Expr::Index(y, i) => {
+                let (y, op) = self.expr(y);
+                (format!("{}[{}]", wrap(&y, op), text(i)), None)
             }
         }
     }
@@ -394,6 +449,7 @@ impl C<'_> {
                 Stmt::Break => {
                     let _ = writeln!(out, "{indent}break;");
                 }
+                Stmt::SetAt(..) => panic!("C's programs set no component (the kernels' stops do)"),
             }
         }
     }
@@ -572,6 +628,20 @@ impl C<'_> {
             Expr::Field { .. } | Expr::Call(..) => {
                 panic!("a field or a call is a named value of its own")
             }
+            Expr::Truth(v) => (CValue::Bool(if *v { "1" } else { "0" }.into()), None),
+            Expr::Neg(a) => match self.operand(scope, a) {
+                CValue::Real(a) => (CValue::Real(format!("-{a}")), None),
+                other => panic!("-{other:?}"),
+            },
+            Expr::Math(Math::Sqrt, args) => match self.expr(scope, &args[0]).0 {
+                CValue::Real(a) => (CValue::Real(self.syntax.call(Func::Sqrt, &a, "")), None),
+                other => panic!("sqrt {other:?}"),
+            },
+            // What only the kernels' programs use (their stops and Newton
+            // brackets): the C step loops hold no structures.
+            Expr::Math(..) | Expr::Member(..) | Expr::Make(..) | Expr::Index(..) => {
+                panic!("C's step programs have no {e:?}")
+            }
         }
     }
 
@@ -706,6 +776,7 @@ mod tests {
                 results: vec![("r", var("x") * "z")],
                 returns: None,
             }],
+            ..Program::default()
         }
     }
 
@@ -805,6 +876,7 @@ f_z1 = ((f_x > 0.0) ? (Y1 + Y1) : Y1);
                 results: vec![("r", result)],
                 returns: None,
             }],
+            ..Program::default()
         };
         assert_eq!(program.function("f").result_types(&program), [Ty::Count]);
         program
@@ -894,6 +966,7 @@ fn orientation(region: u32, bit: u32) -> real {
                 results: vec![("r", Expr::from("z") + "y")],
                 returns: None,
             }],
+            ..Program::default()
         };
         let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
         let mut c = C {
@@ -912,5 +985,70 @@ fn orientation(region: u32, bit: u32) -> real {
             results,
             vec![CValue::State(vec!["qz0 + Y0".into(), "qz1 + Y1".into()])]
         );
+    }
+
+    #[test]
+    fn the_stops_print_as_the_kernels_read_them() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            "struct Stop {\n    position: real,\n    restitution: real,\n    coordinate: u32,\n    velocity: u32,\n    side: real,\n}\n",
+            "fn gap(w: Stop, y: State) -> real {\n    return w.side * (y[w.coordinate] - w.position);\n}\n",
+            "fn on_stop(w: Stop, y: State, v: real) -> State {\n    var out = y;\n    out[w.coordinate] = w.position;\n    out[w.velocity] = w.side * v;\n    return out;\n}\n",
+            "    return may_meet(stop_values(w, y), stop_values(w, y1), h);\n",
+            "    var hit = reaches(stop(walls, 0u), y, h, y1);\n    if (WALLS > 1u) {\n        hit = (hit || reaches(stop(walls, 1u), y, h, y1));\n    }\n",
+            "    var on = WALLS;\n    if ((WALLS > 3u) && at_rest(stop(walls, 3u), y)) {\n        on = 3u;\n    }\n",
+            "    return ((y[w.coordinate] == w.position) && (y[w.velocity] == 0.0));\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn the_location_prints_the_hermite_guess_and_the_bracket() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            "    let c2 = 3.0 * (g1 - g0) - 2.0 * d0 - d1;\n    let c3 = 2.0 * (g0 - g1) + d0 + d1;\n    return Hermite(g0, d0, c2, c3);\n",
+            "    return c.c0 + th * (c.c1 + th * (c.c2 + th * c.c3));\n",
+            "    return c.c1 + th * (2.0 * c.c2 + th * 3.0 * c.c3);\n",
+            "        let root = sqrt(max(b * b - 4.0 * a * c.c1, 0.0));\n",
+            "            th = -0.5 * (b + root) / a;\n",
+            "            th = c.c1 / (-0.5 * (b - root));\n",
+            "        peak = clamp(th, 0.0, 1.0);\n",
+            "    var th = a + (b - a) * clamp(-ga / (gb - ga), 0.0, 1.0);\n",
+            "        let next = th - g / hermite_slope(c, th);\n",
+            "        if ((next > a) && (next < b)) {\n            th = next;\n        } else {\n            th = 0.5 * (a + b);\n        }\n",
+            "    var out = Bracket(false, false, 0.0, 0.0, 0.0);\n",
+            "        out = Bracket(true, false, 0.0, h, hermite_first_root(herm, 0.0, 1.0) * h);\n",
+            "            if (!(peak < 0.0)) {\n                out = Bracket(true, true, 0.0, peak * h, hermite_first_root(herm, 0.0, peak) * h);\n",
+            "    let newton = b.s - g / rate;\n",
+            "    return Bracket(b.found, b.at_peak, lo, hi, s);\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_call_with_several_results_is_read_by_member() {
+        use crate::model::ir::step::build::dot;
+        let mut program = kernels();
+        program.functions.push(Function {
+            name: "f",
+            params: vec![("omega", Ty::Real), ("phase", Ty::Pair), ("y", Ty::State)],
+            body: lets(vec![(
+                "stepped",
+                Expr::Call(
+                    "sub_step",
+                    vec![var("omega"), var("phase"), var("y"), num(0.5)],
+                ),
+            )]),
+            results: vec![("y", dot("stepped", "y"))],
+            returns: None,
+        });
+        assert_eq!(program.function("f").result_types(&program), [Ty::State]);
+        let text = wgsl(&program, &Plain);
+        let expected = "fn f(p: Params, omega: real, phase: vec2<real>, y: State) -> State {\n    let stepped = sub_step(p, omega, phase, y, 0.5);\n    return stepped.y;\n}\n";
+        assert!(text.contains(expected), "{text}");
     }
 }

@@ -757,9 +757,13 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
 /// file with `rhs`) RK4's `rk4_stages`, `rk4_update`, `rk4_increment`,
 /// `rk4_step` and `sub_step` with their `Stepped` result, the stop
 /// test (`may_turn_past`, `may_meet`) and Filippov's sliding field on one
-/// switch (`filippov_alpha`, `filippov_field`); with stops (`held`: the kernels'
-/// `Stop` and `held_rhs`), RK4 of the held flow (`held_*`).
-pub fn integrator(flow: bool, held: bool) -> String {
+/// switch (`filippov_alpha`, `filippov_field`); with stops (`held`: the
+/// kernels' `Stop` and `held_rhs`), RK4 of the held flow (`held_*`) and
+/// the stops' functions (`model::ir::events::stops`), and where the
+/// location is Newton's (`newton`) its Hermite guess, bracket and Newton
+/// (`model::ir::events::location`), else the linear location.
+pub fn integrator(flow: bool, held: bool, newton: bool) -> String {
+    use crate::model::ir::events;
     let mut program = crate::model::ir::integrator::integrator();
     let c_only = crate::model::ir::integrator::C_ONLY;
     program.functions.retain(|f| !c_only.contains(&f.name));
@@ -768,13 +772,35 @@ pub fn integrator(flow: bool, held: bool) -> String {
             .functions
             .retain(|f| ["rotate", "cos_sin"].contains(&f.name));
     }
+    let mut absent: Vec<&str> = Vec::new();
     if !held {
         program.functions.retain(|f| !f.name.starts_with("held_"));
+        absent.extend(events::stops().iter().map(|f| f.name));
+        absent.extend([events::stop().name, events::hit().name]);
     }
+    if !held || !newton {
+        absent.extend(events::location().iter().map(|f| f.name));
+        absent.extend(events::location_structures().iter().map(|s| s.name));
+    }
+    if !held || newton {
+        absent.extend(events::linear_location().iter().map(|f| f.name));
+    }
+    program.functions.retain(|f| !absent.contains(&f.name));
+    program.structures.retain(|s| !absent.contains(&s.name));
     format!(
         "// Generated from the integrator's step program (model::ir::integrator).\n\n{}",
         super::step::wgsl(&program, &Wgsl)
     )
+}
+
+/// The integrator program's functions `names` alone as WGSL, with the
+/// structures `structures` they use: a generated function beside its Rust
+/// twin in a test kernel (tests/math64.rs).
+pub fn step_functions(names: &[&str], structures: &[&str]) -> String {
+    let mut program = crate::model::ir::integrator::integrator();
+    program.functions.retain(|f| names.contains(&f.name));
+    program.structures.retain(|s| structures.contains(&s.name));
+    super::step::wgsl(&program, &Wgsl)
 }
 
 /// A number as a WGSL `real`: Rust's shortest representation that reads

@@ -76,7 +76,17 @@ pub fn integrator() -> Program {
     functions.extend(surface_tests());
     functions.push(orientation());
     functions.extend(sliding());
-    Program { functions }
+    functions.extend(super::events::stops());
+    functions.extend(super::events::location());
+    functions.extend(super::events::linear_location());
+    let (mut structures, externs) = super::events::kernels();
+    structures.extend([super::events::stop(), super::events::hit()]);
+    structures.extend(super::events::location_structures());
+    Program {
+        functions,
+        structures,
+        externs,
+    }
 }
 
 /// The functions only C prints: the sliding fields, NaN where the
@@ -493,6 +503,32 @@ mod tests {
             ("filippov_field", vec![Ty::State]),
             ("sliding_field_1", vec![Ty::State]),
             ("sliding_field_2", vec![Ty::State]),
+            ("gap", vec![Ty::Real]),
+            ("speed", vec![Ty::Real]),
+            ("on_stop", vec![Ty::State]),
+            ("stop_values", vec![Ty::Pair]),
+            ("reaches", vec![Ty::Bool]),
+            ("at_rest", vec![Ty::Bool]),
+            ("reaches_a_stop", vec![Ty::Bool]),
+            ("resting_on", vec![Ty::Count]),
+            ("clamp_to", vec![Ty::State]),
+            ("clamp_to_stops", vec![Ty::State]),
+            ("behind_a_stop", vec![Ty::Bool]),
+            ("state_scale", vec![Ty::Real]),
+            ("held_rhs", vec![Ty::State]),
+            ("pressing", vec![Ty::Real]),
+            ("pressed", vec![Ty::Bool]),
+            ("pressed_on", vec![Ty::Count]),
+            ("hermite_new", vec![Ty::Struct("Hermite")]),
+            ("hermite_value", vec![Ty::Real]),
+            ("hermite_slope", vec![Ty::Real]),
+            ("hermite_peak", vec![Ty::Real]),
+            ("hermite_first_root", vec![Ty::Real]),
+            ("bracket_of", vec![Ty::Struct("Bracket")]),
+            ("newton_update", vec![Ty::Struct("Bracket")]),
+            ("locate_newton", vec![Ty::Struct("Hit")]),
+            ("crossing_fraction", vec![Ty::Real]),
+            ("locate_linear", vec![Ty::Struct("Hit")]),
         ];
         assert_eq!(program.functions.len(), expected.len());
         for (name, types) in expected {

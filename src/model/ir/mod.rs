@@ -1,8 +1,10 @@
 //! The one intermediate representation every generated target is printed
 //! from: the lowered instruction tape of a model's expressions and its
 //! interpreter, the reference ([`tape`]); the step programs' language
-//! ([`step`]) and the integrator's programs written in it ([`integrator`]).
+//! ([`step`]) and the integrator's programs written in it ([`integrator`],
+//! and the kernels' stops and crossing location, [`events`]).
 
+pub mod events;
 pub mod integrator;
 pub mod step;
 pub mod tape;

@@ -5,9 +5,15 @@
 //! themselves are in `model::ir::integrator`; this is their language.
 //!
 //! A program is a list of functions, each a block of statements ending in
-//! its results. Values have five types (a number, a state vector, a pair
+//! its results. Values have six types (a number, a state vector, a pair
 //! of numbers such as a forcing phase or an event's value and rate, a
-//! truth value, and a counter, an unsigned integer that bounds a loop).
+//! truth value, a counter, an unsigned integer that bounds a loop or
+//! indexes a state, and a structure). A structure is a function's several
+//! results (read by member), one the program declares ([`Structure`]: a
+//! stop, a Newton bracket), or an opaque one the kernels define (the
+//! lane's parameters), passed on untouched; what the hand-written kernels
+//! define and a program calls is declared too ([`Extern`]), so that every
+//! name a program uses is typed.
 //! The statements are what the integrator's loops need and no more: named
 //! values ([`Stmt::Let`]), values that change ([`Stmt::Var`],
 //! [`Stmt::Set`]), branches ([`Stmt::If`]) and loops left by a break
@@ -43,6 +49,66 @@ pub enum Ty {
     /// An unsigned integer (WGSL's `u32`, C's `uint32_t`): what counts a
     /// loop's passes, so that every loop has a bound the program states.
     Count,
+    /// A structure: one the program declares ([`Structure`], its members
+    /// read by [`Expr::Member`], made by [`Expr::Make`]), an opaque one
+    /// the kernels define (the lane's `Params`, the stops' `Stops`: passed
+    /// on, never read), or the results of a function with several
+    /// ([`Function::returns`]).
+    Struct(&'static str),
+}
+
+/// A structure of named values (a stop, a Newton bracket). Without
+/// members it is opaque: defined by the kernels, passed on untouched.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Structure {
+    pub name: &'static str,
+    pub members: Vec<(&'static str, Ty)>,
+}
+
+/// What the hand-written kernels define and a program uses: a constant
+/// (the number of stops `WALLS`), or a function (a stop by its index,
+/// which reads the system file's tables).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Extern {
+    Const(&'static str, Ty),
+    Fn {
+        name: &'static str,
+        params: Vec<Ty>,
+        result: Ty,
+    },
+}
+
+/// A function of numbers the targets provide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Math {
+    /// √x.
+    Sqrt,
+    /// The larger of two numbers.
+    Max,
+    /// The smaller of two numbers.
+    Min,
+    /// x clamped to [lo, hi] (WGSL's `clamp`).
+    Clamp,
+}
+
+impl Math {
+    pub fn name(self) -> &'static str {
+        match self {
+            Math::Sqrt => "sqrt",
+            Math::Max => "max",
+            Math::Min => "min",
+            Math::Clamp => "clamp",
+        }
+    }
+
+    /// How many numbers it takes.
+    pub fn arity(self) -> usize {
+        match self {
+            Math::Sqrt => 1,
+            Math::Max | Math::Min => 2,
+            Math::Clamp => 3,
+        }
+    }
 }
 
 /// Which field a [`Expr::Field`] evaluates.
@@ -101,8 +167,22 @@ pub enum Expr {
         phase: Box<Expr>,
         state: Box<Expr>,
     },
-    /// A function of the program defined before this one, with one result.
+    /// A function of the program defined before this one (its structure
+    /// of results where it has several), or one the kernels define
+    /// ([`Extern::Fn`]).
     Call(&'static str, Vec<Expr>),
+    /// A truth value.
+    Truth(bool),
+    /// -x of a number (exact: not 0 - x, which loses the sign of 0).
+    Neg(Box<Expr>),
+    /// A function of numbers.
+    Math(Math, Vec<Expr>),
+    /// A structure's member (a result of a call with several).
+    Member(Box<Expr>, &'static str),
+    /// A structure the program declares, from its members in order.
+    Make(&'static str, Vec<Expr>),
+    /// A state's component at a counter (a stop's coordinate).
+    Index(Box<Expr>, Box<Expr>),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -184,6 +264,9 @@ pub enum Stmt {
     Loop(Vec<Stmt>),
     /// Leaves the innermost loop.
     Break,
+    /// A new value of one component (at a counter) of a state
+    /// [`Stmt::Var`].
+    SetAt(&'static str, Expr, Expr),
 }
 
 /// A function of a program: its parameters, its statements, and its
@@ -199,10 +282,13 @@ pub struct Function {
     pub returns: Option<&'static str>,
 }
 
-/// Functions in order, each calling only those before it.
+/// Functions in order, each calling only those before it, the
+/// structures they declare, and what they use of the kernels.
 #[derive(Clone, Debug, Default)]
 pub struct Program {
     pub functions: Vec<Function>,
+    pub structures: Vec<Structure>,
+    pub externs: Vec<Extern>,
 }
 
 /// A name in scope while a function is typed.
@@ -232,9 +318,30 @@ impl Program {
             assert_eq!(got, want, "{what} of {got:?}");
         };
         match e {
-            Expr::Var(name) => scope(name),
+            Expr::Var(name) => match self.constant(name) {
+                Some(ty) => ty,
+                None => scope(name),
+            },
             Expr::Num(_) => Ty::Real,
             Expr::Count(_) => Ty::Count,
+            Expr::Truth(_) => Ty::Bool,
+            Expr::Neg(a) => {
+                expect(a, Ty::Real, "-x");
+                Ty::Real
+            }
+            Expr::Math(f, args) => {
+                assert_eq!(args.len(), f.arity(), "{}'s arguments", f.name());
+                for a in args {
+                    expect(a, Ty::Real, f.name());
+                }
+                Ty::Real
+            }
+            Expr::Index(y, i) => {
+                expect(y, Ty::State, "a component of");
+                expect(i, Ty::Count, "a component at");
+                Ty::Real
+            }
+            Expr::Member(..) | Expr::Make(..) | Expr::Call(..) => self.type_of_structured(e, scope),
             Expr::Abs(a) => {
                 expect(a, Ty::Real, "|x|");
                 Ty::Real
@@ -293,16 +400,100 @@ impl Program {
                 (Ty::Real, Ty::State) if *op == Op::Mul => Ty::State,
                 (a, b) => panic!("{a:?} {} {b:?} is not a step operation", op.symbol()),
             },
+        }
+    }
+
+    /// The type of a member, a structure made, or a call.
+    fn type_of_structured(&self, e: &Expr, scope: &dyn Fn(&str) -> Ty) -> Ty {
+        let ty = |e: &Expr| self.type_of(e, scope);
+        let expect = |e: &Expr, want: Ty, what: &str| {
+            let got = ty(e);
+            assert_eq!(got, want, "{what} of {got:?}");
+        };
+        match e {
+            Expr::Member(a, member) => match ty(a) {
+                Ty::Struct(name) => {
+                    self.members(name)
+                        .into_iter()
+                        .find(|(m, _)| m == member)
+                        .unwrap_or_else(|| panic!("{name} has no member {member}"))
+                        .1
+                }
+                other => panic!("{other:?} has no members"),
+            },
+            Expr::Make(name, args) => {
+                let members = self.structure(name).members.clone();
+                assert!(!members.is_empty(), "{name} is opaque: the kernels make it");
+                assert_eq!(args.len(), members.len(), "{name}'s members");
+                for (arg, (member, want)) in args.iter().zip(&members) {
+                    expect(arg, *want, &format!("{name}'s {member}"));
+                }
+                Ty::Struct(name)
+            }
             Expr::Call(name, args) => {
+                if let Some((params, result)) = self.external(name) {
+                    assert_eq!(args.len(), params.len(), "{name}'s arguments");
+                    for (arg, want) in args.iter().zip(params) {
+                        expect(arg, *want, &format!("{name}'s argument"));
+                    }
+                    return result;
+                }
                 let f = self.function(name);
-                assert!(f.returns.is_none(), "{name} has several results");
                 assert_eq!(args.len(), f.params.len(), "{name}'s arguments");
                 for (arg, (param, want)) in args.iter().zip(&f.params) {
                     expect(arg, *want, &format!("{name}'s {param}"));
                 }
-                f.result_types(self)[0]
+                match f.returns {
+                    Some(structure) => Ty::Struct(structure),
+                    None => f.result_types(self)[0],
+                }
             }
+            _ => unreachable!("{e:?} is not a member, a structure or a call"),
         }
+    }
+
+    /// The type of the kernels' constant `name`, if it is one.
+    fn constant(&self, name: &str) -> Option<Ty> {
+        self.externs.iter().find_map(|e| match e {
+            Extern::Const(n, ty) if *n == name => Some(*ty),
+            _ => None,
+        })
+    }
+
+    /// The parameters and result of the kernels' function `name`, if it
+    /// is one.
+    fn external(&self, name: &str) -> Option<(&[Ty], Ty)> {
+        self.externs.iter().find_map(|e| match e {
+            Extern::Fn {
+                name: n,
+                params,
+                result,
+            } if *n == name => Some((&params[..], *result)),
+            _ => None,
+        })
+    }
+
+    /// The structure `name` the program declares.
+    pub fn structure(&self, name: &str) -> &Structure {
+        self.structures
+            .iter()
+            .find(|s| s.name == name)
+            .unwrap_or_else(|| panic!("no structure {name}"))
+    }
+
+    /// The members of structure `name`: a declared one's, or the results
+    /// of the functions that return it. Panics on an opaque one.
+    pub fn members(&self, name: &str) -> Vec<(&'static str, Ty)> {
+        if let Some(f) = self.functions.iter().find(|f| f.returns == Some(name)) {
+            let types = f.result_types(self);
+            return f.results.iter().map(|(n, _)| *n).zip(types).collect();
+        }
+        let members = self.structure(name).members.clone();
+        assert!(
+            !members.is_empty(),
+            "{name} is opaque: its members are not read"
+        );
+        members
     }
 
     /// Types `block`'s statements with `scope` in force, adding to it
@@ -316,7 +507,7 @@ impl Program {
             match stmt {
                 Stmt::Let(name, e) | Stmt::Var(name, e) => {
                     assert!(
-                        scope.iter().all(|b| b.name != *name),
+                        scope.iter().all(|b| b.name != *name) && self.constant(name).is_none(),
                         "{name} is declared twice"
                     );
                     let ty = ty(e, scope);
@@ -343,6 +534,13 @@ impl Program {
                     scope.truncate(outer);
                 }
                 Stmt::Break => assert!(loops > 0, "a break outside a loop"),
+                Stmt::SetAt(name, i, e) => {
+                    let target = lookup(scope, name);
+                    assert!(target.mutable, "{name} is not a var");
+                    assert_eq!(target.ty, Ty::State, "{name} has no components");
+                    assert_eq!(ty(i, scope), Ty::Count, "{name}'s component at");
+                    assert_eq!(ty(e, scope), Ty::Real, "{name}'s new component");
+                }
             }
         }
     }
@@ -350,6 +548,9 @@ impl Program {
     /// The names in scope at the end of `f`'s body, parameters first,
     /// every statement typed on the way.
     fn scope_at_end(&self, f: &Function) -> Vec<Binding> {
+        for (name, _) in &f.params {
+            assert!(self.constant(name).is_none(), "{name} is declared twice");
+        }
         let mut scope: Vec<Binding> = f
             .params
             .iter()
@@ -398,6 +599,10 @@ impl Function {
                     }
                     Stmt::Loop(body) => of(body, out),
                     Stmt::Break => {}
+                    Stmt::SetAt(_, i, e) => {
+                        out.push(i);
+                        out.push(e);
+                    }
                 }
             }
         }
@@ -412,8 +617,9 @@ impl Expr {
     /// The expressions this one is an operation of.
     pub fn operands(&self) -> Vec<&Expr> {
         match self {
-            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) => Vec::new(),
+            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) | Expr::Truth(_) => Vec::new(),
             Expr::Bin(_, a, b)
+            | Expr::Index(a, b)
             | Expr::Pair(a, b)
             | Expr::Cmp(_, a, b)
             | Expr::And(a, b)
@@ -423,6 +629,8 @@ impl Expr {
             | Expr::Fill(a)
             | Expr::First(a)
             | Expr::Second(a)
+            | Expr::Neg(a)
+            | Expr::Member(a, _)
             | Expr::Not(a) => vec![a],
             Expr::Select {
                 cond,
@@ -430,7 +638,9 @@ impl Expr {
                 otherwise,
             } => vec![cond, then, otherwise],
             Expr::Field { phase, state, .. } => vec![phase, state],
-            Expr::Call(_, args) => args.iter().collect(),
+            Expr::Call(_, args) | Expr::Math(_, args) | Expr::Make(_, args) => {
+                args.iter().collect()
+            }
         }
     }
 }
@@ -485,7 +695,7 @@ impl From<&'static str> for Expr {
 
 /// Short forms that keep the programs readable.
 pub mod build {
-    use super::{Cmp, Expr, Field, Op, Stmt};
+    use super::{Cmp, Expr, Field, Math, Op, Stmt};
 
     pub fn var(name: &'static str) -> Expr {
         Expr::Var(name)
@@ -594,6 +804,54 @@ pub mod build {
         Expr::Call(name, args.iter().map(|&a| var(a)).collect())
     }
 
+    /// A call with arguments of any expression.
+    pub fn apply(name: &'static str, args: Vec<Expr>) -> Expr {
+        Expr::Call(name, args)
+    }
+
+    pub fn truth(v: bool) -> Expr {
+        Expr::Truth(v)
+    }
+
+    pub fn neg(a: Expr) -> Expr {
+        Expr::Neg(Box::new(a))
+    }
+
+    pub fn sqrt(a: Expr) -> Expr {
+        Expr::Math(Math::Sqrt, vec![a])
+    }
+
+    pub fn max(a: Expr, b: Expr) -> Expr {
+        Expr::Math(Math::Max, vec![a, b])
+    }
+
+    pub fn min(a: Expr, b: Expr) -> Expr {
+        Expr::Math(Math::Min, vec![a, b])
+    }
+
+    pub fn clamp(x: Expr, lo: Expr, hi: Expr) -> Expr {
+        Expr::Math(Math::Clamp, vec![x, lo, hi])
+    }
+
+    /// `of.member`.
+    pub fn member(of: Expr, member: &'static str) -> Expr {
+        Expr::Member(Box::new(of), member)
+    }
+
+    /// The member of the named value `of`.
+    pub fn dot(of: &'static str, member: &'static str) -> Expr {
+        Expr::Member(Box::new(var(of)), member)
+    }
+
+    pub fn make(name: &'static str, members: Vec<Expr>) -> Expr {
+        Expr::Make(name, members)
+    }
+
+    /// `y[i]`.
+    pub fn index(y: Expr, i: Expr) -> Expr {
+        Expr::Index(Box::new(y), Box::new(i))
+    }
+
     /// Named values in order.
     pub fn lets(values: Vec<(&'static str, Expr)>) -> Vec<Stmt> {
         values.into_iter().map(|(n, e)| Stmt::Let(n, e)).collect()
@@ -619,6 +877,7 @@ mod tests {
                 results: vec![("r", result)],
                 returns: None,
             }],
+            ..Program::default()
         }
     }
 
@@ -729,5 +988,156 @@ mod tests {
     fn a_counter_and_a_number_have_no_common_bits() {
         let e = bit_and(var("n"), var("x"));
         result_type(&one(vec![("n", Ty::Count), ("x", Ty::Real)], vec![], e));
+    }
+
+    /// A program with a declared structure, an opaque one, a constant and
+    /// a function of the kernels: the stops' shapes.
+    fn with_stops(params: Vec<(&'static str, Ty)>, body: Vec<Stmt>, result: Expr) -> Program {
+        let mut program = one(params, body, result);
+        program.structures = vec![
+            Structure {
+                name: "Stop",
+                members: vec![("position", Ty::Real), ("coordinate", Ty::Count)],
+            },
+            Structure {
+                name: "Stops",
+                members: Vec::new(),
+            },
+        ];
+        program.externs = vec![
+            Extern::Const("WALLS", Ty::Count),
+            Extern::Fn {
+                name: "stop",
+                params: vec![Ty::Struct("Stops"), Ty::Count],
+                result: Ty::Struct("Stop"),
+            },
+        ];
+        program
+    }
+
+    #[test]
+    fn structures_constants_and_components_are_typed() {
+        let params = vec![("walls", Ty::Struct("Stops")), ("y", Ty::State)];
+        let body = vec![
+            Stmt::Let("w", apply("stop", vec![var("walls"), var("WALLS")])),
+            Stmt::Var("out", var("y")),
+            Stmt::SetAt("out", dot("w", "coordinate"), neg(dot("w", "position"))),
+            Stmt::Let("moved", make("Stop", vec![num(1.0), count(0)])),
+            Stmt::Let(
+                "g",
+                clamp(
+                    sqrt(index(var("out"), dot("moved", "coordinate"))),
+                    max(num(0.0), num(-1.0)),
+                    num(1.0),
+                ),
+            ),
+        ];
+        let program = with_stops(params, body, select(truth(true), var("g"), num(0.0)));
+        assert_eq!(result_type(&program), Ty::Real);
+    }
+
+    #[test]
+    fn a_call_with_several_results_is_their_structure() {
+        let mut program = one(vec![("x", Ty::Real)], vec![], var("x"));
+        program.functions[0].results.push(("twice", var("x") + "x"));
+        program.functions[0].returns = Some("Two");
+        program.functions.push(Function {
+            name: "g",
+            params: vec![("x", Ty::Real)],
+            body: lets(vec![("both", call("f", &["x"]))]),
+            results: vec![("r", dot("both", "twice"))],
+            returns: None,
+        });
+        assert_eq!(program.function("g").result_types(&program), [Ty::Real]);
+    }
+
+    #[test]
+    #[should_panic(expected = "Stop has no member speed")]
+    fn a_structure_has_the_members_it_declares() {
+        let body = lets(vec![("w", make("Stop", vec![num(1.0), count(0)]))]);
+        result_type(&with_stops(vec![], body, dot("w", "speed")));
+    }
+
+    #[test]
+    #[should_panic(expected = "Stops is opaque: its members are not read")]
+    fn an_opaque_structure_is_not_read() {
+        let params = vec![("walls", Ty::Struct("Stops"))];
+        result_type(&with_stops(params, vec![], dot("walls", "position")));
+    }
+
+    #[test]
+    #[should_panic(expected = "Stops is opaque: the kernels make it")]
+    fn an_opaque_structure_is_not_made() {
+        result_type(&with_stops(vec![], vec![], make("Stops", vec![])));
+    }
+
+    #[test]
+    #[should_panic(expected = "Stop's coordinate of Real")]
+    fn a_structure_is_made_of_its_members_types() {
+        let e = dot_of_made(make("Stop", vec![num(1.0), num(0.0)]));
+        result_type(&with_stops(vec![], vec![], e));
+    }
+
+    fn dot_of_made(made: Expr) -> Expr {
+        member(made, "position")
+    }
+
+    #[test]
+    #[should_panic(expected = "Real has no members")]
+    fn a_number_has_no_members() {
+        result_type(&one(vec![("x", Ty::Real)], vec![], dot("x", "position")));
+    }
+
+    #[test]
+    #[should_panic(expected = "a component at of Real")]
+    fn a_state_is_indexed_by_a_counter() {
+        let params = vec![("y", Ty::State), ("x", Ty::Real)];
+        result_type(&one(params, vec![], index(var("y"), var("x"))));
+    }
+
+    #[test]
+    #[should_panic(expected = "y is not a var")]
+    fn a_parameter_s_component_is_not_set() {
+        let params = vec![("y", Ty::State)];
+        let body = vec![Stmt::SetAt("y", count(0), num(1.0))];
+        result_type(&one(params, body, var("y")));
+    }
+
+    #[test]
+    #[should_panic(expected = "z has no components")]
+    fn a_number_has_no_components_to_set() {
+        let body = vec![
+            Stmt::Var("z", num(0.0)),
+            Stmt::SetAt("z", count(0), num(1.0)),
+        ];
+        result_type(&one(vec![], body, var("z")));
+    }
+
+    #[test]
+    #[should_panic(expected = "WALLS is declared twice")]
+    fn a_kernel_s_constant_is_not_shadowed() {
+        let body = vec![Stmt::Let("WALLS", count(1))];
+        result_type(&with_stops(vec![], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "stop's argument of Real")]
+    fn a_kernel_s_function_takes_its_parameters_types() {
+        let params = vec![("walls", Ty::Struct("Stops"))];
+        let e = dot_of_made(apply("stop", vec![var("walls"), num(0.0)]));
+        result_type(&with_stops(params, vec![], e));
+    }
+
+    #[test]
+    #[should_panic(expected = "clamp's arguments")]
+    fn a_function_of_numbers_takes_its_arity() {
+        let e = Expr::Math(Math::Clamp, vec![num(0.0), num(1.0)]);
+        result_type(&one(vec![], vec![], e));
+    }
+
+    #[test]
+    #[should_panic(expected = "-x of Bool")]
+    fn a_truth_value_is_not_negated() {
+        result_type(&one(vec![], vec![], neg(truth(false))));
     }
 }
