@@ -272,7 +272,7 @@ impl Hermite {
     /// root the slope's rounding moves each step by a few ulps, and the
     /// bracket closed by bisection): at one call per oscillation and
     /// trajectory, 7 percent of the CPU path's time on a 200-step sweep
-    /// of the seed's oscillator. Twin of `hermite_peak`.
+    /// of the seed's oscillator.
     pub(crate) fn peak(&self) -> Option<f64> {
         if !(self.slope(0.0) > 0.0 && self.slope(1.0) < 0.0) {
             return None;
@@ -288,6 +288,36 @@ impl Hermite {
             c / (-0.5 * (b - root))
         };
         Some(th.clamp(0.0, 1.0))
+    }
+
+    /// The cubic's stationary points inside [0, 1] (NaN where there are
+    /// fewer than two): the roots of its slope a·θ² + b·θ + c, the one
+    /// without cancellation first (q = -(b + sign(b)·√disc)/2, q/a), the
+    /// other from the product (c/q). Maxima and minima alike: a caller
+    /// after the largest value compares them with the ends. The orbit's
+    /// grazing tests take the peaks of a step this way, whatever the signs
+    /// of its end slopes (a +→-→+ step holds a peak and a trough).
+    pub(crate) fn stationary_points(&self) -> [f64; 2] {
+        let (a, b, c) = (3.0 * self.c[3], 2.0 * self.c[2], self.c[1]);
+        let mut roots = [f64::NAN; 2];
+        if a.abs() <= 1e-300 {
+            if b != 0.0 {
+                roots[0] = -c / b;
+            }
+        } else {
+            let disc = b * b - 4.0 * a * c;
+            if disc >= 0.0 {
+                let q = -0.5 * (b + b.signum() * disc.sqrt());
+                roots = [q / a, if q != 0.0 { c / q } else { f64::NAN }];
+            }
+        }
+        roots.map(|th| {
+            if (0.0..=1.0).contains(&th) {
+                th
+            } else {
+                f64::NAN
+            }
+        })
     }
 
     /// The first upward root of the cubic in [a, b] (g(a) <= 0 < g(b)), by
