@@ -290,6 +290,36 @@ impl Hermite {
         Some(th.clamp(0.0, 1.0))
     }
 
+    /// The cubic's stationary points inside [0, 1] (NaN where there are
+    /// fewer than two): the roots of its slope a·θ² + b·θ + c, the one
+    /// without cancellation first (q = -(b + sign(b)·√disc)/2, q/a), the
+    /// other from the product (c/q). Maxima and minima alike: a caller
+    /// after the largest value compares them with the ends. The orbit's
+    /// grazing tests take the peaks of a step this way, whatever the signs
+    /// of its end slopes (a +→-→+ step holds a peak and a trough).
+    pub(crate) fn stationary_points(&self) -> [f64; 2] {
+        let (a, b, c) = (3.0 * self.c[3], 2.0 * self.c[2], self.c[1]);
+        let mut roots = [f64::NAN; 2];
+        if a.abs() <= 1e-300 {
+            if b != 0.0 {
+                roots[0] = -c / b;
+            }
+        } else {
+            let disc = b * b - 4.0 * a * c;
+            if disc >= 0.0 {
+                let q = -0.5 * (b + b.signum() * disc.sqrt());
+                roots = [q / a, if q != 0.0 { c / q } else { f64::NAN }];
+            }
+        }
+        roots.map(|th| {
+            if (0.0..=1.0).contains(&th) {
+                th
+            } else {
+                f64::NAN
+            }
+        })
+    }
+
     /// The first upward root of the cubic in [a, b] (g(a) <= 0 < g(b)), by
     /// bisection refined with Newton; used only as Newton's starting guess.
     pub fn first_root(&self, mut a: f64, mut b: f64) -> f64 {

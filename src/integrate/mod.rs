@@ -10,7 +10,7 @@ pub mod closed_form;
 pub mod flow;
 pub mod impact;
 pub mod iteration;
-mod locate;
+pub(crate) mod locate;
 pub mod piecewise_linear;
 pub mod region;
 pub mod rk4;

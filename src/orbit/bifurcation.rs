@@ -90,7 +90,11 @@ pub struct Bifurcation<const D: usize> {
 /// consecutive points of `points` (a branch followed by
 /// [`super::continue_branch`] with `continuation`), located to
 /// `tolerance` in λ. A search that fails (the corrector does not converge
-/// on the chord) leaves that bifurcation out.
+/// on the chord) leaves that bifurcation out, and so does a pair with a
+/// point whose multipliers fail the sum rule ([`super::Floquet::trustworthy`]):
+/// within ~v² of a grazing (v the impact's speed) the perturbed copies
+/// meet the wall differently from the orbit, and the test functions'
+/// signs there are noise.
 pub fn bifurcations<const D: usize, S: System<D>>(
     base: &Params,
     settings: &MethodSettings,
@@ -104,6 +108,9 @@ where
 {
     let mut found = Vec::new();
     for pair in points.windows(2) {
+        if !pair.iter().all(|p| p.floquet.trustworthy()) {
+            continue;
+        }
         for kind in Kind::ALL {
             let (ga, gb) = (kind.test(&pair[0]), kind.test(&pair[1]));
             if ga.signum() == gb.signum() || ga.is_nan() || gb.is_nan() {

@@ -7,6 +7,7 @@
 use super::map::flow_of;
 use super::newton::Orbit;
 use crate::integrate::clock::ZERO_PHASE;
+use crate::integrate::locate::Hermite;
 use crate::integrate::Flow;
 use crate::method::MethodSettings;
 use crate::system::{IterationStats, Part, System};
@@ -29,11 +30,77 @@ pub fn largest<const D: usize, S: System<D> + Flow<D>>(
     coordinate: usize,
     sign: f64,
 ) -> f64 {
+    let mut best = sign * x[coordinate];
+    for_each_step(system, settings, x, p, coordinate, |ends, slopes, free| {
+        best = best.max(sign * ends[1]);
+        if free {
+            best = best.max(hermite_peak(sign, ends, slopes));
+        }
+    });
+    best
+}
+
+/// The free flight's closest approach to wall `wall` over the orbit, as
+/// side·(x_c - position) at the largest local maximum of side·x_c inside a
+/// step without impacts or crossings (where the normal velocity turns
+/// from towards the wall to away from it): negative while every free
+/// flight stays clear, zero where one touches the wall with zero normal
+/// velocity. Impacts themselves do not count (their steps are skipped,
+/// and the motion reaches them moving into the wall), so on an impacting
+/// orbit this is the grazing test of a flight between impacts. -∞ when no
+/// free flight turns back; NaN for a system without that wall.
+pub fn free_approach<const D: usize, S: System<D> + Flow<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    orbit: &Orbit<D>,
+    wall: usize,
+) -> f64 {
+    let Some(&w) = system.walls().get(wall) else {
+        return f64::NAN;
+    };
+    let sign = w.side;
+    let mut best = f64::NEG_INFINITY;
+    let (state, period) = (orbit.state, orbit.period);
+    for_each_step(
+        system,
+        settings,
+        &state,
+        period,
+        w.coordinate,
+        |ends, slopes, free| {
+            if !free {
+                return;
+            }
+            let (g0, g1) = (sign * ends[0], sign * ends[1]);
+            let (s0, s1) = (sign * slopes[0], sign * slopes[1]);
+            let hermite = Hermite::new(g0, s0, g1, s1, 1.0);
+            if let Some(th) = hermite.peak() {
+                best = best.max(hermite.value(th));
+            } else if s0 > 0.0 && s1 == 0.0 {
+                best = best.max(g1);
+            }
+        },
+    );
+    best - sign * w.position
+}
+
+/// Calls `visit` for every RK4 step of the p iterations from x with the
+/// step's ends of coordinate `coordinate`, their slopes h·F_c per unit
+/// step, and whether the step is free (no impact or crossing: then one
+/// polynomial). The reference is stepped one step at a time, each a
+/// one-step part of the iteration: the same arithmetic as the whole map.
+fn for_each_step<const D: usize, S: System<D> + Flow<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    x: &[f64; D],
+    p: usize,
+    coordinate: usize,
+    mut visit: impl FnMut([f64; 2], [f64; 2], bool),
+) {
     let flow = flow_of(system, settings);
     let n = flow.steps_per_period;
     let h = system.period() / n as f64;
     let mut y = *x;
-    let mut best = sign * y[coordinate];
     for _ in 0..p {
         let mut phase = ZERO_PHASE;
         for index in 0..n {
@@ -48,54 +115,31 @@ pub fn largest<const D: usize, S: System<D> + Flow<D>>(
                 &mut stats,
             );
             let next = ys[0];
-            best = best.max(sign * next[coordinate]);
-            if stats[0].crossings.iter().all(|&c| c == 0) {
-                let f1 = system.rhs(&phase, &next);
-                let ends = [y[coordinate], next[coordinate]];
-                let slopes = [h * f0[coordinate], h * f1[coordinate]];
-                best = best.max(hermite_peak(sign, ends, slopes));
-            }
+            let free = stats[0].crossings.iter().all(|&c| c == 0);
+            let f1 = if free { system.rhs(&phase, &next) } else { f0 };
+            visit(
+                [y[coordinate], next[coordinate]],
+                [h * f0[coordinate], h * f1[coordinate]],
+                free,
+            );
             y = next;
         }
         system.wrap(&mut y);
     }
-    best
 }
 
 /// The largest `sign`·p(s) over s ∈ [0, 1] of the cubic Hermite p with
 /// p(0), p(1) = `ends` and p'(0), p'(1) = `slopes` (per unit s), at its
 /// stationary points inside the step (the ends are the caller's; a
 /// stationary point that is a minimum of sign·p lies below them, so the
-/// caller's maximum is the same with it).
+/// caller's maximum is the same with it). -∞ without one.
 fn hermite_peak(sign: f64, [p0, p1]: [f64; 2], [m0, m1]: [f64; 2]) -> f64 {
-    let value = |s: f64| {
-        let (s2, s3) = (s * s, s * s * s);
-        (2.0 * s3 - 3.0 * s2 + 1.0) * p0
-            + (s3 - 2.0 * s2 + s) * m0
-            + (-2.0 * s3 + 3.0 * s2) * p1
-            + (s3 - s2) * m1
-    };
-    // p'(s) = a·s² + b·s + c.
-    let a = 6.0 * p0 + 3.0 * m0 - 6.0 * p1 + 3.0 * m1;
-    let b = -6.0 * p0 - 4.0 * m0 + 6.0 * p1 - 2.0 * m1;
-    let c = m0;
-    let mut roots = [f64::NAN; 2];
-    if a.abs() <= 1e-300 {
-        if b != 0.0 {
-            roots[0] = -c / b;
-        }
-    } else {
-        let disc = b * b - 4.0 * a * c;
-        if disc >= 0.0 {
-            // The root without cancellation first, the other from the product.
-            let q = -0.5 * (b + b.signum() * disc.sqrt());
-            roots = [q / a, if q != 0.0 { c / q } else { f64::NAN }];
-        }
-    }
-    roots
+    let hermite = Hermite::new(p0, m0, p1, m1, 1.0);
+    hermite
+        .stationary_points()
         .iter()
-        .filter(|s| (0.0..=1.0).contains(*s))
-        .fold(f64::NEG_INFINITY, |m, &s| m.max(sign * value(s)))
+        .filter(|s| !s.is_nan())
+        .fold(f64::NEG_INFINITY, |m, &s| m.max(sign * hermite.value(s)))
 }
 
 /// How far past wall `wall` of the system the orbit would come, as

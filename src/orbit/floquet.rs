@@ -33,6 +33,14 @@ impl Floquet {
         self.exponents.iter().sum::<f64>() - self.expected_sum
     }
 
+    /// Whether the multipliers pass the sum rule to 1e-6 per unit time:
+    /// their product is the volume law's. An estimate that fails it (the
+    /// perturbed copies of an orbit within ~v² of grazing meet the wall
+    /// differently from it) says nothing of the multipliers' crossings.
+    pub fn trustworthy(&self) -> bool {
+        self.sum_error().abs() <= 1e-6
+    }
+
     /// Whether every multiplier lies inside the unit circle.
     pub fn stable(&self) -> bool {
         self.multipliers.iter().all(|m| m.norm() < 1.0)

@@ -7,7 +7,10 @@
 //! functions on a branch located to a tolerance in the parameter
 //! (`locate`), grazing a wall among them (`extremum`), and the folds,
 //! period doublings and Neimark–Sacker points on a branch from its
-//! multipliers (`bifurcation`).
+//! multipliers (`bifurcation`); the doubled branch followed from a period
+//! doubling (`doubling`); where an orbit's events per period change (an
+//! impact or a free flight grazing, sliding), and the branch restarted
+//! past it (`events`).
 //!
 //! A sweep sees what attracts; these are the orbits between: the unstable
 //! middle of a hysteresis loop, and where an orbit is born or lost.
@@ -16,6 +19,8 @@
 
 pub mod bifurcation;
 pub mod continuation;
+pub mod doubling;
+pub mod events;
 pub mod extremum;
 pub mod floquet;
 pub mod ladder;
@@ -27,7 +32,12 @@ pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
 pub use continuation::{
     continue_branch, params_at, Branch, BranchEnd, BranchPoint, ContinuationSettings,
 };
-pub use extremum::{largest, wall_excess};
+pub use doubling::{doubled_orbit, doubling_direction, doubling_separation, switch_at_doubling};
+pub use events::{
+    events, events_changes, extrapolate_grazing, extrapolate_to_zero, impact_speed_test,
+    locate_events_change, step_past, EventKind, Events, EventsChange, Grazing,
+};
+pub use extremum::{free_approach, largest, wall_excess};
 pub use floquet::{floquet, refined_floquet, Floquet};
 pub use ladder::refined_jacobian;
 pub use locate::{locate_zero, Located};
