@@ -771,6 +771,21 @@ fn the_seed_s_impacting_branch_doubles_and_grazes_where_the_closed_form_says() {
         }
     }
     let (branch, continuation) = down.expect("followed down");
+    grazes_and_goes_on_as_the_free_orbit(&params, &settings, index, &branch, &continuation);
+    let doubling = doubling.expect("a period doubling");
+    the_doubled_branch_grazes(&params, &settings, index, &continuation, &doubling);
+}
+
+/// The impacting branch followed down ends where its impact's speed falls
+/// to 0: the grazing, then on past it as the non-impacting orbit.
+fn grazes_and_goes_on_as_the_free_orbit(
+    params: &Params,
+    settings: &MethodSettings,
+    index: usize,
+    branch: &Branch<2>,
+    continuation: &ContinuationSettings,
+) {
+    let continuation = *continuation;
     let BranchEnd::StepTooSmall { .. } = branch.end else {
         panic!("{:?}", branch.end);
     };
@@ -825,14 +840,24 @@ fn the_seed_s_impacting_branch_doubles_and_grazes_where_the_closed_form_says() {
     assert_eq!(on.end, BranchEnd::Bound);
     assert!(on.points.iter().all(|p| p.orbit.stats.impacts == 0));
     assert!(worst_exponent_error(&on) < 1e-10);
+}
 
+/// Branch switching at the period doubling on the impacting branch.
+fn the_doubled_branch_grazes(
+    params: &Params,
+    settings: &MethodSettings,
+    index: usize,
+    continuation: &ContinuationSettings,
+    doubling: &Bifurcation<2>,
+) {
+    let continuation = *continuation;
+    let test = |_: &Seed, o: &Orbit<2>| impact_speed_test(o);
     // Branch switching at the period doubling: the doubled branch is a
     // genuine period-2 orbit (its two stroboscopic points apart), which
     // leaves the doubling point towards larger η (a subcritical doubling:
     // the doubled orbit is unstable, μ ≈ +1 at the doubling point, the
     // period-1 orbit's μ² there) and ends at a grazing of its second
     // impact.
-    let doubling = doubling.expect("a period doubling");
     let doubled = switch_at_doubling::<2, Seed>(
         &params,
         &settings,
@@ -859,7 +884,7 @@ fn the_seed_s_impacting_branch_doubles_and_grazes_where_the_closed_form_says() {
     assert!(apart > 1e-3, "{apart:e}");
     let first = &doubled.points[0];
     let mu = &first.floquet.multipliers;
-    let mu1 = doubling.point.floquet.multipliers;
+    let mu1 = &doubling.point.floquet.multipliers;
     assert!((mu[0].re - 1.0).abs() < 1e-3 && (mu[1].re - mu1[1].re * mu1[1].re).abs() < 1e-3);
     let grazing2 = extrapolate_grazing::<2, Seed, _>(&params, index, &doubled.points, test)
         .expect("the doubled branch's grazing");
