@@ -7,7 +7,9 @@
 //! functions on a branch located to a tolerance in the parameter
 //! (`locate`), grazing a wall among them (`extremum`), and the folds,
 //! period doublings and Neimark–Sacker points on a branch from its
-//! multipliers (`bifurcation`).
+//! multipliers (`bifurcation`). A run's branches are traced from their
+//! starts with their bifurcations (`trace`), by the instance `dispatch`
+//! picks for the system.
 //!
 //! A sweep sees what attracts; these are the orbits between: the unstable
 //! middle of a hysteresis loop, and where an orbit is born or lost.
@@ -16,12 +18,14 @@
 
 pub mod bifurcation;
 pub mod continuation;
+pub mod dispatch;
 pub mod extremum;
 pub mod floquet;
 pub mod ladder;
 pub mod locate;
 pub mod map;
 pub mod newton;
+pub mod trace;
 
 pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
 pub use continuation::{
