@@ -234,3 +234,46 @@ fn orbits_need_one_swept_parameter_and_the_whole_sweep() {
     let error = lyapsweep::scene::parse(&single, "t", "t", &[]).unwrap_err();
     assert!(error.to_string().contains("orbits"), "{error}");
 }
+
+/// A start whose branch cannot be traced (its period above `max_period`)
+/// is a row of its own with the reason, and the other branches are traced
+/// as without it.
+#[test]
+fn a_start_that_gives_no_branch_is_a_row_with_its_reason_and_the_others_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = lyapsweep(&[
+        "run",
+        seed_path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "sweep.count=11",
+        "--set",
+        "orbits={ max_period = 1 }",
+        "--set",
+        "run.backend=\"cpu\"",
+    ]);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let orbits = read(&out.join("orbits.csv"));
+    let refused: Vec<_> = orbits
+        .iter()
+        .filter(|r| r["status"].starts_with("period-above-max"))
+        .collect();
+    assert!(!refused.is_empty(), "no start above max_period");
+    for row in &refused {
+        assert!(
+            row["lambda_1"].is_empty() && row["stable"].is_empty(),
+            "{row:?}"
+        );
+        assert_ne!(row["period"], "1");
+    }
+    assert!(orbits
+        .iter()
+        .all(|r| r["period"] != "1" || !r["lambda_1"].is_empty()));
+    let grazing = read(&out.join("bifurcations.csv"))
+        .iter()
+        .filter(|r| r["kind"] == "grazing")
+        .count();
+    assert_eq!(grazing, 2);
+}

@@ -279,7 +279,9 @@ where
             start.period,
         )
     };
-    let up = follow(1.0);
+    // Both ways at once, on two of the host's cores: the way down is
+    // wasted only on a branch that closes on itself going up.
+    let (up, down) = rayon::join(|| follow(1.0), || follow(-1.0));
     if let BranchEnd::Start(_) = up.end {
         return failed(describe_end(&up.end));
     }
@@ -287,7 +289,6 @@ where
         let end = describe_end(&up.end);
         (up.points, [end.clone(), end])
     } else {
-        let down = follow(-1.0);
         let ends = [describe_end(&down.end), describe_end(&up.end)];
         let mut path: Vec<BranchPoint<D>> = down.points.into_iter().skip(1).rev().collect();
         path.extend(up.points);
