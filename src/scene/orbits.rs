@@ -22,7 +22,14 @@ use crate::orbit::newton::NewtonSettings;
 use crate::orbit::trace::TraceSettings;
 use crate::system::{Params, SystemInfo};
 
-use super::types::Sweep;
+/// The swept parameter as the table is checked against it: its name, its
+/// index among the system's parameters, its values (the sweep's types
+/// import this file, so it does not import theirs).
+pub(super) struct Swept<'a> {
+    pub(super) parameter: &'a str,
+    pub(super) index: usize,
+    pub(super) values: &'a [f64],
+}
 
 /// The default longest period traced: `[attractors]`' default, the
 /// longest a lane's orbit is tested for without it.
@@ -97,18 +104,18 @@ pub(super) fn resolve_orbits(
     raw: RawOrbits,
     info: &SystemInfo,
     params: &Params,
-    sweep: &Sweep,
+    axis: Swept,
+    second: Option<&str>,
 ) -> Result<Orbits> {
-    if let Some(second) = &sweep.second {
+    if let Some(second) = second {
         return Err(Error::invalid(
             "orbits",
             format!(
-                "follows branches in one swept parameter; this sweep has two ({} and {}): drop [sweep.second] or [orbits]",
-                sweep.first.parameter, second.parameter
+                "follows branches in one swept parameter; this sweep has two ({} and {second}): drop [sweep.second] or [orbits]",
+                axis.parameter
             ),
         ));
     }
-    let axis = &sweep.first;
     let low = axis.values.iter().copied().fold(f64::INFINITY, f64::min);
     let high = axis
         .values
@@ -189,7 +196,7 @@ pub(super) fn resolve_orbits(
         raw.list.unwrap_or_default(),
         info,
         params,
-        axis,
+        &axis,
         (low, high),
         max_period,
     )?;
@@ -220,7 +227,7 @@ fn listed(
     raw: Vec<RawListed>,
     info: &SystemInfo,
     params: &Params,
-    axis: &super::types::Axis,
+    axis: &Swept,
     (low, high): (f64, f64),
     max_period: usize,
 ) -> Result<Vec<ListedOrbit>> {

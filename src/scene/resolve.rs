@@ -6,7 +6,7 @@ use super::defaults::{
     positive, DEFAULT_ALIGN_FRACTION, DEFAULT_COUNT, DEFAULT_ITERATIONS, DEFAULT_STEPS_PER_PERIOD,
     DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
-use super::orbits::resolve_orbits;
+use super::orbits::{resolve_orbits, Swept};
 use super::raw::{RawAxis, RawIntegration, RawOutput, RawScene, RawSweep};
 use super::starts::{resolve_starts, RawAttractors};
 use super::sweep::resolve_sweep;
@@ -74,7 +74,15 @@ pub(super) fn resolve(
     }
     let orbits = raw
         .orbits
-        .map(|o| resolve_orbits(o, info, &params, &sweep))
+        .map(|o| {
+            let axis = Swept {
+                parameter: &sweep.first.parameter,
+                index: sweep.first.index,
+                values: &sweep.first.values,
+            };
+            let second = sweep.second.as_ref().map(|s| s.parameter.as_str());
+            resolve_orbits(o, info, &params, axis, second)
+        })
         .transpose()?;
     let bifurcation_points = check_output(&raw.output, &integration, lyapunov)?;
     let name = check_name(raw.name, default_name)?;
