@@ -46,7 +46,7 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         lyapunov: scene.lyapunov,
         bifurcation_points: scene.bifurcation_points,
         max_period: scene.sweep.max_period(),
-        keep_orbit: scene.sweep.starts.is_some(),
+        keep_orbit: scene.sweep.starts.is_some() || scene.orbits.is_some(),
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.
@@ -74,11 +74,12 @@ pub const BATCH_BYTES: usize = 1 << 30;
 /// Bytes of results one lane holds until its batch is written.
 pub fn lane_bytes(scene: &Scene) -> usize {
     let dim = scene.system.dimension();
-    // Kept with `[attractors]` alone (`MethodSettings::keep_orbit`): at
+    // Kept with `[attractors]` or `[orbits]` alone (`MethodSettings::keep_orbit`): at
     // most 2·max_period points when the orbit has no period.
-    let orbit = match scene.sweep.starts {
-        Some(_) => 8 * dim * 2 * scene.sweep.max_period(),
-        None => 0,
+    let orbit = if scene.sweep.starts.is_some() || scene.orbits.is_some() {
+        8 * dim * 2 * scene.sweep.max_period()
+    } else {
+        0
     };
     std::mem::size_of::<LaneResult>()
         + 8 * (dim + 1) // exponents, expected sum

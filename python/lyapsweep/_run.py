@@ -22,6 +22,8 @@ Scene = Union[str, "os.PathLike[str]", Mapping[str, Any]]
 _SPECTRUM_FILES = ("spectrum.csv", "grid.csv")
 _BIFURCATION_FILE = "bifurcation.csv"
 _ATTRACTORS_FILE = "attractors.csv"
+_ORBITS_FILE = "orbits.csv"
+_BIFURCATIONS_FILE = "bifurcations.csv"
 
 
 def run(
@@ -258,9 +260,11 @@ def _read(path: Path) -> Optional[pandas.DataFrame]:
 class Run:
     """The results of one run: its output set's tables and summary.
 
-    ``spectrum`` (a two-parameter sweep's grid.csv), ``bifurcation`` and
-    ``attractors`` are DataFrames with the columns of the CSV files, or None
-    where the run wrote no such file. ``summary`` is what the command line
+    ``spectrum`` (a two-parameter sweep's grid.csv), ``bifurcation``,
+    ``attractors``, and with ``[orbits]`` ``orbits`` (a row per point of
+    every branch) and ``bifurcations`` (a row per bifurcation located on
+    them) are DataFrames with the columns of the CSV files, or None where
+    the run wrote no such file. ``summary`` is what the command line
     prints (backend, precision, lanes, time, max_sum_error, max_error, flagged, the
     flagged lanes by status in ``flagged_by_status``, of which those with no
     exponents in ``failures``), ``scene`` the scene as run, and ``folder`` where
@@ -289,6 +293,8 @@ class Run:
         self.spectrum = next((_read(p) for p in spectrum if p.exists()), None)
         self.bifurcation = _read(folder / _BIFURCATION_FILE)
         self.attractors = _read(folder / _ATTRACTORS_FILE)
+        self.orbits = _read(folder / _ORBITS_FILE)
+        self.bifurcations = _read(folder / _BIFURCATIONS_FILE)
 
     def __repr__(self) -> str:
         s = self.summary

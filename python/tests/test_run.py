@@ -240,3 +240,22 @@ def test_devices_lists_adapters_as_dicts():
     for adapter in lyapsweep.devices():
         assert {"name", "backend", "f64"} <= adapter.keys()
         assert isinstance(adapter["f64"], bool)
+
+
+def test_orbits_and_bifurcations_are_the_files_to_the_bit(tmp_path):
+    seed = ROOT / "scenes" / "seed-fig3.toml"
+    sets = {"sweep.count": 5, "run.backend": "cpu", "orbits": {"max_points": 200}}
+    run = lyapsweep.run(seed, set=sets, progress=False)
+    cli = command_line(tmp_path, seed, sets)
+    for name, table in [("orbits.csv", run.orbits), ("bifurcations.csv", run.bifurcations)]:
+        pandas.testing.assert_frame_equal(table, read_csv(cli / name), check_exact=True)
+        # float() of each cell's text is the DataFrame's number, bit for bit.
+        with open(cli / name, newline="") as f:
+            rows = list(csv.DictReader(f))
+        for column in table.columns:
+            if table[column].dtype == numpy.float64:
+                written = [float(r[column]) if r[column] else numpy.nan for r in rows]
+                assert numpy.array_equal(written, table[column].to_numpy(), equal_nan=True), column
+    assert set(run.bifurcations["kind"]) >= {"grazing"}
+    assert run.summary["orbit_branches"] > 0
+    assert run.summary["bifurcations"] == len(run.bifurcations)

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use crate::attractor::Attractors;
 use crate::backend::gpu::context::{self, AdapterSummary};
 use crate::backend::RunOptions;
+use crate::driver::orbits::{self, OrbitRun, OrbitStarts};
 use crate::driver::{run_streaming, Summary};
 use crate::error::{clip, Error, Result};
 use crate::model::{self, compiled::Code, Model};
@@ -30,6 +31,8 @@ pub struct Prepared {
 pub struct Outcome {
     pub summary: Summary,
     pub attractors: Option<Attractors>,
+    /// With `[orbits]`, the branches traced.
+    pub orbits: Option<OrbitRun>,
     pub written: Vec<PathBuf>,
 }
 
@@ -63,9 +66,18 @@ impl Prepared {
             scene, mut writer, ..
         } = self;
         let batch = plan::batch_lanes(&scene);
+        let mut starts = OrbitStarts::default();
+        let tracing = scene.orbits.is_some();
         let (summary, attractors) = run_streaming(&scene, options, batch, |batch, report| {
+            if tracing {
+                starts.absorb(batch, report);
+            }
             writer.append(batch, report)
         })?;
+        let orbits = orbits::trace(&scene, starts, options);
+        if let Some(run) = &orbits {
+            writer.set_orbits(run.clone());
+        }
         // A stop asked for while the files were written (Ctrl-C after the
         // lanes), up to the swap, still leaves the folder as it was.
         let staged = writer.complete(attractors.as_ref())?;
@@ -73,6 +85,7 @@ impl Prepared {
         Ok(Outcome {
             summary,
             attractors,
+            orbits,
             written,
         })
     }

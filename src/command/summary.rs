@@ -11,9 +11,11 @@ use std::time::Duration;
 
 use super::Outcome;
 use crate::backend::gpu::pipeline::Timings;
+use crate::driver::orbits::OrbitRun;
 use crate::driver::Summary;
 use crate::error::number;
 use crate::method::lane::MAX_STEP_RATE;
+use crate::orbit::trace::Kind;
 use crate::scene::{Backend, Precision, Scene};
 
 /// What a run reports when it is done.
@@ -43,6 +45,8 @@ pub struct RunSummary {
     pub time: Duration,
     /// With `[attractors]`: what the many starts found.
     pub attractors: Option<Found>,
+    /// With `[orbits]`: the branches traced.
+    pub orbits: Option<Traced>,
     /// The sum rule's largest miss, over the lanes that have exponents.
     pub max_sum_error: Option<f64>,
     /// The largest `lambda_error` of a row.
@@ -255,6 +259,7 @@ impl RunSummary {
                 passes: found.passes,
                 continued_lanes: found.continued_lanes,
             }),
+            orbits: outcome.orbits.as_ref().map(Traced::of),
             max_sum_error: report.max_sum_error,
             max_error: report.max_error,
             lanes: report.lanes,
@@ -302,6 +307,12 @@ impl RunSummary {
         if let Some(found) = &self.attractors {
             record.push(("attractors", Value::Count(found.total)));
             record.push(("branches", Value::Count(found.branches)));
+        }
+        if let Some(traced) = &self.orbits {
+            record.push(("orbit_branches", Value::Count(traced.branches)));
+            record.push(("orbit_starts_failed", Value::Count(traced.failed)));
+            record.push(("bifurcations", Value::Count(traced.bifurcations())));
+            record.push(("orbits_time", Value::Number(traced.time.as_secs_f64())));
         }
         record
     }
@@ -356,6 +367,9 @@ impl fmt::Display for RunSummary {
         }
         if let Some(found) = &self.attractors {
             write!(out, "{found}")?;
+        }
+        if let Some(traced) = &self.orbits {
+            write!(out, "{traced}")?;
         }
         self.write_outcome(out)
     }
@@ -571,5 +585,67 @@ impl fmt::Display for Found {
             )?;
         }
         Ok(())
+    }
+}
+
+/// What `[orbits]` traced: its branches, the starts that gave none, the
+/// bifurcations by kind, and the stage's time.
+pub struct Traced {
+    pub branches: usize,
+    pub failed: usize,
+    /// Bifurcations per kind, in `orbit::trace::Kind::ALL`'s order.
+    pub by_kind: Vec<(&'static str, usize)>,
+    pub time: Duration,
+}
+
+impl Traced {
+    fn of(run: &OrbitRun) -> Traced {
+        let failed = run.branches.iter().filter(|b| b.failure.is_some()).count();
+        let by_kind = Kind::ALL
+            .iter()
+            .map(|&kind| {
+                let n = run
+                    .branches
+                    .iter()
+                    .flat_map(|b| &b.bifurcations)
+                    .filter(|f| f.kind == kind)
+                    .count();
+                (kind.name(), n)
+            })
+            .filter(|(_, n)| *n > 0)
+            .collect();
+        Traced {
+            branches: run.branches.len() - failed,
+            failed,
+            by_kind,
+            time: run.elapsed,
+        }
+    }
+
+    pub fn bifurcations(&self) -> usize {
+        self.by_kind.iter().map(|(_, n)| n).sum()
+    }
+}
+
+impl fmt::Display for Traced {
+    fn fmt(&self, out: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let kinds: Vec<String> = self
+            .by_kind
+            .iter()
+            .map(|(kind, n)| format!("{kind} {n}"))
+            .collect();
+        let kinds = if kinds.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", kinds.join(", "))
+        };
+        writeln!(
+            out,
+            "  orbits       {} branches, {} bifurcations{kinds}, in {:.3} s; {} starts gave no orbit",
+            self.branches,
+            self.bifurcations(),
+            self.time.as_secs_f64(),
+            self.failed
+        )
     }
 }

@@ -4,11 +4,13 @@
 //! the GPU, `validation`: lanes recomputed and validated on the CPU path;
 //! then `checks`: the statuses decided over a finished lane) into a
 //! [`Report`], the batches summed into a [`Summary`], and with
-//! `[attractors]` the continuation passes (`continuation`).
+//! `[attractors]` the continuation passes (`continuation`); with
+//! `[orbits]`, the periodic orbits' branches traced after them (`orbits`).
 
 mod checks;
 mod choice;
 pub mod continuation;
+pub mod orbits;
 pub mod report;
 mod runner;
 pub mod validation;

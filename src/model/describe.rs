@@ -29,6 +29,7 @@ pub fn describe(code: &Code) -> String {
     write_map(&mut out, code, &show);
     write_sum_rule(&mut out, code, &show);
     write_events(&mut out, code, &show);
+    write_bifurcations(&mut out, code);
     write_jacobian(&mut out, code, &show);
     write_cpu(&mut out, code);
     write_gpu(&mut out, code);
@@ -230,6 +231,33 @@ fn write_events(w: &mut String, code: &Code, show: &dyn Fn(&Expr) -> String) {
             } else {
                 " (sliding too, where the jump is constant and the stick limit a number)"
             }
+        );
+    }
+}
+
+/// Which bifurcations of periodic orbits the model's events can produce,
+/// and how a run with `[orbits]` reports each.
+fn write_bifurcations(w: &mut String, code: &Code) {
+    let _ = writeln!(
+        w,
+        "\nbifurcations of periodic orbits ([orbits]):\n  fold, period-doubling, neimark-sacker: from the multipliers, in any model"
+    );
+    for stop in &code.walls {
+        let _ = writeln!(
+            w,
+            "  grazing of stop '{}': located where a free orbit's branch touches it",
+            stop.name
+        );
+    }
+    for s in &code.surfaces {
+        let what = match s.kind {
+            crate::integrate::Surface::Event => "grazing",
+            crate::integrate::Surface::Switch { .. } => "grazing or the onset of sliding",
+        };
+        let _ = writeln!(
+            w,
+            "  {what} on '{}': reported as an events-change where an orbit's crossings change",
+            s.name
         );
     }
 }

@@ -10,7 +10,9 @@
 //! multipliers (`bifurcation`); the doubled branch followed from a period
 //! doubling (`doubling`); where an orbit's events per period change (an
 //! impact or a free flight grazing, sliding), and the branch restarted
-//! past it (`events`).
+//! past it (`events`). A run's branches are traced from their starts with
+//! their bifurcations (`trace`), by the instance `dispatch` picks for the
+//! system.
 //!
 //! A sweep sees what attracts; these are the orbits between: the unstable
 //! middle of a hysteresis loop, and where an orbit is born or lost.
@@ -19,6 +21,7 @@
 
 pub mod bifurcation;
 pub mod continuation;
+pub mod dispatch;
 pub mod doubling;
 pub mod events;
 pub mod extremum;
@@ -27,6 +30,7 @@ pub mod ladder;
 pub mod locate;
 pub mod map;
 pub mod newton;
+pub mod trace;
 
 pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
 pub use continuation::{

@@ -17,6 +17,10 @@ pub const GRID_FILE: &str = "grid.csv";
 pub const BIFURCATION_FILE: &str = "bifurcation.csv";
 /// With `[attractors]`: one row per attractor found at a swept value.
 pub const ATTRACTORS_FILE: &str = "attractors.csv";
+/// With `[orbits]`: a row per point of every periodic orbit's branch.
+pub const ORBITS_FILE: &str = "orbits.csv";
+/// With `[orbits]`: a row per bifurcation located on the branches.
+pub const BIFURCATIONS_FILE: &str = "bifurcations.csv";
 /// The column naming the branch an attractor (or a lane's) belongs to: one
 /// attractor followed across the swept values.
 pub const BRANCH_COLUMN: &str = "branch";
@@ -36,6 +40,8 @@ pub fn spectrum_file(scene: &Scene) -> &'static str {
 /// The figures' file stems (each drawn as .png and .svg).
 pub const SWEEP_FIGURE: &str = "figure";
 pub const HEAT_MAP: &str = "heat-map";
+/// With `[orbits]`: the branches over the sweep's points.
+pub const ORBIT_FIGURE: &str = "orbits";
 /// With `[attractors]` over two parameters: the attractors found per cell.
 pub const ATTRACTOR_MAP: &str = "attractors-map";
 

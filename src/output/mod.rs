@@ -16,6 +16,7 @@
 pub mod attractor_table;
 pub mod files;
 pub mod merge;
+pub mod orbit_table;
 pub mod owned;
 pub mod plot;
 pub mod results;
@@ -28,14 +29,16 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use crate::attractor::{self, Attractors};
+use crate::driver::orbits::OrbitRun;
 use crate::driver::Report;
 use crate::error::{Error, Result};
 use crate::model::compiled::event_column;
 use crate::scene::Scene;
 use files::{number, write_text};
 pub use files::{
-    spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, ERROR_COLUMN,
-    GRID_FILE, HEAT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
+    spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATIONS_FILE, BIFURCATION_FILE,
+    BRANCH_COLUMN, ERROR_COLUMN, GRID_FILE, HEAT_MAP, ORBITS_FILE, SCENE_FILE, SHARD_FILE,
+    SPECTRUM_FILE, SWEEP_FIGURE,
 };
 pub use set::Staging;
 
@@ -89,7 +92,9 @@ pub fn bifurcation_header(scene: &Scene) -> Vec<String> {
 
 /// Writes a run's set: `scene.toml` first, then the rows of each batch of
 /// lanes as it finishes ([`append`](Self::append)), then with many starts
-/// `attractors.csv` and the rows' branches, `shard.toml` or the figures,
+/// `attractors.csv` and the rows' branches, with `[orbits]` `orbits.csv`
+/// and `bifurcations.csv` ([`set_orbits`](Self::set_orbits)), `shard.toml`
+/// or the figures,
 /// and the swap ([`finish`](Self::finish)).
 pub struct SetWriter {
     staging: Staging,
@@ -104,6 +109,8 @@ pub struct SetWriter {
     /// λ1 of each row so far, for the heat map of a grid of one lane a
     /// point (8 bytes a lane, as reading it back would hold).
     lambda1: Option<Vec<f64>>,
+    /// With `[orbits]`, the branches traced after the lanes.
+    orbits: Option<OrbitRun>,
 }
 
 fn write_error(path: &Path) -> impl Fn(std::io::Error) -> Error + '_ {
@@ -145,7 +152,14 @@ impl SetWriter {
                 && scene.sweep.second.is_some()
                 && scene.sweep.starts.is_none())
             .then(Vec::new),
+            orbits: None,
         })
+    }
+
+    /// The branches of `[orbits]`, written as `orbits.csv` and
+    /// `bifurcations.csv` when the set is completed.
+    pub fn set_orbits(&mut self, run: OrbitRun) {
+        self.orbits = Some(run);
     }
 
     /// Appends the rows of one batch: `batch` is the scene restricted to
@@ -215,6 +229,9 @@ impl SetWriter {
                     .flat_map(|(lane, &n)| std::iter::repeat_n(lane, n));
                 attractor_table::fill_branches(&dir.join(BIFURCATION_FILE), found, per_row)?;
             }
+        }
+        if let Some(run) = &self.orbits {
+            orbit_table::write_orbits(scene, run, &dir)?;
         }
         if let Some(shard) = scene.shard {
             let rows: Vec<String> = self

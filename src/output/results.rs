@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::files::{
     spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, HEAT_MAP,
-    SCENE_FILE, SWEEP_FIGURE,
+    ORBITS_FILE, ORBIT_FIGURE, SCENE_FILE, SWEEP_FIGURE,
 };
 use super::plot::{self, AttractorSweepData, Branch, CountData, GridData, SweepData};
 use crate::error::{Error, Result};
@@ -122,7 +122,7 @@ pub fn draw_with(dir: &Path, into: &Path, lambda1: Option<Vec<f64>>) -> Result<V
     } else {
         None
     };
-    match (&scene.sweep.second, attractors) {
+    let mut written = match (&scene.sweep.second, attractors) {
         (Some(second), attractors) => {
             draw_grid(dir, into, &scene, second, attractors.as_deref(), lambda1)
         }
@@ -131,7 +131,12 @@ pub fn draw_with(dir: &Path, into: &Path, lambda1: Option<Vec<f64>>) -> Result<V
             plot::attractor_figure(&data, into, SWEEP_FIGURE)
         }
         (None, None) => draw_sweep(dir, into, &scene),
+    }?;
+    if scene.orbits.is_some() && dir.join(ORBITS_FILE).exists() {
+        let data = super::orbit_table::figure_data(dir, &scene)?;
+        written.extend(plot::orbit_figure(&data, into, ORBIT_FIGURE)?);
     }
+    Ok(written)
 }
 
 /// The sweep figure of one parameter, one lane per value (or many starts

@@ -24,8 +24,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::files::{
-    write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, GRID_FILE, HEAT_MAP, SCENE_FILE,
-    SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
+    write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATIONS_FILE, BIFURCATION_FILE, GRID_FILE,
+    HEAT_MAP, ORBITS_FILE, ORBIT_FIGURE, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
 };
 use crate::error::{Error, Result};
 
@@ -34,15 +34,17 @@ pub const MANIFEST_FILE: &str = "manifest.toml";
 
 /// The data files a set may hold (the figures are drawn from them and are
 /// not part of the manifest: `plot` redraws them in place).
-const DATA_FILES: [&str; 6] = [
+const DATA_FILES: [&str; 8] = [
     SCENE_FILE,
     SHARD_FILE,
     SPECTRUM_FILE,
     GRID_FILE,
     BIFURCATION_FILE,
     ATTRACTORS_FILE,
+    ORBITS_FILE,
+    BIFURCATIONS_FILE,
 ];
-pub const FIGURE_STEMS: [&str; 3] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP];
+pub const FIGURE_STEMS: [&str; 4] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP, ORBIT_FIGURE];
 
 /// Pauses before writing each file and before the swap, naming the step on
 /// stderr, for tests that kill a run in its write phase.

@@ -48,6 +48,7 @@
 
 mod defaults;
 mod model_file;
+mod orbits;
 mod overrides;
 mod raw;
 mod resolve;
@@ -64,6 +65,7 @@ pub use defaults::{
     DEFAULT_PERTURBATION_F64, DEFAULT_STEPS_PER_PERIOD, DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 pub use model_file::model_path;
+pub use orbits::{ListedOrbit, Orbits, DEFAULT_MAX_POINTS, DEFAULT_ORBIT_MAX_PERIOD};
 pub use starts::Continuation;
 pub use types::{
     Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Seed, Shard, Starts, Sweep,

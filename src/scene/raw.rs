@@ -3,6 +3,7 @@
 
 use serde::Deserialize;
 
+use super::orbits::RawOrbits;
 use super::overrides::set_key;
 use super::starts::RawAttractors;
 use super::types::{Backend, Lyapunov, Precision};
@@ -28,6 +29,7 @@ pub(super) struct RawScene {
     #[serde(default)]
     pub(super) output: RawOutput,
     pub(super) attractors: Option<RawAttractors>,
+    pub(super) orbits: Option<RawOrbits>,
 }
 
 // The first axis's keys are spelled out rather than flattened from
@@ -98,13 +100,15 @@ pub(super) struct RawOutput {
 
 /// The tables a scene's keys hold, as serde names them ("struct RawSweep")
 /// and as its user knows them: a table, with its keys.
-const TABLES: [(&str, &str); 7] = [
+const TABLES: [(&str, &str); 9] = [
     ("struct RawSweep", "a table (parameter, and from, to, count or values; second)"),
     ("struct RawAxis", "a table (parameter, and from, to, count or values)"),
     ("struct RawIntegration", "a table (steps_per_period, transient, align, iterations, initial_state, perturbation, difference, impact_location, submaps)"),
     ("struct RawRun", "a table (backend, precision, validate)"),
     ("struct RawOutput", "a table (lyapunov, bifurcation_points, plot)"),
     ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation)"),
+    ("struct RawOrbits", "a table (from_sweep, list, max_period, max_points, min_step, max_step, tolerance, locate_tolerance)"),
+    ("struct RawListed", "a table (value, state, period)"),
     ("struct RawScene", "a table"),
 ];
 

@@ -6,6 +6,7 @@ use super::defaults::{
     positive, DEFAULT_ALIGN_FRACTION, DEFAULT_COUNT, DEFAULT_ITERATIONS, DEFAULT_STEPS_PER_PERIOD,
     DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
+use super::orbits::{resolve_orbits, Swept};
 use super::raw::{RawAxis, RawIntegration, RawOutput, RawScene, RawSweep};
 use super::starts::{resolve_starts, RawAttractors};
 use super::sweep::resolve_sweep;
@@ -71,6 +72,18 @@ pub(super) fn resolve(
         }
         sweep.starts = Some(starts);
     }
+    let orbits = raw
+        .orbits
+        .map(|o| {
+            let axis = Swept {
+                parameter: &sweep.first.parameter,
+                index: sweep.first.index,
+                values: &sweep.first.values,
+            };
+            let second = sweep.second.as_ref().map(|s| s.parameter.as_str());
+            resolve_orbits(o, info, &params, axis, second)
+        })
+        .transpose()?;
     let bifurcation_points = check_output(&raw.output, &integration, lyapunov)?;
     let name = check_name(raw.name, default_name)?;
     let precision = raw.run.precision.unwrap_or_default();
@@ -88,6 +101,7 @@ pub(super) fn resolve(
         lyapunov,
         bifurcation_points,
         plot,
+        orbits,
         shard: None,
         batch: None,
         source,

@@ -90,6 +90,9 @@ pub struct Scene {
     pub bifurcation_points_asked: Option<usize>,
     /// Draw the figures next to the CSV files.
     pub plot: bool,
+    /// `[orbits]`: periodic orbits followed over the sweep's range after
+    /// its lanes.
+    pub orbits: Option<super::orbits::Orbits>,
     /// The part of the sweep this run computes (`--shard i/n`), if not all.
     pub shard: Option<Shard>,
     /// The lanes of the shard (or sweep) computed now, when a large run is
@@ -439,6 +442,12 @@ impl Scene {
             return Err(Error::invalid(
                 "--shard",
                 "a scene with [attractors] runs whole: a value's starts and its neighbours are compared with each other",
+            ));
+        }
+        if self.orbits.is_some() {
+            return Err(Error::invalid(
+                "--shard",
+                "a scene with [orbits] runs whole: its branches are followed over the whole sweep's range",
             ));
         }
         let lanes = self.sweep.lanes();

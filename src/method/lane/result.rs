@@ -164,7 +164,7 @@ pub struct LaneResult {
     /// `orbit_period` points, or when it has none the last 2·max_period
     /// (fewer if fewer were taken). The last point is the lane's final
     /// state: what a neighbouring value is continued from. Empty unless the
-    /// settings keep it (`keep_orbit`: runs with `[attractors]`).
+    /// settings keep it (`keep_orbit`: runs with `[attractors]` or `[orbits]`).
     pub orbit: Vec<f64>,
     /// A term of the sum rule that depends on the orbit, per unit time: a
     /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0

@@ -43,7 +43,8 @@ pub struct MethodSettings {
     pub max_period: usize,
     /// Whether a lane's result keeps its orbit's last points
     /// ([`LaneResult::orbit`](super::LaneResult)): attractors are told apart
-    /// and continued by them; other runs need only the period, and at a
+    /// and continued by them, periodic orbits traced from them; other runs
+    /// need only the period, and at a
     /// million lanes the points would be most of the memory held.
     pub keep_orbit: bool,
     /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).

@@ -11,8 +11,9 @@
 //! temporary name in its folder and renamed into place, so it appears whole or
 //! not at all.
 //!
-//! One file per figure: `sweep`, `attractor_sweep`, `heat_map` and
-//! `attractor_map`. What they share: `style` (sizes, colours, fonts,
+//! One file per figure: `sweep`, `attractor_sweep`, `heat_map`,
+//! `attractor_map` and `orbit_sweep` (the branches of `[orbits]` over the
+//! sweep's points). What they share: `style` (sizes, colours, fonts,
 //! spacing), `render` (the drawing backend's choice: pixels, PNG and SVG
 //! files written whole), `figure` (the embedded font and the PNG encoder),
 //! `svg_raster` (the SVG backend that embeds bitmaps), `panel` (axes, ranges
@@ -25,6 +26,7 @@ pub mod figure;
 mod grid;
 mod heat_map;
 mod legend;
+mod orbit_sweep;
 mod panel;
 mod render;
 mod style;
@@ -34,6 +36,7 @@ mod sweep;
 pub use attractor_map::{attractor_map, attractor_map_pixels, CountData};
 pub use attractor_sweep::{attractor_figure, attractor_pixels, AttractorSweepData, Branch};
 pub use heat_map::{heat_map, heat_map_pixels, GridData};
+pub use orbit_sweep::{orbit_figure, OrbitSweepData};
 pub use render::write_png;
 pub use style::{ATTRACTOR_SWEEP_SIZE, DATA_COLOUR, HEAT_MAP_SIZE, SWEEP_SIZE};
 pub use sweep::{sweep_figure, sweep_pixels, SweepData};

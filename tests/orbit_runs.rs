@@ -1,0 +1,286 @@
+//! `[orbits]` run from a scene: the table's keys checked before any work,
+//! the branches traced after the sweep, written as `orbits.csv` and
+//! `bifurcations.csv`.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+const ZETA: f64 = 0.05;
+/// Where the seed's non-impacting period-1 orbit grazes the wall: its
+/// linear amplitude f/√((1-η²)² + (2ζη)²) equals X_w = 2.
+const GRAZING: [f64; 2] = [0.7106873690939233, 1.2185743569476413];
+
+fn seed_path() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/seed-fig3.toml")
+}
+
+fn lyapsweep(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// A CSV file as rows of named cells.
+fn read(path: &Path) -> Vec<BTreeMap<String, String>> {
+    let mut reader = csv::Reader::from_path(path).expect("the file reads");
+    let header = reader.headers().unwrap().clone();
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            header
+                .iter()
+                .zip(r.iter())
+                .map(|(h, v)| (h.to_owned(), v.to_owned()))
+                .collect()
+        })
+        .collect()
+}
+
+fn value(row: &BTreeMap<String, String>, column: &str) -> f64 {
+    row[column]
+        .parse()
+        .unwrap_or_else(|_| panic!("{column}: {:?}", row[column]))
+}
+
+/// The seed's scene over η ∈ [0.5, 1.5] at 21 values (1800 steps per
+/// period, as committed), with `[orbits]` at its defaults.
+#[test]
+fn the_seed_s_branches_are_written_with_their_grazing_points_and_exponents() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = lyapsweep(&[
+        "run",
+        seed_path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "sweep.count=21",
+        "--set",
+        "orbits={}",
+        "--set",
+        "run.backend=\"cpu\"",
+    ]);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let manifest = std::fs::read_to_string(out.join("manifest.toml")).unwrap();
+    assert!(manifest.contains("\"orbits.csv\""), "{manifest}");
+    assert!(manifest.contains("\"bifurcations.csv\""), "{manifest}");
+
+    let bifurcations = read(&out.join("bifurcations.csv"));
+    let grazing: Vec<f64> = bifurcations
+        .iter()
+        .filter(|r| r["kind"] == "grazing")
+        .map(|r| value(r, "eta"))
+        .collect();
+    for exact in GRAZING {
+        let nearest = grazing
+            .iter()
+            .map(|g| (g - exact).abs())
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            nearest < 1e-8,
+            "grazing at {exact}: {nearest:e} off ({grazing:?})"
+        );
+    }
+
+    let orbits = read(&out.join("orbits.csv"));
+    // The non-impacting period-1 branches: the lanes at both ends of the
+    // range start them.
+    let free: Vec<_> = orbits
+        .iter()
+        .filter(|r| {
+            r["period"] == "1" && r["impacts_per_period"] == "0" && !r["lambda_1"].is_empty()
+        })
+        .collect();
+    assert!(free.len() > 20, "{} non-impacting rows", free.len());
+    for row in &free {
+        let eta = value(row, "eta");
+        assert!(
+            eta <= GRAZING[0] + 1e-8 || eta >= GRAZING[1] - 1e-8,
+            "η = {eta}"
+        );
+        for column in ["lambda_1", "lambda_2"] {
+            let error = (value(row, column) + ZETA).abs();
+            assert!(error < 1e-10, "η = {eta}: {column} off -ζ by {error:e}");
+        }
+        assert_eq!(row["status"], "ok", "η = {eta}");
+        assert_eq!(row["stable"], "true");
+    }
+    // Both ends of the range are reached, and the grazing ends say why.
+    let etas: Vec<f64> = free.iter().map(|r| value(r, "eta")).collect();
+    assert!(etas.contains(&0.5) && etas.contains(&1.5), "{etas:?}");
+    // A row is `ok` only where its exponents meet the sum rule.
+    for row in &orbits {
+        if row["status"] == "ok" {
+            let miss = value(row, "lambda_sum") - value(row, "expected_sum");
+            assert!(miss.abs() <= 1e-8, "{row:?}");
+            assert!(!row["multiplier_1_modulus"].is_empty());
+        } else if row["lambda_1"].is_empty() {
+            assert!(
+                row["status"].starts_with("no-orbit")
+                    || row["status"].starts_with("period-above-max"),
+                "{row:?}"
+            );
+        }
+    }
+    // Every branch's rows are in one run of the file, the first and last
+    // saying how the branch ended there.
+    let branches: Vec<&str> = orbits.iter().map(|r| r["branch"].as_str()).collect();
+    let mut seen = Vec::new();
+    for (k, b) in branches.iter().enumerate() {
+        let first = k == 0 || branches[k - 1] != *b;
+        let last = k + 1 == branches.len() || branches[k + 1] != *b;
+        if first {
+            assert!(!seen.contains(b), "branch {b} split");
+            seen.push(b);
+        }
+        if (first || last) && !orbits[k]["lambda_1"].is_empty() {
+            assert!(!orbits[k]["branch_end"].is_empty(), "{:?}", orbits[k]);
+        }
+    }
+}
+
+/// Each bad key refused by name, exit code 2, nothing written.
+#[test]
+fn bad_orbits_keys_are_refused_by_name_before_any_work() {
+    let cases: [(&str, &str); 14] = [
+        ("orbits={ max_period = 0 }", "orbits.max_period"),
+        ("orbits={ max_points = 1 }", "orbits.max_points"),
+        ("orbits={ min_step = -1.0 }", "orbits.min_step"),
+        ("orbits={ max_step = 5.0 }", "orbits.max_step"),
+        (
+            "orbits={ min_step = 0.1, max_step = 0.01 }",
+            "orbits.min_step",
+        ),
+        ("orbits={ tolerance = 0.5 }", "orbits.tolerance"),
+        ("orbits={ tolerance = nan }", "orbits.tolerance"),
+        (
+            "orbits={ locate_tolerance = 1.0 }",
+            "orbits.locate_tolerance",
+        ),
+        ("orbits={ typo = 1 }", "typo"),
+        (
+            "orbits={ list = [{ value = 2.0, state = [0.0, 0.0], period = 1 }] }",
+            "orbits.list[0].value",
+        ),
+        (
+            "orbits={ list = [{ value = 0.8, state = [0.0], period = 1 }] }",
+            "orbits.list[0].state",
+        ),
+        (
+            "orbits={ list = [{ value = 0.8, state = [2.5, 0.0], period = 1 }] }",
+            "orbits.list[0].state",
+        ),
+        (
+            "orbits={ list = [{ value = 0.8, state = [0.0, 0.0], period = 0 }] }",
+            "orbits.list[0].period",
+        ),
+        (
+            "orbits={ list = [{ value = 0.8, state = [0.0, 0.0] }] }",
+            "orbits.list[0]",
+        ),
+    ];
+    for (set, key) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let output = lyapsweep(&[
+            "run",
+            seed_path().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            set,
+        ]);
+        let text = stderr(&output);
+        assert_eq!(output.status.code(), Some(2), "{set}: {text}");
+        assert!(text.contains(key), "{set}: {key} not in {text}");
+        assert!(!out.exists(), "{set}: wrote {out:?}");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty(), "{set}: left {left:?}");
+    }
+}
+
+/// A two-parameter sweep and a shard cannot follow branches in one
+/// parameter over the whole range: refused naming `orbits` / `--shard`.
+#[test]
+fn orbits_need_one_swept_parameter_and_the_whole_sweep() {
+    let text = format!(
+        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[sweep.second]\nparameter = \"f\"\nvalues = [1.0, 2.0]\n[orbits]\n",
+        common::SEED
+    );
+    let error = lyapsweep::scene::parse(&text, "t", "t", &[]).unwrap_err();
+    assert!(error.to_string().contains("orbits"), "{error}");
+    assert!(lyapsweep::Error::is_input_error(&error), "{error}");
+    let shard = lyapsweep::scene::Shard { index: 0, count: 2 };
+    let one = format!(
+        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[orbits]\n",
+        common::SEED
+    );
+    let error = lyapsweep::scene::parse_shard(&one, "t", "t", &[], Some(shard)).unwrap_err();
+    assert!(error.to_string().contains("--shard"), "{error}");
+    // A range of one value has nothing to follow.
+    let single = format!(
+        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[orbits]\n",
+        common::SEED
+    );
+    let error = lyapsweep::scene::parse(&single, "t", "t", &[]).unwrap_err();
+    assert!(error.to_string().contains("orbits"), "{error}");
+}
+
+/// A start whose branch cannot be traced (its period above `max_period`)
+/// is a row of its own with the reason, and the other branches are traced
+/// as without it.
+#[test]
+fn a_start_that_gives_no_branch_is_a_row_with_its_reason_and_the_others_go_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = lyapsweep(&[
+        "run",
+        seed_path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "sweep.count=11",
+        "--set",
+        "orbits={ max_period = 1 }",
+        "--set",
+        "run.backend=\"cpu\"",
+    ]);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let orbits = read(&out.join("orbits.csv"));
+    let refused: Vec<_> = orbits
+        .iter()
+        .filter(|r| r["status"].starts_with("period-above-max"))
+        .collect();
+    assert!(!refused.is_empty(), "no start above max_period");
+    for row in &refused {
+        assert!(
+            row["lambda_1"].is_empty() && row["stable"].is_empty(),
+            "{row:?}"
+        );
+        assert_ne!(row["period"], "1");
+    }
+    assert!(orbits
+        .iter()
+        .all(|r| r["period"] != "1" || !r["lambda_1"].is_empty()));
+    // The free orbit's two grazings, and the impacting period-1 orbit's
+    // at the first of them, where its impact's speed falls to 0.
+    let grazing: Vec<f64> = read(&out.join("bifurcations.csv"))
+        .iter()
+        .filter(|r| r["kind"] == "grazing")
+        .map(|r| r["eta"].parse().unwrap())
+        .collect();
+    assert_eq!(grazing.len(), 3, "{grazing:?}");
+    let exact = [0.7106873690939233, 1.2185743569476413];
+    for eta in &grazing {
+        assert!(exact.iter().any(|g| (eta - g).abs() < 1e-8), "{grazing:?}");
+    }
+}
