@@ -19,6 +19,7 @@
 
 pub mod branch;
 pub mod group;
+mod index;
 
 use crate::method::LaneResult;
 use crate::scene::{Precision, Scene, Seed};
