@@ -141,13 +141,14 @@ impl ValueAttractors {
                 rule,
             )
         };
-        let found = match self
-            .index
-            .candidates(&member.lane, &shape, rule.dim, rule.tolerance, lone)
-        {
-            Candidates::Some(list) => list.iter().copied().find(|i| test(i)),
-            Candidates::All => (0..self.attractors.len()).find(|i| test(i)),
-        };
+        let found =
+            match self
+                .index
+                .candidates(&member.lane, &shape, rule.dim, rule.tolerance, lone)
+            {
+                Candidates::Some(list) => list.iter().copied().find(|i| test(i)),
+                Candidates::All => (0..self.attractors.len()).find(|i| test(i)),
+            };
         let (index, new) = match found {
             Some(i) => (i, false),
             None => {
@@ -477,7 +478,12 @@ mod tests {
                 let points = 1 + rng.usize(0..6);
                 let corner: Vec<f64> = base.iter().map(|&v| shift(v, rng)).collect();
                 let orbit = (0..points)
-                    .flat_map(|_| corner.iter().map(|&c| c + width * rng.f64()).collect::<Vec<_>>())
+                    .flat_map(|_| {
+                        corner
+                            .iter()
+                            .map(|&c| c + width * rng.f64())
+                            .collect::<Vec<_>>()
+                    })
                     .collect();
                 lane(orbit, None, vec![[0.1, 0.0][rng.usize(0..2)], -0.5])
             } else {
@@ -524,7 +530,10 @@ mod tests {
                 let value = grouped(&lanes, rule);
                 let kept: Vec<usize> = value.of_start.iter().map(|a| a.unwrap()).collect();
                 let reference = grouped_by_points(&lanes, rule);
-                assert_eq!(kept, reference, "seed {seed}, dim {dim}, tolerance {tolerance}");
+                assert_eq!(
+                    kept, reference,
+                    "seed {seed}, dim {dim}, tolerance {tolerance}"
+                );
                 let joined = kept.iter().enumerate().filter(|&(i, &a)| a != i).count();
                 assert!(
                     tolerance == 0.0 || joined > 20,

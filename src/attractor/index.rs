@@ -51,7 +51,7 @@ const ABSOLUTE_MARGIN: f64 = 1e-15;
 /// cell numbers stay within 2^41.
 const FINEST_LEVEL_BELOW_SCALE: i32 = 40;
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Default)]
 pub(super) struct Index {
     /// Periodic attractors by (period, magnitude, cell of the first point).
     periodic: HashMap<(usize, i32, Cell), Vec<usize>>,
@@ -66,6 +66,17 @@ pub(super) struct Index {
     unplaced: Vec<usize>,
     /// The attractors taken in so far (0..indexed).
     pub(super) indexed: usize,
+}
+
+/// The index is a function of the attractors it holds: shown as their
+/// count, so that two values' attractors print alike whatever order the
+/// hash maps keep.
+impl std::fmt::Debug for Index {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Index")
+            .field("indexed", &self.indexed)
+            .finish_non_exhaustive()
+    }
 }
 
 /// What a lane may be compared with.
@@ -142,7 +153,8 @@ impl Index {
             Some(p) => {
                 // An orbit shorter than a point has no point to file it by
                 // (the test's `all` over no points is true).
-                if lane.orbit.len() < dim.max(1) || lane.orbit[..dim].iter().any(|v| !v.is_finite()) {
+                if lane.orbit.len() < dim.max(1) || lane.orbit[..dim].iter().any(|v| !v.is_finite())
+                {
                     self.unplaced.push(index);
                     return;
                 }
@@ -225,7 +237,8 @@ impl Index {
                 return false;
             }
             let s = scale_of(y);
-            let r = tolerance * s / (1.0 - tolerance) * (1.0 + RELATIVE_MARGIN) + ABSOLUTE_MARGIN * s;
+            let r =
+                tolerance * s / (1.0 - tolerance) * (1.0 + RELATIVE_MARGIN) + ABSOLUTE_MARGIN * s;
             let my = magnitude(s);
             for m in (my - 1).max(0)..=my + 1 {
                 let w = 4.0 * tolerance * power_of_two(m);

@@ -17,6 +17,7 @@
 //! which lanes the next pass starts; the driver runs the passes
 //! (`crate::driver::continuation`).
 
+pub mod basins;
 pub mod branch;
 pub mod group;
 mod index;

@@ -64,7 +64,7 @@ pub use defaults::{
     DEFAULT_PERTURBATION_F64, DEFAULT_STEPS_PER_PERIOD, DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
 pub use model_file::model_path;
-pub use starts::Continuation;
+pub use starts::{Basins, Continuation};
 pub use types::{
     Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Seed, Shard, Starts, Sweep,
 };

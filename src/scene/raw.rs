@@ -104,7 +104,7 @@ const TABLES: [(&str, &str); 7] = [
     ("struct RawIntegration", "a table (steps_per_period, transient, align, iterations, initial_state, perturbation, difference, impact_location, submaps)"),
     ("struct RawRun", "a table (backend, precision, validate)"),
     ("struct RawOutput", "a table (lyapunov, bifurcation_points, plot)"),
-    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation)"),
+    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation, basins, basin_box)"),
     ("struct RawScene", "a table"),
 ];
 

@@ -11,8 +11,8 @@
 //! temporary name in its folder and renamed into place, so it appears whole or
 //! not at all.
 //!
-//! One file per figure: `sweep`, `attractor_sweep`, `heat_map` and
-//! `attractor_map`. What they share: `style` (sizes, colours, fonts,
+//! One file per figure: `sweep`, `attractor_sweep`, `heat_map`,
+//! `attractor_map` and `basin_map` (one value's basins over its starts). What they share: `style` (sizes, colours, fonts,
 //! spacing), `render` (the drawing backend's choice: pixels, PNG and SVG
 //! files written whole), `figure` (the embedded font and the PNG encoder),
 //! `svg_raster` (the SVG backend that embeds bitmaps), `panel` (axes, ranges
@@ -21,6 +21,7 @@
 
 mod attractor_map;
 mod attractor_sweep;
+mod basin_map;
 pub mod figure;
 mod grid;
 mod heat_map;
@@ -33,6 +34,7 @@ mod sweep;
 
 pub use attractor_map::{attractor_map, attractor_map_pixels, CountData};
 pub use attractor_sweep::{attractor_figure, attractor_pixels, AttractorSweepData, Branch};
+pub use basin_map::{basin_map, basin_map_pixels, label_colour, BasinData};
 pub use heat_map::{heat_map, heat_map_pixels, GridData};
 pub use render::write_png;
 pub use style::{ATTRACTOR_SWEEP_SIZE, DATA_COLOUR, HEAT_MAP_SIZE, SWEEP_SIZE};
