@@ -823,6 +823,26 @@ fn a_basin_image_labels_every_start_and_its_measures_are_the_file_s() {
             "{s_bb}"
         );
         assert_eq!(&row[col("fractal_boundary")], "false");
+        // The nearest start of the other basin from the orbit's point, in
+        // the box's scaled max norm, computed from the file.
+        let (x0, v0) = (number(row, "x"), number(row, "v"));
+        let along = |lo: f64, hi: f64, n: usize, k: usize| {
+            if k + 1 == n {
+                hi
+            } else {
+                lo + k as f64 * (hi - lo) / (n - 1) as f64
+            }
+        };
+        let shock = (0..nx * ny)
+            .filter(|&k| labels[k] != label && labels[k] >= 0)
+            .map(|k| {
+                let (x, v) = (along(-3.0, 1.9, nx, k % nx), along(-3.0, 3.0, ny, k / nx));
+                ((x - x0).abs() / 4.9).max((v - v0).abs() / 6.0)
+            })
+            .fold(f64::INFINITY, f64::min);
+        let written = number(row, "critical_shock");
+        assert!((written - shock).abs() < 1e-12, "{written} against {shock}");
+        assert!(shock > 0.0 && shock < 0.5, "{shock}");
     }
     assert!(s_b > 0.0 && s_bb > 0.0 && s_bb <= std::f64::consts::LN_2);
 }

@@ -16,6 +16,14 @@
 //!   states): where the two differ by much more than the error, the grid
 //!   is too coarse for the boundary.
 //!
+//! - Minimal critical shock of an attractor: the smallest kick of its
+//!   state, in the box's scaled max norm (each state's change over the
+//!   box's width along it), that sends it to another attractor, searched
+//!   over the image itself: the nearest start, from any of the attractor's
+//!   points, labelled with another attractor. Its resolution is the grid's
+//!   (half a cell's width either way: the true boundary lies between that
+//!   start and its neighbour); only the image's two states are kicked.
+//!
 //! Lanes that failed, or whose motion the method does not resolve, are
 //! labelled [`FAILED`] and count as one more label in the entropy.
 
@@ -139,6 +147,49 @@ pub fn half_resolution_fraction(image: &BasinImage, label: i32) -> f64 {
     on as f64 / all as f64
 }
 
+/// Where the image's starts lie: the grid's values of its two states
+/// (nx and ny of them), with the box's widths along them.
+pub struct Grid<'a> {
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+}
+
+/// The minimal critical shock of the attractor labelled `label` whose
+/// points (in the image's two states) are `points`: the smallest scaled
+/// distance from a point to a start labelled with another attractor
+/// (`None` when no start is).
+pub fn critical_shock(
+    image: &BasinImage,
+    grid: &Grid,
+    label: i32,
+    points: &[[f64; 2]],
+) -> Option<f64> {
+    let width = |v: &[f64]| {
+        let w = v.iter().fold(f64::NEG_INFINITY, |m, &a| m.max(a))
+            - v.iter().fold(f64::INFINITY, |m, &a| m.min(a));
+        if w > 0.0 {
+            w
+        } else {
+            1.0
+        }
+    };
+    let (wx, wy) = (width(grid.x), width(grid.y));
+    let mut best: Option<f64> = None;
+    for (k, &other) in image.labels.iter().enumerate() {
+        if other == label || other == FAILED {
+            continue;
+        }
+        let (x, y) = (grid.x[k % image.nx], grid.y[k / image.nx]);
+        for p in points {
+            let d = ((x - p[0]).abs() / wx).max((y - p[1]).abs() / wy);
+            if best.is_none_or(|b| d < b) {
+                best = Some(d);
+            }
+        }
+    }
+    best
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -167,6 +218,19 @@ mod tests {
         let three = entropy(&image(9, 9, |i, j| ((i + j) % 3) as i32 - 1), 3);
         assert!((three.boundary - 3f64.ln()).abs() < 1e-12);
         assert!(three.fractal());
+    }
+
+    /// A start of the other basin 0.3 along x from the attractor's point,
+    /// over a box 2 wide: a shock of 0.15.
+    #[test]
+    fn critical_shock_is_the_nearest_other_start() {
+        let x = [0.0, 1.0, 2.0];
+        let y = [0.0, 1.0];
+        let picture = image(3, 2, |i, _| i32::from(i == 2));
+        let grid = Grid { x: &x, y: &y };
+        let shock = critical_shock(&picture, &grid, 0, &[[1.7, 0.0]]).unwrap();
+        assert!((shock - 0.15).abs() < 1e-15, "{shock}");
+        assert_eq!(critical_shock(&picture, &grid, 0, &[]), None);
     }
 
     #[test]

@@ -8,6 +8,7 @@ use std::path::Path;
 use super::basin_files::ValueBasins;
 use super::files::{number, write_atomically, BRANCH_COLUMN, ERROR_COLUMN};
 use crate::attractor::basins;
+use crate::attractor::group::Attractor;
 use crate::attractor::Attractors;
 use crate::error::{Error, Result};
 use crate::model::compiled::event_column;
@@ -22,8 +23,8 @@ use crate::scene::Scene;
 /// `basin_fraction_error` (the fraction's binomial standard error),
 /// `basin_fraction_half` (on the grid at half the resolution),
 /// `basin_entropy`, `boundary_basin_entropy` and `fractal_boundary`
-/// (the value's, repeated on its rows; empty beyond the values with an
-/// image), then the final state of the lane that found it, and its
+/// (the value's, repeated on its rows) and `critical_shock` (the
+/// attractor's; all empty beyond the values with an image), then the final state of the lane that found it, and its
 /// `status`.
 pub fn attractors_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
@@ -43,12 +44,13 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
 }
 
 /// The columns of the basin measures.
-const BASIN_COLUMNS: [&str; 5] = [
+const BASIN_COLUMNS: [&str; 6] = [
     "basin_fraction_error",
     "basin_fraction_half",
     "basin_entropy",
     "boundary_basin_entropy",
     "fractal_boundary",
+    "critical_shock",
 ];
 
 /// Whether the scene asks for basin images (and so their columns).
@@ -60,25 +62,53 @@ fn has_images(scene: &Scene) -> bool {
         .is_some_and(|s| s.basins.values > 0)
 }
 
-/// The basin columns of an attractor's row: `fraction` of `starts`, the
-/// value's image if it has one and the attractor's label in it.
+/// The basin columns of an attractor's row: `fraction` of `starts`, with
+/// the value's image if it has one.
 fn basin_cells(
+    scene: &Scene,
     fraction: f64,
     starts: usize,
     image: Option<&ValueBasins>,
-    label: i32,
+    attractor: &Attractor,
 ) -> Vec<String> {
+    let label = attractor.branch.map_or(basins::FAILED, |b| b as i32);
     let mut cells = vec![number(basins::fraction_error(fraction, starts))];
     match image {
-        Some(v) => cells.extend([
-            number(basins::half_resolution_fraction(&v.image, label)),
-            number(v.entropy.basin),
-            number(v.entropy.boundary),
-            v.entropy.fractal().to_string(),
-        ]),
-        None => cells.extend((0..4).map(|_| String::new())),
+        Some(v) => {
+            let shock = (label != basins::FAILED)
+                .then(|| critical_shock(scene, v, attractor, label))
+                .flatten();
+            cells.extend([
+                number(basins::half_resolution_fraction(&v.image, label)),
+                number(v.entropy.basin),
+                number(v.entropy.boundary),
+                v.entropy.fractal().to_string(),
+                shock.map_or(String::new(), number),
+            ])
+        }
+        None => cells.extend((0..5).map(|_| String::new())),
     }
     cells
+}
+
+/// The attractor's minimal critical shock over its value's image (see
+/// `attractor::basins`): from each of its orbit's points.
+fn critical_shock(scene: &Scene, v: &ValueBasins, a: &Attractor, label: i32) -> Option<f64> {
+    let starts = scene.sweep.starts.as_ref()?;
+    let [ax, ay] = starts.basins.axes;
+    let (nx, ny) = (v.image.nx, v.image.ny);
+    let x: Vec<f64> = (0..nx).map(|i| starts.states[i][ax]).collect();
+    let y: Vec<f64> = (0..ny).map(|j| starts.states[j * nx][ay]).collect();
+    let dim = scene.system.dimension();
+    let points: Vec<[f64; 2]> = a
+        .first
+        .lane
+        .orbit
+        .chunks_exact(dim)
+        .map(|p| [p[ax], p[ay]])
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .collect();
+    basins::critical_shock(&v.image, &basins::Grid { x: &x, y: &y }, label, &points)
 }
 
 /// The rows of `attractors.csv`, value by value in the grid's order, with
@@ -123,12 +153,12 @@ pub fn attractor_rows<'a>(
                 row.push(number(fraction));
                 row.push(a.starts.to_string());
                 if with_images {
-                    let label = a.branch.map_or(basins::FAILED, |b| b as i32);
                     row.extend(basin_cells(
+                        scene,
                         fraction,
                         found.starts,
                         images.get(point),
-                        label,
+                        a,
                     ));
                 }
                 let last = lane.orbit.len().saturating_sub(dim);
