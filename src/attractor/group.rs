@@ -3,7 +3,7 @@
 //! aperiodic one by the region its points cover and the signs of its
 //! exponents.
 
-use super::index::{Candidates, Index};
+use super::index::{self, Candidates, Index};
 use crate::method::lane::return_tolerance;
 use crate::method::{LaneResult, LaneStatus};
 
@@ -100,15 +100,24 @@ pub struct ValueAttractors {
 /// folding the points again at every comparison; matching a lane against
 /// N attractors then costs N boxes, not N passes over their points.
 #[derive(Clone, Debug)]
-pub(super) struct Shape {
-    pub(super) signs: Vec<i8>,
+struct Shape {
+    signs: Vec<i8>,
     /// (low, high) of each coordinate of the points.
-    pub(super) bounds: Vec<(f64, f64)>,
+    bounds: Vec<(f64, f64)>,
     /// max(1, |x|∞) over the points.
-    pub(super) scale: f64,
+    scale: f64,
 }
 
 impl Shape {
+    /// The index's view of the shape.
+    fn region(&self) -> index::Shape<'_> {
+        index::Shape {
+            signs: &self.signs,
+            bounds: &self.bounds,
+            scale: self.scale,
+        }
+    }
+
     fn of(lane: &LaneResult, dim: usize) -> Shape {
         Shape {
             signs: signs(&lane.exponents),
@@ -141,20 +150,28 @@ impl ValueAttractors {
                 rule,
             )
         };
-        let found =
-            match self
-                .index
-                .candidates(&member.lane, &shape, rule.dim, rule.tolerance, lone)
-            {
-                Candidates::Some(list) => list.iter().copied().find(|i| test(i)),
-                Candidates::All => (0..self.attractors.len()).find(|i| test(i)),
-            };
+        let found = match self.index.candidates(
+            &member.lane,
+            &shape.region(),
+            rule.dim,
+            rule.tolerance,
+            lone,
+        ) {
+            Candidates::Some(list) => list.iter().copied().find(|i| test(i)),
+            Candidates::All => (0..self.attractors.len()).find(|i| test(i)),
+        };
         let (index, new) = match found {
             Some(i) => (i, false),
             None => {
                 let i = self.attractors.len();
-                self.index
-                    .insert(i, &member.lane, &shape, rule.dim, rule.tolerance, lone);
+                self.index.insert(
+                    i,
+                    &member.lane,
+                    &shape.region(),
+                    rule.dim,
+                    rule.tolerance,
+                    lone,
+                );
                 self.shapes.push(shape);
                 self.attractors.push(Attractor {
                     first: member,
@@ -184,7 +201,7 @@ impl ValueAttractors {
             self.index.insert(
                 i,
                 lane,
-                &self.shapes[i],
+                &self.shapes[i].region(),
                 rule.dim,
                 rule.tolerance,
                 is_lone(&lane.status),

@@ -28,8 +28,15 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use super::group::Shape;
 use crate::method::LaneResult;
+
+/// What the index reads of an aperiodic lane's shape (kept by `group`):
+/// the signs of its exponents, the box around its points and its scale.
+pub(super) struct Shape<'a> {
+    pub(super) signs: &'a [i8],
+    pub(super) bounds: &'a [(f64, f64)],
+    pub(super) scale: f64,
+}
 
 /// The coordinates the grids are over (the first two; the test reads all).
 const AXES: usize = 2;
@@ -138,7 +145,7 @@ impl Index {
         &mut self,
         index: usize,
         lane: &LaneResult,
-        shape: &Shape,
+        shape: &Shape<'_>,
         dim: usize,
         tolerance: f64,
         never_matches: bool,
@@ -178,7 +185,7 @@ impl Index {
                     *c = (lo / w).floor() as i64;
                 }
                 let next = self.sign_ids.len();
-                let id = *self.sign_ids.entry(shape.signs.clone()).or_insert(next);
+                let id = *self.sign_ids.entry(shape.signs.to_vec()).or_insert(next);
                 if id == self.levels.len() {
                     self.levels.push(BTreeMap::new());
                 }
@@ -196,7 +203,7 @@ impl Index {
     pub(super) fn candidates(
         &self,
         lane: &LaneResult,
-        shape: &Shape,
+        shape: &Shape<'_>,
         dim: usize,
         tolerance: f64,
         never_matches: bool,
@@ -259,7 +266,7 @@ impl Index {
     /// finite.
     fn aperiodic_candidates(
         &self,
-        shape: &Shape,
+        shape: &Shape<'_>,
         dim: usize,
         tolerance: f64,
         found: &mut Vec<usize>,
@@ -267,7 +274,7 @@ impl Index {
         if level(shape).is_none() {
             return false;
         }
-        let Some(&id) = self.sign_ids.get(&shape.signs) else {
+        let Some(&id) = self.sign_ids.get(shape.signs) else {
             return true;
         };
         let axes = dim.min(AXES);
@@ -298,7 +305,7 @@ impl Index {
 /// side (over all coordinates), not below the scale's magnitude less
 /// [`FINEST_LEVEL_BELOW_SCALE`]; `None` when a bound or the scale is not
 /// finite.
-fn level(shape: &Shape) -> Option<i32> {
+fn level(shape: &Shape<'_>) -> Option<i32> {
     let finite = shape.scale.is_finite()
         && shape
             .bounds
