@@ -286,6 +286,41 @@ fn bad_attractors_tables_name_their_key() {
             "colour",
         ),
         (
+            "starts = 4\nbox = { x = [0, 1] }\nbasins = 1",
+            "attractors.basins",
+            "needs grid = [nx, ny]",
+        ),
+        (
+            "grid = [4]\nbox = { x = [0, 1] }\nbasins = 1",
+            "attractors.basins",
+            "two states",
+        ),
+        (
+            "list = [[0, 0]]\nbasins = 2",
+            "attractors.basins",
+            "needs grid",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 4",
+            "attractors.basin_box",
+            "shorter side (3)",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 0",
+            "attractors.basin_box",
+            "between 1",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasin_box = 2",
+            "attractors.basin_box",
+            "attractors.basins",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = -1",
+            "attractors.basins",
+            "",
+        ),
+        (
             "list = [[0, 0]]\ncontinuation = \"sideways\"",
             "attractors.continuation",
             "unknown variant `sideways`",
@@ -661,4 +696,176 @@ fn attractors_csv_and_the_branch_columns_agree() {
     for (point, lane) in points.iter().zip(&lanes) {
         assert_eq!(point[4], lane[branch]);
     }
+}
+
+/// A `.npy` file of a 2-D array of little-endian i32, read here without
+/// the writer's code: (rows, columns, numbers).
+fn read_npy_i32(path: &std::path::Path) -> (usize, usize, Vec<i32>) {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
+    let header_len = usize::from(bytes[8]) + 256 * usize::from(bytes[9]);
+    let header = std::str::from_utf8(&bytes[10..10 + header_len]).unwrap();
+    assert!(header.contains("'descr': '<i4'"), "{header}");
+    assert!(header.contains("'fortran_order': False"), "{header}");
+    let shape = header.split("'shape': (").nth(1).unwrap();
+    let shape = &shape[..shape.find(')').unwrap()];
+    let dims: Vec<usize> = shape
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse().unwrap())
+        .collect();
+    let data = &bytes[10 + header_len..];
+    let numbers: Vec<i32> = data
+        .chunks_exact(4)
+        .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    assert_eq!(numbers.len(), dims[0] * dims[1]);
+    (dims[0], dims[1], numbers)
+}
+
+/// Daza et al.'s basin entropy of a label image, written apart from the
+/// library's: boxes of `n` × `n` (the leftover edge cells dropped), each
+/// box's Gibbs entropy over its labels' shares; the mean over all boxes
+/// and over those with more than one label.
+fn entropy_by_hand(rows: usize, columns: usize, labels: &[i32], n: usize) -> (f64, f64) {
+    let mut entropies = Vec::new();
+    let mut boundary = Vec::new();
+    for top in (0..rows - rows % n).step_by(n) {
+        for left in (0..columns - columns % n).step_by(n) {
+            let mut shares = std::collections::BTreeMap::new();
+            for r in top..top + n {
+                for c in left..left + n {
+                    *shares.entry(labels[r * columns + c]).or_insert(0.0) += 1.0 / (n * n) as f64;
+                }
+            }
+            let s: f64 = shares.values().map(|p: &f64| -p * p.ln()).sum();
+            entropies.push(s);
+            if shares.len() > 1 {
+                boundary.push(s);
+            }
+        }
+    }
+    let mean = |v: &[f64]| {
+        if v.is_empty() {
+            0.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    (mean(&entropies), mean(&boundary))
+}
+
+/// The seed's oscillator at η = 0.6 over a 32 × 32 grid of the box with
+/// `basins = 1`: `basins-0.npy` labels every start with its lane's branch
+/// (spectrum.csv's column, start by start), its two period-1 orbits'
+/// fractions are the labels' shares, the basin entropy and the boundary's
+/// are those computed here from the file, and the boundary between the
+/// two basins is smooth by the ln 2 criterion; the image is drawn and the
+/// labels are in the manifest.
+#[test]
+fn a_basin_image_labels_every_start_and_its_measures_are_the_file_s() {
+    let (nx, ny) = (32, 32);
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [{nx}, {ny}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nbasins = 1\nbasin_box = 4\n"
+    )
+    .replace("[output]", "[output]\nplot = true");
+    let scene = common::scene(&text, &[]);
+    let report = common::run(&scene);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    lyapsweep::output::write(&scene, &report, &out).unwrap();
+    let (rows, columns, labels) = read_npy_i32(&out.join("basins-0.npy"));
+    assert_eq!((rows, columns), (ny, nx));
+    for name in ["basins-0.png", "basins-0.svg"] {
+        assert!(out.join(name).exists(), "{name}");
+    }
+    let manifest = std::fs::read_to_string(out.join("manifest.toml")).unwrap();
+    assert!(manifest.contains("name = \"basins-0.npy\""), "{manifest}");
+
+    let mut spectrum = csv::Reader::from_path(out.join("spectrum.csv")).unwrap();
+    let branch = spectrum
+        .headers()
+        .unwrap()
+        .iter()
+        .position(|h| h == "branch")
+        .unwrap();
+    let by_start: Vec<i32> = spectrum
+        .records()
+        .map(|r| r.unwrap()[branch].parse().unwrap_or(-1))
+        .collect();
+    assert_eq!(labels, by_start);
+
+    let mut table = csv::Reader::from_path(out.join("attractors.csv")).unwrap();
+    let header: Vec<String> = table.headers().unwrap().iter().map(String::from).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let rows: Vec<csv::StringRecord> = table.records().map(|r| r.unwrap()).collect();
+    assert_eq!(rows.len(), 2, "the free and the impacting period-1 orbits");
+    let (s_b, s_bb) = entropy_by_hand(ny, nx, &labels, 4);
+    let number = |row: &csv::StringRecord, name: &str| row[col(name)].parse::<f64>().unwrap();
+    for row in &rows {
+        let label: i32 = row[col("branch")].parse().unwrap();
+        let share = labels.iter().filter(|&&l| l == label).count() as f64 / labels.len() as f64;
+        let fraction = number(row, "basin_fraction");
+        assert_eq!(fraction, share);
+        assert!((0.3..0.7).contains(&fraction), "{fraction}");
+        let error = (fraction * (1.0 - fraction) / labels.len() as f64).sqrt();
+        assert!((number(row, "basin_fraction_error") - error).abs() <= 1e-15);
+        let half: Vec<i32> = (0..ny)
+            .step_by(2)
+            .flat_map(|j| (0..nx).step_by(2).map(move |i| (i, j)))
+            .map(|(i, j)| labels[j * nx + i])
+            .collect();
+        let half_share = half.iter().filter(|&&l| l == label).count() as f64 / half.len() as f64;
+        assert_eq!(number(row, "basin_fraction_half"), half_share);
+        assert!((number(row, "basin_entropy") - s_b).abs() < 1e-12, "{s_b}");
+        assert!(
+            (number(row, "boundary_basin_entropy") - s_bb).abs() < 1e-12,
+            "{s_bb}"
+        );
+        assert_eq!(&row[col("fractal_boundary")], "false");
+        // The nearest start of the other basin from the orbit's point, in
+        // the box's scaled max norm, computed from the file.
+        let (x0, v0) = (number(row, "x"), number(row, "v"));
+        let along = |lo: f64, hi: f64, n: usize, k: usize| {
+            if k + 1 == n {
+                hi
+            } else {
+                lo + k as f64 * (hi - lo) / (n - 1) as f64
+            }
+        };
+        let shock = (0..nx * ny)
+            .filter(|&k| labels[k] != label && labels[k] >= 0)
+            .map(|k| {
+                let (x, v) = (along(-3.0, 1.9, nx, k % nx), along(-3.0, 3.0, ny, k / nx));
+                ((x - x0).abs() / 4.9).max((v - v0).abs() / 6.0)
+            })
+            .fold(f64::INFINITY, f64::min);
+        let written = number(row, "critical_shock");
+        assert!((written - shock).abs() < 1e-12, "{written} against {shock}");
+        assert!(shock > 0.0 && shock < 0.5, "{shock}");
+    }
+    assert!(s_b > 0.0 && s_bb > 0.0 && s_bb <= std::f64::consts::LN_2);
+}
+
+/// The basin labels of a grid of starts on the GPU (f64) are the CPU
+/// path's, start by start.
+#[test]
+fn basin_labels_on_the_gpu_are_the_cpu_s() {
+    if !gpu_or_skip("basin_labels_on_the_gpu_are_the_cpu_s", Precision::F64) {
+        return;
+    }
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [16, 16]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nbasins = 1\n"
+    );
+    let labels = |text: &str| {
+        let found = attractors_of(&common::scene(text, &[]));
+        lyapsweep::attractor::basins::image(&found, 0, (16, 16)).labels
+    };
+    let cpu = labels(&text);
+    let gpu = labels(&text.replace(
+        "backend = \"cpu\"",
+        "backend = \"gpu\"\nprecision = \"f64\"",
+    ));
+    assert_eq!(cpu, gpu);
+    assert!(cpu.contains(&0) && cpu.contains(&1), "{cpu:?}");
 }

@@ -10,6 +10,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Mapping, Optional, Union
 
+import numpy
 import pandas
 
 from . import _lyapsweep
@@ -270,7 +271,8 @@ class Run:
     exponents in ``failures``), ``scene`` the scene as run, and ``folder`` where
     the set lies (``out``, or a temporary folder removed with the Run).
     ``to_xarray()`` labels the tables by the swept parameters, the start and
-    the exponent; ``write_netcdf(path)`` writes them to a file.
+    the exponent; ``write_netcdf(path)`` writes them to a file. With
+    ``attractors.basins``, ``basins(k)`` is value k's image of labels.
     """
 
     def __init__(
@@ -302,6 +304,20 @@ class Run:
             f"<lyapsweep.Run {s['name']}: {s['lanes']} lanes on {s['backend']} "
             f"({s['precision']}) in {s['time']:.3f} s, {s['flagged']} flagged>"
         )
+
+    def basins(self, value: int = 0) -> numpy.ndarray:
+        """The basin image of the ``value``-th value (in the sweep's order) of a
+        scene with ``attractors.basins``: a 2-D array of int32, rows along the
+        grid's second state and columns along its first, each start's label
+        the branch of the attractor its lane ended on (as attractors.csv's
+        ``branch``), -1 where the lane failed. Read from ``basins-<value>.npy``."""
+        path = self.folder / f"basins-{int(value)}.npy"
+        if not path.exists():
+            raise ValueError(
+                f"the run has no basin image of value {value}: its scene's attractors.basins "
+                "covers fewer values, or is not set"
+            )
+        return numpy.load(path, allow_pickle=False)
 
     def write(self, folder: Union[str, "os.PathLike[str]"]) -> list:
         """Writes the run's output set into ``folder`` as the command line

@@ -215,6 +215,28 @@ def test_attractors_give_basin_fractions(tmp_path):
     assert run.summary["attractors"] == len(run.attractors)
 
 
+def test_basins_are_the_label_files_as_arrays():
+    sets = {
+        **SMALL,
+        "sweep.count": 2,
+        "attractors.grid": [6, 4],
+        "attractors.box": {"x": [-0.9, 0.9], "v": [-1, 1]},
+        "attractors.basins": 1,
+        "attractors.basin_box": 2,
+    }
+    run = lyapsweep.run(SCENE, set=sets, progress=False)
+    image = run.basins(0)
+    assert image.shape == (4, 6) and image.dtype == numpy.int32
+    assert numpy.array_equal(image, numpy.load(run.folder / "basins-0.npy"))
+    # Each attractor's fraction is its share of the image's labels.
+    first = run.attractors[run.attractors["eta"] == run.attractors["eta"].iloc[0]]
+    first = first[first["branch"].notna()]
+    for branch, fraction in zip(first["branch"], first["basin_fraction"]):
+        assert (image == branch).mean() == fraction
+    with pytest.raises(ValueError, match="no basin image of value 1"):
+        run.basins(1)
+
+
 def test_plot_without_matplotlib_says_how_to_get_it(monkeypatch):
     run = lyapsweep.run(SCENE, set={**SMALL, "sweep.count": 3}, progress=False)
     monkeypatch.setitem(__import__("sys").modules, "matplotlib", None)

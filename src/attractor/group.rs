@@ -3,6 +3,7 @@
 //! aperiodic one by the region its points cover and the signs of its
 //! exponents.
 
+use super::index::{self, Candidates, Index};
 use crate::method::lane::return_tolerance;
 use crate::method::{LaneResult, LaneStatus};
 
@@ -87,6 +88,9 @@ pub struct ValueAttractors {
     /// What the matching reads of each attractor's first lane, by index
     /// (see [`Shape`]): kept, not recomputed for every lane that arrives.
     shapes: Vec<Shape>,
+    /// Where the attractors lie, so that a lane is tested only against
+    /// those it may be on.
+    index: Index,
 }
 
 /// What [`same_attractor`] reads of a lane beyond its period and points,
@@ -105,6 +109,15 @@ struct Shape {
 }
 
 impl Shape {
+    /// The index's view of the shape.
+    fn region(&self) -> index::Shape<'_> {
+        index::Shape {
+            signs: &self.signs,
+            bounds: &self.bounds,
+            scale: self.scale,
+        }
+    }
+
     fn of(lane: &LaneResult, dim: usize) -> Shape {
         Shape {
             signs: signs(&lane.exponents),
@@ -125,15 +138,40 @@ impl ValueAttractors {
             let first = &self.attractors[self.shapes.len()].first.lane;
             self.shapes.push(Shape::of(first, rule.dim));
         }
+        self.catch_up_index(rule);
         let shape = Shape::of(&member.lane, rule.dim);
-        let found = self
-            .attractors
-            .iter()
-            .zip(&self.shapes)
-            .position(|(a, known)| matches(&a.first.lane, known, &member.lane, &shape, rule));
+        let lone = is_lone(&member.lane.status);
+        let test = |&i: &usize| {
+            matches(
+                &self.attractors[i].first.lane,
+                &self.shapes[i],
+                &member.lane,
+                &shape,
+                rule,
+            )
+        };
+        let found = match self.index.candidates(
+            &member.lane,
+            &shape.region(),
+            rule.dim,
+            rule.tolerance,
+            lone,
+        ) {
+            Candidates::Some(list) => list.iter().copied().find(|i| test(i)),
+            Candidates::All => (0..self.attractors.len()).find(|i| test(i)),
+        };
         let (index, new) = match found {
             Some(i) => (i, false),
             None => {
+                let i = self.attractors.len();
+                self.index.insert(
+                    i,
+                    &member.lane,
+                    &shape.region(),
+                    rule.dim,
+                    rule.tolerance,
+                    lone,
+                );
                 self.shapes.push(shape);
                 self.attractors.push(Attractor {
                     first: member,
@@ -152,6 +190,23 @@ impl ValueAttractors {
         }
         self.of_start[start] = Some(index);
         (index, new)
+    }
+
+    /// Files the attractors not yet in the index (those added to
+    /// `attractors` directly).
+    fn catch_up_index(&mut self, rule: Rule) {
+        while self.index.indexed < self.attractors.len() {
+            let i = self.index.indexed;
+            let lane = &self.attractors[i].first.lane;
+            self.index.insert(
+                i,
+                lane,
+                &self.shapes[i].region(),
+                rule.dim,
+                rule.tolerance,
+                is_lone(&lane.status),
+            );
+        }
     }
 
     /// Attractors proper (not lone failed lanes).
@@ -408,6 +463,143 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Lanes made to test the index's bounds: orbits of 1 to 3
+    /// coordinates at magnitudes from 1 to 1e9, points placed at the
+    /// tolerance's edge (just within, just beyond) of one another and
+    /// across powers of two, boxes from a point to 1e6 wide, some apart by
+    /// the tolerance, and points that are NaN or infinite.
+    fn edges(n: usize, dim: usize, tolerance: f64, rng: &mut fastrand::Rng) -> Vec<LaneResult> {
+        let magnitudes = [0.3, 1.0, 2.0, 1023.9, 1024.1, 7.5e5, 1e9];
+        let mut made: Vec<LaneResult> = Vec::new();
+        for k in 0..n {
+            let near = !made.is_empty() && rng.u8(0..3) > 0;
+            let base: Vec<f64> = if near {
+                let other = &made[rng.usize(0..made.len())];
+                let mut x: Vec<f64> = other.orbit.iter().take(dim).copied().collect();
+                x.resize(dim, 0.0);
+                x
+            } else {
+                let m = magnitudes[rng.usize(0..magnitudes.len())];
+                (0..dim).map(|_| m * (2.0 * rng.f64() - 1.0)).collect()
+            };
+            let scale = base.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+            let edge = [0.0, 0.5, 0.999_999_999_9, 1.0, 1.000_000_000_1, 2.0, 3.0][rng.usize(0..7)];
+            let shift = |v: f64, rng: &mut fastrand::Rng| {
+                let sign = if rng.bool() { 1.0 } else { -1.0 };
+                v + sign * edge * tolerance * scale
+            };
+            let mut l = if k % 3 == 0 {
+                let width = [0.0, 1e-12, 1e-3, 1.0, 1e6][rng.usize(0..5)];
+                let points = 1 + rng.usize(0..6);
+                let corner: Vec<f64> = base.iter().map(|&v| shift(v, rng)).collect();
+                let orbit = (0..points)
+                    .flat_map(|_| {
+                        corner
+                            .iter()
+                            .map(|&c| c + width * rng.f64())
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                lane(orbit, None, vec![[0.1, 0.0][rng.usize(0..2)], -0.5])
+            } else {
+                let p = 1 + rng.usize(0..2);
+                let orbit: Vec<f64> = (0..p)
+                    .flat_map(|j| {
+                        base.iter()
+                            .map(|&v| shift(v + j as f64 * 3.0 * tolerance * scale, rng))
+                            .collect::<Vec<_>>()
+                    })
+                    .collect();
+                lane(orbit, Some(p), vec![-0.1, -0.5])
+            };
+            match rng.u8(0..40) {
+                0 => l.orbit[0] = f64::NAN,
+                1 => l.orbit[0] = f64::INFINITY,
+                2 => {
+                    let last = l.orbit.len() - 1;
+                    l.orbit[last] = f64::NEG_INFINITY
+                }
+                3 if dim > 1 => l.orbit.truncate(dim - 1),
+                4 => l.orbit.clear(),
+                5 => l.status = LaneStatus::NonFinite { iteration: 1 },
+                _ => {}
+            }
+            made.push(l);
+        }
+        made
+    }
+
+    /// The index proposes every attractor the test accepts: each lane
+    /// joins the attractor it joined when compared with all, at the edges
+    /// of the tolerance, of the grids' cells and magnitudes, and with
+    /// points that are not finite; and for tolerances the index does not
+    /// serve (compared with all).
+    #[test]
+    fn indexed_matching_groups_lanes_as_comparing_each_with_all() {
+        for seed in 0..60 {
+            let mut rng = fastrand::Rng::with_seed(seed);
+            let dim = 1 + (seed as usize % 3);
+            for tolerance in [1e-9, 1e-5, 6e-4, 0.3, 0.0] {
+                let rule = Rule { dim, tolerance };
+                let lanes = edges(400, dim, tolerance.max(1e-7), &mut rng);
+                let value = grouped(&lanes, rule);
+                let kept: Vec<usize> = value.of_start.iter().map(|a| a.unwrap()).collect();
+                let reference = grouped_by_points(&lanes, rule);
+                assert_eq!(
+                    kept, reference,
+                    "seed {seed}, dim {dim}, tolerance {tolerance}"
+                );
+                let joined = kept.iter().enumerate().filter(|&(i, &a)| a != i).count();
+                assert!(
+                    tolerance == 0.0 || joined > 20,
+                    "seed {seed}: too few lanes joined another ({joined})"
+                );
+            }
+        }
+    }
+
+    /// 20 000 lanes that never settled, each on a region of its own, and
+    /// 20 000 periodic ones on 2 000 orbits: the index keeps the matching
+    /// about linear (comparing each with all would be 2·10^8 tests).
+    #[test]
+    fn many_distinct_attractors_are_told_apart_in_about_linear_time() {
+        let rule = Rule {
+            dim: 2,
+            tolerance: 1e-5,
+        };
+        let mut rng = fastrand::Rng::with_seed(7);
+        let mut lanes: Vec<LaneResult> = (0..20_000)
+            .map(|_| {
+                let (x, v) = (6.0 * rng.f64() - 3.0, 6.0 * rng.f64() - 3.0);
+                let orbit = (0..50)
+                    .flat_map(|j| [x + j as f64 * 1e-7, v + j as f64 * 1e-7])
+                    .collect();
+                lane(orbit, None, vec![0.0, -0.5])
+            })
+            .collect();
+        lanes.extend((0..20_000).map(|k| {
+            let o = (k % 2_000) as f64 * 1e-3;
+            lane(vec![o, 1.0, o, -1.0], Some(2), vec![-0.1, -0.5])
+        }));
+        let now = std::time::Instant::now();
+        let value = grouped(&lanes, rule);
+        let took = now.elapsed();
+        assert_eq!(value.attractors.len(), 22_000);
+        assert!(took.as_secs_f64() < 2.0, "{took:?}");
+        // A sample checked against comparing with all.
+        let sample: Vec<LaneResult> = lanes[..2_000]
+            .iter()
+            .chain(&lanes[20_000..22_000])
+            .cloned()
+            .collect();
+        let kept: Vec<usize> = grouped(&sample, rule)
+            .of_start
+            .iter()
+            .map(|a| a.unwrap())
+            .collect();
+        assert_eq!(kept, grouped_by_points(&sample, rule));
     }
 
     /// Thousands of lanes that never settled (aperiodic, each on a region

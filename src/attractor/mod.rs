@@ -17,8 +17,10 @@
 //! which lanes the next pass starts; the driver runs the passes
 //! (`crate::driver::continuation`).
 
+pub mod basins;
 pub mod branch;
 pub mod group;
+mod index;
 
 use crate::method::LaneResult;
 use crate::scene::{Precision, Scene, Seed};

@@ -5,7 +5,10 @@
 
 use std::path::Path;
 
+use super::basin_files::ValueBasins;
 use super::files::{number, write_atomically, BRANCH_COLUMN, ERROR_COLUMN};
+use crate::attractor::basins;
+use crate::attractor::group::Attractor;
 use crate::attractor::Attractors;
 use crate::error::{Error, Result};
 use crate::model::compiled::event_column;
@@ -16,8 +19,13 @@ use crate::scene::Scene;
 /// `impacts_per_period` and for a model one `<event>_per_period` column
 /// per event, with exponents `lambda_1..N,lambda_sum,expected_sum,lambda_error`, then
 /// `basin_fraction` (the share of the value's starts that end on it),
-/// `starts` (their count), the final state of the lane that found it, and
-/// its `status`.
+/// `starts` (their count), with basin images (`attractors.basins`)
+/// `basin_fraction_error` (the fraction's binomial standard error),
+/// `basin_fraction_half` (on the grid at half the resolution),
+/// `basin_entropy`, `boundary_basin_entropy` and `fractal_boundary`
+/// (the value's, repeated on its rows) and `critical_shock` (the
+/// attractor's; all empty beyond the values with an image), then the final state of the lane that found it, and its
+/// `status`.
 pub fn attractors_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend([BRANCH_COLUMN, "period", "impacts_per_period"].map(String::from));
@@ -27,16 +35,90 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
         header.extend(["lambda_sum", "expected_sum", ERROR_COLUMN].map(String::from));
     }
     header.extend(["basin_fraction", "starts"].map(String::from));
+    if has_images(scene) {
+        header.extend(BASIN_COLUMNS.map(String::from));
+    }
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
     header.push("status".into());
     header
 }
 
-/// The rows of `attractors.csv`, value by value in the grid's order.
+/// The columns of the basin measures.
+const BASIN_COLUMNS: [&str; 6] = [
+    "basin_fraction_error",
+    "basin_fraction_half",
+    "basin_entropy",
+    "boundary_basin_entropy",
+    "fractal_boundary",
+    "critical_shock",
+];
+
+/// Whether the scene asks for basin images (and so their columns).
+fn has_images(scene: &Scene) -> bool {
+    scene
+        .sweep
+        .starts
+        .as_ref()
+        .is_some_and(|s| s.basins.values > 0)
+}
+
+/// The basin columns of an attractor's row: `fraction` of `starts`, with
+/// the value's image if it has one.
+fn basin_cells(
+    scene: &Scene,
+    fraction: f64,
+    starts: usize,
+    image: Option<&ValueBasins>,
+    attractor: &Attractor,
+) -> Vec<String> {
+    let label = attractor.branch.map_or(basins::FAILED, |b| b as i32);
+    let mut cells = vec![number(basins::fraction_error(fraction, starts))];
+    match image {
+        Some(v) => {
+            let shock = (label != basins::FAILED)
+                .then(|| critical_shock(scene, v, attractor, label))
+                .flatten();
+            cells.extend([
+                number(basins::half_resolution_fraction(&v.image, label)),
+                number(v.entropy.basin),
+                number(v.entropy.boundary),
+                v.entropy.fractal().to_string(),
+                shock.map_or(String::new(), number),
+            ])
+        }
+        None => cells.extend((0..5).map(|_| String::new())),
+    }
+    cells
+}
+
+/// The attractor's minimal critical shock over its value's image (see
+/// `attractor::basins`): from each of its orbit's points.
+fn critical_shock(scene: &Scene, v: &ValueBasins, a: &Attractor, label: i32) -> Option<f64> {
+    let starts = scene.sweep.starts.as_ref()?;
+    let [ax, ay] = starts.basins.axes;
+    let (nx, ny) = (v.image.nx, v.image.ny);
+    let x: Vec<f64> = (0..nx).map(|i| starts.states[i][ax]).collect();
+    let y: Vec<f64> = (0..ny).map(|j| starts.states[j * nx][ay]).collect();
+    let dim = scene.system.dimension();
+    let points: Vec<[f64; 2]> = a
+        .first
+        .lane
+        .orbit
+        .chunks_exact(dim)
+        .map(|p| [p[ax], p[ay]])
+        .filter(|p| p.iter().all(|c| c.is_finite()))
+        .collect();
+    basins::critical_shock(&v.image, &basins::Grid { x: &x, y: &y }, label, &points)
+}
+
+/// The rows of `attractors.csv`, value by value in the grid's order, with
+/// the basin images of the first values.
 pub fn attractor_rows<'a>(
     scene: &'a Scene,
     found: &'a Attractors,
+    images: &'a [ValueBasins],
 ) -> impl Iterator<Item = Vec<String>> + 'a {
+    let with_images = has_images(scene);
     let dim = scene.system.dimension();
     let events = scene.system.events.len();
     found
@@ -67,8 +149,18 @@ pub fn attractor_rows<'a>(
                     row.push(number(a.first.expected_sum));
                     row.push(number(lane.error));
                 }
-                row.push(number(a.starts as f64 / found.starts as f64));
+                let fraction = a.starts as f64 / found.starts as f64;
+                row.push(number(fraction));
                 row.push(a.starts.to_string());
+                if with_images {
+                    row.extend(basin_cells(
+                        scene,
+                        fraction,
+                        found.starts,
+                        images.get(point),
+                        a,
+                    ));
+                }
                 let last = lane.orbit.len().saturating_sub(dim);
                 match lane.orbit.get(last..).filter(|p| p.len() == dim) {
                     Some(point) => row.extend(point.iter().map(|&x| number(x))),
@@ -81,10 +173,15 @@ pub fn attractor_rows<'a>(
 }
 
 /// Writes `attractors.csv` into `dir`.
-pub fn write_attractors(scene: &Scene, found: &Attractors, dir: &Path) -> Result<()> {
+pub fn write_attractors(
+    scene: &Scene,
+    found: &Attractors,
+    images: &[ValueBasins],
+    dir: &Path,
+) -> Result<()> {
     write_atomically(&dir.join(super::ATTRACTORS_FILE), |w| {
         w.write_record(attractors_header(scene))?;
-        for row in attractor_rows(scene, found) {
+        for row in attractor_rows(scene, found, images) {
             w.write_record(&row)?;
         }
         Ok(())

@@ -88,7 +88,10 @@ pub(crate) fn temporary_name(path: &Path) -> PathBuf {
     ))
 }
 
-fn write_file(path: &Path, fill: impl FnOnce(&mut fs::File) -> std::io::Result<()>) -> Result<()> {
+pub(crate) fn write_file(
+    path: &Path,
+    fill: impl FnOnce(&mut fs::File) -> std::io::Result<()>,
+) -> Result<()> {
     let temporary = temporary_name(path);
     let result = (|| {
         let mut file = fs::File::create(&temporary)?;

@@ -14,6 +14,7 @@
 //! holds one run's files or the previous run's, never a mix.
 
 pub mod attractor_table;
+pub mod basin_files;
 pub mod files;
 pub mod merge;
 pub mod orbit_table;
@@ -216,8 +217,13 @@ impl SetWriter {
         }
         let scene = &self.scene;
         if let Some(found) = attractors {
+            let basins = basin_files::value_basins(scene, found);
             set::pause(ATTRACTORS_FILE);
-            attractor_table::write_attractors(scene, found, &dir)?;
+            attractor_table::write_attractors(scene, found, &basins, &dir)?;
+            basin_files::write_labels(&basins, &dir)?;
+            if scene.plot && scene.shard.is_none() {
+                basin_files::draw(scene, found, &basins, &dir)?;
+            }
             let lanes = || self.lanes.iter().map(|&(g, s)| (g as usize, s as usize));
             if scene.lyapunov {
                 attractor_table::fill_branches(&dir.join(spectrum_file(scene)), found, lanes())?;

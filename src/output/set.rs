@@ -23,6 +23,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use super::basin_files::is_basin_file;
 use super::files::{
     write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATIONS_FILE, BIFURCATION_FILE, GRID_FILE,
     HEAT_MAP, ORBITS_FILE, ORBIT_FIGURE, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
@@ -79,10 +80,18 @@ fn unwritable(path: &Path, reason: impl Into<String>) -> Error {
     }
 }
 
+/// Whether a file of this name is one of a set's data files (listed in
+/// its manifest): the fixed names and the basin labels.
+fn is_data_file(name: &str) -> bool {
+    DATA_FILES.contains(&name) || is_basin_file(name, "npy")
+}
+
 /// Whether lyapsweep writes files of this name into an output folder.
 fn is_ours(name: &str) -> bool {
-    DATA_FILES.contains(&name)
+    is_data_file(name)
         || name == MANIFEST_FILE
+        || is_basin_file(name, "png")
+        || is_basin_file(name, "svg")
         || FIGURE_STEMS
             .iter()
             .any(|stem| [".png", ".svg"].iter().any(|ext| name == format!("{stem}{ext}")))
@@ -292,7 +301,7 @@ impl Staging {
             .collect();
         names.sort();
         let mut files = Vec::new();
-        for name in names.iter().filter(|n| DATA_FILES.contains(&n.as_str())) {
+        for name in names.iter().filter(|n| is_data_file(n)) {
             let (bytes, sha256) = digest(&self.dir.join(name)).map_err(write_error)?;
             files.push(Entry {
                 name: name.clone(),

@@ -66,7 +66,7 @@ pub use defaults::{
 };
 pub use model_file::model_path;
 pub use orbits::{ListedOrbit, Orbits, DEFAULT_MAX_POINTS, DEFAULT_ORBIT_MAX_PERIOD};
-pub use starts::Continuation;
+pub use starts::{Basins, Continuation};
 pub use types::{
     Axis, Backend, Integration, Layout, Lyapunov, Precision, Scene, Seed, Shard, Starts, Sweep,
 };

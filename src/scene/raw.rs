@@ -106,7 +106,7 @@ const TABLES: [(&str, &str); 9] = [
     ("struct RawIntegration", "a table (steps_per_period, transient, align, iterations, initial_state, perturbation, difference, impact_location, submaps)"),
     ("struct RawRun", "a table (backend, precision, validate)"),
     ("struct RawOutput", "a table (lyapunov, bifurcation_points, plot)"),
-    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation)"),
+    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation, basins, basin_box)"),
     ("struct RawOrbits", "a table (from_sweep, list, max_period, max_points, min_step, max_step, tolerance, locate_tolerance)"),
     ("struct RawListed", "a table (value, state, period)"),
     ("struct RawScene", "a table"),

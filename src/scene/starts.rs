@@ -30,6 +30,8 @@ pub(super) struct RawAttractors {
     pub(super) list: Option<Vec<Vec<f64>>>,
     pub(super) max_period: Option<usize>,
     pub(super) continuation: Option<Continuation>,
+    pub(super) basins: Option<usize>,
+    pub(super) basin_box: Option<usize>,
 }
 
 /// Which neighbours each value is also started from: the attractors found
@@ -76,7 +78,25 @@ pub struct Starts {
     /// The longest period a lane's orbit is tested for.
     pub max_period: usize,
     pub continuation: Continuation,
+    /// The basin images: how many values (the first, in the grid's order)
+    /// have every start's label written and drawn (0: none), and the side
+    /// of the boxes the basin entropy is taken over, in cells.
+    pub basins: Basins,
 }
+
+/// `attractors.basins` and `attractors.basin_box`, checked: images need a
+/// grid over two states.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Basins {
+    pub values: usize,
+    pub box_side: usize,
+    /// The two states the grid spans (x fastest), by index.
+    pub axes: [usize; 2],
+}
+
+/// The default side of the boxes the basin entropy is taken over (Daza
+/// et al. 2016 use 5 × 5 cells).
+pub const DEFAULT_BASIN_BOX: usize = 5;
 
 /// Starts per value that a scene may ask for (a start is a lane at every
 /// value; the run's size is checked against the budget as a whole).
@@ -125,6 +145,11 @@ pub(super) fn resolve_starts(
     initial_state: &[f64],
 ) -> Result<Starts> {
     let max_period = raw.max_period.unwrap_or(DEFAULT_MAX_PERIOD);
+    let raw_basins = RawAttractors {
+        basins: raw.basins,
+        basin_box: raw.basin_box,
+        ..RawAttractors::default()
+    };
     let continuation = raw.continuation.unwrap_or_default();
     if continuation != Continuation::None && info.model.is_some_and(|m| m.section.is_some()) {
         return Err(Error::invalid(
@@ -142,11 +167,13 @@ pub(super) fn resolve_starts(
     // A table that chooses no starts (only max_period or continuation)
     // asks for one: integration.initial_state, as without the table.
     if given == [false; 3] && raw.bounds.is_none() && raw.seed.is_none() {
+        check_basins(&raw, None)?;
         return Ok(Starts {
             layout: Layout::List,
             states: vec![initial_state.to_vec()],
             max_period,
             continuation,
+            basins: Basins::default(),
         });
     }
     if given.iter().filter(|&&g| g).count() != 1 {
@@ -156,6 +183,7 @@ pub(super) fn resolve_starts(
         ));
     }
     let names: Vec<String> = info.state_names.iter().map(|s| s.to_string()).collect();
+    let mut box_states = Vec::new();
     let (layout, states) = if let Some(list) = raw.list {
         if raw.bounds.is_some() || raw.seed.is_some() {
             return Err(Error::invalid(
@@ -166,6 +194,7 @@ pub(super) fn resolve_starts(
         (Layout::List, listed(list, initial_state.len(), &names)?)
     } else {
         let bounds = box_of(raw.bounds, &names, initial_state.len())?;
+        box_states = bounds.iter().map(|b| b.0).collect();
         if let Some(n) = raw.starts {
             check_count(n, "attractors.starts")?;
             let seed = raw.seed.unwrap_or(1);
@@ -185,11 +214,52 @@ pub(super) fn resolve_starts(
             (Layout::Grid { counts }, states)
         }
     };
+    let basins = check_basins(&raw_basins, Some((&layout, &box_states)))?;
     Ok(Starts {
         layout,
         states,
         max_period,
         continuation,
+        basins,
+    })
+}
+
+/// `basins` and `basin_box` against the starts' layout: images need a grid
+/// over two states, boxes at least a cell and at most the grid's shorter
+/// side.
+fn check_basins(raw: &RawAttractors, layout: Option<(&Layout, &[usize])>) -> Result<Basins> {
+    let values = raw.basins.unwrap_or(0);
+    if values == 0 {
+        if raw.basin_box.is_some() {
+            return Err(Error::invalid(
+                "attractors.basin_box",
+                "applies to basin images: give attractors.basins = N too",
+            ));
+        }
+        return Ok(Basins::default());
+    }
+    let (counts, axes) =
+        match layout {
+            Some((Layout::Grid { counts }, &[a, b])) if counts.len() == 2 => (counts, [a, b]),
+            _ => return Err(Error::invalid(
+                "attractors.basins",
+                "needs grid = [nx, ny] with a box over two states: an image has a start per cell",
+            )),
+        };
+    let shorter = counts[0].min(counts[1]);
+    let box_side = raw.basin_box.unwrap_or(DEFAULT_BASIN_BOX.min(shorter));
+    if box_side == 0 || box_side > shorter {
+        return Err(Error::invalid(
+            "attractors.basin_box",
+            format!(
+                "must be between 1 and the grid's shorter side ({shorter}) cells, got {box_side}"
+            ),
+        ));
+    }
+    Ok(Basins {
+        values,
+        box_side,
+        axes,
     })
 }
 

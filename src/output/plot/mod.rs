@@ -12,8 +12,9 @@
 //! not at all.
 //!
 //! One file per figure: `sweep`, `attractor_sweep`, `heat_map`,
-//! `attractor_map` and `orbit_sweep` (the branches of `[orbits]` over the
-//! sweep's points). What they share: `style` (sizes, colours, fonts,
+//! `attractor_map`, `orbit_sweep` (the branches of `[orbits]` over the
+//! sweep's points) and `basin_map` (one value's basins over its starts).
+//! What they share: `style` (sizes, colours, fonts,
 //! spacing), `render` (the drawing backend's choice: pixels, PNG and SVG
 //! files written whole), `figure` (the embedded font and the PNG encoder),
 //! `svg_raster` (the SVG backend that embeds bitmaps), `panel` (axes, ranges
@@ -22,6 +23,7 @@
 
 mod attractor_map;
 mod attractor_sweep;
+mod basin_map;
 pub mod figure;
 mod grid;
 mod heat_map;
@@ -35,6 +37,7 @@ mod sweep;
 
 pub use attractor_map::{attractor_map, attractor_map_pixels, CountData};
 pub use attractor_sweep::{attractor_figure, attractor_pixels, AttractorSweepData, Branch};
+pub use basin_map::{basin_map, basin_map_pixels, label_colour, BasinData};
 pub use heat_map::{heat_map, heat_map_pixels, GridData};
 pub use orbit_sweep::{orbit_figure, OrbitSweepData};
 pub use render::write_png;
