@@ -792,7 +792,7 @@ fn grazes_and_goes_on_as_the_free_orbit(
     // The impact's speed falls linearly to 0 at the grazing.
     let test = |_: &Seed, o: &Orbit<2>| impact_speed_test(o);
     let grazing =
-        extrapolate_grazing::<2, Seed, _>(&params, index, &branch.points, test).expect("grazing");
+        extrapolate_grazing::<2, Seed, _>(params, index, &branch.points, test).expect("grazing");
     let exact = 0.7106873690939233;
     let error = (grazing.parameter - exact).abs();
     eprintln!(
@@ -805,8 +805,8 @@ fn grazes_and_goes_on_as_the_free_orbit(
     // complex pair of modulus e^{-ζT}.
     let before = branch.points.last().expect("points");
     let past = step_past::<2, Seed>(
-        &params,
-        &settings,
+        params,
+        settings,
         &newton(),
         index,
         grazing.parameter,
@@ -827,8 +827,8 @@ fn grazes_and_goes_on_as_the_free_orbit(
     }
     // The branch goes on as the non-impacting orbit down to the range's end.
     let on = continue_branch::<2, Seed>(
-        &params_at(&params, index, past.parameter),
-        &settings,
+        &params_at(params, index, past.parameter),
+        settings,
         &newton(),
         &ContinuationSettings {
             direction: -1.0,
@@ -859,8 +859,8 @@ fn the_doubled_branch_grazes(
     // period-1 orbit's μ² there) and ends at a grazing of its second
     // impact.
     let doubled = switch_at_doubling::<2, Seed>(
-        &params,
-        &settings,
+        params,
+        settings,
         &newton(),
         &ContinuationSettings {
             min_step: 1e-7,
@@ -878,15 +878,15 @@ fn the_doubled_branch_grazes(
     }
     // Away from the doubling point (10 steps on) its points are apart.
     let p = &doubled.points[10];
-    let system = Seed::new(&params_at(&params, index, p.parameter));
-    let apart = doubling_separation(&system, &settings, &p.orbit.state, 1);
+    let system = Seed::new(&params_at(params, index, p.parameter));
+    let apart = doubling_separation(&system, settings, &p.orbit.state, 1);
     eprintln!("doubled branch: η = {}, U(x) - x = {apart:e}", p.parameter);
     assert!(apart > 1e-3, "{apart:e}");
     let first = &doubled.points[0];
     let mu = &first.floquet.multipliers;
     let mu1 = &doubling.point.floquet.multipliers;
     assert!((mu[0].re - 1.0).abs() < 1e-3 && (mu[1].re - mu1[1].re * mu1[1].re).abs() < 1e-3);
-    let grazing2 = extrapolate_grazing::<2, Seed, _>(&params, index, &doubled.points, test)
+    let grazing2 = extrapolate_grazing::<2, Seed, _>(params, index, &doubled.points, test)
         .expect("the doubled branch's grazing");
     // The closed form's grazing, from the doubled branch's point whose
     // slowest impact is nearest 0.1 (both impacts well inside the scan).

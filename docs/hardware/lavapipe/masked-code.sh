@@ -19,7 +19,7 @@
 #                numbers are wrong, the time is the kernel's shape)
 #   unresolved   the same without the resolution path
 #   no-wall      the kernel without impact code (wall at 100), for scale
-# docs/BENCHMARKS.md ("What lavapipe runs") has the figures.
+# docs/BENCHMARKS-GPU.md ("What lavapipe runs") has the figures.
 #
 # Usage, from the repository root, after `cargo build --release` (or with
 # BIN naming another build of lyapsweep):

@@ -30,7 +30,7 @@ pub const DISPATCH_LANE_STEPS: usize = 1 << 26;
 pub(super) const TRUNCATION_RETRY: usize = 8;
 
 /// Invocations per workgroup unless the run asks otherwise
-/// (docs/BENCHMARKS.md, "What lavapipe runs", and the H100's workgroup
+/// (docs/BENCHMARKS-GPU.md, "What lavapipe runs", and the H100's workgroup
 /// table under "NVIDIA H100 and H200").
 ///
 /// On lavapipe a lane chattering against the wall once changed the seven

@@ -86,7 +86,7 @@ pub fn kernels() -> (Vec<Structure>, Vec<Extern>) {
 ///   loop's two tests over every stop, written out per stop rather than
 ///   as a loop (`WALLS` is a constant, so the branches of absent stops
 ///   fold away, and a loop inside the step loop would cost every step on
-///   lavapipe: docs/BENCHMARKS.md, "What lavapipe runs"). `resting_on`
+///   lavapipe: docs/BENCHMARKS-GPU.md, "What lavapipe runs"). `resting_on`
 ///   gives the first stop y rests on, or `WALLS`.
 pub fn stops() -> Vec<Function> {
     use Ty::{Real, State};
