@@ -141,7 +141,7 @@ fn advance(lane: u32, t: u32, tr_in: Trajectory) -> Trajectory {
 // stop, ends it, and resolve_step takes that one step and goes back. With
 // the resolution inlined into every step, lavapipe ran the kernel 21 times
 // slower than the kernel without a wall, even when no impact happened
-// (lavapipe runs masked code in full: docs/BENCHMARKS.md, "What lavapipe
+// (lavapipe runs masked code in full: docs/BENCHMARKS-GPU.md, "What lavapipe
 // runs").
 fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajectory) -> Trajectory {
 #ifdef SURFACES

@@ -399,7 +399,7 @@ fn a_model_gets_math64_only_in_f64_and_only_when_it_calls_a_function() {
     }
     // Surface code (the region, the surfaces' values, ln |det S|) only for
     // models with events or switches: the stop models' kernels are the
-    // ones they were (their speed measured in docs/BENCHMARKS.md, "What lavapipe
+    // ones they were (their speed measured in docs/BENCHMARKS-GPU.md, "What lavapipe
     // runs").
     for (name, surfaces) in [
         ("impact-oscillator.toml", false),

@@ -29,7 +29,7 @@ for p in f64 f32; do
 done
 for n in 16384 32768 65536 262144; do one $n f64 100 20; done
 for n in 16384 65536; do one $n f64 2 2; one $n f64 2 60; done
-# A million values with longer dispatches (see docs/BENCHMARKS.md, "Steps per
+# A million values with longer dispatches (see docs/BENCHMARKS-GPU.md, "Steps per
 # dispatch fall as lanes grow"): the budget of RK4 lane-steps per dispatch.
 for budget in 268435456 1073741824; do
   echo "== LYAPSWEEP_DISPATCH_LANE_STEPS=$budget" | tee -a "$R"

@@ -139,7 +139,7 @@ impl Gpu {
     /// not fuse a·b + c but does reassociate, `NoContraction` moved an f32
     /// section's validation from within 1e-3 to 1.25e-3; on an H100, which
     /// fuses, it brought an f32 sum-rule error from 3.1e-4 to 8.1e-5 in one
-    /// measurement there (the card's f32 rounding: docs/BENCHMARKS.md, "f32
+    /// measurement there (the card's f32 rounding: docs/BENCHMARKS-GPU.md, "f32
     /// on NVIDIA"). Elsewhere wgpu
     /// compiles the WGSL and the driver may fuse.
     pub fn compute_pipeline(

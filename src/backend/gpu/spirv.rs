@@ -8,7 +8,7 @@
 //! rounds twice, and the finite-difference Jacobians amplify that rounding
 //! by 1/δ: on an H100 and an H200 the GPU's exponents differed from the
 //! CPU's by 2e-10 to 3e-8, where lavapipe (which does not contract in f64)
-//! agrees with the CPU almost to the bit (docs/BENCHMARKS.md, "NVIDIA H100
+//! agrees with the CPU almost to the bit (docs/BENCHMARKS-GPU.md, "NVIDIA H100
 //! and H200", "Why the f64 kernels forbid contraction"). So the kernels are compiled here as wgpu would,
 //! decorated, and handed to the driver as they are (wgpu's passthrough
 //! shaders, which Vulkan adapters offer). Explicit `fma` (the exact steps of
