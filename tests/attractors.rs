@@ -234,6 +234,68 @@ fn grids_and_random_starts_are_where_the_table_says() {
     }
 }
 
+/// Each `(table, key, reason)`: the `[attractors]` table is refused with
+/// an input error naming the key and the reason.
+fn refused(cases: &[(&str, &str, &str)]) {
+    for &(table, key, reason) in cases {
+        let text = format!("{COEXISTING}[attractors]\n{table}\n");
+        let error = parse(&text, &[])
+            .err()
+            .unwrap_or_else(|| panic!("{table}: accepted"));
+        let message = error.to_string();
+        assert!(
+            message.contains(key) && message.contains(reason),
+            "{table}: {message}"
+        );
+        assert!(
+            matches!(error, Error::Invalid { .. } | Error::Syntax { .. }),
+            "{table}: {error:?}"
+        );
+    }
+}
+
+/// Bad basin keys are refused by name, before any work.
+#[test]
+fn bad_basin_keys_name_their_key() {
+    refused(&[
+        (
+            "starts = 4\nbox = { x = [0, 1] }\nbasins = 1",
+            "attractors.basins",
+            "needs grid = [nx, ny]",
+        ),
+        (
+            "grid = [4]\nbox = { x = [0, 1] }\nbasins = 1",
+            "attractors.basins",
+            "two states",
+        ),
+        (
+            "list = [[0, 0]]\nbasins = 2",
+            "attractors.basins",
+            "needs grid",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 4",
+            "attractors.basin_box",
+            "shorter side (3)",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 0",
+            "attractors.basin_box",
+            "between 1",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasin_box = 2",
+            "attractors.basin_box",
+            "attractors.basins",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = -1",
+            "attractors.basins",
+            "",
+        ),
+    ]);
+}
+
 /// Bad tables are refused with the key and the reason, before any work.
 #[test]
 fn bad_attractors_tables_name_their_key() {
@@ -286,61 +348,12 @@ fn bad_attractors_tables_name_their_key() {
             "colour",
         ),
         (
-            "starts = 4\nbox = { x = [0, 1] }\nbasins = 1",
-            "attractors.basins",
-            "needs grid = [nx, ny]",
-        ),
-        (
-            "grid = [4]\nbox = { x = [0, 1] }\nbasins = 1",
-            "attractors.basins",
-            "two states",
-        ),
-        (
-            "list = [[0, 0]]\nbasins = 2",
-            "attractors.basins",
-            "needs grid",
-        ),
-        (
-            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 4",
-            "attractors.basin_box",
-            "shorter side (3)",
-        ),
-        (
-            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nbasin_box = 0",
-            "attractors.basin_box",
-            "between 1",
-        ),
-        (
-            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasin_box = 2",
-            "attractors.basin_box",
-            "attractors.basins",
-        ),
-        (
-            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = -1",
-            "attractors.basins",
-            "",
-        ),
-        (
             "list = [[0, 0]]\ncontinuation = \"sideways\"",
             "attractors.continuation",
             "unknown variant `sideways`",
         ),
     ];
-    for (table, key, reason) in cases {
-        let text = format!("{COEXISTING}[attractors]\n{table}\n");
-        let error = parse(&text, &[])
-            .err()
-            .unwrap_or_else(|| panic!("{table}: accepted"));
-        let message = error.to_string();
-        assert!(
-            message.contains(key) && message.contains(reason),
-            "{table}: {message}"
-        );
-        assert!(
-            matches!(error, Error::Invalid { .. } | Error::Syntax { .. }),
-            "{table}: {error:?}"
-        );
-    }
+    refused(&cases);
     // starts × values is a size like any other.
     let wide = COEXISTING.replace("values = [0.6]", "from = 0.5\nto = 1.5\ncount = 100000");
     let error = parse(
