@@ -3,8 +3,8 @@
 //! between impacts shortens the flights until a period holds hundreds of
 //! thousands of located impacts (never 64 in one step). Such a lane ends
 //! with `too-many-events(iteration=k)` on every path it can run (the native
-//! step loops, the tape's interpreter, the GPU's kernels in f64 and f32),
-//! and no other lane notices.
+//! step loops, the tape's interpreter, the GPU's kernels in f64 and f32,
+//! the exact propagator), and no other lane notices.
 
 mod common;
 
@@ -98,6 +98,8 @@ fn a_lane_past_the_bound_on_events_ends_with_its_status_on_the_cpu_path() {
         &[("LYAPSWEEP_STEP_LOOPS", "interpreter")],
         2,
     );
+    // The exact propagator, at its own bound on crossings (the same).
+    every_lane_ends_at_the_bound("-300460", "exact", &[], &[], 2);
 }
 
 #[test]
