@@ -103,7 +103,7 @@ fn write_columns(lane: u32, r: u32, slot: u32) -> Columns {
         var minus = r + 1u + DIM + i;
         let step_plus = deltas[lane * 2u * DIM + i];
         let step_minus = deltas[lane * 2u * DIM + DIM + i];
-        out.flags = out.flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
+        out.flags = out.flags | ((counts[plus].z | counts[minus].z) & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING | FLAG_TOO_MANY_EVENTS));
         // A copy that met a stop a different number of times than the
         // reference crossed a grazing boundary: its difference is O(1)
         // wrong. Difference on the other side, where the map is smooth.
@@ -120,7 +120,7 @@ fn write_columns(lane: u32, r: u32, slot: u32) -> Columns {
 #else
         let minus = r;
         let step = deltas[lane * DIM + i];
-        out.flags = out.flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING));
+        out.flags = out.flags | (counts[plus].z & (FLAG_CHATTERING | FLAG_TRUNCATED | FLAG_SLIDING | FLAG_TOO_MANY_EVENTS));
 #endif
         // The two images are close, so their difference is exact; their
         // low bits are what the column is made of.

@@ -220,6 +220,19 @@ fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajector
         }
         tr = resolve_step(p, walls, t, step, y1, comp1, tr);
         k = k + 1u;
+        // Past the bound on located events in the part, the step's
+        // resolution done (the CPU's end_past_the_bound): the trajectory
+        // ends non-finite (NaN made at run time: a constant 0/0 is a
+        // shader-creation error), flagged, and stops here (stepping its
+        // NaN on would only count against lavapipe's loop cap).
+        let counted = crossings[t];
+        if (counted.x + counted.y + counted.z + counted.w > MAX_EVENTS_PER_ITERATION) {
+            let zero = real(control.opaque_zero);
+            tr.y = State(zero / zero);
+            tr.comp = State();
+            tr.c.z = tr.c.z | FLAG_TOO_MANY_EVENTS;
+            k = end;
+        }
 #ifdef SURFACES
         p.region = tr.region;
         before = surface_values(p, tr.phase, tr.y);

@@ -37,6 +37,7 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         flow: FlowSettings {
             steps_per_period: i.steps_per_period,
             impact_location: i.impact_location,
+            stop: Default::default(),
         },
         tangent: if backend == Backend::Exact {
             Tangent::Exact
@@ -53,7 +54,6 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         rounding_accumulates: precision == Precision::F64 && steps > 1,
         submaps: scene.integration.submaps,
         rounding_unit: precision.rounding_unit(),
-        stop: Default::default(),
     }
 }
 
@@ -65,7 +65,7 @@ pub fn cpu_twin(scene: &Scene, gpu: &MethodSettings) -> MethodSettings {
     let mut cpu = method_settings(scene, Backend::Cpu, Precision::F64);
     cpu.flow.steps_per_period = gpu.flow.steps_per_period;
     cpu.submaps = gpu.submaps;
-    cpu.stop = gpu.stop.clone();
+    cpu.flow.stop = gpu.flow.stop.clone();
     cpu
 }
 

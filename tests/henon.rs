@@ -29,6 +29,7 @@ fn estimated_jacobian_is_the_papers_eq_10() {
     let settings = FlowSettings {
         steps_per_period: 1,
         impact_location: Default::default(),
+        stop: Default::default(),
     };
     for (x, y) in [(0.1, 0.2), (-0.7, 0.15), (1.2, -0.3)] {
         for delta in [1e-3, 1e-5, 1e-7] {

@@ -493,6 +493,43 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
     }
 }
 
+/// A stop asked for inside one long iteration ends the run as soon: the
+/// step loop looks at the request every 65 536 steps, not only between
+/// iterations (each transient iteration here is 9e7 steps of 16 lanes
+/// stepped together, seconds; the request came 0.3 s into the first).
+#[test]
+fn a_run_stopped_inside_a_long_iteration_ends_soon_and_writes_nothing() {
+    use lyapsweep::{command, Error, RunOptions};
+    let text = BASE
+        .replace("count = 5", "count = 16")
+        .replace("steps_per_period = 200", "steps_per_period = 90000000")
+        .replace("transient = 50", "transient = 2")
+        .replace("iterations = 100", "iterations = 1");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let scene = common::scene(&text, &[]);
+    let options = RunOptions::default();
+    let stop = options.stop.clone();
+    let prepared = command::prepare(&scene, &out).unwrap();
+    let started = std::time::Instant::now();
+    let asked = std::thread::scope(|s| {
+        let asked = s.spawn(|| {
+            std::thread::sleep(std::time::Duration::from_millis(300));
+            stop.request();
+            std::time::Instant::now()
+        });
+        assert!(matches!(prepared.run(&options), Err(Error::Stopped)));
+        asked.join().unwrap()
+    });
+    let stopped = started.elapsed().saturating_sub(asked - started);
+    assert!(
+        stopped < std::time::Duration::from_secs(1),
+        "{stopped:?} after the request"
+    );
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
 /// The million-lane map's scene at 8 × 6 on `backend`, with `more` keys.
 fn small_map(backend: &str, more: &[&str]) -> lyapsweep::scene::Scene {
     let backend = format!("run.backend=\"{backend}\"");

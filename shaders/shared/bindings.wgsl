@@ -23,8 +23,9 @@ const NO_IMPACT: real = real(1e30);
 
 // Flags that outlive the iteration they were raised in. (A lane that slid
 // once, even in the transient, went on from a state the kernels did not
-// integrate: all it computes after is the CPU's to redo.)
-const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED | FLAG_SLIDING;
+// integrate: all it computes after is the CPU's to redo. A failure keeps
+// its cause.)
+const FLAG_STICKY: u32 = FLAG_NONFINITE | FLAG_TRUNCATED | FLAG_SLIDING | FLAG_TOO_MANY_EVENTS;
 
 fn rank_flags(rank_loss: u32) -> u32 {
     if (rank_loss >= 2u) {

@@ -24,7 +24,7 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
         .for_each(|(c, slots)| {
             // A stopped run sets up no more lanes (a million of them take
             // seconds even when each ends at its first iteration).
-            if settings.stop.requested() {
+            if settings.flow.stop.requested() {
                 return;
             }
             let first = c * NEIGHBOURS;
@@ -41,7 +41,7 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                 *slot = Some(result);
             }
         });
-    if settings.stop.requested() {
+    if settings.flow.stop.requested() {
         // Not results: the runner returns `Error::Stopped`.
         return Vec::new();
     }

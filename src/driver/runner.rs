@@ -54,13 +54,13 @@ impl Runner {
                 };
                 let mut settings = method_settings(scene, backend, Precision::F64);
                 settings.keep_jacobians = options.keep_jacobians;
-                settings.stop = options.stop.clone();
+                settings.flow.stop = options.stop.clone();
                 (backend, settings, None)
             }
             Plan::Gpu(adapter, summary) => {
                 let mut settings = method_settings(scene, Backend::Gpu, precision);
                 settings.keep_jacobians = options.keep_jacobians;
-                settings.stop = options.stop.clone();
+                settings.flow.stop = options.stop.clone();
                 follow_lane_plan(scene, &mut settings)?;
                 let variant = variant(scene, precision);
                 gpu::shader::check_composed(&variant)?;
@@ -194,7 +194,7 @@ impl Runner {
             let result = next.iter().try_for_each(|(batch, ran)| finish(batch, ran?));
             if result.is_err() {
                 // The batch on the device is not wanted: end it now.
-                self.settings.stop.request();
+                self.settings.flow.stop.request();
             }
             result
         })
@@ -254,7 +254,7 @@ impl Runner {
             }
         };
         // A stopped run's lanes ended part way: they are not results.
-        if self.settings.stop.requested() {
+        if self.settings.flow.stop.requested() {
             return Err(Error::Stopped);
         }
         Ok(Ran {

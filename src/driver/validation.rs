@@ -89,9 +89,9 @@ pub(super) fn date_transient_failures(scene: &Scene, lanes: &mut [LaneResult]) {
     // The kernels' transient is the iterations before the aligning ones.
     let first_with_jacobians = settings.transient;
     let undated = |status: &LaneStatus| match status {
-        LaneStatus::NonFinite { iteration } | LaneStatus::NoReturn { iteration } => {
-            *iteration == first_with_jacobians
-        }
+        LaneStatus::NonFinite { iteration }
+        | LaneStatus::NoReturn { iteration }
+        | LaneStatus::TooManyEvents { iteration } => *iteration == first_with_jacobians,
         _ => false,
     };
     let failed: Vec<usize> = (0..lanes.len())

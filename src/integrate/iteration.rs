@@ -3,6 +3,9 @@
 //! ([`Part`]), and what happened on the way ([`IterationStats`]). The
 //! method reads these; the systems fill them.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use serde::Deserialize;
 
 use super::region::MAX_SURFACES;
@@ -12,11 +15,58 @@ use super::wall::MAX_WALLS;
 /// surfaces' (the output's event columns).
 pub const MAX_EVENTS: usize = MAX_WALLS + MAX_SURFACES;
 
+/// Located events (wall impacts, crossings of events and switches) one
+/// trajectory may meet in one call of the step loop: a map iteration, or
+/// one of its sub-maps where it is cut into parts. Past it the trajectory
+/// ends non-finite with [`IterationStats::too_many_events`] set, and its
+/// lane stops with `too-many-events(iteration=k)`.
+///
+/// Why a bound at all: energy pumped in between events faster than they
+/// take it out (an impact pair under negative damping, ζ = -3000) shortens
+/// the flight between impacts to about -ln(e)/(2|ζ|) without ever putting
+/// 64 in one step, so the lane settled at 4.2e5 located impacts per period,
+/// ten seconds an iteration, and ran on for hours. Why this value: the
+/// shipped scenes average at most 6 events per period (belt-into-stop;
+/// measured on every scene's reduced run, `.ci/same-outputs` sizes), and
+/// an accumulation of impacts to rest is some hundred (e = 0.8 down to
+/// rounding); 1e4 leaves them a wide margin, while a lane past it stops
+/// within about a quarter of a second a trajectory (some 25 µs a located
+/// event).
+pub const MAX_EVENTS_PER_ITERATION: u32 = 10_000;
+
+/// RK4 steps a step loop takes between two looks at [`Stop`]: at most
+/// some hundredths of a second of a batch of trajectories (the native
+/// loops take some ten nanoseconds a trajectory-step), and a look costs
+/// nothing beside them.
+pub const STEPS_BETWEEN_STOP_LOOKS: usize = 1 << 16;
+
 /// How one flow iteration is integrated (the part of `[integration]` a system sees).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct FlowSettings {
     pub steps_per_period: usize,
     pub impact_location: ImpactLocation,
+    /// The run's stop request: the step loop looks at it every
+    /// [`STEPS_BETWEEN_STOP_LOOKS`] steps and ends the call where it is
+    /// set, so that one long iteration does not hold a stopped run.
+    pub stop: Stop,
+}
+
+/// A request, from outside a run (a front end's Ctrl-C), that it end early.
+/// A stopped run's lanes are not results: the backends return
+/// `Error::Stopped` and nothing is written, so an iteration cut short
+/// where it was asked is never read.
+#[derive(Clone, Debug, Default)]
+pub struct Stop(Arc<AtomicBool>);
+
+impl Stop {
+    /// Asks every run holding this flag to end.
+    pub fn request(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
+    pub fn requested(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
 }
 
 /// How the impact time inside a crossing step is found.
@@ -92,6 +142,9 @@ pub struct IterationStats {
     /// An integration step needed more impacts than the bound allows, or the
     /// mass was pressed into the wall: the iteration is not trustworthy.
     pub chattering: bool,
+    /// The trajectory met more than [`MAX_EVENTS_PER_ITERATION`] located
+    /// events in the step loop's call: it was ended there, non-finite.
+    pub too_many_events: bool,
     /// A sliding motion that is not integrated (a wall or an event met
     /// while sliding, switches whose signs multiply in the field, a stick
     /// limit below Filippov's, or sliding on two switches at once in the
@@ -150,6 +203,7 @@ impl IterationStats {
             *c += p;
         }
         self.chattering |= part.chattering;
+        self.too_many_events |= part.too_many_events;
         self.rank_loss = self.rank_loss.max(part.rank_loss);
         self.sliding_phases += part.sliding_phases;
         self.slowest_impact = self.slowest_impact.min(part.slowest_impact);
@@ -169,6 +223,7 @@ impl Default for IterationStats {
             crossings: [0; MAX_EVENTS],
             sliding: false,
             chattering: false,
+            too_many_events: false,
             rank_loss: 0,
             sliding_phases: 0,
             slowest_impact: f64::INFINITY,

@@ -21,7 +21,10 @@ pub mod wall;
 // The names the rest of the tool reaches the integrator by; each lives in
 // the child module of its layer (this file only drives the step loop).
 pub use flow::{EventHoldValues, Flow, InRegion, Reset, Switching};
-pub use iteration::{FlowSettings, ImpactLocation, IterationStats, Part, MAX_EVENTS};
+pub use iteration::{
+    FlowSettings, ImpactLocation, IterationStats, Part, Stop, MAX_EVENTS, MAX_EVENTS_PER_ITERATION,
+    STEPS_BETWEEN_STOP_LOOKS,
+};
 /// The cubic Hermite interpolant of a step, the oracle of the kernels'
 /// generated `hermite_*` (tests/math64.rs holds them to the bit).
 pub use locate::Hermite;
@@ -490,8 +493,22 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     // A flow with a step loop of its own takes the steps that meet no wall
     // there, and this loop the one that does (or every step, without).
     let live = (1u32 << n) - 1;
+    // Each slot's located events before this call (its statistics may
+    // carry a whole transient's), for the bound on the call's.
+    let counted: [u32; W] = crate::array::from_fn(|k| stats.get(k).map_or(0, events));
+    // The slots ended there (bit k).
+    let mut ended = 0u32;
     let mut left = part.steps(steps).len();
+    // Steps until the next look at the stop request.
+    let mut unseen = STEPS_BETWEEN_STOP_LOOKS;
     while left > 0 {
+        if unseen == 0 {
+            if settings.stop.requested() {
+                // Cut short: a stopped run's lanes are never read.
+                break;
+            }
+            unseen = STEPS_BETWEEN_STOP_LOOKS;
+        }
         // A sliding or held trajectory takes the slow path at every step.
         if !(SURFACES && regions[..n].iter().any(|&r| surface::is_constrained(r))) {
             let switching = SURFACES.then(|| Switching {
@@ -499,12 +516,17 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
                 values: &mut values[at_start],
             });
             let phases = (&mut phase, &mut phases);
-            left -= walk(flows, &mut y, phases, (&half, &h), (live, left), switching);
-            if left == 0 {
-                break;
+            // At most the steps until the next look (a loop that takes
+            // them all met nothing: the next begins where it ended).
+            let most = left.min(unseen);
+            let walked = walk(flows, &mut y, phases, (&half, &h), (live, most), switching);
+            (left, unseen) = (left - walked, unseen - walked);
+            if left == 0 || walked == most {
+                continue;
             }
         }
         left -= 1;
+        unseen -= 1;
         // The batch's step, then detection. Every slot's sides (unused
         // slots repeat the last trajectory's).
         let sides: [u32; W] = crate::array::from_fn(|k| surface::sides(regions[k.min(n - 1)]));
@@ -544,6 +566,17 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             };
             let end_values = SURFACES.then(|| &mut values[1 - at_start]);
             slots.resolve(meets, (&y, &mut y1), &mut regions, end_values, stats);
+            ended |= end_past_the_bound(meets, &counted, &mut y1, stats);
+            if ended == live {
+                // Every trajectory ended: none is read past here, and the
+                // rest of the call (millions of steps, where flights grew
+                // that short) is not taken.
+                for (k, out) in ys.iter_mut().enumerate() {
+                    *out = [f64::NAN; D];
+                    debug_assert!(stats[k].too_many_events);
+                }
+                return crate::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k));
+            }
         }
         y = y1;
         phases = next;
@@ -556,6 +589,42 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         *out = crate::array::from_fn(|i| y[i][k]);
     }
     crate::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k))
+}
+
+/// The located events in `stats`: wall impacts and crossings of events
+/// and switches.
+#[inline(always)]
+fn events(stats: &IterationStats) -> u32 {
+    stats
+        .crossings
+        .iter()
+        .fold(0u32, |sum, &c| sum.wrapping_add(c))
+}
+
+/// Ends, non-finite, each slot of `resolved` whose events in this call
+/// (beyond `counted` at its start) passed [`MAX_EVENTS_PER_ITERATION`],
+/// flagging it: its lane stops with that status. Returns those slots (bit
+/// k). Their later steps in the call are plain steps of NaN (no wall or
+/// surface is met by NaN), until every slot has ended.
+#[inline(always)]
+fn end_past_the_bound<const D: usize, const W: usize>(
+    resolved: u32,
+    counted: &[u32; W],
+    y1: &mut [[f64; W]; D],
+    stats: &mut [IterationStats],
+) -> u32 {
+    let mut ended = 0u32;
+    for k in (0..W).filter(|&k| resolved & (1 << k) != 0) {
+        let st = &mut stats[k];
+        if events(st).wrapping_sub(counted[k]) > MAX_EVENTS_PER_ITERATION {
+            st.too_many_events = true;
+            ended |= 1 << k;
+            for row in y1.iter_mut() {
+                row[k] = f64::NAN;
+            }
+        }
+    }
+    ended
 }
 
 /// The steps a flow's own step loop takes from y before one meets a wall

@@ -126,6 +126,7 @@ impl<const D: usize> Copies<D> {
         stats.rank_loss = stats.rank_loss.max(st[0].rank_loss);
         stats.sliding_phases += st[0].sliding_phases;
         stats.chattering |= st.iter().any(|s| s.chattering);
+        stats.too_many_events |= st.iter().any(|s| s.too_many_events);
         stats.sliding |= st.iter().any(|s| s.sliding);
 
         let image = ys[0];

@@ -32,7 +32,7 @@ pub fn flow_of<const D: usize, S: System<D>>(
 ) -> FlowSettings {
     FlowSettings {
         steps_per_period: plan_lane(system, settings).steps_per_period,
-        ..settings.flow
+        ..settings.flow.clone()
     }
 }
 
@@ -52,7 +52,7 @@ where
     let plan = plan_lane(system, settings);
     let flow = FlowSettings {
         steps_per_period: plan.steps_per_period,
-        ..settings.flow
+        ..settings.flow.clone()
     };
     let mut out = Evaluation {
         image: *x,

@@ -117,6 +117,10 @@ shared_constants! {
     /// Filippov combination): IterationStats::sliding; the backend
     /// recomputes the lane on the CPU.
     FLAG_SLIDING = 64;
+    /// A trajectory met more located events in the part than
+    /// MAX_EVENTS_PER_ITERATION and was ended there, non-finite:
+    /// IterationStats::too_many_events (kept with FLAG_NONFINITE).
+    FLAG_TOO_MANY_EVENTS = 128;
 }
 
 shared_constants! {

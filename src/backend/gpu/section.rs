@@ -524,7 +524,7 @@ where
             let plan = plan_lane(&system, settings);
             let flow = FlowSettings {
                 steps_per_period: plan.steps_per_period,
-                ..settings.flow
+                ..settings.flow.clone()
             };
             let result = (!plan.affordable()).then(|| not_run(settings, D, system.period(), plan));
             let start = scene.lane_initial_state(k);
@@ -561,12 +561,12 @@ where
         lane.x = lane.back.take().expect("a return").image;
         if !lane.x.iter().all(|v| v.is_finite()) {
             let mut accumulator = lane.accumulator.clone();
-            accumulator.fail_at(0, &lane.x);
+            accumulator.fail_at(0, &lane.x, &IterationStats::default());
             lane.result = Some(accumulator.finish());
         }
     }
     for n in 0..settings.transient {
-        if settings.stop.requested() {
+        if settings.flow.stop.requested() {
             return Err(Error::Stopped);
         }
         returns(stepper, lanes, |lane| lane.system.lift(&lane.x))?;
@@ -575,7 +575,7 @@ where
             lane.system.wrap(&mut lane.x);
             if !lane.x.iter().all(|v| v.is_finite()) {
                 let mut accumulator = lane.accumulator.clone();
-                accumulator.fail_at(n, &lane.x);
+                accumulator.fail_at(n, &lane.x, &IterationStats::default());
                 lane.result = Some(accumulator.finish());
             }
         }
@@ -597,7 +597,7 @@ where
 {
     let count = lanes.len();
     for _ in 0..settings.iterations {
-        if settings.stop.requested() {
+        if settings.flow.stop.requested() {
             return Err(Error::Stopped);
         }
         for lane in lanes.iter_mut() {

@@ -230,10 +230,12 @@ impl Variant {
              const PARAM_COUNT: u32 = {params}u;\n\
              const EPSILON: real = real({epsilon});\n\
              const MAX_REAL: real = real({max});\n\
+             const MAX_EVENTS_PER_ITERATION: u32 = {max_events}u;\n\
              fn load_params(lane: u32) -> Params {{\n    let b = lane * LANE_STRIDE;\n    return Params({fields});\n}}\n",
             name = self.name(),
             traj = self.trajectories(),
             params = self.system.parameters.len(),
+            max_events = crate::integrate::MAX_EVENTS_PER_ITERATION,
             fields = fields.join(", "),
         )
     }

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::bindings::{
     Bindings, SweepControl, FLAG_CHATTERING, FLAG_NONFINITE, FLAG_RANK_ONE, FLAG_RANK_TWO,
-    FLAG_SLIDING, FLAG_TRUNCATED, SWEEP,
+    FLAG_SLIDING, FLAG_TOO_MANY_EVENTS, FLAG_TRUNCATED, SWEEP,
 };
 use super::context::Gpu;
 use super::pipeline::{
@@ -32,7 +32,7 @@ use super::stopwatch::{self, Stopwatch};
 use crate::backend::options::RunOptions;
 use crate::backend::progress::Attempt as Tally;
 use crate::error::{Error, Result};
-use crate::method::lane::{is_grazing, LanePlan};
+use crate::method::lane::{is_grazing, Failure, LanePlan};
 use crate::method::{LaneAccumulator, LaneResult, MethodSettings};
 use crate::scene::{Precision, Scene};
 use crate::system::{IterationStats, Part};
@@ -456,7 +456,7 @@ where
         let per_submit = (SUBMIT_LANE_STEPS / (self.count * self.steps).max(1)).max(1);
         let mut done = 0;
         while done < settings.transient {
-            if settings.stop.requested() {
+            if settings.flow.stop.requested() {
                 return Err(Error::Stopped);
             }
             let n = per_submit.min(settings.transient - done);
@@ -506,7 +506,7 @@ where
         let mut pending: Option<Pending> = None;
         for c in 0..=chunks.len() {
             let submitted = if c < chunks.len() {
-                if settings.stop.requested() {
+                if settings.flow.stop.requested() {
                     // Let the chunk in flight finish before its buffers go.
                     if let Some(in_flight) = &pending {
                         Ring::wait(gpu, in_flight, timings)?;
@@ -671,8 +671,17 @@ where
             let slot = |part: usize| (j * parts + part) * self.count + lane;
             // A failed reference reports in its iteration's last
             // part; the earlier slots may hold an older iteration.
-            if (0..parts).any(|p| chunk.summary(stride * slot(p))[1] & FLAG_NONFINITE != 0) {
-                acc.fail(self.settings.transient + first_iteration + j);
+            let failed = (0..parts)
+                .map(|p| chunk.summary(stride * slot(p))[1])
+                .find(|flags| flags & FLAG_NONFINITE != 0);
+            if let Some(flags) = failed {
+                // The cause is kept beside the failure (FLAG_STICKY).
+                let cause = if flags & FLAG_TOO_MANY_EVENTS != 0 {
+                    Failure::TooManyEvents
+                } else {
+                    Failure::NonFinite
+                };
+                acc.fail_because(self.settings.transient + first_iteration + j, cause);
                 break;
             }
             let mut stats = IterationStats::default();
@@ -807,6 +816,7 @@ fn part_stats<const D: usize>(chunk: &Readback, stride: usize, s: usize) -> Iter
         // backend recomputes on the CPU.
         chattering: flags & FLAG_CHATTERING != 0 && flags & FLAG_SLIDING == 0,
         sliding: flags & FLAG_SLIDING != 0,
+        too_many_events: flags & FLAG_TOO_MANY_EVENTS != 0,
         // Counted in the flags' high half.
         sliding_phases: flags >> 16,
         log_flux: if s < chunk.fluxes.len() {

@@ -184,7 +184,7 @@ impl PiecewiseLinear {
     /// after it and its first point, or where and how the iteration ends.
     fn crossing(&self, segment: &Segment, w: usize, p: Point, record: &mut Record) -> Onward {
         if record.total == MAX_CROSSINGS_PER_PERIOD {
-            return Onward::Ends(p, PiecewiseStatus::Chattering);
+            return Onward::Ends(p, PiecewiseStatus::TooManyCrossings);
         }
         let n = self.dimension();
         let watched = &segment.dynamics.watch[w];

@@ -8,8 +8,9 @@ use std::sync::Arc;
 use super::dynamics::{dynamics, side_sign, Dynamics, Watch, FORCING};
 
 /// Crossings allowed in one period, over all surfaces, before the iteration
-/// is abandoned with [`PiecewiseStatus::Chattering`].
-pub const MAX_CROSSINGS_PER_PERIOD: u32 = 10_000;
+/// is abandoned with [`PiecewiseStatus::TooManyCrossings`]: the RK4 path's
+/// bound on located events, so that both end such a lane alike.
+pub const MAX_CROSSINGS_PER_PERIOD: u32 = crate::integrate::MAX_EVENTS_PER_ITERATION;
 
 /// A crossing whose approach rate n·F⁻ (towards the surface) is below this
 /// fraction of |n|·|F⁻| is grazing ([`PiecewiseStatus::Grazing`]): the
@@ -224,10 +225,9 @@ pub enum PiecewiseStatus {
     /// The span was completed; state and Jacobian are those at its end
     /// (sliding phases included).
     Ok,
-    /// Crossings accumulated (more than [`MAX_CROSSINGS_PER_PERIOD`], or a
-    /// bounce off an event surface below the time or position resolution,
-    /// the tail of a Zeno sequence), or the scan exhausted its step budget:
-    /// stopped at [`PiecewiseIteration::time`].
+    /// Crossings accumulated (a bounce off an event surface below the time
+    /// or position resolution, the tail of a Zeno sequence), or the scan
+    /// exhausted its step budget: stopped at [`PiecewiseIteration::time`].
     Chattering,
     /// A crossing approached the surface at a rate |n·F⁻| below
     /// [`GRAZING_RATE`]·|n||F⁻|: the state is right but the tangent map is
@@ -246,6 +246,10 @@ pub enum PiecewiseStatus {
     Sticking,
     /// The state left the floating-point range.
     Diverged,
+    /// More than [`MAX_CROSSINGS_PER_PERIOD`] crossings in the span (energy
+    /// pumped in between impacts faster than they take it out): stopped
+    /// at the last; the lane ends there (`too-many-events`).
+    TooManyCrossings,
 }
 
 /// The result of one iteration.

@@ -74,9 +74,44 @@ pub struct LaneAccumulator<const D: usize> {
     keep_orbit: bool,
     jacobians: Option<Vec<f64>>,
     pub(super) failed_at: Option<usize>,
-    /// Whether the failure was a Poincaré map's trajectory not coming back
-    /// (`NoReturn`), not a point that blew up.
-    pub(super) no_return: bool,
+    /// What stopped the lane at `failed_at`.
+    pub(super) failure: Failure,
+}
+
+/// Why a failed lane stopped: every cause leaves its state non-finite,
+/// and this tells them apart for its status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Failure {
+    /// A point that blew up ([`LaneStatus::NonFinite`]).
+    NonFinite,
+    /// A Poincaré map's trajectory that did not come back to its section
+    /// ([`LaneStatus::NoReturn`]).
+    NoReturn,
+    /// A trajectory ended past the bound on located events
+    /// ([`LaneStatus::TooManyEvents`]).
+    TooManyEvents,
+}
+
+impl Failure {
+    /// The cause of the non-finite point `x`, an image whose iteration (of
+    /// the reference or of a copy) had the statistics `stats`.
+    pub fn of(x: &[f64], stats: &IterationStats) -> Failure {
+        if crate::system::is_no_return(x) {
+            Failure::NoReturn
+        } else {
+            Failure::of_stats(stats)
+        }
+    }
+
+    /// The cause of a non-finite Jacobian or point of an iteration with
+    /// the statistics `stats`.
+    pub fn of_stats(stats: &IterationStats) -> Failure {
+        if stats.too_many_events {
+            Failure::TooManyEvents
+        } else {
+            Failure::NonFinite
+        }
+    }
 }
 
 impl<const D: usize> LaneAccumulator<D>
@@ -128,7 +163,7 @@ where
             keep_orbit: settings.keep_orbit,
             jacobians: settings.keep_jacobians.then(Vec::new),
             failed_at: None,
-            no_return: false,
+            failure: Failure::NonFinite,
         }
     }
 
@@ -143,7 +178,7 @@ where
         stats: &IterationStats,
     ) -> bool {
         if !all_finite(next) {
-            self.fail_at(self.taken(), next);
+            self.fail_at(self.taken(), next, stats);
             return false;
         }
         let scale = next.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
@@ -165,7 +200,9 @@ where
         }
         let n = self.done;
         if jacobians.iter().any(|j| !j.iter().all(|v| v.is_finite())) {
-            self.fail(self.taken());
+            // A copy ended past the bound on events leaves the reference
+            // finite and its column NaN.
+            self.fail_because(self.taken(), Failure::of_stats(stats));
             return false;
         }
         let aligning = self.aligned < self.align;
@@ -265,14 +302,19 @@ where
         self.failed_at.get_or_insert(iteration);
     }
 
-    /// Marks the lane failed at `iteration` on the non-finite point `x`:
-    /// [`LaneStatus::NoReturn`] where `x` is a Poincaré map's image of no
-    /// return, else [`LaneStatus::NonFinite`].
-    pub fn fail_at(&mut self, iteration: usize, x: &[f64]) {
+    /// Marks the lane failed at `iteration` for `cause` (the first
+    /// failure stands).
+    pub fn fail_because(&mut self, iteration: usize, cause: Failure) {
         if self.failed_at.is_none() {
-            self.no_return = crate::system::is_no_return(x);
+            self.failure = cause;
         }
         self.fail(iteration);
+    }
+
+    /// Marks the lane failed at `iteration` on the non-finite point `x` of
+    /// an iteration with the statistics `stats` ([`Failure::of`]).
+    pub fn fail_at(&mut self, iteration: usize, x: &[f64], stats: &IterationStats) {
+        self.fail_because(iteration, Failure::of(x, stats));
     }
 
     /// The lane's result after all its iterations.
@@ -360,10 +402,10 @@ where
             grazing_bound: f64::NAN,
             error: f64::NAN,
             plan: self.plan,
-            status: if self.no_return {
-                LaneStatus::NoReturn { iteration }
-            } else {
-                LaneStatus::NonFinite { iteration }
+            status: match self.failure {
+                Failure::NonFinite => LaneStatus::NonFinite { iteration },
+                Failure::NoReturn => LaneStatus::NoReturn { iteration },
+                Failure::TooManyEvents => LaneStatus::TooManyEvents { iteration },
             },
         }
     }

@@ -34,17 +34,17 @@ where
     }
     let flow = &FlowSettings {
         steps_per_period: plan.steps_per_period,
-        ..settings.flow
+        ..settings.flow.clone()
     };
     let mut x = system.start(&lane.initial_state, flow);
     if !all_finite(&x) {
         let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
-        acc.fail_at(0, &x);
+        acc.fail_at(0, &x, &IterationStats::default());
         return acc.finish();
     }
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
-        if settings.stop.requested() {
+        if settings.flow.stop.requested() {
             break;
         }
         // The exact backend's transient is exact too: it is the ground truth.
@@ -60,7 +60,7 @@ where
         system.wrap(&mut x);
         if !all_finite(&x) {
             let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
-            acc.fail_at(n, &x);
+            acc.fail_at(n, &x, &discard);
             return acc.finish();
         }
     }
@@ -79,12 +79,12 @@ where
 {
     let flow = &FlowSettings {
         steps_per_period: plan.steps_per_period,
-        ..settings.flow
+        ..settings.flow.clone()
     };
     let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
     let mut jacobians = Vec::with_capacity(plan.parts);
     for _ in 0..settings.iterations {
-        if settings.stop.requested() {
+        if settings.flow.stop.requested() {
             break;
         }
         let mut stats = IterationStats::default();

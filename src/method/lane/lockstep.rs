@@ -4,7 +4,7 @@
 
 use nalgebra::{Const, DimMin};
 
-use super::accumulator::{all_finite, LaneAccumulator};
+use super::accumulator::{all_finite, Failure, LaneAccumulator};
 use super::driver::{average, run_lane, Lane};
 use super::grazing::resolve_grazing;
 use super::plan::{plan_lane, LanePlan};
@@ -42,7 +42,7 @@ where
     }
     let flow = &FlowSettings {
         steps_per_period: plans[0].steps_per_period,
-        ..settings.flow
+        ..settings.flow.clone()
     };
     let mut xs: Vec<[f64; D]> = systems
         .iter()
@@ -53,12 +53,13 @@ where
     let mut discard = vec![IterationStats::default(); lanes.len()];
     // A lane that fails goes on being stepped with the others (its
     // numbers touch no other lane's) but is reported at its first failure.
-    let mut failed: Vec<Option<(usize, bool)>> = xs
+    let start = IterationStats::default();
+    let mut failed: Vec<Option<(usize, Failure)>> = xs
         .iter()
-        .map(|x| (!all_finite(x)).then(|| (0, crate::system::is_no_return(x))))
+        .map(|x| (!all_finite(x)).then(|| (0, Failure::of(x, &start))))
         .collect();
     for n in 0..settings.transient {
-        if settings.stop.requested() {
+        if settings.flow.stop.requested() {
             break;
         }
         discard.fill(IterationStats::default());
@@ -68,7 +69,7 @@ where
         }
         for (k, x) in xs.iter().enumerate() {
             if failed[k].is_none() && !all_finite(x) {
-                failed[k] = Some((n, crate::system::is_no_return(x)));
+                failed[k] = Some((n, Failure::of(x, &discard[k])));
             }
         }
     }
@@ -81,9 +82,8 @@ where
         .zip(&failed)
         .map(|((system, &plan), failed)| {
             let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
-            if let Some((n, no_return)) = *failed {
-                acc.fail(n);
-                acc.no_return = no_return;
+            if let Some((n, cause)) = *failed {
+                acc.fail_because(n, cause);
             }
             acc
         })
@@ -126,7 +126,7 @@ where
     let (mut owners, mut ys, mut st) = (Vec::new(), Vec::new(), Vec::new());
     let mut copies = Vec::with_capacity(live.len());
     for _ in 0..settings.iterations {
-        if live.is_empty() || settings.stop.requested() {
+        if live.is_empty() || settings.flow.stop.requested() {
             break;
         }
         copies.clear();

@@ -32,7 +32,7 @@ mod settings;
 mod uncertainty;
 
 pub use crate::perturbation::perturbation_at;
-pub use accumulator::{LaneAccumulator, RESOLUTION_BOUND};
+pub use accumulator::{Failure, LaneAccumulator, RESOLUTION_BOUND};
 pub use driver::{estimated_iteration, run_lane, Lane};
 pub use grazing::{estimate_resolving_grazing, is_grazing, reestimate_of, GRAZING_ERROR};
 pub use lockstep::run_lanes;

@@ -59,6 +59,14 @@ pub enum LaneStatus {
     NoReturn {
         iteration: usize,
     },
+    /// A trajectory of the lane (its reference or a perturbed copy) met
+    /// more located events in one iteration (or sub-map) than
+    /// [`MAX_EVENTS_PER_ITERATION`](crate::integrate::MAX_EVENTS_PER_ITERATION)
+    /// at `iteration` (from the start of the transient): the lane stopped
+    /// there, with no exponents.
+    TooManyEvents {
+        iteration: usize,
+    },
     /// The lane's fastest time scale needs more RK4 steps per period than
     /// [`MAX_STEPS_PER_PERIOD`](super::plan::MAX_STEPS_PER_PERIOD): it was not run.
     TooManySteps {
@@ -97,6 +105,7 @@ impl LaneStatus {
             LaneStatus::Grazing { .. } => "grazing",
             LaneStatus::Mismatch { .. } => "gpu-mismatch",
             LaneStatus::TooManySteps { .. } => "too-many-steps",
+            LaneStatus::TooManyEvents { .. } => "too-many-events",
             LaneStatus::NoReturn { .. } => "no-return",
             LaneStatus::SumRule { .. } => "sum-rule",
             LaneStatus::ShortAverage { .. } => "short-average",
@@ -112,6 +121,7 @@ impl LaneStatus {
             LaneStatus::NonFinite { .. }
                 | LaneStatus::NoReturn { .. }
                 | LaneStatus::TooManySteps { .. }
+                | LaneStatus::TooManyEvents { .. }
         )
     }
 }
@@ -139,6 +149,9 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::ShortAverage { scales } => write!(f, "short-average(scales={scales:.1e})"),
             LaneStatus::Uncertain { error } => write!(f, "uncertain(error={error:.1e})"),
             LaneStatus::NoReturn { iteration } => write!(f, "no-return(iteration={iteration})"),
+            LaneStatus::TooManyEvents { iteration } => {
+                write!(f, "too-many-events(iteration={iteration})")
+            }
         }
     }
 }

@@ -1,9 +1,7 @@
 //! What every lane of a sweep shares: the method's settings, and the
 //! rounding noise of a finite-difference column they imply.
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-
+pub use crate::integrate::Stop;
 use crate::system::FlowSettings;
 
 use crate::method::jacobian;
@@ -33,6 +31,9 @@ pub struct MethodSettings {
     pub perturbation: f64,
     /// Forward (the paper's) or central differences.
     pub difference: jacobian::Difference,
+    /// How an iteration is integrated, with the run's stop request
+    /// (`flow.stop`), which every lane's iteration loop looks at, and the
+    /// step loop within an iteration: a run ends soon after it.
     pub flow: FlowSettings,
     pub tangent: Tangent,
     /// Whether to compute exponents at all (`[output] lyapunov`).
@@ -58,26 +59,6 @@ pub struct MethodSettings {
     /// The unit roundoff of the arithmetic the images are computed in
     /// (f64::EPSILON, or f32::EPSILON on the GPU's f32 path).
     pub rounding_unit: f64,
-    /// Asked from outside the run to end it early; every lane's iteration
-    /// loop looks at it, so that a run ends within one iteration of it.
-    pub stop: Stop,
-}
-
-/// A request, from outside a run (a front end's Ctrl-C), that it end early.
-/// A stopped run's lanes are not results: the backends return
-/// [`crate::Error::Stopped`] and nothing is written.
-#[derive(Clone, Debug, Default)]
-pub struct Stop(Arc<AtomicBool>);
-
-impl Stop {
-    /// Asks every run holding this flag to end.
-    pub fn request(&self) {
-        self.0.store(true, Ordering::Relaxed);
-    }
-
-    pub fn requested(&self) -> bool {
-        self.0.load(Ordering::Relaxed)
-    }
 }
 
 impl MethodSettings {

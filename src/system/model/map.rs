@@ -125,6 +125,12 @@ impl<const D: usize> System<D> for ModelFlow<D> {
             }
             PiecewiseStatus::Chattering | PiecewiseStatus::Sticking => stats.chattering = true,
             PiecewiseStatus::Diverged => {}
+            // Ended as the RK4 path ends a trajectory past its bound on
+            // events: non-finite, flagged (the lane is `too-many-events`).
+            PiecewiseStatus::TooManyCrossings => {
+                stats.too_many_events = true;
+                return Some(([f64::NAN; D], SMatrix::from_element(f64::NAN)));
+            }
         }
         let state: [f64; D] = crate::array::from_fn(|i| it.state[i]);
         Some((state, SMatrix::from_column_slice(it.jacobian.as_slice())))
