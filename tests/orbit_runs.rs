@@ -271,16 +271,141 @@ fn a_start_that_gives_no_branch_is_a_row_with_its_reason_and_the_others_go_on() 
     assert!(orbits
         .iter()
         .all(|r| r["period"] != "1" || !r["lambda_1"].is_empty()));
-    // The free orbit's two grazings, and the impacting period-1 orbit's
-    // at the first of them, where its impact's speed falls to 0.
+    // The free orbit's two grazings, each located once: the impacting
+    // period-1 orbit beyond the first (its impact's speed falling to 0
+    // there) is the branch switched past it, not a second grazing.
     let grazing: Vec<f64> = read(&out.join("bifurcations.csv"))
         .iter()
         .filter(|r| r["kind"] == "grazing")
         .map(|r| r["eta"].parse().unwrap())
         .collect();
-    assert_eq!(grazing.len(), 3, "{grazing:?}");
-    let exact = [0.7106873690939233, 1.2185743569476413];
-    for eta in &grazing {
-        assert!(exact.iter().any(|g| (eta - g).abs() < 1e-8), "{grazing:?}");
+    assert_eq!(grazing.len(), 2, "{grazing:?}");
+    for exact in GRAZING {
+        assert!(
+            grazing.iter().any(|eta| (eta - exact).abs() < 1e-8),
+            "{grazing:?}"
+        );
+    }
+    let past: Vec<_> = orbits
+        .iter()
+        .filter(|r| r["branch_end"].starts_with("grazing(from-branch="))
+        .collect();
+    assert!(
+        past.iter()
+            .any(|r| r["impacts_per_period"] == "1" && value(r, "eta") > GRAZING[0]),
+        "{past:?}"
+    );
+}
+
+/// The rows of branch `branch` of `orbits.csv`, in order.
+fn rows_of<'a>(
+    orbits: &'a [BTreeMap<String, String>],
+    branch: &str,
+) -> Vec<&'a BTreeMap<String, String>> {
+    orbits.iter().filter(|r| r["branch"] == branch).collect()
+}
+
+/// The seed's run switches branches: at the impacting period-1 orbit's
+/// period doubling (η ≈ 0.9863) the doubled branch is traced from the
+/// doubling point itself, a genuine period-2 orbit away from it; and the
+/// non-impacting orbit's grazing at η = 0.7106873690939233 is continued
+/// past, as the impacting orbit on the wall's side. Each such branch is a
+/// branch of its own whose first row says where it came from.
+#[test]
+fn the_seed_s_run_switches_at_its_period_doubling_and_goes_on_past_its_grazing() {
+    use lyapsweep::orbit::{evaluate, relative_residual};
+    use lyapsweep::plan::method_settings;
+    use lyapsweep::scene::{Backend, Precision};
+    use lyapsweep::system::System;
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = lyapsweep(&[
+        "run",
+        seed_path().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "sweep.count=21",
+        "--set",
+        "orbits={}",
+        "--set",
+        "run.backend=\"cpu\"",
+    ]);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let orbits = read(&out.join("orbits.csv"));
+    let bifurcations = read(&out.join("bifurcations.csv"));
+    let period = |branch: &str| rows_of(&orbits, branch)[0]["period"].clone();
+
+    // The period-1 orbit's doubling, and the branch switched there.
+    let doubling = bifurcations
+        .iter()
+        .find(|r| r["kind"] == "period-doubling" && period(&r["branch"]) == "1")
+        .expect("a period doubling of a period-1 branch");
+    let at = value(doubling, "eta");
+    let from = format!("period-doubling(from-branch={})", doubling["branch"]);
+    let doubled = orbits
+        .iter()
+        .find(|r| r["branch_end"] == from)
+        .map(|r| rows_of(&orbits, &r["branch"]))
+        .unwrap_or_else(|| panic!("no branch starts with {from}"));
+    let first = value(doubled[0], "eta");
+    assert!((first - at).abs() < 1e-8, "{first} against {at}");
+    assert!(doubled.iter().all(|r| r["period"] == "2"));
+    // Away from the doubling point it is a genuine period-2 orbit: U(x) is
+    // not x, U²(x) is.
+    let scene = lyapsweep::scene::parse(
+        &std::fs::read_to_string(seed_path()).unwrap(),
+        "seed",
+        "seed",
+        &["sweep.count=2".to_owned()],
+    )
+    .unwrap();
+    let settings = method_settings(&scene, Backend::Cpu, Precision::F64);
+    let index = scene.system.parameter_index("eta").expect("eta");
+    let away = doubled
+        .iter()
+        .max_by(|a, b| {
+            let d = |r: &&&BTreeMap<String, String>| (value(r, "eta") - at).abs();
+            d(a).total_cmp(&d(b))
+        })
+        .unwrap();
+    let eta = value(away, "eta");
+    let params = lyapsweep::orbit::params_at(&scene.lane_params(0), index, eta);
+    let system = lyapsweep::system::model::ModelFlow::<2>::new(&params);
+    let x = [value(away, "x"), value(away, "v")];
+    let once = evaluate(&system, &settings, &x, 1, false).image;
+    let twice = evaluate(&system, &settings, &x, 2, false).image;
+    let (apart, closed) = (relative_residual(&x, &once), relative_residual(&x, &twice));
+    eprintln!("doubled branch at η = {eta}: |U(x) - x| = {apart:e}, |U²(x) - x| = {closed:e}");
+    assert!(apart > 1e-2 && closed < 1e-10, "{apart:e} {closed:e}");
+
+    // The free orbit's grazing, continued past on the wall's side.
+    let grazing = bifurcations
+        .iter()
+        .find(|r| r["kind"] == "grazing" && (value(r, "eta") - GRAZING[0]).abs() < 1e-8)
+        .expect("the free orbit's grazing");
+    let free = rows_of(&orbits, &grazing["branch"]);
+    assert!(free.iter().all(|r| r["impacts_per_period"] == "0"));
+    let from = format!("grazing(from-branch={})", grazing["branch"]);
+    let past = orbits
+        .iter()
+        .find(|r| r["branch_end"] == from)
+        .map(|r| rows_of(&orbits, &r["branch"]))
+        .unwrap_or_else(|| panic!("no branch starts with {from}"));
+    let first = value(past[0], "eta");
+    eprintln!(
+        "past the grazing: first point at η = {first}, {} points",
+        past.len()
+    );
+    assert!(first > GRAZING[0] && first - GRAZING[0] < 1e-3, "{first}");
+    assert!(past.len() > 20);
+    assert!(past.iter().all(|r| r["impacts_per_period"] == "1"));
+    // Each branch once: no two branches share a point.
+    let mut seen = BTreeMap::new();
+    for r in orbits.iter().filter(|r| !r["lambda_1"].is_empty()) {
+        let key = (r["eta"].clone(), r["x"].clone(), r["period"].clone());
+        let branch = seen.entry(key).or_insert_with(|| r["branch"].clone());
+        assert_eq!(*branch, r["branch"], "{r:?} on two branches");
     }
 }

@@ -43,6 +43,7 @@ impl OrbitStarts {
                 period,
                 points: lane.orbit.clone(),
                 origin: Origin::Lane(batch.sweep_lane(j)),
+                onward: None,
             };
             self.starts.push((lane.status == LaneStatus::Ok, start));
         }
@@ -82,6 +83,7 @@ pub fn trace(scene: &Scene, starts: OrbitStarts, options: &RunOptions) -> Option
             period: listed.period,
             points: Vec::new(),
             origin: Origin::Listed(i),
+            onward: None,
         })
         .collect();
     if orbits.from_sweep {

@@ -76,7 +76,21 @@ pub enum BranchEnd {
     /// It came back to its first point: a closed branch (an isola, such
     /// as the seed's impacting period-1 orbit between its two folds).
     Closed,
+    /// Its impact's speed falls to 0 at λ = `parameter` ahead of its last
+    /// point (extrapolated, with the error estimate `error`): the hook of
+    /// [`continue_branch_until`] ended it there rather than let it creep
+    /// on in ever smaller steps as the map's square root nears.
+    Grazing { parameter: f64, error: f64 },
+    /// Its last `points` steps were all tiny and together moved λ by
+    /// next to nothing, up to λ = `parameter`: the hook of
+    /// [`continue_branch_until`] ended it there, short of
+    /// [`ContinuationSettings::max_points`] taken in the same place.
+    Stalled { parameter: f64, points: usize },
 }
+
+/// Asked after each new point of a branch (the points so far, the step
+/// that reached the newest): `Some` ends the branch there with that end.
+pub type EndHook<'a, const D: usize> = &'a dyn Fn(&[BranchPoint<D>], f64) -> Option<BranchEnd>;
 
 /// A followed branch: its points in the order followed, and its end.
 #[derive(Clone, Debug)]
@@ -216,11 +230,52 @@ pub fn continue_branch<const D: usize, S: System<D>>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
+    let never = |_: &[BranchPoint<D>], _: f64| None;
+    continue_branch_until::<D, S>(base, settings, newton, continuation, guess, p, &never)
+}
+
+/// The branch's first point, solved from `guess`, and its tangent there
+/// pointing along `continuation.direction` in λ.
+fn first_point<const D: usize, S: System<D>>(
+    base: &Params,
+    settings: &MethodSettings,
+    newton: &NewtonSettings,
+    continuation: &ContinuationSettings,
+    guess: &[f64; D],
+    p: usize,
+) -> Result<(BranchPoint<D>, DVector<f64>), Failure>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let index = continuation.parameter;
+    let start = base.values[index];
+    let first = solve(&S::new(base), settings, newton, guess, p)?;
+    let dl = parameter_derivative::<D, S>(base, settings, index, &first.state, start, p);
+    let mut along = DVector::zeros(D + 1);
+    along[D] = continuation.direction.signum();
+    let t = tangent(&first.jacobian, &dl, &along).ok_or(Failure::Singular { steps: 0 })?;
+    Ok((point::<D, S>(base, settings, index, start, first), t))
+}
+
+/// [`continue_branch`], asking `end` after each new point whether the
+/// branch ends there.
+pub fn continue_branch_until<const D: usize, S: System<D>>(
+    base: &Params,
+    settings: &MethodSettings,
+    newton: &NewtonSettings,
+    continuation: &ContinuationSettings,
+    guess: &[f64; D],
+    p: usize,
+    end: EndHook<D>,
+) -> Branch<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
     let index = continuation.parameter;
     let (low, high) = continuation.bounds;
     let start = base.values[index];
-    let first = match solve(&S::new(base), settings, newton, guess, p) {
-        Ok(orbit) => orbit,
+    let (first, mut t) = match first_point::<D, S>(base, settings, newton, continuation, guess, p) {
+        Ok(first) => first,
         Err(failure) => {
             return Branch {
                 points: Vec::new(),
@@ -228,17 +283,7 @@ where
             }
         }
     };
-    let dl = parameter_derivative::<D, S>(base, settings, index, &first.state, start, p);
-    let mut along = DVector::zeros(D + 1);
-    along[D] = continuation.direction.signum();
-    let Some(mut t) = tangent(&first.jacobian, &dl, &along) else {
-        let failure = Failure::Singular { steps: 0 };
-        return Branch {
-            points: Vec::new(),
-            end: BranchEnd::Start(failure),
-        };
-    };
-    let mut points = vec![point::<D, S>(base, settings, index, start, first)];
+    let mut points = vec![first];
     let mut step = continuation.step;
     let mut last_failure;
     // Whether the branch has gone further from its first point than a
@@ -286,6 +331,9 @@ where
                                 points,
                                 end: BranchEnd::Closed,
                             };
+                        }
+                        if let Some(end) = end(&points, step) {
+                            return Branch { points, end };
                         }
                         step = if steps <= 2 {
                             step * 1.5

@@ -34,7 +34,8 @@ pub mod trace;
 
 pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
 pub use continuation::{
-    continue_branch, params_at, Branch, BranchEnd, BranchPoint, ContinuationSettings,
+    continue_branch, continue_branch_until, params_at, Branch, BranchEnd, BranchPoint,
+    ContinuationSettings, EndHook,
 };
 pub use doubling::{doubled_orbit, doubling_direction, doubling_separation, switch_at_doubling};
 pub use events::{

@@ -5,16 +5,28 @@
 //! `[orbits]` does for each of its starts ([`trace_all`]); its results
 //! hold states as vectors, so that the driver and the output need not know
 //! the system's dimension.
+//!
+//! A branch switches at each of its period doublings to the doubled
+//! branch, and at a grazing where it ended goes on past it where Newton
+//! converges on the other side. Each is traced as a branch of its own
+//! (one way, from its bifurcation; its first row names the branch it
+//! came from), not as the same branch with its character changed: a
+//! branch's rows keep one period and, between its located events
+//! changes, one sequence of events, and the branch it came from may be
+//! traced again from elsewhere without the two being told apart. A
+//! branch that creeps towards a grazing ends there ([`creeping_end`]).
 
 use nalgebra::{Complex, Const, DVector, DimMin};
 
 use super::bifurcation::{bifurcations, Kind as MultiplierKind};
 use super::continuation::{
-    continue_branch, params_at, BranchEnd, BranchPoint, ContinuationSettings,
+    continue_branch_until, params_at, Branch, BranchEnd, BranchPoint, ContinuationSettings,
 };
-use super::events::{extrapolate_grazing, impact_speed_test, EventKind};
+use super::doubling::doubled_orbit;
+use super::events::{extrapolate_grazing, impact_speed_test, step_past, EventKind};
 use super::locate::locate_zero;
-use super::newton::{NewtonSettings, Orbit};
+use super::map::evaluate;
+use super::newton::{relative_residual, NewtonSettings, Orbit};
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
 
@@ -61,6 +73,9 @@ pub struct Start {
     /// on a traced branch is that branch's.
     pub points: Vec<f64>,
     pub origin: Origin,
+    /// For a branch switched from another ([`Origin::Branch`]): where, and
+    /// which way it leaves; it is traced that way only.
+    pub onward: Option<Onward>,
 }
 
 /// What gave a start.
@@ -71,7 +86,35 @@ pub enum Origin {
     /// The sweep's lane (its index in the sweep, continuation passes after
     /// the scene's own lanes).
     Lane(usize),
+    /// A bifurcation of the branch of this index (its `branch` in
+    /// `orbits.csv`): the doubled branch of its period doubling, or the
+    /// branch on the far side of its grazing.
+    Branch(usize),
 }
+
+/// Where a switched branch starts, and which way it goes: from a period
+/// doubling at λ* (its first point the period-p orbit there counted
+/// twice, then the doubled orbit found near it, see [`doubled_orbit`]),
+/// or from a grazing at λ_g (its first point the orbit found just past
+/// it, see [`step_past`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Onward {
+    pub kind: Kind,
+    /// λ* or λ_g.
+    pub parameter: f64,
+    /// At a period doubling, the period-p orbit's state there; empty
+    /// past a grazing.
+    pub state: Vec<f64>,
+    /// +1 when the branch leaves towards larger λ, -1 towards smaller.
+    pub direction: f64,
+}
+
+/// The largest period doubling's or grazing's parameter distance, as a
+/// fraction of the range, that a switched branch's first orbit may lie
+/// from it: a doubled orbit found further off (λ - λ* grows with the
+/// square of its amplitude) or an orbit past a grazing that far is not
+/// the switched branch's.
+const SWITCH_REACH: f64 = 0.05;
 
 /// Why a point's numbers are in doubt; `Ok` when they are not.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -186,7 +229,8 @@ pub struct Located {
 }
 
 /// A branch traced from its start: its points in order of the parameter's
-/// path (from the low end up), how each end ended, and its bifurcations
+/// path (from the low end up; a switched branch's from its bifurcation),
+/// how each end ended, and its bifurcations
 /// in the path's order. `failure` says why a start gave no branch.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Traced {
@@ -197,11 +241,20 @@ pub struct Traced {
     pub ends: [String; 2],
     pub bifurcations: Vec<Located>,
     pub failure: Option<String>,
+    /// The starts of the branches switched from this one, at its period
+    /// doublings and past its grazings (see [`trace_all`]).
+    pub onward: Vec<Start>,
 }
 
 /// A branch end as `orbits.csv` writes it (no comma: one CSV field).
 fn describe_end(end: &BranchEnd) -> String {
     match end {
+        BranchEnd::Grazing { parameter, error } => {
+            format!("grazing(at={parameter:e}; error={error:.1e})")
+        }
+        BranchEnd::Stalled { parameter, points } => {
+            format!("stalled(at={parameter:e}; steps={points})")
+        }
         BranchEnd::Bound => "bound".into(),
         BranchEnd::Closed => "closed".into(),
         BranchEnd::MaxPoints => "max-points".into(),
@@ -225,7 +278,45 @@ struct Context<'a, const D: usize, S: System<D>> {
     walls: Option<WallExcess<D, S>>,
 }
 
-/// The branch of `start`, traced over `trace.bounds` both ways.
+impl<const D: usize, S: System<D>> Context<'_, D, S>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    /// The solved `orbit` at λ = `lambda` as a branch point, with its
+    /// multipliers.
+    fn point(&self, lambda: f64, orbit: Orbit<D>) -> BranchPoint<D> {
+        super::continuation::point::<D, S>(
+            self.base,
+            self.settings,
+            self.trace.parameter,
+            lambda,
+            orbit,
+        )
+    }
+
+    /// The branch of period-`period` orbits from `guess` at the start's
+    /// λ, one way (`direction` in λ), ended where it creeps ([`creeping_end`]).
+    fn follow(&self, guess: &[f64; D], period: usize, direction: f64) -> Branch<D> {
+        let continuation = ContinuationSettings {
+            direction,
+            ..self.continuation
+        };
+        let end = |points: &[BranchPoint<D>], step: f64| creeping_end(self, points, step);
+        continue_branch_until::<D, S>(
+            self.base,
+            self.settings,
+            &self.trace.newton,
+            &continuation,
+            guess,
+            period,
+            &end,
+        )
+    }
+}
+
+/// The branch of `start`, traced over `trace.bounds` both ways (a
+/// switched start, one way from its bifurcation), with the starts of the
+/// branches switched from it.
 pub fn trace<const D: usize, S: System<D>>(
     base: &Params,
     settings: &MethodSettings,
@@ -242,6 +333,7 @@ where
         ends: [reason.clone(), reason.clone()],
         bifurcations: Vec::new(),
         failure: Some(reason),
+        onward: Vec::new(),
     };
     if start.period > trace.max_period {
         return failed(format!(
@@ -253,88 +345,329 @@ where
         return failed(format!("state-length({} not {D})", start.state.len()));
     }
     let base = params_at(base, trace.parameter, start.parameter);
-    let continuation = ContinuationSettings {
-        parameter: trace.parameter,
-        bounds: trace.bounds,
-        direction: 1.0,
-        step: trace.step,
-        min_step: trace.min_step,
-        max_step: trace.max_step,
-        max_points: trace.max_points,
-        max_corrector_steps: 6,
-    };
     let context = Context {
         base: &base,
         settings,
         trace,
-        continuation,
+        continuation: ContinuationSettings {
+            parameter: trace.parameter,
+            bounds: trace.bounds,
+            direction: 1.0,
+            step: trace.step,
+            min_step: trace.min_step,
+            max_step: trace.max_step,
+            max_points: trace.max_points,
+            max_corrector_steps: 6,
+        },
         walls,
     };
     let guess: [f64; D] = crate::array::from_fn(|i| start.state[i]);
-    let follow = |direction: f64| {
-        let continuation = ContinuationSettings {
-            direction,
-            ..continuation
-        };
-        continue_branch::<D, S>(
-            &base,
-            settings,
-            &trace.newton,
-            &continuation,
-            &guess,
-            start.period,
-        )
+    let followed = match &start.onward {
+        None => both_ways(&context, &guess, start.period),
+        Some(onward) => one_way(&context, onward, &guess, start.period),
     };
-    // Both ways at once, on two of the host's cores: the way down is
-    // wasted only on a branch that closes on itself going up.
-    let (up, down) = rayon::join(|| follow(1.0), || follow(-1.0));
-    if let BranchEnd::Start(_) = up.end {
-        return failed(describe_end(&up.end));
+    let (path, ends) = match followed {
+        Ok(followed) => followed,
+        Err(end) => return failed(describe_end(&end)),
+    };
+    let mut found = located(&context, &path, &ends);
+    if start.onward.as_ref().map(|o| o.kind) == Some(Kind::PeriodDoubling) {
+        // The doubled branch's first point is the period doubling itself,
+        // the period-p orbit counted twice, with its multiplier +1: the
+        // fold test's sign change next to it is that pitchfork, no fold.
+        found
+            .located
+            .retain(|b| b.kind != Kind::Fold || b.segment != 0);
     }
-    let (path, ends) = if up.end == BranchEnd::Closed {
-        let end = describe_end(&up.end);
-        (up.points, [end.clone(), end])
-    } else {
-        let ends = [describe_end(&down.end), describe_end(&up.end)];
-        let mut path: Vec<BranchPoint<D>> = down.points.into_iter().skip(1).rev().collect();
-        path.extend(up.points);
-        (path, ends)
+    found.located.sort_by_key(|b| b.segment);
+    let switched = |end: &Option<BranchEnd>| match (end, &start.onward, start.origin) {
+        (Some(end), _, _) => describe_end(end),
+        (None, Some(onward), Origin::Branch(from)) => {
+            format!("{}(from-branch={from})", onward.kind.name())
+        }
+        (None, ..) => String::new(),
     };
-    let mut found = located(&context, &path, [&ends[0], &ends[1]]);
-    found.sort_by_key(|b| b.segment);
     Traced {
         start: start.clone(),
         points: path.iter().map(traced_point).collect(),
-        ends,
-        bifurcations: found,
+        ends: [switched(&ends[0]), switched(&ends[1])],
+        bifurcations: found.located,
         failure: None,
+        onward: onward_starts(&context, &found.doublings, &found.grazings),
     }
 }
 
-/// Every bifurcation on `path` (a branch's points in order, its ends
-/// described as `ends`), from each test function in turn. A new test
-/// function is one more line here.
-fn located<const D: usize, S: System<D>>(
+/// A branch's points in the order of its path, and how it ended at its
+/// first and last point (`None`: it starts at the bifurcation it was
+/// switched from); `Err` with the end when no orbit was found at its
+/// start.
+type Followed<const D: usize> = Result<(Vec<BranchPoint<D>>, [Option<BranchEnd>; 2]), BranchEnd>;
+
+/// A start's branch followed from `guess` both ways at once, on two of
+/// the host's cores: the way down is wasted only on a branch that closes
+/// on itself going up.
+fn both_ways<const D: usize, S: System<D>>(
     context: &Context<D, S>,
-    path: &[BranchPoint<D>],
-    ends: [&str; 2],
-) -> Vec<Located>
+    guess: &[f64; D],
+    period: usize,
+) -> Followed<D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let mut found = Vec::new();
-    found.extend(multiplier_bifurcations(context, path));
-    found.extend(grazing_at_ends(context, path, ends));
-    found.extend(events_changes(context, path));
-    found
+    let (up, down) = rayon::join(
+        || context.follow(guess, period, 1.0),
+        || context.follow(guess, period, -1.0),
+    );
+    if let BranchEnd::Start(_) = up.end {
+        return Err(up.end);
+    }
+    Ok(if up.end == BranchEnd::Closed {
+        (up.points, [Some(up.end), Some(up.end)])
+    } else {
+        let mut path: Vec<BranchPoint<D>> = down.points.into_iter().skip(1).rev().collect();
+        path.extend(up.points);
+        (path, [Some(down.end), Some(up.end)])
+    })
 }
+
+/// A switched branch followed from `guess` away from its bifurcation, in
+/// the order followed (from the bifurcation, whichever way in λ); a doubled branch begins with the doubling's orbit
+/// counted twice (period 2p at λ*), so that it starts at the bifurcation.
+fn one_way<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    onward: &Onward,
+    guess: &[f64; D],
+    period: usize,
+) -> Followed<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let branch = context.follow(guess, period, onward.direction);
+    if let BranchEnd::Start(_) = branch.end {
+        return Err(branch.end);
+    }
+    let mut path = Vec::with_capacity(branch.points.len() + 1);
+    if onward.kind == Kind::PeriodDoubling && onward.state.len() == D {
+        let x: [f64; D] = crate::array::from_fn(|i| onward.state[i]);
+        let at = params_at(context.base, context.trace.parameter, onward.parameter);
+        let twice = evaluate(&S::new(&at), context.settings, &x, period, true);
+        let orbit = Orbit {
+            state: x,
+            period,
+            jacobian: twice.jacobian,
+            residual: relative_residual(&x, &twice.image),
+            steps: 0,
+            stats: twice.stats,
+            time: twice.time,
+        };
+        path.push(context.point(onward.parameter, orbit));
+    }
+    path.extend(branch.points);
+    Ok((path, [None, Some(branch.end)]))
+}
+
+/// What the test functions found on a branch: the located bifurcations,
+/// and the orbits its branches are switched from: the period doublings'
+/// (period p), and the grazings' on the branch's side with λ_g.
+struct Found<const D: usize> {
+    located: Vec<Located>,
+    doublings: Vec<BranchPoint<D>>,
+    grazings: Vec<(f64, Orbit<D>)>,
+}
+
+/// Every bifurcation on `path` (a branch's points in order, ended by
+/// `ends` at its first and last point), from each test function in turn.
+/// A new test function is one more line here.
+fn located<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    path: &[BranchPoint<D>],
+    ends: &[Option<BranchEnd>; 2],
+) -> Found<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let (mut located, doublings) = multiplier_bifurcations(context, path);
+    let (grazing, grazings): (Vec<Located>, Vec<(f64, Orbit<D>)>) =
+        grazing_at_ends(context, path, ends).into_iter().unzip();
+    located.extend(grazing);
+    located.extend(events_changes(context, path));
+    Found {
+        located,
+        doublings,
+        grazings,
+    }
+}
+
+/// The starts of the branches switched from a traced one: at each period
+/// doubling the doubled branch (period 2p, up to `max_period`), from its
+/// first orbit near the doubling ([`doubled_orbit`]); past each grazing at
+/// a branch's end, the branch on the far side where Newton converges
+/// there ([`step_past`], from 10^-8 of the range out to 10^-3). Each
+/// within [`SWITCH_REACH`] of its bifurcation. Their origin is set by
+/// [`trace_all`], which knows the branch's index.
+fn onward_starts<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    doublings: &[BranchPoint<D>],
+    grazings: &[(f64, Orbit<D>)],
+) -> Vec<Start>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let (low, high) = context.trace.bounds;
+    let reach = SWITCH_REACH * (high - low).abs();
+    let start = |kind: Kind, from: f64, state: Vec<f64>, first: &BranchPoint<D>| Start {
+        parameter: first.parameter,
+        state: first.orbit.state.to_vec(),
+        period: first.orbit.period,
+        points: Vec::new(),
+        origin: Origin::Branch(usize::MAX),
+        onward: Some(Onward {
+            kind,
+            parameter: from,
+            state,
+            direction: if first.parameter >= from { 1.0 } else { -1.0 },
+        }),
+    };
+    let mut starts = Vec::new();
+    for at in doublings {
+        if 2 * at.orbit.period > context.trace.max_period {
+            continue;
+        }
+        let first = doubled_orbit::<D, S>(
+            context.base,
+            context.settings,
+            &context.trace.newton,
+            &context.continuation,
+            at,
+            1e-2,
+            1e-6,
+        );
+        if let Ok(first) = first {
+            if (first.parameter - at.parameter).abs() <= reach && in_range(context, first.parameter)
+            {
+                let state = at.orbit.state.to_vec();
+                starts.push(start(Kind::PeriodDoubling, at.parameter, state, &first));
+            }
+        }
+    }
+    // 10^-k of the range's scale, λ_g's own: the decades of `step_past`.
+    let decades = 3..=8;
+    for (grazing, orbit) in grazings {
+        let past = step_past::<D, S>(
+            context.base,
+            context.settings,
+            &context.trace.newton,
+            context.trace.parameter,
+            *grazing,
+            orbit,
+            decades.clone(),
+        );
+        if let Ok(first) = past {
+            if (first.parameter - grazing).abs() <= reach && in_range(context, first.parameter) {
+                starts.push(start(Kind::Grazing, *grazing, Vec::new(), &first));
+            }
+        }
+    }
+    starts
+}
+
+fn in_range<const D: usize, S: System<D>>(context: &Context<D, S>, lambda: f64) -> bool {
+    let (low, high) = context.trace.bounds;
+    lambda >= low.min(high) && lambda <= high.max(low)
+}
+
+/// Ends a branch creeping towards an impact's grazing: once its step has
+/// shrunk to [`CREEP`] times the largest and its newest point impacts,
+/// where the slowest impact's speed extrapolated to 0 from the branch's
+/// own points ([`extrapolate_grazing`]) lies ahead of the branch (the way
+/// λ moves), further than its points left would reach at the pace of its
+/// last step. Newton loses the impacting
+/// orbit within about v² of the grazing (v the speed), so the branch
+/// would otherwise take its remaining points in steps that shrink with
+/// v², each with multipliers near 1/v that miss the sum rule (measured
+/// on the seed: its period-2 branch took 330 steps of 3e-10 in η near
+/// 0.8283, its period-8 branch 350 of 3e-7 near 0.7246).
+///
+/// Where no impact's speed extrapolates to 0 ahead (the branch creeps
+/// towards a free flight's grazing, or another corner), the branch ends
+/// stalled once its last [`STALL`] steps were all below [`CREEP`] times
+/// the largest and together moved λ by less than [`CREEP`] of the range.
+fn creeping_end<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    points: &[BranchPoint<D>],
+    step: f64,
+) -> Option<BranchEnd> {
+    let [.., before, last] = points else {
+        return None;
+    };
+    if step > CREEP * context.trace.max_step {
+        return None;
+    }
+    grazing_ahead(context, points, before, last).or_else(|| stalled(context, points))
+}
+
+/// The end at an impact's grazing ahead, see [`creeping_end`].
+fn grazing_ahead<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    points: &[BranchPoint<D>],
+    before: &BranchPoint<D>,
+    last: &BranchPoint<D>,
+) -> Option<BranchEnd> {
+    if last.orbit.stats.impacts == 0 {
+        return None;
+    }
+    let test = |_: &S, o: &Orbit<D>| impact_speed_test(o);
+    let grazing =
+        extrapolate_grazing::<D, S, _>(context.base, context.trace.parameter, points, test).ok()?;
+    let ahead = grazing.parameter - last.parameter;
+    let moving = last.parameter - before.parameter;
+    let left = context.trace.max_points.saturating_sub(points.len()) as f64;
+    let beyond_reach = ahead.abs() > left * moving.abs();
+    (beyond_reach && ahead * moving >= 0.0).then_some(BranchEnd::Grazing {
+        parameter: grazing.parameter,
+        error: grazing.error,
+    })
+}
+
+/// The stalled end, see [`creeping_end`].
+fn stalled<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    points: &[BranchPoint<D>],
+) -> Option<BranchEnd> {
+    let recent = points.get(points.len().checked_sub(STALL + 1)?..)?;
+    let tiny = CREEP * context.trace.max_step;
+    let creeping = recent.windows(2).all(|pair| {
+        let (a, b) = (&pair[0], &pair[1]);
+        let states: f64 = (0..D)
+            .map(|i| (a.orbit.state[i] - b.orbit.state[i]).powi(2))
+            .sum();
+        (states + (a.parameter - b.parameter).powi(2)).sqrt() <= tiny
+    });
+    let (low, high) = context.trace.bounds;
+    let span = (recent[STALL].parameter - recent[0].parameter).abs();
+    let last = recent[STALL].parameter;
+    (creeping && span < CREEP * (high - low).abs()).then_some(BranchEnd::Stalled {
+        parameter: last,
+        points: STALL,
+    })
+}
+
+/// The steps after which a creeping branch that went nowhere ends.
+const STALL: usize = 50;
+
+/// The fraction of the largest step below which a branch creeps: a
+/// smooth branch's steps stay above it (the seed's, away from grazings
+/// and folds: a tenth of the largest or more).
+const CREEP: f64 = 1e-3;
 
 /// Folds, period doublings and Neimark–Sacker points: a multiplier
 /// through +1, -1, or a complex pair through the unit circle.
+/// With the period doublings' branch points, from which the doubled
+/// branches are switched.
 fn multiplier_bifurcations<const D: usize, S: System<D>>(
     context: &Context<D, S>,
     path: &[BranchPoint<D>],
-) -> Vec<Located>
+) -> (Vec<Located>, Vec<BranchPoint<D>>)
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
@@ -346,34 +679,20 @@ where
         path,
         context.trace.locate_tolerance,
     );
-    found
-        .into_iter()
-        .filter(|b| on_the_unit_circle(Kind::of(b.kind), &b.point.floquet.multipliers))
+    let located = found
+        .iter()
         .map(|b| Located {
             kind: Kind::of(b.kind),
             segment: segment_of(path, b.point.parameter, &b.point.orbit.state),
             point: traced_point(&b.point),
         })
-        .collect()
-}
-
-/// How near the unit circle a located bifurcation's critical multiplier
-/// must be. A test function det(DU^p ∓ I) also changes sign where a
-/// multiplier jumps through infinity (a grazing impact's square root
-/// makes DU^p blow up), and its "zero" there has no multiplier near ±1
-/// (measured on the seed's period-2 branch: 4742 and 2.05); a true one
-/// located to 1e-10 in the parameter has its multiplier within 1e-7.
-const ON_THE_CIRCLE: f64 = 1e-3;
-
-/// Whether `kind`'s multiplier is on the unit circle: +1 for a fold, -1
-/// for a period doubling, a complex pair of modulus 1 for Neimark–Sacker.
-fn on_the_unit_circle(kind: Kind, multipliers: &[Complex<f64>]) -> bool {
-    multipliers.iter().any(|m| match kind {
-        Kind::Fold => (m - 1.0).norm() <= ON_THE_CIRCLE,
-        Kind::PeriodDoubling => (m + 1.0).norm() <= ON_THE_CIRCLE,
-        Kind::NeimarkSacker => m.im != 0.0 && (m.norm() - 1.0).abs() <= ON_THE_CIRCLE,
-        _ => false,
-    })
+        .collect();
+    let doublings = found
+        .into_iter()
+        .filter(|b| b.kind == MultiplierKind::PeriodDoubling)
+        .map(|b| b.point)
+        .collect();
+    (located, doublings)
 }
 
 /// The segment of `path` nearest (λ, x): the one whose chord passes
@@ -404,12 +723,15 @@ fn segment_of<const D: usize>(path: &[BranchPoint<D>], lambda: f64, x: &[f64; D]
 /// free side out beyond the end. Kept when the orbit found there touches
 /// the wall (its excess within the Newton tolerance of 0, relative to the
 /// wall's position): a branch that ended for another reason is not said
-/// to graze.
+/// to graze. An impacting end's grazing is its impact's
+/// ([`impact_grazing`]), also where the branch was ended creeping
+/// towards it ([`BranchEnd::Grazing`]). Each with λ_g and the orbit on the
+/// branch's side, from which the branch past it is switched.
 fn grazing_at_ends<const D: usize, S: System<D>>(
     context: &Context<D, S>,
     path: &[BranchPoint<D>],
-    ends: [&str; 2],
-) -> Vec<Located>
+    ends: &[Option<BranchEnd>; 2],
+) -> Vec<(Located, (f64, Orbit<D>))>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
@@ -422,7 +744,11 @@ where
         .iter()
         .zip([(0, 1.min(last)), (last, last.saturating_sub(1))])
     {
-        if !end.starts_with("step-too-small") || path.is_empty() {
+        let grazes = matches!(
+            end,
+            Some(BranchEnd::StepTooSmall { .. } | BranchEnd::Grazing { .. })
+        );
+        if !grazes || path.is_empty() {
             continue;
         }
         let here = &path[index];
@@ -472,21 +798,16 @@ where
                 continue;
             }
             // The orbit solved nearest the zero, at the zero's estimate.
-            let point = super::continuation::point::<D, S>(
-                context.base,
-                context.settings,
-                context.trace.parameter,
-                solved_at,
-                zero.orbit,
-            );
-            found.push(Located {
+            let point = context.point(solved_at, zero.orbit);
+            let located = Located {
                 kind: Kind::Grazing,
                 point: TracedPoint {
                     parameter: zero.parameter,
                     ..traced_point(&point)
                 },
                 segment: index,
-            });
+            };
+            found.push((located, (zero.parameter, zero.orbit)));
         }
     }
     found
@@ -501,7 +822,7 @@ fn impact_grazing<const D: usize, S: System<D>>(
     context: &Context<D, S>,
     path: &[BranchPoint<D>],
     end: usize,
-) -> Option<Located> {
+) -> Option<(Located, (f64, Orbit<D>))> {
     let towards: Vec<BranchPoint<D>> = if end == 0 {
         path.iter().rev().cloned().collect()
     } else {
@@ -511,14 +832,16 @@ fn impact_grazing<const D: usize, S: System<D>>(
     let grazing =
         extrapolate_grazing::<D, S, _>(context.base, context.trace.parameter, &towards, test)
             .ok()?;
-    (grazing.error <= GRAZING_EXTRAPOLATION).then(|| Located {
+    let located = Located {
         kind: Kind::Grazing,
         point: TracedPoint {
             parameter: grazing.parameter,
             ..traced_point(&path[end])
         },
         segment: end,
-    })
+    };
+    (grazing.error <= GRAZING_EXTRAPOLATION)
+        .then_some((located, (grazing.parameter, grazing.orbit)))
 }
 
 fn excess_scale<const D: usize>(x: &[f64; D]) -> f64 {
@@ -546,13 +869,7 @@ where
     )
     .into_iter()
     .map(|change| {
-        let point = super::continuation::point::<D, S>(
-            context.base,
-            context.settings,
-            context.trace.parameter,
-            change.bracket.0,
-            change.orbit,
-        );
+        let point = context.point(change.bracket.0, change.orbit);
         Located {
             kind: match change.kind() {
                 EventKind::Grazing => Kind::Grazing,
@@ -661,8 +978,10 @@ pub type Tracer = fn(&Params, &MethodSettings, &TraceSettings, &Start) -> Traced
 /// Every start's branch, each branch once: a start on a branch already
 /// traced is skipped, and a start that gave no branch is reported only if
 /// no branch traced from another start covers it. Listed starts come
-/// first, then the lanes' in the order given. `stop` is asked between
-/// branches.
+/// first, then the lanes' in the order given; the branches switched from
+/// a traced branch ([`Traced::onward`]) are taken right after it, so that
+/// a doubled branch is traced from its period doubling before a lane on
+/// it starts it anew. `stop` is asked between branches.
 pub fn trace_all(
     tracer: Tracer,
     base: &Params,
@@ -673,21 +992,42 @@ pub fn trace_all(
 ) -> Vec<Traced> {
     let mut branches: Vec<Traced> = Vec::new();
     let mut failed: Vec<Traced> = Vec::new();
-    for start in starts {
+    let mut pending: std::collections::VecDeque<Start> = starts.iter().cloned().collect();
+    let mut switched = 0;
+    while let Some(start) = pending.pop_front() {
         if stop() {
             break;
         }
-        if branches.iter().any(|b| covers(b, start)) {
+        if branches.iter().any(|b| covers(b, &start)) {
             continue;
         }
-        let traced = tracer(base, settings, trace, start);
+        if start.onward.is_some() {
+            if switched == MAX_SWITCHED {
+                continue;
+            }
+            switched += 1;
+        }
+        let traced = tracer(base, settings, trace, &start);
         if traced.failure.is_some() {
             failed.push(traced);
-        } else {
-            branches.push(traced);
+            continue;
         }
+        let from = Origin::Branch(branches.len());
+        for onward in traced.onward.iter().rev() {
+            pending.push_front(Start {
+                origin: from,
+                ..onward.clone()
+            });
+        }
+        branches.push(traced);
     }
     failed.retain(|f| !branches.iter().any(|b| covers(b, &f.start)));
     branches.extend(failed);
     branches
 }
+
+/// The most branches a run switches to (at period doublings and past
+/// grazings): a cascade of period doublings ends at `max_period`, and
+/// each branch is traced once, but a chaotic band's many grazings could
+/// chain on; a bound on the stage's work.
+const MAX_SWITCHED: usize = 64;

@@ -37,8 +37,9 @@ pub const DEFAULT_ORBIT_MAX_PERIOD: usize = super::starts::DEFAULT_MAX_PERIOD;
 /// The default points of a branch each way: the seed's branches over
 /// η ∈ [0.5, 1.5] take at most 271 in all where they end at a bound,
 /// a grazing or close; one that creeps along a grazing impact in tiny
-/// steps (its period-2 branch near η = 0.84) took 2000 at 2000, most of
-/// the stage's time.
+/// steps (its period-2 branch near η = 0.83) took 2000 at 2000, most of
+/// the stage's time; such a branch now ends at the grazing it creeps
+/// towards, or stalled (`orbit::trace`'s `creeping_end`).
 pub const DEFAULT_MAX_POINTS: usize = 400;
 /// The longest period the table accepts: Newton's work grows with it,
 /// and a lane's orbit is never tested beyond `attractors.max_period`.
