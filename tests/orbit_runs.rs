@@ -401,6 +401,26 @@ fn the_seed_s_run_switches_at_its_period_doubling_and_goes_on_past_its_grazing()
     assert!(first > GRAZING[0] && first - GRAZING[0] < 1e-3, "{first}");
     assert!(past.len() > 20);
     assert!(past.iter().all(|r| r["impacts_per_period"] == "1"));
+    // Every row is of its least period: no branch runs into a shorter
+    // orbit counted over (but for a doubled branch's first row, the
+    // doubling point itself).
+    for row in orbits.iter().filter(|r| !r["x"].is_empty()) {
+        let p: usize = row["period"].parse().unwrap();
+        if p == 1 || row["branch_end"].starts_with("period-doubling(") {
+            continue;
+        }
+        let params = lyapsweep::orbit::params_at(&scene.lane_params(0), index, value(row, "eta"));
+        let system = lyapsweep::system::model::ModelFlow::<2>::new(&params);
+        let x = [value(row, "x"), value(row, "v")];
+        for d in (1..p).filter(|d| p % d == 0) {
+            let apart = relative_residual(&x, &evaluate(&system, &settings, &x, d, false).image);
+            let branch = &row["branch"];
+            assert!(
+                apart > 1e-6,
+                "branch {branch} (period {p}) is of period {d}: {apart:e}"
+            );
+        }
+    }
     // Each branch once: no two branches share a point.
     let mut seen = BTreeMap::new();
     for r in orbits.iter().filter(|r| !r["lambda_1"].is_empty()) {

@@ -86,6 +86,13 @@ pub enum BranchEnd {
     /// [`continue_branch_until`] ended it there, short of
     /// [`ContinuationSettings::max_points`] taken in the same place.
     Stalled { parameter: f64, points: usize },
+    /// At λ = `parameter` the orbit closed after `period` iterations, a
+    /// divisor of the branch's: the branch ran into the orbit of that
+    /// period counted over (a period-2 orbit whose one impact grazed away
+    /// becomes the free period-1 orbit twice). The hook of
+    /// [`continue_branch_until`] ended it there, the point of the shorter
+    /// orbit left out: that orbit is a branch of its own.
+    ShorterPeriod { parameter: f64, period: usize },
 }
 
 /// Asked after each new point of a branch (the points so far, the step

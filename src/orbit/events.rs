@@ -22,7 +22,7 @@
 use nalgebra::{Const, DimMin};
 
 use super::continuation::{params_at, point, BranchPoint};
-use super::newton::{solve, Failure, NewtonSettings, Orbit};
+use super::newton::{least_period, solve, Failure, NewtonSettings, Orbit};
 use crate::integrate::{IterationStats, MAX_EVENTS};
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
@@ -203,8 +203,9 @@ impl<const D: usize> EventsChange<D> {
 /// λ_g + s·10^-k·max(1, |λ_g|), the largest k of `decades` first (the
 /// nearest), s = +1 then -1, Newton from `at`; the first that converges to
 /// an orbit whose events differ from `at`'s (the branch's other side, not
-/// the orbit it came from). Its multipliers,
-/// against the branch's last point's, are the jump at the grazing.
+/// the orbit it came from), at its least period ([`least_period`]). Its
+/// multipliers, against the branch's last point's, are the jump at the
+/// grazing.
 #[allow(clippy::too_many_arguments)]
 pub fn step_past<const D: usize, S: System<D>>(
     base: &Params,
@@ -229,6 +230,12 @@ where
             let system = S::new(&params_at(base, index, lambda));
             match solve(&system, settings, newton, &at.state, at.period) {
                 Ok(orbit) if events(&orbit) != events(at) => {
+                    let least = least_period(&system, settings, &orbit);
+                    let orbit = if least < orbit.period {
+                        solve(&system, settings, newton, &orbit.state, least)?
+                    } else {
+                        orbit
+                    };
                     return Ok(point::<D, S>(base, settings, index, lambda, orbit));
                 }
                 Ok(_) => {}

@@ -47,4 +47,4 @@ pub use floquet::{floquet, refined_floquet, Floquet};
 pub use ladder::refined_jacobian;
 pub use locate::{locate_zero, Located};
 pub use map::{evaluate, Evaluation};
-pub use newton::{relative_residual, solve, Failure, NewtonSettings, Orbit};
+pub use newton::{least_period, relative_residual, solve, Failure, NewtonSettings, Orbit};

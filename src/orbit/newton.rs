@@ -158,6 +158,36 @@ where
     })
 }
 
+/// The smallest divisor d of `orbit`'s period with U^d(x) = x to
+/// [`LEAST_PERIOD_TOLERANCE`] (relative, as the residual): a period-p
+/// solve may converge on an orbit of period d counted p/d times (Newton
+/// past a period-2 orbit's grazing finds the free period-1 orbit twice
+/// over), which is that orbit, not a branch of period p.
+pub fn least_period<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    orbit: &Orbit<D>,
+) -> usize
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let p = orbit.period;
+    (1..p)
+        .filter(|d| p % d == 0)
+        .find(|&d| {
+            let image = evaluate(system, settings, &orbit.state, d, false).image;
+            relative_residual(&orbit.state, &image) <= LEAST_PERIOD_TOLERANCE
+        })
+        .unwrap_or(p)
+}
+
+/// How near U^d(x) must come back to x for [`least_period`] to call x an
+/// orbit of period d: far above a solve's 1e-10 (a period-d orbit solved
+/// as period p misses U^d(x) = x by its residual over |1 - μ|), far below
+/// the distance between the points of a period-p orbit away from its
+/// period doubling (the seed's doubled orbits: 0.1 to 1.4).
+pub const LEAST_PERIOD_TOLERANCE: f64 = 1e-6;
+
 /// x + s·dx for s = 1, 1/2, …: the first that is usable and lowers the
 /// residual, with its evaluation.
 #[allow(clippy::too_many_arguments)]

@@ -23,10 +23,10 @@ use super::continuation::{
     continue_branch_until, params_at, Branch, BranchEnd, BranchPoint, ContinuationSettings,
 };
 use super::doubling::doubled_orbit;
-use super::events::{extrapolate_grazing, impact_speed_test, step_past, EventKind};
+use super::events::{events, extrapolate_grazing, impact_speed_test, step_past, EventKind};
 use super::locate::locate_zero;
 use super::map::evaluate;
-use super::newton::{relative_residual, NewtonSettings, Orbit};
+use super::newton::{least_period, relative_residual, NewtonSettings, Orbit};
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
 
@@ -255,6 +255,9 @@ fn describe_end(end: &BranchEnd) -> String {
         BranchEnd::Stalled { parameter, points } => {
             format!("stalled(at={parameter:e}; steps={points})")
         }
+        BranchEnd::ShorterPeriod { parameter, period } => {
+            format!("shorter-period(at={parameter:e}; period={period})")
+        }
         BranchEnd::Bound => "bound".into(),
         BranchEnd::Closed => "closed".into(),
         BranchEnd::MaxPoints => "max-points".into(),
@@ -295,14 +298,17 @@ where
     }
 
     /// The branch of period-`period` orbits from `guess` at the start's
-    /// λ, one way (`direction` in λ), ended where it creeps ([`creeping_end`]).
+    /// λ, one way (`direction` in λ), ended where it runs into an orbit
+    /// of a shorter period ([`shorter_period`]) or creeps ([`creeping_end`]).
     fn follow(&self, guess: &[f64; D], period: usize, direction: f64) -> Branch<D> {
         let continuation = ContinuationSettings {
             direction,
             ..self.continuation
         };
-        let end = |points: &[BranchPoint<D>], step: f64| creeping_end(self, points, step);
-        continue_branch_until::<D, S>(
+        let end = |points: &[BranchPoint<D>], step: f64| {
+            shorter_period(self, points).or_else(|| creeping_end(self, points, step))
+        };
+        let mut branch = continue_branch_until::<D, S>(
             self.base,
             self.settings,
             &self.trace.newton,
@@ -310,7 +316,11 @@ where
             guess,
             period,
             &end,
-        )
+        );
+        if let BranchEnd::ShorterPeriod { .. } = branch.end {
+            branch.points.pop();
+        }
+        branch
     }
 }
 
@@ -606,6 +616,33 @@ fn creeping_end<const D: usize, S: System<D>>(
     grazing_ahead(context, points, before, last).or_else(|| stalled(context, points))
 }
 
+/// The end where the branch's newest orbit closes after fewer iterations
+/// than its period: where its events changed from the point before (an
+/// impact grazed away), the only place a branch of genuine period-p
+/// orbits turns into a shorter orbit counted over without a period
+/// doubling (where the events do not change, and the doubled branch's
+/// first points are near the shorter orbit by right).
+fn shorter_period<const D: usize, S: System<D>>(
+    context: &Context<D, S>,
+    points: &[BranchPoint<D>],
+) -> Option<BranchEnd>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let [.., before, last] = points else {
+        return None;
+    };
+    if last.orbit.period == 1 || events(&last.orbit) == events(&before.orbit) {
+        return None;
+    }
+    let at = params_at(context.base, context.trace.parameter, last.parameter);
+    let least = least_period(&S::new(&at), context.settings, &last.orbit);
+    (least < last.orbit.period).then_some(BranchEnd::ShorterPeriod {
+        parameter: last.parameter,
+        period: least,
+    })
+}
+
 /// The end at an impact's grazing ahead, see [`creeping_end`].
 fn grazing_ahead<const D: usize, S: System<D>>(
     context: &Context<D, S>,
@@ -746,7 +783,11 @@ where
     {
         let grazes = matches!(
             end,
-            Some(BranchEnd::StepTooSmall { .. } | BranchEnd::Grazing { .. })
+            Some(
+                BranchEnd::StepTooSmall { .. }
+                    | BranchEnd::Grazing { .. }
+                    | BranchEnd::ShorterPeriod { .. }
+            )
         );
         if !grazes || path.is_empty() {
             continue;
