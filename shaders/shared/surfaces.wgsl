@@ -7,10 +7,10 @@
 // of its region, p.region: rhs reads a switch's side from it, never from
 // the state. Regions, the stop test over every surface, a switch's sides,
 // the sliding field, the slide and a crossing (cross) are generated from
-// the step program (src/model/ir/surfaces.rs); here are what it reads of
-// the kernels: the region's layout, ln |det S| of an event's crossing (an
-// elimination over an array of states), and the crossing's effect on the
-// step loop's Resolution and on `crossed`.
+// the step program (src/model/ir/surfaces.rs), and ln |det S| of an
+// event's crossing; here are what they read of the kernels (the region's
+// layout) and a crossing's effect on the step loop's Resolution and on
+// `crossed`.
 
 // What resolve_impacts did to the surfaces in its step, beside its
 // WallStep: the region it ends in, Σ ln |det S| of its crossings, and
@@ -29,50 +29,6 @@ var<private> crossed: Crossed;
 // (bit SLIDING_SHIFT + j), the bits below are the sides (surface::SLIDING).
 const SLIDING_SHIFT: u32 = 16u;
 const SIDES: u32 = 0xffffu;
-
-// ln |det S| of an event's crossing, S = DR + (F⁺ - DR·F⁻ - ∂R/∂t) ∇gᵀ /
-// rate (surface::event_log_det), det by elimination with partial pivoting.
-fn event_log_det(r: Reset, gradient: State, rate: real, before: State, after: State) -> real {
-    var s: array<State, DIM>;
-    for (var i = 0u; i < DIM; i = i + 1u) {
-        let dr_f = dot_in_order(r.dr[i], before);
-        for (var k = 0u; k < DIM; k = k + 1u) {
-            s[i][k] = r.dr[i][k] + (after[i] - dr_f - r.rate[i]) * gradient[k] / rate;
-        }
-    }
-    var det = real(1.0);
-    for (var col = 0u; col < DIM; col = col + 1u) {
-        var pivot = col;
-        for (var row = col + 1u; row < DIM; row = row + 1u) {
-            if (abs(s[row][col]) > abs(s[pivot][col])) {
-                pivot = row;
-            }
-        }
-        if (pivot != col) {
-            let swap = s[col];
-            s[col] = s[pivot];
-            s[pivot] = swap;
-            det = -det;
-        }
-        let d = s[col][col];
-        det = det * d;
-        if (d == real(0.0)) {
-            break;
-        }
-        for (var row = col + 1u; row < DIM; row = row + 1u) {
-            let factor = s[row][col] / d;
-            for (var k = col; k < DIM; k = k + 1u) {
-                s[row][k] = s[row][k] - factor * s[col][k];
-            }
-        }
-    }
-    if (det == real(0.0)) {
-        // -∞, made at run time (a constant 1/0 is a shader-creation error).
-        var zero = real(0.0);
-        return real(-1.0) / zero;
-    }
-    return log_r(abs(det));
-}
 
 // General surface met.stop - WALLS crossed at met.hit (the surface branch
 // of resolve): the crossing applied, counted and, in `crossed`, its region,

@@ -84,6 +84,7 @@ fn wgsl_type(ty: Ty) -> &'static str {
         Ty::Struct(name) => name,
         Ty::Table => "vec4<real>",
         Ty::CountTable => "vec4<u32>",
+        Ty::Rows => "array<State, DIM>",
     }
 }
 
@@ -230,6 +231,10 @@ impl Wgsl<'_> {
                 }
                 Stmt::SetMember(name, member, e) => {
                     writeln!(out, "{indent}{name}.{member} = {};", self.expr(e).0)
+                }
+                Stmt::SetEntry(name, row, col, e) => {
+                    let (row, col, e) = (self.expr(row).0, self.expr(col).0, self.expr(e).0);
+                    writeln!(out, "{indent}{name}[{row}][{col}] = {e};")
                 }
             };
         }
@@ -463,6 +468,7 @@ impl C<'_> {
                 }
                 Stmt::SetAt(..) => panic!("C's programs set no component (the kernels' stops do)"),
                 Stmt::SetMember(..) => panic!("C's programs hold no structures to set"),
+                Stmt::SetEntry(..) => panic!("C's programs hold no matrices"),
             }
         }
     }
@@ -1093,6 +1099,11 @@ fn orientation(region: u32, bit: u32) -> real {
             "        joined.region = p.region | (1u << (SLIDING_SHIFT + j));\n",
             "            out.log_det = log_r(leaving / approach_rate);\n",
             "struct Crossing {\n    resolved: bool,\n    y: State,\n    region: u32,\n",
+            "fn event_log_det(r: Reset, gradient: State, rate: real, before: State, after: State) -> real {\n    var s = r.dr;\n",
+            "            s[i][k] = r.dr[i][k] + (after[i] - dr_f - r.rate[i]) * gradient[k] / rate;\n",
+            "            let swap = s[col];\n            s[col] = s[pivot];\n            s[pivot] = swap;\n            det = -det;\n",
+            "                s[below][m] = s[below][m] - factor * s[col][m];\n",
+            "        out = -1.0 / zero;\n",
         ];
         for part in expected {
             assert!(text.contains(part), "{part}\nnot in\n{text}");

@@ -61,6 +61,9 @@ pub enum Ty {
     /// A counter per general surface, read by a counter (WGSL's
     /// `vec4<u32>`: each surface's switch bit).
     CountTable,
+    /// A square matrix of the model's dimension by rows, each a state
+    /// (WGSL's `array<State, DIM>`: a reset's Jacobian, a saltation).
+    Rows,
 }
 
 /// A structure of named values (a stop, a Newton bracket). Without
@@ -294,8 +297,11 @@ pub enum Stmt {
     /// Leaves the innermost loop.
     Break,
     /// A new value of one component (at a counter) of a state
-    /// [`Stmt::Var`].
+    /// [`Stmt::Var`], or of one row of a matrix.
     SetAt(&'static str, Expr, Expr),
+    /// A new value of one entry (at a row and a column) of a matrix
+    /// [`Stmt::Var`].
+    SetEntry(&'static str, Expr, Expr, Expr),
     /// A new value of one member of a structure [`Stmt::Var`] (a copy of
     /// the lane's parameters in another region).
     SetMember(&'static str, &'static str, Expr),
@@ -373,6 +379,7 @@ impl Program {
                 match ty(y) {
                     Ty::State | Ty::Table => Ty::Real,
                     Ty::CountTable => Ty::Count,
+                    Ty::Rows => Ty::State,
                     other => panic!("a component of {other:?}"),
                 }
             }
@@ -592,9 +599,21 @@ impl Program {
                 Stmt::SetAt(name, i, e) => {
                     let target = lookup(scope, name);
                     assert!(target.mutable, "{name} is not a var");
-                    assert_eq!(target.ty, Ty::State, "{name} has no components");
+                    let component = match target.ty {
+                        Ty::State => Ty::Real,
+                        Ty::Rows => Ty::State,
+                        _ => panic!("{name} has no components"),
+                    };
                     assert_eq!(ty(i, scope), Ty::Count, "{name}'s component at");
-                    assert_eq!(ty(e, scope), Ty::Real, "{name}'s new component");
+                    assert_eq!(ty(e, scope), component, "{name}'s new component");
+                }
+                Stmt::SetEntry(name, row, col, e) => {
+                    let target = lookup(scope, name);
+                    assert!(target.mutable, "{name} is not a var");
+                    assert_eq!(target.ty, Ty::Rows, "{name} has no entries");
+                    assert_eq!(ty(row, scope), Ty::Count, "{name}'s row");
+                    assert_eq!(ty(col, scope), Ty::Count, "{name}'s column");
+                    assert_eq!(ty(e, scope), Ty::Real, "{name}'s new entry");
                 }
                 Stmt::SetMember(name, member, e) => {
                     let target = lookup(scope, name);
@@ -673,6 +692,7 @@ impl Function {
                         out.push(e);
                     }
                     Stmt::SetMember(_, _, e) => out.push(e),
+                    Stmt::SetEntry(_, row, col, e) => out.extend([row, col, e]),
                 }
             }
         }
@@ -1329,5 +1349,44 @@ mod tests {
     fn a_pair_is_not_a_table() {
         let e = index(pair(num(0.0), num(1.0)), count(0));
         result_type(&with_params(vec![], vec![], e));
+    }
+
+    #[test]
+    fn a_matrix_s_rows_and_entries_are_typed() {
+        let params = vec![("a", Ty::Rows), ("y", Ty::State)];
+        let body = vec![
+            Stmt::Var("s", var("a")),
+            Stmt::SetAt("s", count(1), var("y")),
+            Stmt::SetEntry("s", count(0), count(1), num(2.0)),
+        ];
+        let e = index(index(var("s"), count(0)), count(1));
+        assert_eq!(result_type(&one(params, body, e)), Ty::Real);
+    }
+
+    #[test]
+    #[should_panic(expected = "s's new component")]
+    fn a_matrix_s_row_is_a_state() {
+        let body = vec![
+            Stmt::Var("s", var("a")),
+            Stmt::SetAt("s", count(1), num(0.0)),
+        ];
+        result_type(&one(vec![("a", Ty::Rows)], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "z has no entries")]
+    fn a_state_has_no_entries() {
+        let body = vec![
+            Stmt::Var("z", var("y")),
+            Stmt::SetEntry("z", count(0), count(0), num(0.0)),
+        ];
+        result_type(&one(vec![("y", Ty::State)], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "a is not a var")]
+    fn a_parameter_s_entry_is_not_set() {
+        let body = vec![Stmt::SetEntry("a", count(0), count(0), num(0.0))];
+        result_type(&one(vec![("a", Ty::Rows)], body, num(0.0)));
     }
 }

@@ -10,9 +10,8 @@
 //! A region is a counter: bit b set where switch b's g > 0, and bits from
 //! `SLIDING_SHIFT` up marking the switch a motion slides on. What the
 //! system file gives (each surface's g, values, gradient, reset and stick
-//! limit, the region's field) and what the kernels keep by hand (ln |det S|
-//! of an event's saltation, by elimination over an array of states) are
-//! declared as the kernels' ([`kernels`]).
+//! limit, the region's field) and what the kernels keep by hand (the
+//! location, the stops) are declared as the kernels' ([`kernels`]).
 
 use super::step::build::*;
 use super::step::{Cmp, Expr, Extern, Function, Stmt, Structure, Ty};
@@ -24,12 +23,11 @@ use super::step::{Cmp, Expr, Extern, Function, Stmt, Structure, Ty};
 ///   sliding bits' first) and `SIDES` (the sides' bits);
 /// - the lane's `Params` (its `region` read and set), `SurfaceValues`
 ///   (g and the rate of every surface), an event's `Reset` (the state
-///   after it);
+///   after it, its Jacobian DR by rows and ∂R/∂t);
 /// - `field(p, phase, y)`, the field of p's region, and `rhs`, the field
 ///   RK4 steps (the sliding one on a sliding region); `surface_g`,
 ///   `surface_values`, `surface_gradient(p, phase, y, j)`,
-///   `stick_limit(p, y, j, filippov)`, `reset(p, phase, y, j)`;
-///   `event_log_det(r, gradient, rate, before, after)`, `log_r`,
+///   `stick_limit(p, y, j, filippov)`, `reset(p, phase, y, j)`; `log_r`,
 ///   `stops_of(p)` and the location `locate(...)`.
 pub fn kernels() -> Vec<Extern> {
     use Ty::{Count, CountTable, Pair, Real, State, Table};
@@ -46,7 +44,10 @@ pub fn kernels() -> Vec<Extern> {
         Extern::Const("SLIDING_SHIFT", Count),
         Extern::Const("SIDES", Count),
         Extern::Struct("SurfaceValues", vec![("g", Table), ("rate", Table)]),
-        Extern::Struct("Reset", vec![("y", State)]),
+        Extern::Struct(
+            "Reset",
+            vec![("y", State), ("dr", Ty::Rows), ("rate", State)],
+        ),
         function("field", vec![params, Pair, State], State),
         function("rhs", vec![params, Pair, State], State),
         function("surface_g", vec![params, Pair, State], Table),
@@ -57,11 +58,6 @@ pub fn kernels() -> Vec<Extern> {
             "reset",
             vec![params, Pair, State, Count],
             Ty::Struct("Reset"),
-        ),
-        function(
-            "event_log_det",
-            vec![Ty::Struct("Reset"), State, Real, State, State],
-            Real,
         ),
         function("log_r", vec![Real], Real),
         function("stops_of", vec![params], Ty::Struct("Stops")),
@@ -167,6 +163,8 @@ pub fn structures() -> [Structure; 4] {
 /// - `jumped(p, phase, y, after)`: the region after a reset jumps y to
 ///   `after` (`surface::jumped`), see [`jumped`].
 /// - `dot_in_order(a, b)`: Σ a_i b_i from i = 0, as the CPU's iterator sum.
+/// - `event_log_det(r, gradient, rate, before, after)`: ln |det S| of an
+///   event's crossing, see [`event_log_det`].
 /// - `switch_sides(p, j, phase, y)`, `equivalent(p, phase, y)`,
 ///   `sliding_field(p, phase, y)`: see [`sides`].
 /// - `surface_at(p, omega, j, phase0, s, y)`: surface j's oriented value
@@ -177,6 +175,7 @@ pub fn structures() -> [Structure; 4] {
 pub fn functions() -> Vec<Function> {
     let mut all = tests();
     all.extend(regions());
+    all.push(event_log_det());
     all.extend(sides());
     all.extend(located());
     all.push(slide());
@@ -432,6 +431,116 @@ fn jumped() -> Function {
         body,
         ("region", var("region")),
     )
+}
+
+/// The loop `{i} = from; while {i} < DIM { body; {i} += 1 }`.
+fn counted(i: &'static str, from: Expr, body: Vec<Stmt>) -> Vec<Stmt> {
+    let mut pass = vec![break_unless(less(var(i), var("DIM")))];
+    pass.extend(body);
+    pass.push(Stmt::Set(i, var(i) + count(1)));
+    vec![Stmt::Var(i, from), Stmt::Loop(pass)]
+}
+
+/// `event_log_det(r, gradient, rate, before, after)`: ln |det S| of an
+/// event's crossing, S = DR + (F⁺ - DR·F⁻ - ∂R/∂t) ∇gᵀ / rate
+/// (`surface::event_log_det`), det by elimination with partial pivoting;
+/// -∞ where det S = 0, made at run time (a constant 1/0 is a
+/// shader-creation error).
+fn event_log_det() -> Function {
+    use Ty::{Real, State};
+    let at = |m: Expr, i: &'static str, k: &'static str| index(index(m, var(i)), var(k));
+    let entry = at(dot("r", "dr"), "i", "k")
+        + (index(var("after"), var("i")) - "dr_f" - index(dot("r", "rate"), var("i")))
+            * index(var("gradient"), var("k"))
+            / "rate";
+    let mut row = vec![Stmt::Let(
+        "dr_f",
+        apply(
+            "dot_in_order",
+            vec![index(dot("r", "dr"), var("i")), var("before")],
+        ),
+    )];
+    row.extend(counted(
+        "k",
+        count(0),
+        vec![Stmt::SetEntry("s", var("i"), var("k"), entry)],
+    ));
+    let mut body = vec![
+        // Every entry is set below: the copy only gives s its type.
+        Stmt::Var("s", dot("r", "dr")),
+    ];
+    body.extend(counted("i", count(0), row));
+    body.push(Stmt::Var("det", num(1.0)));
+    body.extend(counted("col", count(0), elimination()));
+    body.extend([
+        Stmt::Var("out", num(0.0)),
+        Stmt::If(
+            cmp(Cmp::Equal, var("det"), num(0.0)),
+            vec![
+                Stmt::Var("zero", num(0.0)),
+                Stmt::Set("out", num(-1.0) / "zero"),
+            ],
+            vec![Stmt::Set("out", apply("log_r", vec![abs(var("det"))]))],
+        ),
+    ]);
+    function(
+        "event_log_det",
+        vec![
+            ("r", Ty::Struct("Reset")),
+            ("gradient", State),
+            ("rate", Real),
+            ("before", State),
+            ("after", State),
+        ],
+        body,
+        ("log_det", var("out")),
+    )
+}
+
+/// Column `col` of the elimination: the largest pivot below swapped up
+/// (det changes sign), det times it, and the rows below cleared; a zero
+/// pivot ends it (det = 0).
+fn elimination() -> Vec<Stmt> {
+    let at = |i: &'static str, k: &'static str| index(index(var("s"), var(i)), var(k));
+    let mut out = vec![Stmt::Var("pivot", var("col"))];
+    out.extend(counted(
+        "row",
+        var("col") + count(1),
+        vec![Stmt::If(
+            greater(abs(at("row", "col")), abs(at("pivot", "col"))),
+            vec![Stmt::Set("pivot", var("row"))],
+            Vec::new(),
+        )],
+    ));
+    out.extend([
+        Stmt::If(
+            cmp(Cmp::NotEqual, var("pivot"), var("col")),
+            vec![
+                Stmt::Let("swap", index(var("s"), var("col"))),
+                Stmt::SetAt("s", var("col"), index(var("s"), var("pivot"))),
+                Stmt::SetAt("s", var("pivot"), var("swap")),
+                Stmt::Set("det", neg(var("det"))),
+            ],
+            Vec::new(),
+        ),
+        Stmt::Let("d", at("col", "col")),
+        Stmt::Set("det", var("det") * "d"),
+        Stmt::If(
+            cmp(Cmp::Equal, var("d"), num(0.0)),
+            vec![Stmt::Break],
+            Vec::new(),
+        ),
+    ]);
+    let clear = vec![Stmt::SetEntry(
+        "s",
+        var("below"),
+        var("m"),
+        at("below", "m") - var("factor") * at("col", "m"),
+    )];
+    let mut below = vec![Stmt::Let("factor", at("below", "col") / "d")];
+    below.extend(counted("m", var("col"), clear));
+    out.extend(counted("below", var("col") + count(1), below));
+    out
 }
 
 /// The lane's parameters with another region: `var {name} = from;
@@ -1014,6 +1123,7 @@ mod tests {
             ("region_of", Ty::Count),
             ("jumped", Ty::Count),
             ("dot_in_order", Ty::Real),
+            ("event_log_det", Ty::Real),
             ("switch_sides", Ty::Struct("SwitchSides")),
             ("equivalent", Ty::Struct("Equivalent")),
             ("sliding_field", Ty::State),
