@@ -320,13 +320,18 @@ fn tests() -> Vec<Function> {
     ]
 }
 
-/// The statements of a loop over the surfaces, `k` from 0 while below
-/// `SURFACES`, running `body` for each.
-fn each_surface(k: &'static str, body: Vec<Stmt>) -> Vec<Stmt> {
-    let mut pass = vec![break_unless(less(var(k), var("SURFACES")))];
+/// The loop `{i} = from; while {i} < below { body; {i} += 1 }`: over
+/// the surfaces (`SURFACES`) or a state's components (`DIM`).
+fn counted(i: &'static str, from: Expr, below: &'static str, body: Vec<Stmt>) -> Vec<Stmt> {
+    let mut pass = vec![break_unless(less(var(i), var(below)))];
     pass.extend(body);
-    pass.push(Stmt::Set(k, var(k) + count(1)));
-    vec![Stmt::Var(k, count(0)), Stmt::Loop(pass)]
+    pass.push(Stmt::Set(i, var(i) + count(1)));
+    vec![Stmt::Var(i, from), Stmt::Loop(pass)]
+}
+
+/// A loop over the surfaces, `k` from 0.
+fn each_surface(k: &'static str, body: Vec<Stmt>) -> Vec<Stmt> {
+    counted(k, count(0), "SURFACES", body)
 }
 
 /// `region_of`, `jumped` and `dot_in_order` (see [`functions`]).
@@ -359,7 +364,11 @@ fn regions() -> Vec<Function> {
     );
     let mut sum = vec![Stmt::Var("sum", zero())];
     let product = index(var("a"), var("i")) * index(var("b"), var("i"));
-    sum.extend(each_i(vec![Stmt::Set("sum", var("sum") + product)]));
+    sum.extend(each_component(
+        "i",
+        count(0),
+        vec![Stmt::Set("sum", var("sum") + product)],
+    ));
     let dot_in_order = function(
         "dot_in_order",
         vec![("a", State), ("b", State)],
@@ -367,14 +376,6 @@ fn regions() -> Vec<Function> {
         ("sum", var("sum")),
     );
     vec![region_of, jumped(), dot_in_order]
-}
-
-/// A loop over a state's components, `i` from 0 while below `DIM`.
-fn each_i(body: Vec<Stmt>) -> Vec<Stmt> {
-    let mut pass = vec![break_unless(less(var("i"), var("DIM")))];
-    pass.extend(body);
-    pass.push(Stmt::Set("i", var("i") + count(1)));
-    vec![Stmt::Var("i", count(0)), Stmt::Loop(pass)]
 }
 
 /// `jumped(p, phase, y, after)`: a switch that the jump moves strictly
@@ -433,12 +434,10 @@ fn jumped() -> Function {
     )
 }
 
-/// The loop `{i} = from; while {i} < DIM { body; {i} += 1 }`.
-fn counted(i: &'static str, from: Expr, body: Vec<Stmt>) -> Vec<Stmt> {
-    let mut pass = vec![break_unless(less(var(i), var("DIM")))];
-    pass.extend(body);
-    pass.push(Stmt::Set(i, var(i) + count(1)));
-    vec![Stmt::Var(i, from), Stmt::Loop(pass)]
+/// A loop over a state's components (or a matrix's rows), `i` from
+/// `from`.
+fn each_component(i: &'static str, from: Expr, body: Vec<Stmt>) -> Vec<Stmt> {
+    counted(i, from, "DIM", body)
 }
 
 /// `event_log_det(r, gradient, rate, before, after)`: ln |det S| of an
@@ -460,7 +459,7 @@ fn event_log_det() -> Function {
             vec![index(dot("r", "dr"), var("i")), var("before")],
         ),
     )];
-    row.extend(counted(
+    row.extend(each_component(
         "k",
         count(0),
         vec![Stmt::SetEntry("s", var("i"), var("k"), entry)],
@@ -469,9 +468,9 @@ fn event_log_det() -> Function {
         // Every entry is set below: the copy only gives s its type.
         Stmt::Var("s", dot("r", "dr")),
     ];
-    body.extend(counted("i", count(0), row));
+    body.extend(each_component("i", count(0), row));
     body.push(Stmt::Var("det", num(1.0)));
-    body.extend(counted("col", count(0), elimination()));
+    body.extend(each_component("col", count(0), elimination()));
     body.extend([
         Stmt::Var("out", num(0.0)),
         Stmt::If(
@@ -503,7 +502,7 @@ fn event_log_det() -> Function {
 fn elimination() -> Vec<Stmt> {
     let at = |i: &'static str, k: &'static str| index(index(var("s"), var(i)), var(k));
     let mut out = vec![Stmt::Var("pivot", var("col"))];
-    out.extend(counted(
+    out.extend(each_component(
         "row",
         var("col") + count(1),
         vec![Stmt::If(
@@ -538,8 +537,8 @@ fn elimination() -> Vec<Stmt> {
         at("below", "m") - var("factor") * at("col", "m"),
     )];
     let mut below = vec![Stmt::Let("factor", at("below", "col") / "d")];
-    below.extend(counted("m", var("col"), clear));
-    out.extend(counted("below", var("col") + count(1), below));
+    below.extend(each_component("m", var("col"), clear));
+    out.extend(each_component("below", var("col") + count(1), below));
     out
 }
 
