@@ -269,11 +269,13 @@ impl Variant {
             ));
         }
         // The clock, RK4 and the stop test (of the held flow too where
-        // the impact code holds a mass on a stop), generated.
+        // the impact code holds a mass on a stop), and the general
+        // surfaces' functions, generated.
         out.push_str(&crate::model::codegen::wgsl::integrator(
             self.system.is_flow,
             self.wall,
             self.impact_location != ImpactLocation::Linear,
+            self.surfaces(),
         ));
         if self.wall {
             // The stops, the step loop that resolves their impacts, where

@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use std::fmt::Write as _;
 
 use super::print::Syntax;
-use crate::model::ir::step::{Expr, Field, Function, Math, Op, Program, Stmt, Ty};
+use crate::model::ir::step::{Bits, Expr, Field, Function, Math, Op, Program, Stmt, Ty};
 use crate::model::language::expr::Func;
 
 /// How tightly an operation binds, for parentheses. The bit operations
@@ -22,7 +22,7 @@ use crate::model::language::expr::Func;
 /// parenthesised.
 fn precedence(op: Op) -> u8 {
     match op {
-        Op::Shr | Op::BitAnd | Op::BitOr | Op::BitXor => 0,
+        Op::Shr | Op::Shl | Op::BitAnd | Op::BitOr | Op::BitXor => 0,
         Op::Add | Op::Sub => 1,
         Op::Mul | Op::Div => 2,
     }
@@ -82,6 +82,9 @@ fn wgsl_type(ty: Ty) -> &'static str {
         Ty::Bool => "bool",
         Ty::Count => "u32",
         Ty::Struct(name) => name,
+        Ty::Table => "vec4<real>",
+        Ty::CountTable => "vec4<u32>",
+        Ty::Rows => "array<State, DIM>",
     }
 }
 
@@ -226,6 +229,13 @@ impl Wgsl<'_> {
                     let (i, e) = (self.expr(i).0, self.expr(e).0);
                     writeln!(out, "{indent}{name}[{i}] = {e};")
                 }
+                Stmt::SetMember(name, member, e) => {
+                    writeln!(out, "{indent}{name}.{member} = {};", self.expr(e).0)
+                }
+                Stmt::SetEntry(name, row, col, e) => {
+                    let (row, col, e) = (self.expr(row).0, self.expr(col).0, self.expr(e).0);
+                    writeln!(out, "{indent}{name}[{row}][{col}] = {e};")
+                }
             };
         }
     }
@@ -317,6 +327,13 @@ impl Wgsl<'_> {
             Expr::Index(y, i) => {
                 let (y, op) = self.expr(y);
                 (format!("{}[{}]", wrap(&y, op), text(i)), None)
+            }
+            Expr::Bits(bits, a) => {
+                let (a, op) = self.expr(a);
+                match bits {
+                    Bits::Complement => (format!("~{}", wrap(&a, op)), None),
+                    Bits::LowestSet => (format!("firstTrailingBit({a})"), None),
+                }
             }
         }
     }
@@ -450,6 +467,8 @@ impl C<'_> {
                     let _ = writeln!(out, "{indent}break;");
                 }
                 Stmt::SetAt(..) => panic!("C's programs set no component (the kernels' stops do)"),
+                Stmt::SetMember(..) => panic!("C's programs hold no structures to set"),
+                Stmt::SetEntry(..) => panic!("C's programs hold no matrices"),
             }
         }
     }
@@ -642,6 +661,20 @@ impl C<'_> {
             Expr::Math(..) | Expr::Member(..) | Expr::Make(..) | Expr::Index(..) => {
                 panic!("C's step programs have no {e:?}")
             }
+            // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
+            // undefined).
+            Expr::Bits(bits, a) => match self.operand(scope, a) {
+                CValue::Count(a) => (
+                    CValue::Count(match bits {
+                        Bits::Complement => format!("~{a}"),
+                        Bits::LowestSet => {
+                            format!("({a} == 0u ? 0xffffffffu : (uint32_t)__builtin_ctz({a}))")
+                        }
+                    }),
+                    None,
+                ),
+                other => panic!("the bits of {other:?}"),
+            },
         }
     }
 
@@ -1050,5 +1083,67 @@ fn orientation(region: u32, bit: u32) -> real {
         let text = wgsl(&program, &Plain);
         let expected = "fn f(p: Params, omega: real, phase: vec2<real>, y: State) -> State {\n    let stepped = sub_step(p, omega, phase, y, 0.5);\n    return stepped.y;\n}\n";
         assert!(text.contains(expected), "{text}");
+    }
+
+    #[test]
+    fn the_surfaces_print_their_regions_and_members_as_the_kernels_read_them() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            "fn is_sliding(region: u32) -> bool {\n    return ((region >> SLIDING_SHIFT) != 0u);\n}\n",
+            "fn surface_pair(j: u32, v: SurfaceValues) -> vec2<real> {\n    return vec2<real>(v.g[j], v.rate[j]);\n}\n",
+            "    var hit = may_cross(region, 0u, before, after, h);\n    if (SURFACES > 1u) {\n        hit = (hit || may_cross(region, 1u, before, after, h));\n    }\n",
+            "            region = region | (1u << SURFACE_BIT[j]);\n",
+            "    var lo_p = p;\n    lo_p.region = (p.region & SIDES) & ~(1u << bit);\n    var hi_p = lo_p;\n    hi_p.region = lo_p.region | (1u << bit);\n",
+            "    let s = switch_sides(p, firstTrailingBit(p.region >> SLIDING_SHIFT), phase, y);\n",
+            "        let y_to = sub_step(p, omega, phase, y, to).y;\n",
+            "        joined.region = p.region | (1u << (SLIDING_SHIFT + j));\n",
+            "            out.log_det = log_r(leaving / approach_rate);\n",
+            "struct Crossing {\n    resolved: bool,\n    y: State,\n    region: u32,\n",
+            "fn event_log_det(r: Reset, gradient: State, rate: real, before: State, after: State) -> real {\n    var s = r.dr;\n",
+            "            s[i][k] = r.dr[i][k] + (after[i] - dr_f - r.rate[i]) * gradient[k] / rate;\n",
+            "            let swap = s[col];\n            s[col] = s[pivot];\n            s[pivot] = swap;\n            det = -det;\n",
+            "                s[below][m] = s[below][m] - factor * s[col][m];\n",
+            "        out = -1.0 / zero;\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+        // The kernels' structures are theirs: not printed.
+        assert!(!text.contains("struct Params"), "{text}");
+        assert!(!text.contains("struct SurfaceValues"), "{text}");
+    }
+
+    #[test]
+    fn a_counter_s_bits_inline_into_c() {
+        use crate::model::ir::step::build::{complement, lowest_set, shl};
+        let program = Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("region", Ty::Count), ("bit", Ty::Count)],
+                body: lets(vec![(
+                    "cleared",
+                    bit_and(var("region"), complement(shl(count(1), var("bit")))),
+                )]),
+                results: vec![("r", lowest_set(var("cleared")))],
+                returns: None,
+            }],
+            ..Program::default()
+        };
+        let mut field = |_: &mut String, _: &str, _: &[String], _: (&str, &str)| Vec::new();
+        let mut c = C {
+            syntax: &Plain,
+            field: &mut field,
+            indent: "",
+        };
+        let mut out = String::new();
+        let args = vec![CValue::Count("R".into()), CValue::Count("B".into())];
+        let results = c.inline(&mut out, &program, "f", args, "f_");
+        assert_eq!(out, "const uint32_t f_cleared = R & ~(1u << B);\n");
+        assert_eq!(
+            results,
+            vec![CValue::Count(
+                "(f_cleared == 0u ? 0xffffffffu : (uint32_t)__builtin_ctz(f_cleared))".into()
+            )]
+        );
     }
 }

@@ -39,7 +39,8 @@
 //!   the bit, so a model that calls one matches the CPU to rounding.
 //!
 //! For a model with general surfaces (events that are not stops, and
-//! switches) the file adds what the surface code of `surfaces.wgsl` reads:
+//! switches) the file adds what the surface code (`model::ir::surfaces`'s
+//! generated functions and `surfaces.wgsl`) reads:
 //! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`),
 //! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
 //! field in force, the CPU surface tape's sum in its order),
@@ -295,7 +296,7 @@ pub fn system_source(code: &Code) -> Result<String, Unsupported> {
 
 /// The field: with surfaces, the field of p's region is `field`, and
 /// `rhs` (what RK4 steps) is it or, for a motion sliding on a switch, the
-/// sliding field of surfaces.wgsl built from it ([`surfaces`]).
+/// sliding field built from it (`model::ir::surfaces`; [`surfaces`]).
 fn equations(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
@@ -431,7 +432,8 @@ fn vec4(kind: &str, n: usize, each: &dyn Fn(usize) -> String, zero: &str) -> Str
 
 /// The general surfaces of `code` (events that are not stops, then the
 /// switches: the CPU's order, `Code::surfaces`) as the surface code of
-/// `shaders/shared/surfaces.wgsl` reads them: their count, each one's
+/// `model::ir::surfaces` and `shaders/shared/surfaces.wgsl` read them:
+/// their count, each one's
 /// switch bit (or `EVENT`), the side of a switch, the field RK4 steps, and
 /// g; their rates ([`surface_values`]), gradients and resets
 /// ([`gradients_and_resets`]) follow.
@@ -514,7 +516,7 @@ fn surface_values(w: &mut String, code: &Code) -> Result<(), Unsupported> {
     let _ = writeln!(
         w,
         "// g, and the rate ∇g·F + ∂g/∂t along the field of p's region (its\n\
-         // sides: a sliding motion's rates are surfaces.wgsl's).\n\
+         // sides: a sliding motion's rates are switch_sides').\n\
          fn surface_values(p: Params, phase: vec2<real>, y: State) -> SurfaceValues {{\n    \
          let f = field(p, phase, y);"
     );
@@ -761,8 +763,10 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
 /// kernels' `Stop` and `held_rhs`), RK4 of the held flow (`held_*`) and
 /// the stops' functions (`model::ir::events::stops`), and where the
 /// location is Newton's (`newton`) its Hermite guess, bracket and Newton
-/// (`model::ir::events::location`), else the linear location.
-pub fn integrator(flow: bool, held: bool, newton: bool) -> String {
+/// (`model::ir::events::location`), else the linear location; with
+/// general surfaces (`surfaces`), their regions, tests, sliding and
+/// crossing (`model::ir::surfaces`).
+pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> String {
     use crate::model::ir::events;
     let mut program = crate::model::ir::integrator::integrator();
     let c_only = crate::model::ir::integrator::C_ONLY;
@@ -784,6 +788,11 @@ pub fn integrator(flow: bool, held: bool, newton: bool) -> String {
     }
     if !held || newton {
         absent.extend(events::linear_location().iter().map(|f| f.name));
+    }
+    if !surfaces {
+        use crate::model::ir::surfaces;
+        absent.extend(surfaces::functions().iter().map(|f| f.name));
+        absent.extend(surfaces::structures().iter().map(|s| s.name));
     }
     program.functions.retain(|f| !absent.contains(&f.name));
     program.structures.retain(|s| !absent.contains(&s.name));

@@ -38,7 +38,8 @@ pub fn hit() -> Structure {
 }
 
 /// What the events' functions use of the kernels: the lane's `Params`
-/// and every stop's values at them (`Stops`, opaque), the number of stops
+/// (of which only a trajectory's `region` is read) and every stop's
+/// values at them (`Stops`, opaque), the number of stops
 /// `WALLS` (a constant of the system file, 0 to 4), the precision's
 /// `EPSILON`, `stop(walls, j)`, stop j (shaders/shared/stops.wgsl reads
 /// the system file's tables), and an event's value and rate and its
@@ -57,6 +58,9 @@ pub fn kernels() -> (Vec<Structure>, Vec<Extern>) {
         result,
     };
     let externs = vec![
+        // The lane's parameters: a trajectory's region is read and set
+        // (the surfaces' functions), the rest passed on.
+        Extern::Struct("Params", vec![("region", Count)]),
         Extern::Const("DIM", Count),
         Extern::Const("WALLS", Count),
         Extern::Const("EPSILON", Real),
@@ -68,7 +72,7 @@ pub fn kernels() -> (Vec<Structure>, Vec<Extern>) {
         ),
         function("event_scale", vec![stops, Count, State], Pair),
     ];
-    (vec![opaque("Params"), opaque("Stops")], externs)
+    (vec![opaque("Stops")], externs)
 }
 
 /// The functions of the stops (twins of `Wall`'s and of the step loop's

@@ -79,7 +79,10 @@ pub fn integrator() -> Program {
     functions.extend(super::events::stops());
     functions.extend(super::events::location());
     functions.extend(super::events::linear_location());
-    let (mut structures, externs) = super::events::kernels();
+    functions.extend(super::surfaces::functions());
+    let (mut structures, mut externs) = super::events::kernels();
+    externs.extend(super::surfaces::kernels());
+    structures.extend(super::surfaces::structures());
     structures.extend([super::events::stop(), super::events::hit()]);
     structures.extend(super::events::location_structures());
     Program {
@@ -530,7 +533,9 @@ mod tests {
             ("crossing_fraction", vec![Ty::Real]),
             ("locate_linear", vec![Ty::Struct("Hit")]),
         ];
-        assert_eq!(program.functions.len(), expected.len());
+        // The surfaces' are typed in `model::ir::surfaces`.
+        let surfaces = super::super::surfaces::functions().len();
+        assert_eq!(program.functions.len(), expected.len() + surfaces);
         for (name, types) in expected {
             assert_eq!(
                 program.function(name).result_types(&program),

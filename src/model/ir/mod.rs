@@ -2,9 +2,11 @@
 //! from: the lowered instruction tape of a model's expressions and its
 //! interpreter, the reference ([`tape`]); the step programs' language
 //! ([`step`]) and the integrator's programs written in it ([`integrator`],
-//! and the kernels' stops and crossing location, [`events`]).
+//! the kernels' stops and crossing location, [`events`], and their general
+//! surfaces and sliding, [`surfaces`]).
 
 pub mod events;
 pub mod integrator;
 pub mod step;
+pub mod surfaces;
 pub mod tape;

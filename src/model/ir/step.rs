@@ -55,6 +55,15 @@ pub enum Ty {
     /// on, never read), or the results of a function with several
     /// ([`Function::returns`]).
     Struct(&'static str),
+    /// A number per general surface, read by a counter: up to four
+    /// (WGSL's `vec4<real>`; the surfaces' values g and rates).
+    Table,
+    /// A counter per general surface, read by a counter (WGSL's
+    /// `vec4<u32>`: each surface's switch bit).
+    CountTable,
+    /// A square matrix of the model's dimension by rows, each a state
+    /// (WGSL's `array<State, DIM>`: a reset's Jacobian, a saltation).
+    Rows,
 }
 
 /// A structure of named values (a stop, a Newton bracket). Without
@@ -71,6 +80,10 @@ pub struct Structure {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Extern {
     Const(&'static str, Ty),
+    /// A structure the kernels define and make (the lane's `Params`, the
+    /// surfaces' values), of which the program reads and sets the
+    /// members named here and no others; it is not printed.
+    Struct(&'static str, Vec<(&'static str, Ty)>),
     Fn {
         name: &'static str,
         params: Vec<Ty>,
@@ -181,8 +194,21 @@ pub enum Expr {
     Member(Box<Expr>, &'static str),
     /// A structure the program declares, from its members in order.
     Make(&'static str, Vec<Expr>),
-    /// A state's component at a counter (a stop's coordinate).
+    /// A state's component at a counter (a stop's coordinate), or a
+    /// table's entry (a surface's value, its bit).
     Index(Box<Expr>, Box<Expr>),
+    /// An operation on one counter's bits.
+    Bits(Bits, Box<Expr>),
+}
+
+/// An operation on one counter's bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bits {
+    /// Every bit flipped (`~`).
+    Complement,
+    /// The index of the lowest bit set, all ones for 0 (WGSL's
+    /// `firstTrailingBit`): the switch a sliding region slides on.
+    LowestSet,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -193,6 +219,8 @@ pub enum Op {
     Div,
     /// A counter's bits shifted right (a region's bit `b` is `r >> b & 1`).
     Shr,
+    /// A counter's bits shifted left (region bit `b` is `1 << b`).
+    Shl,
     /// A counter's bits: both, either, one of the two.
     BitAnd,
     BitOr,
@@ -231,6 +259,7 @@ impl Op {
             Op::Mul => "*",
             Op::Div => "/",
             Op::Shr => ">>",
+            Op::Shl => "<<",
             Op::BitAnd => "&",
             Op::BitOr => "|",
             Op::BitXor => "^",
@@ -239,7 +268,10 @@ impl Op {
 
     /// An operation on a counter's bits, which only counters have.
     pub fn is_bitwise(self) -> bool {
-        matches!(self, Op::Shr | Op::BitAnd | Op::BitOr | Op::BitXor)
+        matches!(
+            self,
+            Op::Shr | Op::Shl | Op::BitAnd | Op::BitOr | Op::BitXor
+        )
     }
 }
 
@@ -265,8 +297,14 @@ pub enum Stmt {
     /// Leaves the innermost loop.
     Break,
     /// A new value of one component (at a counter) of a state
-    /// [`Stmt::Var`].
+    /// [`Stmt::Var`], or of one row of a matrix.
     SetAt(&'static str, Expr, Expr),
+    /// A new value of one entry (at a row and a column) of a matrix
+    /// [`Stmt::Var`].
+    SetEntry(&'static str, Expr, Expr, Expr),
+    /// A new value of one member of a structure [`Stmt::Var`] (a copy of
+    /// the lane's parameters in another region).
+    SetMember(&'static str, &'static str, Expr),
 }
 
 /// A function of a program: its parameters, its statements, and its
@@ -337,9 +375,17 @@ impl Program {
                 Ty::Real
             }
             Expr::Index(y, i) => {
-                expect(y, Ty::State, "a component of");
                 expect(i, Ty::Count, "a component at");
-                Ty::Real
+                match ty(y) {
+                    Ty::State | Ty::Table => Ty::Real,
+                    Ty::CountTable => Ty::Count,
+                    Ty::Rows => Ty::State,
+                    other => panic!("a component of {other:?}"),
+                }
+            }
+            Expr::Bits(bits, a) => {
+                expect(a, Ty::Count, &format!("{bits:?}"));
+                Ty::Count
             }
             Expr::Member(..) | Expr::Make(..) | Expr::Call(..) => self.type_of_structured(e, scope),
             Expr::Abs(a) => {
@@ -422,6 +468,10 @@ impl Program {
                 other => panic!("{other:?} has no members"),
             },
             Expr::Make(name, args) => {
+                assert!(
+                    self.kernels_structure(name).is_none(),
+                    "{name} is the kernels': they make it"
+                );
                 let members = self.structure(name).members.clone();
                 assert!(!members.is_empty(), "{name} is opaque: the kernels make it");
                 assert_eq!(args.len(), members.len(), "{name}'s members");
@@ -473,6 +523,15 @@ impl Program {
         })
     }
 
+    /// The members the program may use of the kernels' structure `name`,
+    /// if it is one.
+    fn kernels_structure(&self, name: &str) -> Option<&[(&'static str, Ty)]> {
+        self.externs.iter().find_map(|e| match e {
+            Extern::Struct(n, members) if *n == name => Some(&members[..]),
+            _ => None,
+        })
+    }
+
     /// The structure `name` the program declares.
     pub fn structure(&self, name: &str) -> &Structure {
         self.structures
@@ -487,6 +546,9 @@ impl Program {
         if let Some(f) = self.functions.iter().find(|f| f.returns == Some(name)) {
             let types = f.result_types(self);
             return f.results.iter().map(|(n, _)| *n).zip(types).collect();
+        }
+        if let Some(members) = self.kernels_structure(name) {
+            return members.to_vec();
         }
         let members = self.structure(name).members.clone();
         assert!(
@@ -537,9 +599,35 @@ impl Program {
                 Stmt::SetAt(name, i, e) => {
                     let target = lookup(scope, name);
                     assert!(target.mutable, "{name} is not a var");
-                    assert_eq!(target.ty, Ty::State, "{name} has no components");
+                    let component = match target.ty {
+                        Ty::State => Ty::Real,
+                        Ty::Rows => Ty::State,
+                        _ => panic!("{name} has no components"),
+                    };
                     assert_eq!(ty(i, scope), Ty::Count, "{name}'s component at");
-                    assert_eq!(ty(e, scope), Ty::Real, "{name}'s new component");
+                    assert_eq!(ty(e, scope), component, "{name}'s new component");
+                }
+                Stmt::SetEntry(name, row, col, e) => {
+                    let target = lookup(scope, name);
+                    assert!(target.mutable, "{name} is not a var");
+                    assert_eq!(target.ty, Ty::Rows, "{name} has no entries");
+                    assert_eq!(ty(row, scope), Ty::Count, "{name}'s row");
+                    assert_eq!(ty(col, scope), Ty::Count, "{name}'s column");
+                    assert_eq!(ty(e, scope), Ty::Real, "{name}'s new entry");
+                }
+                Stmt::SetMember(name, member, e) => {
+                    let target = lookup(scope, name);
+                    assert!(target.mutable, "{name} is not a var");
+                    let Ty::Struct(structure) = target.ty else {
+                        panic!("{name} has no members")
+                    };
+                    let want = self
+                        .members(structure)
+                        .into_iter()
+                        .find(|(m, _)| m == member)
+                        .unwrap_or_else(|| panic!("{structure} has no member {member}"))
+                        .1;
+                    assert_eq!(ty(e, scope), want, "{name}.{member}'s new value");
                 }
             }
         }
@@ -603,6 +691,8 @@ impl Function {
                         out.push(i);
                         out.push(e);
                     }
+                    Stmt::SetMember(_, _, e) => out.push(e),
+                    Stmt::SetEntry(_, row, col, e) => out.extend([row, col, e]),
                 }
             }
         }
@@ -631,6 +721,7 @@ impl Expr {
             | Expr::Second(a)
             | Expr::Neg(a)
             | Expr::Member(a, _)
+            | Expr::Bits(_, a)
             | Expr::Not(a) => vec![a],
             Expr::Select {
                 cond,
@@ -695,7 +786,7 @@ impl From<&'static str> for Expr {
 
 /// Short forms that keep the programs readable.
 pub mod build {
-    use super::{Cmp, Expr, Field, Math, Op, Stmt};
+    use super::{Bits, Cmp, Expr, Field, Math, Op, Stmt};
 
     pub fn var(name: &'static str) -> Expr {
         Expr::Var(name)
@@ -724,6 +815,20 @@ pub mod build {
 
     pub fn bit_xor(a: Expr, b: Expr) -> Expr {
         Expr::Bin(Op::BitXor, Box::new(a), Box::new(b))
+    }
+
+    pub fn shl(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::Shl, Box::new(a), Box::new(b))
+    }
+
+    /// `~a`.
+    pub fn complement(a: Expr) -> Expr {
+        Expr::Bits(Bits::Complement, Box::new(a))
+    }
+
+    /// The index of `a`'s lowest bit set (`firstTrailingBit`).
+    pub fn lowest_set(a: Expr) -> Expr {
+        Expr::Bits(Bits::LowestSet, Box::new(a))
     }
 
     pub fn abs(a: Expr) -> Expr {
@@ -1139,5 +1244,149 @@ mod tests {
     #[should_panic(expected = "-x of Bool")]
     fn a_truth_value_is_not_negated() {
         result_type(&one(vec![], vec![], neg(truth(false))));
+    }
+
+    /// A program with the kernels' `Params` (its region read and set)
+    /// and a table of a number and of a counter per surface.
+    fn with_params(params: Vec<(&'static str, Ty)>, body: Vec<Stmt>, result: Expr) -> Program {
+        let mut program = one(params, body, result);
+        program.externs = vec![
+            Extern::Struct("Params", vec![("region", Ty::Count)]),
+            Extern::Const("G", Ty::Table),
+            Extern::Const("BITS", Ty::CountTable),
+        ];
+        program
+    }
+
+    #[test]
+    fn tables_members_and_bits_are_typed() {
+        let params = vec![("p", Ty::Struct("Params")), ("j", Ty::Count)];
+        let body = vec![
+            Stmt::Var("q", var("p")),
+            Stmt::SetMember(
+                "q",
+                "region",
+                bit_and(
+                    dot("p", "region"),
+                    complement(shl(count(1), index(var("BITS"), var("j")))),
+                ),
+            ),
+            Stmt::Let("first", lowest_set(dot("q", "region"))),
+        ];
+        let program = with_params(params.clone(), body, index(var("G"), var("first")));
+        assert_eq!(result_type(&program), Ty::Real);
+        let bit = index(var("BITS"), var("j"));
+        assert_eq!(result_type(&with_params(params, vec![], bit)), Ty::Count);
+    }
+
+    #[test]
+    #[should_panic(expected = "p is not a var")]
+    fn a_parameter_s_member_is_not_set() {
+        let body = vec![Stmt::SetMember("p", "region", count(0))];
+        let params = vec![("p", Ty::Struct("Params"))];
+        result_type(&with_params(params, body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "Params has no member omega")]
+    fn only_the_kernels_structure_s_declared_members_are_set() {
+        let body = vec![
+            Stmt::Var("q", var("p")),
+            Stmt::SetMember("q", "omega", num(1.0)),
+        ];
+        let params = vec![("p", Ty::Struct("Params"))];
+        result_type(&with_params(params, body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "q.region's new value")]
+    fn a_member_is_set_to_a_value_of_its_type() {
+        let body = vec![
+            Stmt::Var("q", var("p")),
+            Stmt::SetMember("q", "region", num(1.0)),
+        ];
+        let params = vec![("p", Ty::Struct("Params"))];
+        result_type(&with_params(params, body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "x has no members")]
+    fn a_number_has_no_member_to_set() {
+        let body = vec![
+            Stmt::Var("x", num(0.0)),
+            Stmt::SetMember("x", "region", count(0)),
+        ];
+        result_type(&with_params(vec![], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "Params is the kernels': they make it")]
+    fn the_kernels_structure_is_not_made() {
+        result_type(&with_params(vec![], vec![], make("Params", vec![count(0)])));
+    }
+
+    #[test]
+    #[should_panic(expected = "Complement of Real")]
+    fn a_number_has_no_bits_to_flip() {
+        result_type(&with_params(vec![], vec![], complement(num(1.0))));
+    }
+
+    #[test]
+    #[should_panic(expected = "LowestSet of Bool")]
+    fn a_truth_value_has_no_lowest_bit() {
+        result_type(&with_params(vec![], vec![], lowest_set(truth(true))));
+    }
+
+    #[test]
+    #[should_panic(expected = "<< is an operation of two counters")]
+    fn a_number_is_not_shifted() {
+        let e = shl(count(1), num(2.0));
+        result_type(&with_params(vec![], vec![], e));
+    }
+
+    #[test]
+    #[should_panic(expected = "a component of Pair")]
+    fn a_pair_is_not_a_table() {
+        let e = index(pair(num(0.0), num(1.0)), count(0));
+        result_type(&with_params(vec![], vec![], e));
+    }
+
+    #[test]
+    fn a_matrix_s_rows_and_entries_are_typed() {
+        let params = vec![("a", Ty::Rows), ("y", Ty::State)];
+        let body = vec![
+            Stmt::Var("s", var("a")),
+            Stmt::SetAt("s", count(1), var("y")),
+            Stmt::SetEntry("s", count(0), count(1), num(2.0)),
+        ];
+        let e = index(index(var("s"), count(0)), count(1));
+        assert_eq!(result_type(&one(params, body, e)), Ty::Real);
+    }
+
+    #[test]
+    #[should_panic(expected = "s's new component")]
+    fn a_matrix_s_row_is_a_state() {
+        let body = vec![
+            Stmt::Var("s", var("a")),
+            Stmt::SetAt("s", count(1), num(0.0)),
+        ];
+        result_type(&one(vec![("a", Ty::Rows)], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "z has no entries")]
+    fn a_state_has_no_entries() {
+        let body = vec![
+            Stmt::Var("z", var("y")),
+            Stmt::SetEntry("z", count(0), count(0), num(0.0)),
+        ];
+        result_type(&one(vec![("y", Ty::State)], body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "a is not a var")]
+    fn a_parameter_s_entry_is_not_set() {
+        let body = vec![Stmt::SetEntry("a", count(0), count(0), num(0.0))];
+        result_type(&one(vec![("a", Ty::Rows)], body, num(0.0)));
     }
 }
