@@ -48,6 +48,11 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
         bifurcation_points: scene.bifurcation_points,
         max_period: scene.sweep.max_period(),
         keep_orbit: scene.sweep.starts.is_some() || scene.orbits.is_some(),
+        keep_settling: scene
+            .sweep
+            .starts
+            .as_ref()
+            .is_some_and(|s| s.basins.values > 0),
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.

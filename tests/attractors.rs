@@ -861,7 +861,8 @@ fn a_basin_image_labels_every_start_and_its_measures_are_the_file_s() {
 }
 
 /// The basin labels of a grid of starts on the GPU (f64) are the CPU
-/// path's, start by start.
+/// path's, start by start, and so are each attractor's convergence times
+/// (the GPU's from the references the host recomputes).
 #[test]
 fn basin_labels_on_the_gpu_are_the_cpu_s() {
     if !gpu_or_skip("basin_labels_on_the_gpu_are_the_cpu_s", Precision::F64) {
@@ -872,13 +873,145 @@ fn basin_labels_on_the_gpu_are_the_cpu_s() {
     );
     let labels = |text: &str| {
         let found = attractors_of(&common::scene(text, &[]));
-        lyapsweep::attractor::basins::image(&found, 0, (16, 16)).labels
+        let times: Vec<_> = found.values[0]
+            .attractors
+            .iter()
+            .map(|a| (a.branch, a.convergence()))
+            .collect();
+        let image = lyapsweep::attractor::basins::image(&found, 0, (16, 16));
+        (image.labels, times)
     };
-    let cpu = labels(&text);
-    let gpu = labels(&text.replace(
+    let (cpu, cpu_times) = labels(&text);
+    let (gpu, gpu_times) = labels(&text.replace(
         "backend = \"cpu\"",
         "backend = \"gpu\"\nprecision = \"f64\"",
     ));
     assert_eq!(cpu, gpu);
     assert!(cpu.contains(&0) && cpu.contains(&1), "{cpu:?}");
+    assert_eq!(cpu_times, gpu_times);
+    assert!(cpu_times.iter().all(|t| t.1.is_some()), "{cpu_times:?}");
+}
+
+/// The uncertainty exponent of a label file, computed here: pairs of
+/// starts s cells apart along either state (s = 1, 2, 4, ... while 8s fits
+/// the shorter side), from the starts that have a partner at the largest
+/// s; α the least-squares slope of ln f(s) against ln s.
+fn uncertainty_by_hand(rows: usize, columns: usize, labels: &[i32]) -> f64 {
+    let mut shifts = vec![1];
+    while 8 * 2 * shifts[shifts.len() - 1] <= rows.min(columns) {
+        shifts.push(2 * shifts[shifts.len() - 1]);
+    }
+    let largest = shifts[shifts.len() - 1];
+    let mut logs = Vec::new();
+    for &s in &shifts {
+        let (mut pairs, mut differ) = (0, 0);
+        for r in 0..rows {
+            for c in 0..columns {
+                if c + largest < columns {
+                    pairs += 1;
+                    differ += usize::from(labels[r * columns + c] != labels[r * columns + c + s]);
+                }
+                if r + largest < rows {
+                    pairs += 1;
+                    differ += usize::from(labels[r * columns + c] != labels[(r + s) * columns + c]);
+                }
+            }
+        }
+        if differ > 0 {
+            logs.push(((s as f64).ln(), (differ as f64 / pairs as f64).ln()));
+        }
+    }
+    let n = logs.len() as f64;
+    let mx = logs.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = logs.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxy: f64 = logs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    let sxx: f64 = logs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    sxy / sxx
+}
+
+/// Each start's convergence time computed here: its reference iterated
+/// from the start (`System::iterate`, as a lane steps it) for the run's
+/// transient and iterations, and the iteration after the last point
+/// farther than the attractor tolerance (1e-5 of max(1, |x|∞, |y|∞) in
+/// f64) from `orbit_point`.
+fn convergence_by_hand(scene: &lyapsweep::Scene, start: usize, orbit_point: [f64; 2]) -> usize {
+    use lyapsweep::system::System;
+    let settings =
+        lyapsweep::plan::method_settings(scene, lyapsweep::scene::Backend::Cpu, Precision::F64);
+    let system = lyapsweep::system::model::ModelFlow::<2>::new(&scene.lane_params(start));
+    let flow = lyapsweep::orbit::map::flow_of(&system, &settings);
+    let mut x = system.start(scene.lane_initial_state(start), &flow);
+    let mut last_outside = None;
+    for n in 0..=settings.transient + settings.iterations {
+        if n > 0 {
+            x = system.iterate(&x, &flow, &mut Default::default());
+            system.wrap(&mut x);
+        }
+        let scale = x
+            .iter()
+            .chain(&orbit_point)
+            .fold(1.0_f64, |m, v| m.max(v.abs()));
+        let distance = (x[0] - orbit_point[0])
+            .abs()
+            .max((x[1] - orbit_point[1]).abs());
+        if distance > 1e-5 * scale {
+            last_outside = Some(n);
+        }
+    }
+    last_outside.map_or(0, |n| n + 1)
+}
+
+/// The seed at η = 0.6 over a 32 × 32 grid with `basins = 1`: each
+/// attractor's convergence times (mean, median, largest over its starts)
+/// are those computed here start by start from the label file and the
+/// orbit's point, and the value's uncertainty exponent and boundary
+/// dimension are the file's; the two basins' boundary is smooth (α near 1).
+#[test]
+fn convergence_times_and_the_uncertainty_exponent_are_the_file_s() {
+    let (nx, ny) = (32, 32);
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [{nx}, {ny}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nbasins = 1\nbasin_box = 4\n"
+    );
+    let scene = common::scene(&text, &[]);
+    let report = common::run(&scene);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    lyapsweep::output::write(&scene, &report, &out).unwrap();
+    let (_, _, labels) = read_npy_i32(&out.join("basins-0.npy"));
+    let mut table = csv::Reader::from_path(out.join("attractors.csv")).unwrap();
+    let header: Vec<String> = table.headers().unwrap().iter().map(String::from).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let rows: Vec<csv::StringRecord> = table.records().map(|r| r.unwrap()).collect();
+    let number = |row: &csv::StringRecord, name: &str| row[col(name)].parse::<f64>().unwrap();
+    assert_eq!(rows.len(), 2);
+    let alpha = uncertainty_by_hand(ny, nx, &labels);
+    assert!((0.7..1.3).contains(&alpha), "{alpha}");
+    for row in &rows {
+        assert!((number(row, "uncertainty_exponent") - alpha).abs() < 1e-12);
+        assert!((number(row, "boundary_dimension") - (2.0 - alpha)).abs() < 1e-12);
+        let label: i32 = row[col("branch")].parse().unwrap();
+        assert_eq!(row[col("period")].parse::<usize>().unwrap(), 1);
+        let point = [number(row, "x"), number(row, "v")];
+        let mut times: Vec<usize> = (0..nx * ny)
+            .filter(|&k| labels[k] == label)
+            .map(|k| convergence_by_hand(&scene, k, point))
+            .collect();
+        times.sort_unstable();
+        let n = times.len();
+        let mean = times.iter().sum::<usize>() as f64 / n as f64;
+        let median = if n % 2 == 1 {
+            times[n / 2] as f64
+        } else {
+            0.5 * (times[n / 2 - 1] + times[n / 2]) as f64
+        };
+        let largest = times[n - 1];
+        assert!(
+            (number(row, "convergence_mean") - mean).abs() < 1e-9,
+            "{} against {mean}",
+            number(row, "convergence_mean")
+        );
+        assert_eq!(number(row, "convergence_median"), median);
+        assert_eq!(number(row, "convergence_max") as usize, largest);
+        assert!(largest > 0 && largest < 600, "{largest}");
+    }
 }

@@ -16,6 +16,22 @@
 //!   states): where the two differ by much more than the error, the grid
 //!   is too coarse for the boundary.
 //!
+//! - The uncertainty exponent α (Grebogi, McDonald, Ott and Yorke,
+//!   Phys. Lett. A 99, 415, 1983): a start is ε-uncertain when a start ε
+//!   away ends on another attractor; the fraction f(ε) of uncertain starts
+//!   scales as ε^α, and the boundary's box-counting dimension is D - α
+//!   (D = 2, the image's states). On the image, the pairs are the starts s
+//!   cells apart along either state, for s = 1, 2, 4, ... up to an eighth
+//!   of the grid's shorter side (beyond it f saturates as s nears the
+//!   basins' own size: on the seed's 512 × 512 image at η = 0.6 the slope
+//!   from s = 64 to 128 is 0.77, from 1 to 64 0.97), from the same starts at every shift (those
+//!   with a partner at the largest); f(s) is the share of those pairs whose
+//!   labels differ (a failed start's label counting as one more), and α
+//!   the least-squares slope of ln f against ln s over the shifts with
+//!   f > 0. A smooth boundary has α = 1; a fractal one α < 1. Shifts of
+//!   whole cells resolve nothing finer than a cell: an α near 1 says the
+//!   boundary is smooth down to the grid's cell.
+//!
 //! - Minimal critical shock of an attractor: the smallest kick of its
 //!   state, in the box's scaled max norm (each state's change over the
 //!   box's width along it), that sends it to another attractor, searched
@@ -129,6 +145,68 @@ pub fn entropy(image: &BasinImage, side: usize) -> Entropy {
     }
 }
 
+/// The uncertainty exponent of an image (see the module's header): the
+/// shifts s in cells with the fractions f(s) of pairs s apart whose labels
+/// differ, and α, the slope of ln f against ln s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Uncertainty {
+    pub fractions: Vec<(usize, f64)>,
+    pub exponent: f64,
+}
+
+impl Uncertainty {
+    /// The boundary's dimension, 2 - α.
+    pub fn boundary_dimension(&self) -> f64 {
+        2.0 - self.exponent
+    }
+}
+
+/// The uncertainty exponent of an image: `None` when fewer than two
+/// shifts fit the grid (its shorter side under 16 cells) or have uncertain
+/// pairs (a single basin).
+pub fn uncertainty(image: &BasinImage) -> Option<Uncertainty> {
+    let (nx, ny) = (image.nx, image.ny);
+    let at = |i: usize, j: usize| image.labels[j * nx + i];
+    let shifts: Vec<usize> = std::iter::successors(Some(1usize), |s| Some(2 * s))
+        .take_while(|&s| 8 * s <= nx.min(ny))
+        .collect();
+    let largest = *shifts.last()?;
+    // The same starts at every shift (those with a partner at the largest),
+    // so that f(s) counts uncertain starts of one set.
+    let fractions: Vec<(usize, f64)> = shifts
+        .iter()
+        .map(|&s| {
+            let along_x = (0..ny).flat_map(|j| (0..nx - largest).map(move |i| (i, j, i + s, j)));
+            let along_y = (0..ny - largest).flat_map(|j| (0..nx).map(move |i| (i, j, i, j + s)));
+            let (mut pairs, mut differ) = (0usize, 0usize);
+            for (i, j, k, l) in along_x.chain(along_y) {
+                pairs += 1;
+                differ += usize::from(at(i, j) != at(k, l));
+            }
+            (s, differ as f64 / pairs as f64)
+        })
+        .collect();
+    let points: Vec<(f64, f64)> = fractions
+        .iter()
+        .filter(|&&(_, f)| f > 0.0)
+        .map(|&(s, f)| ((s as f64).ln(), f.ln()))
+        .collect();
+    if points.len() < 2 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), &(x, y)| (a + x / n, b + y / n));
+    let (sxy, sxx) = points.iter().fold((0.0, 0.0), |(a, b), &(x, y)| {
+        (a + (x - mx) * (y - my), b + (x - mx) * (x - mx))
+    });
+    Some(Uncertainty {
+        fractions,
+        exponent: sxy / sxx,
+    })
+}
+
 /// The binomial standard error of a fraction `f` of `n` starts.
 pub fn fraction_error(f: f64, n: usize) -> f64 {
     (f * (1.0 - f) / n as f64).sqrt()
@@ -231,6 +309,30 @@ mod tests {
         let shock = critical_shock(&picture, &grid, 0, &[[1.7, 0.0]]).unwrap();
         assert!((shock - 0.15).abs() < 1e-15, "{shock}");
         assert_eq!(critical_shock(&picture, &grid, 0, &[]), None);
+    }
+
+    /// A straight boundary: f(s) = s·(rows)/(pairs), α = 1 exactly; a
+    /// single basin
+    /// and a grid too small for two shifts have none; a boundary that
+    /// crosses every cell pair at every shift (a checkerboard of period 1
+    /// along x) has f constant in s at the odd shift and 0 at the even:
+    /// only s = 1 fits, so none.
+    #[test]
+    fn uncertainty_exponent_of_known_pictures() {
+        let edge = uncertainty(&image(64, 64, |i, _| i32::from(i >= 40))).unwrap();
+        let shifts: Vec<usize> = edge.fractions.iter().map(|f| f.0).collect();
+        assert_eq!(shifts, [1, 2, 4, 8]);
+        for &(s, f) in &edge.fractions {
+            // The starts i < 56 of each row (the largest shift is 8): s of
+            // them straddle i = 40; along y none of the 56 × 64 differ.
+            let want = (s * 64) as f64 / (2 * 56 * 64) as f64;
+            assert!((f - want).abs() < 1e-15, "{s}: {f} against {want}");
+        }
+        assert!((edge.exponent - 1.0).abs() < 1e-12, "{}", edge.exponent);
+        assert!((edge.boundary_dimension() - 1.0).abs() < 1e-12);
+        assert_eq!(uncertainty(&image(64, 64, |_, _| 3)), None);
+        assert_eq!(uncertainty(&image(15, 64, |i, _| i32::from(i > 3))), None);
+        assert_eq!(uncertainty(&image(64, 64, |i, _| (i % 2) as i32)), None);
     }
 
     #[test]

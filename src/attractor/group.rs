@@ -4,7 +4,7 @@
 //! exponents.
 
 use super::index::{self, Candidates, Index};
-use crate::method::lane::return_tolerance;
+use crate::method::lane::attractor_tolerance;
 use crate::method::{LaneResult, LaneStatus};
 
 /// One lane of a value as the grouping keeps it: its result without the
@@ -29,12 +29,33 @@ pub struct Attractor {
     pub starts: usize,
     /// Every lane that ended on it, continuation seeds included.
     pub lanes: usize,
+    /// The convergence times of the scene's starts that ended on it
+    /// (`LaneResult::settled`, where the lanes kept them), in the order
+    /// they came.
+    pub settling: Vec<usize>,
     /// The branch it belongs to across values (see `branch`); `None` for
     /// a failed lane's own row, and until branches are matched.
     pub branch: Option<usize>,
 }
 
 impl Attractor {
+    /// The mean, median and largest convergence time of its starts (see
+    /// [`Attractor::settling`]): `None` when none kept one. The median of
+    /// an even count is the mean of the middle two.
+    pub fn convergence(&self) -> Option<(f64, f64, usize)> {
+        let mut times = self.settling.clone();
+        times.sort_unstable();
+        let n = times.len();
+        let largest = *times.last()?;
+        let mean = times.iter().map(|&t| t as f64).sum::<f64>() / n as f64;
+        let median = if n % 2 == 1 {
+            times[n / 2] as f64
+        } else {
+            0.5 * (times[n / 2 - 1] + times[n / 2]) as f64
+        };
+        Some((mean, median, largest))
+    }
+
     /// Whether this row is one lane that failed or whose motion the method
     /// does not resolve (diverged, stuck, chattering, sliding): such a lane
     /// keeps its status and is never merged with another.
@@ -64,13 +85,12 @@ pub struct Rule {
 }
 
 impl Rule {
-    /// Ten times the return test's tolerance in the run's arithmetic: each
-    /// lane's own points settle within that of their orbit, so two lanes'
-    /// points within twice it.
+    /// The attractor tolerance of the run's arithmetic
+    /// ([`attractor_tolerance`]).
     pub fn new(dim: usize, rounding_unit: f64) -> Rule {
         Rule {
             dim,
-            tolerance: 10.0 * return_tolerance(rounding_unit),
+            tolerance: attractor_tolerance(rounding_unit),
         }
     }
 }
@@ -134,6 +154,7 @@ impl ValueAttractors {
     /// new.
     pub fn join(&mut self, member: Member, sampled: bool, rule: Rule) -> (usize, bool) {
         let start = member.start;
+        let settled = member.lane.settled.filter(|_| sampled);
         while self.shapes.len() < self.attractors.len() {
             let first = &self.attractors[self.shapes.len()].first.lane;
             self.shapes.push(Shape::of(first, rule.dim));
@@ -177,6 +198,7 @@ impl ValueAttractors {
                     first: member,
                     starts: 0,
                     lanes: 0,
+                    settling: Vec::new(),
                     branch: None,
                 });
                 (self.attractors.len() - 1, true)
@@ -185,6 +207,7 @@ impl ValueAttractors {
         let attractor = &mut self.attractors[index];
         attractor.lanes += 1;
         attractor.starts += usize::from(sampled);
+        attractor.settling.extend(settled);
         if self.of_start.len() <= start {
             self.of_start.resize(start + 1, None);
         }
@@ -352,6 +375,7 @@ mod tests {
             period: 1.0,
             orbit_period: period,
             orbit,
+            settled: None,
             orbit_term: 0.0,
             bifurcation: Vec::new(),
             jacobians: Vec::new(),

@@ -171,6 +171,23 @@ pub struct Found {
     /// Continuation passes, and the lanes they ran.
     pub passes: usize,
     pub continued_lanes: usize,
+    /// The scene's starts' convergence times (runs with basin images): their
+    /// mean and the longest, in iterations, over every value's starts.
+    pub convergence: Option<(f64, usize)>,
+}
+
+/// The mean and the longest convergence time over every attractor's
+/// starts (`None` when no start kept one).
+fn convergence(found: &crate::attractor::Attractors) -> Option<(f64, usize)> {
+    let times = found
+        .values
+        .iter()
+        .flat_map(|v| &v.attractors)
+        .flat_map(|a| &a.settling);
+    let (count, sum, longest) = times.fold((0usize, 0.0, 0usize), |(n, s, m), &t| {
+        (n + 1, s + t as f64, m.max(t))
+    });
+    (count > 0).then(|| (sum / count as f64, longest))
 }
 
 /// A value of [`RunSummary::record`].
@@ -258,6 +275,7 @@ impl RunSummary {
                 several: found.several(),
                 passes: found.passes,
                 continued_lanes: found.continued_lanes,
+                convergence: convergence(found),
             }),
             orbits: outcome.orbits.as_ref().map(Traced::of),
             max_sum_error: report.max_sum_error,
@@ -307,6 +325,10 @@ impl RunSummary {
         if let Some(found) = &self.attractors {
             record.push(("attractors", Value::Count(found.total)));
             record.push(("branches", Value::Count(found.branches)));
+            if let Some((mean, longest)) = found.convergence {
+                record.push(("convergence_mean", Value::Number(mean)));
+                record.push(("convergence_max", Value::Count(longest)));
+            }
         }
         if let Some(traced) = &self.orbits {
             record.push(("orbit_branches", Value::Count(traced.branches)));
@@ -582,6 +604,12 @@ impl fmt::Display for Found {
                 out,
                 "  continued    {} lanes in {} passes from the neighbours' attractors",
                 self.continued_lanes, self.passes
+            )?;
+        }
+        if let Some((mean, longest)) = self.convergence {
+            writeln!(
+                out,
+                "  converged    after {mean:.1} iterations on average, {longest} at most"
             )?;
         }
         Ok(())

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use super::checks::{flag_sum_rule, flag_uncertain};
 use super::choice::{plan, Plan};
 use super::report::{GpuReport, Report, Summary};
-use super::validation::{date_transient_failures, recompute_sliding, validate};
+use super::validation::{date_transient_failures, recompute_sliding, settle_on_the_host, validate};
 use crate::backend::gpu::context;
 use crate::backend::gpu::plan::{follow_lane_plan, variant};
 use crate::backend::gpu::shader::Variant;
@@ -276,6 +276,7 @@ impl Runner {
         let gpu_report = gpu_report.map(|mut report| {
             report.recomputed = recompute_sliding(scene, &self.settings, &mut lanes);
             date_transient_failures(scene, &mut lanes);
+            settle_on_the_host(scene, &self.settings, &mut lanes);
             report.validation = validate(scene, precision, &self.settings, &mut lanes);
             report
         });

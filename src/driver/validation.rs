@@ -1,10 +1,13 @@
 //! The host's checks of a GPU run against the CPU path: the lanes the
 //! kernels flag `sliding` recomputed, the failures of their transient
-//! dated, and a few sweep values recomputed to validate the rest
-//! ([`Validation`], `gpu-mismatch` beyond [`validation_tolerance`]).
+//! dated, the convergence times of a run with basin images taken from the
+//! references recomputed, and a few sweep values recomputed to validate
+//! the rest ([`Validation`], `gpu-mismatch` beyond
+//! [`validation_tolerance`]).
 
 use rayon::prelude::*;
 
+use crate::attractor::group::{same_attractor, Rule};
 use crate::backend::gpu::plan::follow_lane_plan;
 use crate::method::{LaneResult, LaneStatus, MethodSettings};
 use crate::plan::{cpu_twin, method_settings};
@@ -105,6 +108,38 @@ pub(super) fn date_transient_failures(scene: &Scene, lanes: &mut [LaneResult]) {
     for (&k, cpu) in failed.iter().zip(cpu_lanes(scene, &settings, &failed)) {
         if cpu.status.is_failure() {
             lanes[k].status = cpu.status;
+        }
+    }
+}
+
+/// Gives the lanes of a GPU run that keeps convergence times (basin
+/// images) their times: the kernels' transient leaves its points on the
+/// device, so each lane's reference is recomputed on the CPU path (f64,
+/// with the GPU's steps and parts, without exponents: one trajectory an
+/// iteration where a CPU run's averaging takes D + 1 or 2D + 1) and its
+/// time taken where the recomputed lane ends
+/// on the GPU lane's attractor (the attractor test at the GPU's precision);
+/// elsewhere, and for failed lanes, it stays empty.
+pub(super) fn settle_on_the_host(scene: &Scene, gpu: &MethodSettings, lanes: &mut [LaneResult]) {
+    if !gpu.keep_settling {
+        return;
+    }
+    let unsettled: Vec<usize> = (0..lanes.len())
+        .filter(|&k| lanes[k].settled.is_none() && !lanes[k].status.is_failure())
+        .collect();
+    if unsettled.is_empty() {
+        return;
+    }
+    let mut settings = cpu_twin(scene, gpu);
+    settings.lyapunov = false;
+    settings.bifurcation_points = 0;
+    let rule = Rule::new(scene.system.dimension(), gpu.rounding_unit);
+    for (&k, cpu) in unsettled
+        .iter()
+        .zip(cpu_lanes(scene, &settings, &unsettled))
+    {
+        if same_attractor(&lanes[k], &cpu, rule) {
+            lanes[k].settled = cpu.settled;
         }
     }
 }

@@ -22,10 +22,13 @@ use crate::scene::Scene;
 /// `starts` (their count), with basin images (`attractors.basins`)
 /// `basin_fraction_error` (the fraction's binomial standard error),
 /// `basin_fraction_half` (on the grid at half the resolution),
-/// `basin_entropy`, `boundary_basin_entropy` and `fractal_boundary`
-/// (the value's, repeated on its rows) and `critical_shock` (the
-/// attractor's; all empty beyond the values with an image), then the final state of the lane that found it, and its
-/// `status`.
+/// `basin_entropy`, `boundary_basin_entropy`, `fractal_boundary`,
+/// `uncertainty_exponent` and `boundary_dimension` (the value's, repeated
+/// on its rows) and `critical_shock` (the attractor's; all empty beyond
+/// the values with an image), and `convergence_mean`,
+/// `convergence_median` and `convergence_max` (its starts' convergence
+/// times in iterations, at every value), then the final state of the
+/// lane that found it, and its `status`.
 pub fn attractors_header(scene: &Scene) -> Vec<String> {
     let mut header: Vec<String> = scene.sweep.axes().map(|a| a.parameter.clone()).collect();
     header.extend([BRANCH_COLUMN, "period", "impacts_per_period"].map(String::from));
@@ -44,13 +47,18 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
 }
 
 /// The columns of the basin measures.
-const BASIN_COLUMNS: [&str; 6] = [
+const BASIN_COLUMNS: [&str; 11] = [
     "basin_fraction_error",
     "basin_fraction_half",
     "basin_entropy",
     "boundary_basin_entropy",
     "fractal_boundary",
+    "uncertainty_exponent",
+    "boundary_dimension",
     "critical_shock",
+    "convergence_mean",
+    "convergence_median",
+    "convergence_max",
 ];
 
 /// Whether the scene asks for basin images (and so their columns).
@@ -78,15 +86,24 @@ fn basin_cells(
             let shock = (label != basins::FAILED)
                 .then(|| critical_shock(scene, v, attractor, label))
                 .flatten();
+            let uncertainty = v.uncertainty.as_ref();
             cells.extend([
                 number(basins::half_resolution_fraction(&v.image, label)),
                 number(v.entropy.basin),
                 number(v.entropy.boundary),
                 v.entropy.fractal().to_string(),
+                uncertainty.map_or(String::new(), |u| number(u.exponent)),
+                uncertainty.map_or(String::new(), |u| number(u.boundary_dimension())),
                 shock.map_or(String::new(), number),
             ])
         }
-        None => cells.extend((0..5).map(|_| String::new())),
+        None => cells.extend((0..7).map(|_| String::new())),
+    }
+    match attractor.convergence() {
+        Some((mean, median, largest)) => {
+            cells.extend([number(mean), number(median), largest.to_string()])
+        }
+        None => cells.extend((0..3).map(|_| String::new())),
     }
     cells
 }

@@ -9,7 +9,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::files::{number, write_file};
-use crate::attractor::basins::{self, BasinImage, Entropy};
+use crate::attractor::basins::{self, BasinImage, Entropy, Uncertainty};
 use crate::attractor::Attractors;
 use crate::error::Result;
 use crate::scene::{Layout, Scene};
@@ -35,6 +35,7 @@ pub fn is_basin_file(name: &str, extension: &str) -> bool {
 pub struct ValueBasins {
     pub image: BasinImage,
     pub entropy: Entropy,
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// The basin images of the first `attractors.basins` values (none for a
@@ -54,7 +55,12 @@ pub fn value_basins(scene: &Scene, found: &Attractors) -> Vec<ValueBasins> {
         .map(|point| {
             let image = basins::image(found, point, (counts[0], counts[1]));
             let entropy = basins::entropy(&image, starts.basins.box_side);
-            ValueBasins { image, entropy }
+            let uncertainty = basins::uncertainty(&image);
+            ValueBasins {
+                image,
+                entropy,
+                uncertainty,
+            }
         })
         .collect()
 }

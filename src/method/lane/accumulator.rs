@@ -2,6 +2,7 @@
 //! the statuses they decide, whichever backend produced the iterations.
 
 use super::orbit::RecentPoints;
+use super::settling::{attractor_tolerance, Settling};
 use nalgebra::{Const, DimMin, SMatrix};
 
 use super::plan::LanePlan;
@@ -73,6 +74,10 @@ pub struct LaneAccumulator<const D: usize> {
     /// Whether the result keeps them (see [`MethodSettings::keep_orbit`]).
     keep_orbit: bool,
     jacobians: Option<Vec<f64>>,
+    /// The reference's points from the lane's start, for its convergence
+    /// time (see [`MethodSettings::keep_settling`]), and the tolerance.
+    settling: Option<Settling<D>>,
+    settling_tolerance: f64,
     pub(super) failed_at: Option<usize>,
     /// What stopped the lane at `failed_at`.
     pub(super) failure: Failure,
@@ -162,6 +167,8 @@ where
             recent: RecentPoints::new(settings.max_period, settings.rounding_unit),
             keep_orbit: settings.keep_orbit,
             jacobians: settings.keep_jacobians.then(Vec::new),
+            settling: None,
+            settling_tolerance: attractor_tolerance(settings.rounding_unit),
             failed_at: None,
             failure: Failure::NonFinite,
         }
@@ -204,6 +211,9 @@ where
             // finite and its column NaN.
             self.fail_because(self.taken(), Failure::of_stats(stats));
             return false;
+        }
+        if let (Some(settling), Some(point)) = (self.settling.as_mut(), point) {
+            settling.push(point);
         }
         let aligning = self.aligned < self.align;
         if let Some(kept) = self.jacobians.as_mut().filter(|_| !aligning) {
@@ -279,6 +289,13 @@ where
         self.uncertainty
             .end_iteration(self.qr.sums(), self.averaging_time());
         true
+    }
+
+    /// Goes on from the reference's points before the iterations this
+    /// accumulator takes (the start's and the transient's): the result
+    /// then has its convergence time.
+    pub fn settle_from(&mut self, settling: Settling<D>) {
+        self.settling = Some(settling);
     }
 
     /// The time of the averaging iterations so far: a Poincaré map's
@@ -359,17 +376,19 @@ where
         let grazing_bound = self.grazing_error / (self.done.max(1) as f64 * self.period);
         let status = self.status(resolution_bound, grazing_bound);
         let orbit_period = self.recent.period();
+        let orbit = self.recent.orbit(orbit_period);
+        let settled = self.settling.as_ref().and_then(|s| {
+            let periodic = orbit_period.map(|_| orbit.as_slice());
+            s.time(periodic, self.done, self.settling_tolerance)
+        });
         LaneResult {
             exponents,
             impacts_per_period: self.impacts as f64 / self.iterations as f64,
             crossings_per_period: self.crossings.map(|c| c as f64 / self.iterations as f64),
             period: self.period,
             orbit_period,
-            orbit: if self.keep_orbit {
-                self.recent.orbit(orbit_period)
-            } else {
-                Vec::new()
-            },
+            orbit: if self.keep_orbit { orbit } else { Vec::new() },
+            settled,
             orbit_term,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),
@@ -395,6 +414,7 @@ where
             period: self.period,
             orbit_period: None,
             orbit: Vec::new(),
+            settled: None,
             orbit_term: f64::NAN,
             bifurcation: self.bifurcation,
             jacobians: self.jacobians.unwrap_or_default(),

@@ -8,6 +8,7 @@ use super::grazing::estimate_resolving_grazing;
 use super::plan::{plan_lane, LanePlan};
 use super::result::{not_run, LaneResult};
 use super::settings::{MethodSettings, Tangent};
+use super::settling::Settling;
 use crate::integrate::clock::ZERO_PHASE;
 use crate::system::{FlowSettings, IterationStats, Params, Part, System};
 
@@ -42,6 +43,10 @@ where
         acc.fail_at(0, &x, &IterationStats::default());
         return acc.finish();
     }
+    let mut settling = settings.keep_settling.then(Settling::default);
+    if let Some(s) = settling.as_mut() {
+        s.push(&x);
+    }
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
         if settings.flow.stop.requested() {
@@ -63,16 +68,25 @@ where
             acc.fail_at(n, &x, &discard);
             return acc.finish();
         }
+        if let Some(s) = settling.as_mut() {
+            s.push(&x);
+        }
     }
-    average(&system, settings, plan, x)
+    let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
+    if let Some(s) = settling {
+        acc.settle_from(s);
+    }
+    average(&system, settings, plan, x, acc)
 }
 
-/// The averaging iterations of a lane from x, the end of its transient.
+/// The averaging iterations of a lane from x, the end of its transient,
+/// into `acc` (new, or holding the points before them).
 pub(super) fn average<const D: usize, S: System<D>>(
     system: &S,
     settings: &MethodSettings,
     plan: LanePlan,
     mut x: [f64; D],
+    mut acc: LaneAccumulator<D>,
 ) -> LaneResult
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
@@ -81,7 +95,6 @@ where
         steps_per_period: plan.steps_per_period,
         ..settings.flow.clone()
     };
-    let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
     let mut jacobians = Vec::with_capacity(plan.parts);
     for _ in 0..settings.iterations {
         if settings.flow.stop.requested() {

@@ -10,6 +10,7 @@ use super::grazing::resolve_grazing;
 use super::plan::{plan_lane, LanePlan};
 use super::result::LaneResult;
 use super::settings::{MethodSettings, Tangent};
+use super::settling::Settling;
 use crate::integrate::clock::ZERO_PHASE;
 use crate::method::jacobian;
 use crate::perturbation::perturbation_at;
@@ -58,6 +59,16 @@ where
         .iter()
         .map(|x| (!all_finite(x)).then(|| (0, Failure::of(x, &start))))
         .collect();
+    let mut settling: Vec<Option<Settling<D>>> = xs
+        .iter()
+        .map(|x| {
+            settings.keep_settling.then(|| {
+                let mut s = Settling::default();
+                s.push(x);
+                s
+            })
+        })
+        .collect();
     for n in 0..settings.transient {
         if settings.flow.stop.requested() {
             break;
@@ -71,6 +82,9 @@ where
             if failed[k].is_none() && !all_finite(x) {
                 failed[k] = Some((n, Failure::of(x, &discard[k])));
             }
+            if let Some(s) = settling[k].as_mut() {
+                s.push(x);
+            }
         }
     }
     let lockstep = settings.lyapunov
@@ -80,10 +94,14 @@ where
         .iter()
         .zip(&plans)
         .zip(&failed)
-        .map(|((system, &plan), failed)| {
+        .zip(&mut settling)
+        .map(|(((system, &plan), failed), settling)| {
             let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);
             if let Some((n, cause)) = *failed {
                 acc.fail_because(n, cause);
+            }
+            if let Some(s) = settling.take() {
+                acc.settle_from(s);
             }
             acc
         })
@@ -97,7 +115,7 @@ where
         .zip(xs.into_iter().zip(accumulators))
         .map(|((system, plan), (x, acc))| match acc.failed_at {
             Some(_) => acc.finish(),
-            None => average(system, settings, plan, x),
+            None => average(system, settings, plan, x, acc),
         })
         .collect()
 }

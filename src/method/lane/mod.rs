@@ -14,7 +14,7 @@
 //! backend gets the alignment that way, by running the settings it is
 //! given.
 //!
-//! The steps, one file each: `settings` (what every lane shares), `plan`
+//! The steps, one file each: `settings` (what every lane shares), `settling` (a lane's convergence time), `plan`
 //! (a lane's steps and sub-maps), `driver` (one lane alone), `lockstep`
 //! (neighbouring lanes stepped together), `grazing` (the δ ladder of
 //! near-grazing iterations), `accumulator` (the sums and the statuses they
@@ -29,6 +29,7 @@ mod orbit;
 mod plan;
 mod result;
 mod settings;
+mod settling;
 mod uncertainty;
 
 pub use crate::perturbation::perturbation_at;
@@ -40,3 +41,4 @@ pub use orbit::{return_tolerance, RecentPoints};
 pub use plan::{plan_lane, plan_of, LanePlan, MAX_STEPS_PER_PERIOD, MAX_STEP_RATE};
 pub use result::{not_run, LaneResult, LaneStatus};
 pub use settings::{difference_noise, MethodSettings, Stop, Tangent};
+pub use settling::{attractor_tolerance, Settling};

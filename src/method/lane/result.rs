@@ -179,6 +179,10 @@ pub struct LaneResult {
     /// state: what a neighbouring value is continued from. Empty unless the
     /// settings keep it (`keep_orbit`: runs with `[attractors]` or `[orbits]`).
     pub orbit: Vec<f64>,
+    /// The iterations from the start until the reference came within the
+    /// attractor tolerance of its orbit for good (see `settling`): with
+    /// `keep_settling` only, `None` otherwise and for a failed lane.
+    pub settled: Option<usize>,
     /// A term of the sum rule that depends on the orbit, per unit time: a
     /// Poincaré map's ln |F_k(x_0)/F_k(x_n)| over the averaging time (0
     /// for a period map).
@@ -228,6 +232,7 @@ pub fn not_run(
         period,
         orbit_period: None,
         orbit: Vec::new(),
+        settled: None,
         orbit_term: f64::NAN,
         bifurcation: Vec::new(),
         jacobians: Vec::new(),

@@ -48,6 +48,10 @@ pub struct MethodSettings {
     /// need only the period, and at a
     /// million lanes the points would be most of the memory held.
     pub keep_orbit: bool,
+    /// Whether a lane keeps its reference's points from its start for its
+    /// convergence time ([`LaneResult::settled`](super::LaneResult)): runs
+    /// with basin images (`attractors.basins`).
+    pub keep_settling: bool,
     /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
     pub submaps: Option<usize>,
     /// Whether rounding accumulates over the RK4 steps of an iteration (f64),
