@@ -442,6 +442,29 @@ fn steps<const D: usize, const W: usize, S: Flows<D>>(
     }
 }
 
+/// The step loop of [`steps`], with or without general surfaces: the
+/// flow's own loop ([`walk`]) takes the steps that meet nothing, this one
+/// the step that meets a wall or surface, resolving it, and bounds each
+/// trajectory's located events ([`EventBound`]; where every trajectory
+/// has ended, the rest of the call, millions of steps where flights grew
+/// that short, is not taken) and the steps between two looks at the stop
+/// request.
+///
+/// Measured choices it keeps:
+/// - The forcing phase, when the slots share it, sits in a register: an
+///   array of W copies, written a scalar at a time and read back as
+///   pairs, stalled every step on failed store forwards. `phases` is then
+///   unused until the end.
+/// - The surfaces' values are kept outside the loop and touched only
+///   where there are surfaces (zeroing and copying them every step cost
+///   the flows without any a tenth of their time), in two buffers that
+///   swap roles each step (`at_start` indexes the start's): copying the
+///   end's values to the start each step was a `memcpy` whose stores the
+///   next step's loads waited for.
+/// - Which slots meet a wall or surface in a step is a mask, bit k for
+///   slot k: the loop over an array of bools that found whether any was
+///   set read back, one at a time, the bytes the vector compares had just
+///   stored, and cost a tenth of the loop.
 #[inline(always)]
 fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     flows: &S,
@@ -464,26 +487,12 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         crate::array::from_fn(|i| crate::array::from_fn(|w| ys[w.min(n - 1)][i]));
     // General surfaces: each trajectory's region of the switches, and its
     // surfaces' values and rates at the step's start.
-    let surfaces: &[Surface] = if SURFACES {
-        flows.of(0).surfaces()
-    } else {
-        &[]
-    };
-    // The forcing phase when the slots share it, in a register: an array
-    // of W copies, written a scalar at a time and read back as pairs,
-    // stalled every step on failed store forwards. `phases` is then
-    // unused until the end.
+    // (None without SURFACES: `steps` takes that loop for those flows.)
+    let surfaces: &[Surface] = flows.of(0).surfaces();
     let mut phase = phases[0];
     let unset = [[ZERO_PHASE; 3]; W];
     let mut regions = [0u32; W];
-    // (Kept outside the step loop and touched only where there are
-    // surfaces: zeroing and copying them every step cost the flows without
-    // any a tenth of their time.)
-    //
-    // The values at the step's start and end, in two buffers that swap
-    // roles each step (`at_start` indexes the start's): copying the end's
-    // values to the start each step was a `memcpy` whose stores the next
-    // step's loads waited for.
+    // The surfaces' values at the step's start and end.
     let mut values = [SurfaceBatch::<W>::default(); 2];
     let mut at_start = 0;
     if SURFACES {
@@ -493,11 +502,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     // A flow with a step loop of its own takes the steps that meet no wall
     // there, and this loop the one that does (or every step, without).
     let live = (1u32 << n) - 1;
-    // Each slot's located events before this call (its statistics may
-    // carry a whole transient's), for the bound on the call's.
-    let counted: [u32; W] = crate::array::from_fn(|k| stats.get(k).map_or(0, events));
-    // The slots ended there (bit k).
-    let mut ended = 0u32;
+    let mut bound = EventBound::<W>::new(stats);
     let mut left = part.steps(steps).len();
     // Steps until the next look at the stop request.
     let mut unseen = STEPS_BETWEEN_STOP_LOOKS;
@@ -538,20 +543,18 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             &sides,
             &unset,
         );
-        // Bit k: slot k meets a wall or surface in this step. (A mask: the
-        // loop over an array of bools that found whether any was set read
-        // back, one at a time, the bytes the vector compares had just
-        // stored, and cost a tenth of the loop.)
+        // Bit k: slot k meets a wall or surface in this step.
         let mut meets = walls.meets(&y, &y1, &h);
         if SURFACES {
-            let [first, second] = &mut values;
-            let (before, after) = if at_start == 0 {
-                (&*first, second)
-            } else {
-                (&*second, first)
-            };
-            flows.surface_values(&sides, &next_phase, &next, &y1, after);
-            meets |= surface_meets(surfaces, &regions, (before, after), &h);
+            let end = (&sides, &next_phase, &next);
+            meets |= surfaces_met(
+                flows,
+                (surfaces, &regions),
+                (&mut values, at_start),
+                end,
+                &y1,
+                &h,
+            );
         }
         // Unused slots repeat a trajectory and are never resolved.
         meets &= (1u32 << n) - 1;
@@ -566,17 +569,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             };
             let end_values = SURFACES.then(|| &mut values[1 - at_start]);
             slots.resolve(meets, (&y, &mut y1), &mut regions, end_values, stats);
-            ended |= end_past_the_bound(meets, &counted, &mut y1, stats);
-            if ended == live {
-                // Every trajectory ended: none is read past here, and the
-                // rest of the call (millions of steps, where flights grew
-                // that short) is not taken.
-                for (k, out) in ys.iter_mut().enumerate() {
-                    *out = [f64::NAN; D];
-                    debug_assert!(stats[k].too_many_events);
-                }
-                return crate::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k));
-            }
+            bound.end_past_it(meets, &mut y1, stats);
         }
         y = y1;
         phases = next;
@@ -584,11 +577,36 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
         if SURFACES {
             at_start = 1 - at_start;
         }
+        if bound.ended == live {
+            break;
+        }
     }
     for (k, out) in ys.iter_mut().enumerate() {
         *out = crate::array::from_fn(|i| y[i][k]);
     }
     crate::array::from_fn(|k| phase_of(S::SHARED, &phases, &phase, k))
+}
+
+/// The surfaces' values at the step's end (`end`: the slots' sides and
+/// phases, `y1`), into the buffer of `values` that is not `at_start`, and
+/// the slots that meet a surface in the step ([`surface_meets`]).
+#[inline(always)]
+fn surfaces_met<const D: usize, const W: usize, S: Flows<D>>(
+    flows: &S,
+    (surfaces, regions): (&[Surface], &[u32; W]),
+    (values, at_start): (&mut [SurfaceBatch<W>; 2], usize),
+    (sides, phase, phases): (&[u32; W], &Phase, &[Phase; W]),
+    y1: &[[f64; W]; D],
+    h: &[f64; W],
+) -> u32 {
+    let [first, second] = values;
+    let (before, after) = if at_start == 0 {
+        (&*first, second)
+    } else {
+        (&*second, first)
+    };
+    flows.surface_values(sides, phase, phases, y1, after);
+    surface_meets(surfaces, regions, (before, after), h)
 }
 
 /// The located events in `stats`: wall impacts and crossings of events
@@ -601,30 +619,47 @@ fn events(stats: &IterationStats) -> u32 {
         .fold(0u32, |sum, &c| sum.wrapping_add(c))
 }
 
-/// Ends, non-finite, each slot of `resolved` whose events in this call
-/// (beyond `counted` at its start) passed [`MAX_EVENTS_PER_ITERATION`],
-/// flagging it: its lane stops with that status. Returns those slots (bit
-/// k). Their later steps in the call are plain steps of NaN (no wall or
-/// surface is met by NaN), until every slot has ended.
-#[inline(always)]
-fn end_past_the_bound<const D: usize, const W: usize>(
-    resolved: u32,
-    counted: &[u32; W],
-    y1: &mut [[f64; W]; D],
-    stats: &mut [IterationStats],
-) -> u32 {
-    let mut ended = 0u32;
-    for k in (0..W).filter(|&k| resolved & (1 << k) != 0) {
-        let st = &mut stats[k];
-        if events(st).wrapping_sub(counted[k]) > MAX_EVENTS_PER_ITERATION {
-            st.too_many_events = true;
-            ended |= 1 << k;
-            for row in y1.iter_mut() {
-                row[k] = f64::NAN;
+/// The bound on each trajectory's located events in one call of the step
+/// loop, [`MAX_EVENTS_PER_ITERATION`].
+struct EventBound<const W: usize> {
+    /// Each slot's located events before this call (its statistics may
+    /// carry a whole transient's).
+    counted: [u32; W],
+    /// The slots ended past the bound (bit k).
+    ended: u32,
+}
+
+impl<const W: usize> EventBound<W> {
+    #[inline(always)]
+    fn new(stats: &[IterationStats]) -> Self {
+        EventBound {
+            counted: crate::array::from_fn(|k| stats.get(k).map_or(0, events)),
+            ended: 0,
+        }
+    }
+
+    /// Ends, non-finite, each slot of `resolved` whose events in this call
+    /// passed the bound, flagging it: its lane stops with that status.
+    /// Their later steps in the call are plain steps of NaN (no wall or
+    /// surface is met by NaN), until every slot has ended.
+    #[inline(always)]
+    fn end_past_it<const D: usize>(
+        &mut self,
+        resolved: u32,
+        y1: &mut [[f64; W]; D],
+        stats: &mut [IterationStats],
+    ) {
+        for k in (0..W).filter(|&k| resolved & (1 << k) != 0) {
+            let st = &mut stats[k];
+            if events(st).wrapping_sub(self.counted[k]) > MAX_EVENTS_PER_ITERATION {
+                st.too_many_events = true;
+                self.ended |= 1 << k;
+                for row in y1.iter_mut() {
+                    row[k] = f64::NAN;
+                }
             }
         }
     }
-    ended
 }
 
 /// The steps a flow's own step loop takes from y before one meets a wall
