@@ -485,14 +485,13 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let walls = WallColumns::of(flows);
     let mut y: [[f64; W]; D] =
         crate::array::from_fn(|i| crate::array::from_fn(|w| ys[w.min(n - 1)][i]));
-    // General surfaces: each trajectory's region of the switches, and its
-    // surfaces' values and rates at the step's start.
-    // (None without SURFACES: `steps` takes that loop for those flows.)
+    // General surfaces (none without SURFACES: `steps` takes that loop for
+    // those flows), each trajectory's region of the switches.
     let surfaces: &[Surface] = flows.of(0).surfaces();
     let mut phase = phases[0];
     let unset = [[ZERO_PHASE; 3]; W];
     let mut regions = [0u32; W];
-    // The surfaces' values at the step's start and end.
+    // The surfaces' values and rates at the step's start and end.
     let mut values = [SurfaceBatch::<W>::default(); 2];
     let mut at_start = 0;
     if SURFACES {
@@ -570,15 +569,16 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
             let end_values = SURFACES.then(|| &mut values[1 - at_start]);
             slots.resolve(meets, (&y, &mut y1), &mut regions, end_values, stats);
             bound.end_past_it(meets, &mut y1, stats);
+            if bound.ended == live {
+                y = y1;
+                break;
+            }
         }
         y = y1;
         phases = next;
         phase = next_phase;
         if SURFACES {
             at_start = 1 - at_start;
-        }
-        if bound.ended == live {
-            break;
         }
     }
     for (k, out) in ys.iter_mut().enumerate() {
