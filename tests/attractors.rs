@@ -745,15 +745,24 @@ fn entropy_by_hand(rows: usize, columns: usize, labels: &[i32], n: usize) -> (f6
     let mut boundary = Vec::new();
     for top in (0..rows - rows % n).step_by(n) {
         for left in (0..columns - columns % n).step_by(n) {
-            let mut shares = std::collections::BTreeMap::new();
+            // Over the box's admissible starts (label -2 is not a basin's).
+            let mut counts = std::collections::BTreeMap::new();
             for r in top..top + n {
                 for c in left..left + n {
-                    *shares.entry(labels[r * columns + c]).or_insert(0.0) += 1.0 / (n * n) as f64;
+                    let label = labels[r * columns + c];
+                    if label != -2 {
+                        *counts.entry(label).or_insert(0.0) += 1.0;
+                    }
                 }
             }
-            let s: f64 = shares.values().map(|p: &f64| -p * p.ln()).sum();
+            let cells: f64 = counts.values().sum();
+            if cells == 0.0 {
+                continue;
+            }
+            let shares: Vec<f64> = counts.values().map(|k| k / cells).collect();
+            let s: f64 = shares.iter().map(|p| -p * p.ln()).sum();
             entropies.push(s);
-            if shares.len() > 1 {
+            if counts.len() > 1 {
                 boundary.push(s);
             }
         }
@@ -858,6 +867,93 @@ fn a_basin_image_labels_every_start_and_its_measures_are_the_file_s() {
         assert!(shock > 0.0 && shock < 0.5, "{shock}");
     }
     assert!(s_b > 0.0 && s_bb > 0.0 && s_bb <= std::f64::consts::LN_2);
+}
+
+/// A basin image's box may reach past the wall (here x up to 3, the wall
+/// at 2): those starts are not run, labelled -2 (`inadmissible-start` in
+/// spectrum.csv), drawn apart and left out of the measures; the others'
+/// labels are those of a box that stops at the wall, start by start, and
+/// the fractions are of the admissible starts. On the GPU too, when one is
+/// present, with the same labels.
+#[test]
+fn starts_behind_the_wall_are_labelled_apart_and_left_out_of_the_measures() {
+    let (nx, ny) = (13, 8);
+    let scene_text = |x_to: u32, nx: usize| {
+        format!(
+            "{COEXISTING}[attractors]\ngrid = [{nx}, {ny}]\nbox = {{ x = [-3, {x_to}], v = [-3, 3] }}\nbasins = 1\nbasin_box = 2\n"
+        )
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let labels_of = |text: &str, name: &str| {
+        let scene = common::scene(text, &[]);
+        let report = common::run(&scene);
+        let out = dir.path().join(name);
+        lyapsweep::output::write(&scene, &report, &out).unwrap();
+        let (rows, columns, labels) = read_npy_i32(&out.join("basins-0.npy"));
+        assert_eq!(rows, ny);
+        (columns, labels, out)
+    };
+    // x = -3 + 0.5 k on both grids, exactly: columns 11 and 12 (x = 2.5, 3)
+    // lie behind the wall; x = 2 is on it, admissible.
+    let (columns, past, out) = labels_of(&scene_text(3, nx), "past");
+    let (inside_columns, inside, _) = labels_of(&scene_text(2, 11), "inside");
+    assert_eq!((columns, inside_columns), (13, 11));
+    for r in 0..ny {
+        for c in 0..nx {
+            let label = past[r * nx + c];
+            if c >= 11 {
+                assert_eq!(label, -2, "row {r}, column {c}");
+            } else {
+                assert_eq!(label, inside[r * 11 + c], "row {r}, column {c}");
+            }
+        }
+    }
+    assert!(past.contains(&0) && past.contains(&1), "{past:?}");
+
+    let rows = |file: &str| -> (Vec<String>, Vec<csv::StringRecord>) {
+        let mut table = csv::Reader::from_path(out.join(file)).unwrap();
+        let header = table.headers().unwrap().iter().map(String::from).collect();
+        (header, table.records().map(|r| r.unwrap()).collect())
+    };
+    let (header, lanes) = rows("spectrum.csv");
+    let status = header.iter().position(|h| h == "status").unwrap();
+    for (k, lane) in lanes.iter().enumerate() {
+        assert_eq!(
+            &lane[status] == "inadmissible-start",
+            k % nx >= 11,
+            "start {k}: {lane:?}"
+        );
+    }
+    let (header, attractors) = rows("attractors.csv");
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    assert_eq!(
+        attractors.len(),
+        2,
+        "the two orbits, no row for the starts not run"
+    );
+    let admissible = (ny * 11) as f64;
+    let (s_b, s_bb) = entropy_by_hand(ny, nx, &past, 2);
+    for row in &attractors {
+        let label: i32 = row[col("branch")].parse().unwrap();
+        let share = past.iter().filter(|&&l| l == label).count() as f64 / admissible;
+        assert_eq!(row[col("basin_fraction")].parse::<f64>().unwrap(), share);
+        let entropy: f64 = row[col("basin_entropy")].parse().unwrap();
+        assert!((entropy - s_b).abs() < 1e-12, "{entropy} against {s_b}");
+        let boundary: f64 = row[col("boundary_basin_entropy")].parse().unwrap();
+        assert!((boundary - s_bb).abs() < 1e-12, "{boundary} against {s_bb}");
+    }
+
+    if gpu_or_skip(
+        "starts_behind_the_wall_are_labelled_apart_and_left_out_of_the_measures",
+        Precision::F64,
+    ) {
+        let gpu = scene_text(3, nx).replace(
+            "backend = \"cpu\"",
+            "backend = \"gpu\"\nprecision = \"f64\"",
+        );
+        let (_, on_gpu, _) = labels_of(&gpu, "gpu");
+        assert_eq!(on_gpu, past);
+    }
 }
 
 /// The basin labels of a grid of starts on the GPU (f64) are the CPU

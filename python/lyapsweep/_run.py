@@ -310,7 +310,9 @@ class Run:
         scene with ``attractors.basins``: a 2-D array of int32, rows along the
         grid's second state and columns along its first, each start's label
         the branch of the attractor its lane ended on (as attractors.csv's
-        ``branch``), -1 where the lane failed. Read from ``basins-<value>.npy``."""
+        ``branch``), -1 where the lane failed, -2 where the start lies outside
+        the admissible states (behind a wall; not run). Read from
+        ``basins-<value>.npy``."""
         path = self.folder / f"basins-{int(value)}.npy"
         if not path.exists():
             raise ValueError(

@@ -41,12 +41,18 @@
 //!   start and its neighbour); only the image's two states are kicked.
 //!
 //! Lanes that failed, or whose motion the method does not resolve, are
-//! labelled [`FAILED`] and count as one more label in the entropy.
+//! labelled [`FAILED`] and count as one more label in the entropy. Starts
+//! outside the admissible states (behind a wall the box reaches past) are
+//! labelled [`INADMISSIBLE`] and left out of every measure: the wall's
+//! edge is not a boundary between basins, and those starts are no motion's.
 
 use super::Attractors;
 
 /// The label of a start whose lane failed or is not resolved.
 pub const FAILED: i32 = -1;
+
+/// The label of a start outside the admissible states (not run).
+pub const INADMISSIBLE: i32 = -2;
 
 /// One value's labels over the grid: `labels[j * nx + i]` for the start at
 /// the i-th value of the first state and the j-th of the second.
@@ -58,10 +64,11 @@ pub struct BasinImage {
 }
 
 /// The labels of grid point `point`'s `nx × ny` starts: the branch of each
-/// start's attractor, [`FAILED`] for a lone lane.
+/// start's attractor, [`FAILED`] for a lone lane, [`INADMISSIBLE`] for a
+/// start not run.
 pub fn image(found: &Attractors, point: usize, (nx, ny): (usize, usize)) -> BasinImage {
     let value = &found.values[point];
-    let labels = (0..nx * ny)
+    let mut labels: Vec<i32> = (0..nx * ny)
         .map(|s| {
             value
                 .of_start
@@ -72,6 +79,11 @@ pub fn image(found: &Attractors, point: usize, (nx, ny): (usize, usize)) -> Basi
                 .map_or(FAILED, |b| b as i32)
         })
         .collect();
+    for &s in &value.inadmissible {
+        if let Some(label) = labels.get_mut(s) {
+            *label = INADMISSIBLE;
+        }
+    }
     BasinImage { nx, ny, labels }
 }
 
@@ -105,19 +117,30 @@ pub fn entropy(image: &BasinImage, side: usize) -> Entropy {
     assert!(side > 0, "boxes of at least one cell");
     let (bx, by) = (image.nx / side, image.ny / side);
     let (mut sum, mut boundary_sum, mut boundary_boxes) = (0.0, 0.0, 0);
+    let mut boxes = 0;
     let mut counts: Vec<(i32, usize)> = Vec::new();
     for j in 0..by {
         for i in 0..bx {
             counts.clear();
             for row in j * side..(j + 1) * side {
                 for &label in &image.labels[row * image.nx + i * side..][..side] {
+                    if label == INADMISSIBLE {
+                        continue;
+                    }
                     match counts.iter_mut().find(|(l, _)| *l == label) {
                         Some((_, n)) => *n += 1,
                         None => counts.push((label, 1)),
                     }
                 }
             }
-            let cells = (side * side) as f64;
+            // The shares over the box's admissible cells; a box of none
+            // is no box of the basins'.
+            let cells: usize = counts.iter().map(|&(_, n)| n).sum();
+            if cells == 0 {
+                continue;
+            }
+            boxes += 1;
+            let cells = cells as f64;
             let s: f64 = counts
                 .iter()
                 .map(|&(_, n)| {
@@ -132,7 +155,6 @@ pub fn entropy(image: &BasinImage, side: usize) -> Entropy {
             }
         }
     }
-    let boxes = bx * by;
     Entropy {
         basin: if boxes > 0 { sum / boxes as f64 } else { 0.0 },
         boundary: if boundary_boxes > 0 {
@@ -180,10 +202,13 @@ pub fn uncertainty(image: &BasinImage) -> Option<Uncertainty> {
             let along_y = (0..ny - largest).flat_map(|j| (0..nx).map(move |i| (i, j, i, j + s)));
             let (mut pairs, mut differ) = (0usize, 0usize);
             for (i, j, k, l) in along_x.chain(along_y) {
-                pairs += 1;
-                differ += usize::from(at(i, j) != at(k, l));
+                let (a, b) = (at(i, j), at(k, l));
+                if a != INADMISSIBLE && b != INADMISSIBLE {
+                    pairs += 1;
+                    differ += usize::from(a != b);
+                }
             }
-            (s, differ as f64 / pairs as f64)
+            (s, differ as f64 / pairs.max(1) as f64)
         })
         .collect();
     let points: Vec<(f64, f64)> = fractions
@@ -218,8 +243,9 @@ pub fn half_resolution_fraction(image: &BasinImage, label: i32) -> f64 {
     let (mut on, mut all) = (0usize, 0usize);
     for j in (0..image.ny).step_by(2) {
         for i in (0..image.nx).step_by(2) {
-            all += 1;
-            on += usize::from(image.labels[j * image.nx + i] == label);
+            let at = image.labels[j * image.nx + i];
+            all += usize::from(at != INADMISSIBLE);
+            on += usize::from(at == label);
         }
     }
     on as f64 / all as f64
@@ -254,7 +280,7 @@ pub fn critical_shock(
     let (wx, wy) = (width(grid.x), width(grid.y));
     let mut best: Option<f64> = None;
     for (k, &other) in image.labels.iter().enumerate() {
-        if other == label || other == FAILED {
+        if other == label || other == FAILED || other == INADMISSIBLE {
             continue;
         }
         let (x, y) = (grid.x[k % image.nx], grid.y[k / image.nx]);

@@ -101,6 +101,8 @@ pub struct ValueAttractors {
     pub attractors: Vec<Attractor>,
     /// The attractor each lane ended on, by the lane's start.
     pub of_start: Vec<Option<usize>>,
+    /// The starts outside the admissible states (not run), in order.
+    pub inadmissible: Vec<usize>,
     /// Continuation's evidence: (attractor here, neighbouring point, its
     /// attractor) when a lane started from that attractor's final state
     /// ended on this one.

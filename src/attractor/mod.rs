@@ -22,7 +22,7 @@ pub mod branch;
 pub mod group;
 mod index;
 
-use crate::method::LaneResult;
+use crate::method::{LaneResult, LaneStatus};
 use crate::scene::{Precision, Scene, Seed};
 use group::{Member, Rule, ValueAttractors};
 
@@ -129,6 +129,11 @@ impl Found {
         for (j, lane) in lanes.iter().enumerate() {
             let point = batch.sweep.point_of(batch.sweep_lane(j));
             let start = batch.lane_start(j);
+            // Not a motion: no attractor's row, and no share of the basins.
+            if lane.status == LaneStatus::Inadmissible {
+                self.values[point].inadmissible.push(start);
+                continue;
+            }
             let member = Member {
                 start,
                 lane: LaneResult {

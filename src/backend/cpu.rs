@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::Progress;
-use crate::method::{Lane, LaneResult, MethodSettings};
+use crate::method::{Lane, LaneResult, LaneStatus, MethodSettings};
 use crate::scene::Scene;
 
 /// Lanes whose transients are stepped together (`method::lane::run_lanes`):
@@ -28,17 +28,23 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                 return;
             }
             let first = c * NEIGHBOURS;
-            let lanes: Vec<Lane> = (first..first + slots.len())
-                .map(|k| Lane {
+            let (run, unrun): (Vec<usize>, Vec<usize>) =
+                (first..first + slots.len()).partition(|&k| !scene.lane_start_inadmissible(k));
+            let lanes: Vec<Lane> = run
+                .iter()
+                .map(|&k| Lane {
                     params: scene.lane_params(k),
                     settings,
                     initial_state: scene.lane_initial_state(k).to_vec(),
                 })
                 .collect();
             let results = (crate::method::runner(scene.system).run_lanes)(&lanes);
-            progress.advance((lanes.len() * (settings.transient + settings.iterations)) as u64);
-            for (slot, result) in slots.iter_mut().zip(results) {
-                *slot = Some(result);
+            progress.advance((slots.len() * (settings.transient + settings.iterations)) as u64);
+            for (k, result) in run.into_iter().zip(results) {
+                slots[k - first] = Some(result);
+            }
+            for k in unrun {
+                slots[k - first] = Some(inadmissible(scene, settings, k));
             }
         });
     if settings.flow.stop.requested() {
@@ -49,4 +55,15 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
         .into_iter()
         .map(|r| r.expect("every chunk fills its slots"))
         .collect()
+}
+
+/// The result of lane `k`, whose start is outside the admissible states:
+/// not run ([`Scene::lane_start_inadmissible`]).
+pub fn inadmissible(scene: &Scene, settings: &MethodSettings, k: usize) -> LaneResult {
+    let params = scene.lane_params(k);
+    let plan = (crate::method::runner(scene.system).plan)(&params, settings);
+    let period = (scene.system.period)(&params);
+    let mut lane = crate::method::lane::not_run(settings, scene.system.dimension(), period, plan);
+    lane.status = LaneStatus::Inadmissible;
+    lane
 }

@@ -225,7 +225,13 @@ impl Runner {
                 // does not run it at all).
                 // (Over the host's cores, as the other steps over every
                 // lane are: at a million lanes each is a serial 0.1 s.)
+                // Nor are the starts outside the admissible states: the
+                // kernels ran them, the CPU path does not.
                 run.lanes.par_iter_mut().enumerate().for_each(|(k, lane)| {
+                    if scene.lane_start_inadmissible(k) {
+                        *lane = cpu::inadmissible(scene, settings, k);
+                        return;
+                    }
                     let own =
                         (crate::method::runner(scene.system).plan)(&scene.lane_params(k), settings);
                     if !own.affordable() {

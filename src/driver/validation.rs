@@ -196,6 +196,9 @@ pub(super) fn validate(
     let tolerance = validation_tolerance(precision);
     let mut max_difference: f64 = 0.0;
     for &k in &picks {
+        if scene.lane_start_inadmissible(k) {
+            continue;
+        }
         let lane = crate::method::Lane {
             params: scene.lane_params(k),
             settings: &settings,

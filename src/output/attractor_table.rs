@@ -166,17 +166,14 @@ pub fn attractor_rows<'a>(
                     row.push(number(a.first.expected_sum));
                     row.push(number(lane.error));
                 }
-                let fraction = a.starts as f64 / found.starts as f64;
+                // Of the starts that are motions (a basin image's box may
+                // reach past a wall: those starts are no basin's).
+                let starts = found.starts - value.inadmissible.len();
+                let fraction = a.starts as f64 / starts as f64;
                 row.push(number(fraction));
                 row.push(a.starts.to_string());
                 if with_images {
-                    row.extend(basin_cells(
-                        scene,
-                        fraction,
-                        found.starts,
-                        images.get(point),
-                        a,
-                    ));
+                    row.extend(basin_cells(scene, fraction, starts, images.get(point), a));
                 }
                 let last = lane.orbit.len().saturating_sub(dim);
                 match lane.orbit.get(last..).filter(|p| p.len() == dim) {

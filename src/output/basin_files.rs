@@ -141,12 +141,14 @@ pub fn draw(
 }
 
 /// The labels of an image in the order of their attractors at the value,
-/// failed lanes last, each with what the caption says of it: period,
-/// impacts a period, λ1 and the basin fraction.
+/// failed lanes and inadmissible starts last, each with what the caption
+/// says of it: period, impacts a period, λ1 and the basin fraction (of the
+/// admissible starts, as in `attractors.csv`).
 fn entries(found: &Attractors, point: usize, image: &BasinImage) -> Vec<(i32, String)> {
-    let share = |label: i32| {
-        image.labels.iter().filter(|&&l| l == label).count() as f64 / image.labels.len() as f64
-    };
+    let count = |label: i32| image.labels.iter().filter(|&&l| l == label).count() as f64;
+    let inadmissible = count(basins::INADMISSIBLE);
+    let admissible = image.labels.len() as f64 - inadmissible;
+    let share = |label: i32| count(label) / admissible;
     let mut entries: Vec<(i32, String)> = Vec::new();
     for a in &found.values[point].attractors {
         let Some(branch) = a.branch else { continue };
@@ -176,6 +178,15 @@ fn entries(found: &Attractors, point: usize, image: &BasinImage) -> Vec<(i32, St
         entries.push((
             basins::FAILED,
             format!("grey: failed, {:.1}%", 100.0 * failed),
+        ));
+    }
+    if inadmissible > 0.0 {
+        entries.push((
+            basins::INADMISSIBLE,
+            format!(
+                "dark: outside the admissible states (not run), {:.1}% of the grid",
+                100.0 * inadmissible / image.labels.len() as f64
+            ),
         ));
     }
     entries

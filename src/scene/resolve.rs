@@ -54,16 +54,19 @@ pub(super) fn resolve(
     if let Some(attractors) = raw.attractors {
         let starts = resolve_starts(attractors, info, &integration.initial_state)?;
         // Over the host's cores (up to 2^20 starts × every value); the
-        // first start refused is named, as a loop in order would.
+        // first start refused is named, as a loop in order would. A basin
+        // image's box may reach past a wall: those starts are labelled
+        // apart, not refused.
         use rayon::prelude::*;
-        let refused = starts
-            .states
-            .par_iter()
-            .enumerate()
-            .find_map_first(|(s, state)| {
-                let refused = check_state_at_every_value(info, &params, &sweep, state).err();
-                refused.map(|reason| (s, reason))
-            });
+        let checked: &[Vec<f64>] = if starts.may_be_inadmissible() {
+            &[]
+        } else {
+            &starts.states
+        };
+        let refused = checked.par_iter().enumerate().find_map_first(|(s, state)| {
+            let refused = check_state_at_every_value(info, &params, &sweep, state).err();
+            refused.map(|reason| (s, reason))
+        });
         if let Some((s, reason)) = refused {
             return Err(Error::invalid(
                 starts.layout.key(),

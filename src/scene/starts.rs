@@ -94,6 +94,14 @@ pub struct Basins {
     pub axes: [usize; 2],
 }
 
+impl Starts {
+    /// Whether some starts may lie outside the admissible states: those of
+    /// a basin image's grid, whose box the wall may cut.
+    pub fn may_be_inadmissible(&self) -> bool {
+        self.basins.values > 0
+    }
+}
+
 /// The default side of the boxes the basin entropy is taken over (Daza
 /// et al. 2016 use 5 × 5 cells).
 pub const DEFAULT_BASIN_BOX: usize = 5;

@@ -374,6 +374,23 @@ impl Scene {
             .initial_state_at(self.sweep_lane(j), &self.integration.initial_state)
     }
 
+    /// Whether this run's lane `j` starts outside the admissible states at
+    /// its values. Only a basin image's grid may hold such starts (the wall
+    /// cuts the picture's box; the scene refuses them everywhere else), and
+    /// they are not run: their lanes are [`LaneStatus::Inadmissible`].
+    ///
+    /// [`LaneStatus::Inadmissible`]: crate::method::LaneStatus::Inadmissible
+    pub fn lane_start_inadmissible(&self, j: usize) -> bool {
+        let images = self.sweep.seeds.is_none()
+            && self
+                .sweep
+                .starts
+                .as_ref()
+                .is_some_and(Starts::may_be_inadmissible);
+        images
+            && (self.system.check_state)(&self.lane_params(j), self.lane_initial_state(j)).is_err()
+    }
+
     /// The start of this run's lane `j` among its point's.
     pub fn lane_start(&self, j: usize) -> usize {
         self.sweep.start_index(self.sweep_lane(j))

@@ -72,6 +72,10 @@ pub enum LaneStatus {
     TooManySteps {
         needed: usize,
     },
+    /// A start of a basin image's grid lies outside the admissible states
+    /// at this value (behind a stop, beyond an event's surface): it was not
+    /// run, and its start is labelled apart.
+    Inadmissible,
     /// The exponents' sum misses the sum rule by `miss` per unit time, more
     /// than the precision's tolerance (`driver::sum_rule_tolerance`): an
     /// error no other check caught, which every exponent may carry.
@@ -105,6 +109,7 @@ impl LaneStatus {
             LaneStatus::Grazing { .. } => "grazing",
             LaneStatus::Mismatch { .. } => "gpu-mismatch",
             LaneStatus::TooManySteps { .. } => "too-many-steps",
+            LaneStatus::Inadmissible => "inadmissible-start",
             LaneStatus::TooManyEvents { .. } => "too-many-events",
             LaneStatus::NoReturn { .. } => "no-return",
             LaneStatus::SumRule { .. } => "sum-rule",
@@ -122,6 +127,7 @@ impl LaneStatus {
                 | LaneStatus::NoReturn { .. }
                 | LaneStatus::TooManySteps { .. }
                 | LaneStatus::TooManyEvents { .. }
+                | LaneStatus::Inadmissible
         )
     }
 }
@@ -145,6 +151,7 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::TooManySteps { needed } => {
                 write!(f, "too-many-steps(needed={:.1e})", *needed as f64)
             }
+            LaneStatus::Inadmissible => write!(f, "inadmissible-start"),
             LaneStatus::SumRule { miss } => write!(f, "sum-rule(miss={miss:.1e})"),
             LaneStatus::ShortAverage { scales } => write!(f, "short-average(scales={scales:.1e})"),
             LaneStatus::Uncertain { error } => write!(f, "uncertain(error={error:.1e})"),

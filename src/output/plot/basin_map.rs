@@ -1,7 +1,8 @@
 //! The basins of one value's attractors over a grid of starts spanning two
 //! states (`attractors.basins`): each start's cell coloured by the branch
 //! of the attractor it ended on (the colours of the sweep figure's
-//! branches), grey where the lane failed; the colour bar names each
+//! branches), grey where the lane failed, dark where the start lies outside
+//! the admissible states (behind a wall); the colour bar names each
 //! branch, the caption its period, impacts, λ1 and basin fraction.
 
 use std::path::{Path, PathBuf};
@@ -12,7 +13,8 @@ use plotters::prelude::*;
 use super::attractor_sweep::branch_colour;
 use super::grid::{draw_caption, draw_cells, draw_colour_bar, map_layout};
 use super::render::{pixels, write, Drawn, Figure};
-use super::style::{FAILED_COLOUR, HEAT_MAP_SIZE};
+use super::style::{FAILED_COLOUR, HEAT_MAP_SIZE, INADMISSIBLE_COLOUR};
+use crate::attractor::basins::INADMISSIBLE;
 use crate::error::Result;
 
 /// One value's basin image.
@@ -46,9 +48,12 @@ pub fn basin_map_pixels(data: &BasinData) -> Vec<u8> {
     pixels(data)
 }
 
-/// A label's colour: its branch's, grey for a failed lane.
+/// A label's colour: its branch's, grey for a failed lane, dark for a
+/// start outside the admissible states.
 pub fn label_colour(label: i32) -> RGBColor {
-    if label < 0 {
+    if label == INADMISSIBLE {
+        INADMISSIBLE_COLOUR
+    } else if label < 0 {
         FAILED_COLOUR
     } else {
         branch_colour(label as u64)
@@ -67,7 +72,9 @@ impl Figure for BasinData {
             label_colour(self.labels[k])
         })?;
         let name = |label: i32| {
-            if label < 0 {
+            if label == INADMISSIBLE {
+                "inadmissible".to_owned()
+            } else if label < 0 {
                 "failed".to_owned()
             } else {
                 format!("branch {label}")

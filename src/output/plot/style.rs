@@ -39,6 +39,10 @@ pub(super) const GUIDE_COLOUR: RGBColor = RGBColor(200, 200, 200);
 /// attractor.
 pub(super) const FAILED_COLOUR: RGBColor = RGBColor(150, 150, 150);
 
+/// A basin image's cell whose start lies outside the admissible states
+/// (behind a wall): dark, apart from every branch's colour and the grey.
+pub(super) const INADMISSIBLE_COLOUR: RGBColor = RGBColor(40, 40, 40);
+
 /// A marker's radius in pixels: large enough to tell a filled one from an
 /// open one, small enough that neighbouring values stay apart.
 pub(super) const MARKER_RADIUS: i32 = 4;
