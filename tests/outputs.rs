@@ -499,15 +499,43 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
 /// stepped together, seconds; the request came 0.3 s into the first).
 #[test]
 fn a_run_stopped_inside_a_long_iteration_ends_soon_and_writes_nothing() {
-    use lyapsweep::{command, Error, RunOptions};
     let text = BASE
         .replace("count = 5", "count = 16")
         .replace("steps_per_period = 200", "steps_per_period = 90000000")
         .replace("transient = 50", "transient = 2")
         .replace("iterations = 100", "iterations = 1");
+    stops_soon(common::scene(&text, &[]));
+}
+
+/// So does the second pass over an averaged iteration of a model whose
+/// divergence depends on the state (van der Pol's), which integrates
+/// div F along the reference, the same 9e7 steps again.
+#[test]
+fn a_run_stopped_inside_the_divergence_s_integral_ends_soon() {
+    let scene = |steps: &str| {
+        common::committed_scene(
+            "van-der-pol.toml",
+            &[
+                "sweep.count=1",
+                steps,
+                "integration.transient=0",
+                "integration.iterations=1",
+                "run.backend=\"cpu\"",
+            ],
+        )
+    };
+    // The model's native code compiled and cached first: the C compiler
+    // does not look at the request.
+    common::run(&scene("integration.steps_per_period=100"));
+    stops_soon(scene("integration.steps_per_period=90000000"));
+}
+
+/// Runs `scene`, asks it to stop 0.3 s in, and checks that it ended
+/// within a second of the request, with nothing written.
+fn stops_soon(scene: lyapsweep::scene::Scene) {
+    use lyapsweep::{command, Error, RunOptions};
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let scene = common::scene(&text, &[]);
     let options = RunOptions::default();
     let stop = options.stop.clone();
     let prepared = command::prepare(&scene, &out).unwrap();

@@ -45,9 +45,10 @@ pub const STEPS_BETWEEN_STOP_LOOKS: usize = 1 << 16;
 pub struct FlowSettings {
     pub steps_per_period: usize,
     pub impact_location: ImpactLocation,
-    /// The run's stop request: the step loop looks at it every
-    /// [`STEPS_BETWEEN_STOP_LOOKS`] steps and ends the call where it is
-    /// set, so that one long iteration does not hold a stopped run.
+    /// The run's stop request: the step loop looks at it as a call begins
+    /// and every [`STEPS_BETWEEN_STOP_LOOKS`] steps, and ends the call
+    /// where it is set, so that one long iteration does not hold a
+    /// stopped run.
     pub stop: Stop,
 }
 

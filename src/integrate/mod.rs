@@ -226,7 +226,11 @@ fn time_map_lanes_batched<const D: usize, F: Flow<D>>(
 /// `density` along it by the same RK4: a quadrature state q' = density
 /// riding along, evaluated at the stage states. Returns the end and ∫
 /// density dt. For a flow without walls; `half` is the grid's half-step
-/// turn of the phase ([`half_turn`]).
+/// turn of the phase ([`half_turn`]). Like the step loop, it ends early
+/// where `stop` is requested (looked at every [`STEPS_BETWEEN_STOP_LOOKS`]
+/// steps): a stopped run's numbers are never read.
+///
+/// [`STEPS_BETWEEN_STOP_LOOKS`]: iteration::STEPS_BETWEEN_STOP_LOOKS
 pub fn advance_integrating<const D: usize, F: Flow<D>>(
     flow: &F,
     y: &[f64; D],
@@ -234,11 +238,15 @@ pub fn advance_integrating<const D: usize, F: Flow<D>>(
     (h, half): (f64, Phase),
     steps: usize,
     density: impl Fn(&Phase, &[f64; D]) -> f64,
+    stop: &Stop,
 ) -> ([f64; D], f64) {
     debug_assert!(flow.walls().is_empty());
     let sixth = h / 6.0;
     let (mut y, mut integral) = (*y, 0.0);
-    for _ in 0..steps {
+    for step in 0..steps {
+        if step % iteration::STEPS_BETWEEN_STOP_LOOKS == 0 && stop.requested() {
+            break;
+        }
         let phases = rk4::stage_phases(&phase, &half);
         let [start, mid, end] = &phases;
         let (next, [y1, y2, y3, y4]) = rk4::step_with_stages(flow, &phases, &y, h);
@@ -503,8 +511,9 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let live = (1u32 << n) - 1;
     let mut bound = EventBound::<W>::new(stats);
     let mut left = part.steps(steps).len();
-    // Steps until the next look at the stop request.
-    let mut unseen = STEPS_BETWEEN_STOP_LOOKS;
+    // Steps until the next look at the stop request: the first at once,
+    // since a stopped iteration's later parts (sub-maps) call again.
+    let mut unseen = 0;
     while left > 0 {
         if unseen == 0 {
             if settings.stop.requested() {

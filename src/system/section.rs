@@ -17,7 +17,7 @@ use super::model::ModelFlow;
 use super::{FlowSettings, IterationStats, Params, System};
 use crate::integrate::clock::{Phase, ZERO_PHASE};
 use crate::integrate::section::{advance, next_crossings, Crossing, Section};
-use crate::integrate::Flow;
+use crate::integrate::{Flow, Stop};
 use crate::model::compiled::Code;
 use crate::model::ir::tape::Tape;
 use crate::perturbation::{perturbation_at, Difference};
@@ -185,7 +185,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
 
     /// ∫ div F along the reference over the next part, where div F depends
     /// on the state (its end is the reference's to the bit).
-    pub fn part_divergence(&self, part: &TangentParts<N>) -> Option<f64> {
+    pub fn part_divergence(&self, part: &TangentParts<N>, stop: &Stop) -> Option<f64> {
         let (tape, constants) = self.divergence.as_ref()?;
         let density = |_: &Phase, y: &[f64; N]| -> f64 {
             let y: [[f64; 1]; N] = crate::array::from_fn(|i| [y[i]]);
@@ -200,6 +200,7 @@ impl<const D: usize, const N: usize> SectionFlow<D, N> {
             (part.h, ZERO_PHASE),
             part.steps,
             density,
+            stop,
         );
         Some(integral)
     }
@@ -332,7 +333,7 @@ impl<const D: usize, const N: usize> System<D> for SectionFlow<D, N> {
         for _ in 0..part.parts {
             let (delta, mut ys) = self.part_starts(&part, relative_delta, difference);
             advance(&self.flow, &mut ys, part.h, part.steps);
-            if let Some(integral) = self.part_divergence(&part) {
+            if let Some(integral) = self.part_divergence(&part, &flow.stop) {
                 stats.log_flux += integral;
             }
             factors.push(self.part_end(&mut part, &ys, delta, difference));

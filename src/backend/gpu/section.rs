@@ -738,7 +738,7 @@ where
             .filter_map(|(lane, end)| end.map(|e| (lane, e)))
             .for_each(|(lane, (delta, ys))| {
                 let t = lane.tangent.as_mut().expect("in a part");
-                if let Some(integral) = lane.system.part_divergence(t) {
+                if let Some(integral) = lane.system.part_divergence(t, &settings.flow.stop) {
                     lane.stats.log_flux += integral;
                 }
                 let factor = lane.system.part_end(t, &ys, delta, settings.difference);
