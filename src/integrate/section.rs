@@ -29,8 +29,8 @@ impl Section {
     }
 
     /// Whether a step from `before` to `after` crosses it: from behind it
-    /// to on or past it (the GPU's `crossed` in shaders/section.wgsl is
-    /// its twin).
+    /// to on or past it (the section kernel's `crossed`, generated from
+    /// model::ir::section, is its twin).
     #[inline(always)]
     pub fn crossed<const N: usize>(&self, before: &[f64; N], after: &[f64; N]) -> bool {
         self.distance(before) < 0.0 && self.distance(after) >= 0.0

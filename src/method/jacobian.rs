@@ -155,7 +155,7 @@ impl<const D: usize> Copies<D> {
         // bursts within one iteration (the Dadras flow's period map) carries
         // its copies out of the linear regime without any impact; such an
         // iteration is re-estimated with the δ ladder like a grazing one.
-        // Twin of finish.wgsl's `asymmetry`.
+        // Twin of the finish kernel's `asymmetry` (model::ir::finish).
         let asymmetry = |a: usize, b: usize| {
             if a == 0 || b == 0 {
                 return 0.0;

@@ -121,7 +121,7 @@ impl Variant {
     /// Whether the host re-estimates some iterations on the CPU from the
     /// reference's point (`method::lane::is_grazing`): the copies' impacts
     /// move (a wall), or a central column's copies leave the linear
-    /// regime (their asymmetry, which finish.wgsl measures).
+    /// regime (their asymmetry, which the finish kernel measures).
     pub fn reestimates(&self) -> bool {
         self.lyapunov && (self.wall || self.difference == Difference::Central)
     }
@@ -285,8 +285,28 @@ impl Variant {
                 out.push_str(&preprocess(&include(&path), &defines));
             }
         }
+        match kernel {
+            Kernel::Finish => out.push_str(&crate::model::codegen::wgsl::finish(self.finish())),
+            Kernel::Section => out.push_str(&crate::model::codegen::wgsl::section(
+                self.precision == Precision::F32,
+            )),
+            Kernel::Integrate => {}
+        }
         out.push_str(&preprocess(&include(kernel.file()), &defines));
         out
+    }
+
+    /// The finish kernel's program's options: its defines.
+    fn finish(&self) -> crate::model::ir::finish::Options {
+        let defines = self.defines();
+        crate::model::ir::finish::Options {
+            lyapunov: defines.contains("LYAPUNOV"),
+            central: defines.contains("CENTRAL"),
+            compensated: defines.contains("COMPENSATED"),
+            wall: defines.contains("WALL"),
+            surfaces: defines.contains("SURFACES"),
+            wrap: defines.contains("WRAP"),
+        }
     }
 }
 

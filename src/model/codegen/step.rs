@@ -24,7 +24,7 @@ fn precedence(op: Op) -> u8 {
     match op {
         Op::Shr | Op::Shl | Op::BitAnd | Op::BitOr | Op::BitXor => 0,
         Op::Add | Op::Sub => 1,
-        Op::Mul | Op::Div => 2,
+        Op::Mul | Op::Div | Op::Rem => 2,
     }
 }
 
@@ -85,6 +85,7 @@ fn wgsl_type(ty: Ty) -> &'static str {
         Ty::Table => "vec4<real>",
         Ty::CountTable => "vec4<u32>",
         Ty::Rows => "array<State, DIM>",
+        Ty::Single => "f32",
     }
 }
 
@@ -117,10 +118,9 @@ fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
 /// Whether `name` is a function the kernels define.
 fn is_extern(program: &Program, name: &str) -> bool {
     use crate::model::ir::step::Extern;
-    program
-        .externs
-        .iter()
-        .any(|e| matches!(e, Extern::Fn { name: n, .. } if *n == name))
+    program.externs.iter().any(
+        |e| matches!(e, Extern::Fn { name: n, .. } | Extern::Proc { name: n, .. } if *n == name),
+    )
 }
 
 /// What a WGSL function takes before its own parameters, as (name,
@@ -176,18 +176,24 @@ pub fn wgsl(program: &Program, syntax: &dyn Syntax) -> String {
                     .map(|(n, t)| format!("{n}: {}", wgsl_type(*t))),
             )
             .collect();
-        let returns = f.returns.unwrap_or_else(|| wgsl_type(types[0]));
-        let _ = writeln!(out, "fn {}({}) -> {returns} {{", f.name, params.join(", "));
+        // A function without results returns nothing.
+        let returns = match (f.returns, types.first()) {
+            (Some(name), _) => format!(" -> {name}"),
+            (None, Some(ty)) => format!(" -> {}", wgsl_type(*ty)),
+            (None, None) => String::new(),
+        };
+        let _ = writeln!(out, "fn {}({}){returns} {{", f.name, params.join(", "));
         let text = Wgsl { program, syntax };
         text.block(&mut out, &f.body, "    ");
         let results: Vec<String> = f.results.iter().map(|(_, e)| text.expr(e).0).collect();
-        match f.returns {
-            Some(name) => {
+        match (f.returns, &results[..]) {
+            (Some(name), _) => {
                 let _ = writeln!(out, "    return {name}({});", results.join(", "));
             }
-            None => {
-                let _ = writeln!(out, "    return {};", results[0]);
+            (None, [one]) => {
+                let _ = writeln!(out, "    return {one};");
             }
+            (None, _) => {}
         }
         out.push_str("}\n\n");
     }
@@ -236,6 +242,7 @@ impl Wgsl<'_> {
                     let (row, col, e) = (self.expr(row).0, self.expr(col).0, self.expr(e).0);
                     writeln!(out, "{indent}{name}[{row}][{col}] = {e};")
                 }
+                Stmt::Do(call) => writeln!(out, "{indent}{};", self.expr(call).0),
             };
         }
     }
@@ -334,6 +341,16 @@ impl Wgsl<'_> {
                     Bits::Complement => (format!("~{}", wrap(&a, op)), None),
                     Bits::LowestSet => (format!("firstTrailingBit({a})"), None),
                 }
+            }
+            // A constant converted from WGSL's abstract float, as an
+            // `f32` literal is.
+            Expr::Single(a) => match **a {
+                Expr::Num(v) if v.is_finite() => (format!("f32({v:?})"), None),
+                _ => (format!("f32({})", text(a)), None),
+            },
+            Expr::Counters(args) => {
+                let list: Vec<String> = args.iter().map(text).collect();
+                (format!("vec4<u32>({})", list.join(", ")), None)
             }
         }
     }
@@ -469,6 +486,7 @@ impl C<'_> {
                 Stmt::SetAt(..) => panic!("C's programs set no component (the kernels' stops do)"),
                 Stmt::SetMember(..) => panic!("C's programs hold no structures to set"),
                 Stmt::SetEntry(..) => panic!("C's programs hold no matrices"),
+                Stmt::Do(..) => panic!("C's programs call no function for its effect"),
             }
         }
     }
@@ -658,7 +676,12 @@ impl C<'_> {
             },
             // What only the kernels' programs use (their stops and Newton
             // brackets): the C step loops hold no structures.
-            Expr::Math(..) | Expr::Member(..) | Expr::Make(..) | Expr::Index(..) => {
+            Expr::Math(..)
+            | Expr::Member(..)
+            | Expr::Make(..)
+            | Expr::Index(..)
+            | Expr::Single(..)
+            | Expr::Counters(..) => {
                 panic!("C's step programs have no {e:?}")
             }
             // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
@@ -1145,5 +1168,77 @@ fn orientation(region: u32, bit: u32) -> real {
                 "(f_cleared == 0u ? 0xffffffffu : (uint32_t)__builtin_ctz(f_cleared))".into()
             )]
         );
+    }
+
+    /// A procedure over the kernels' buffers: an element read and one
+    /// set, a procedure of theirs called, a single, four counters and a
+    /// remainder.
+    fn stores() -> Program {
+        use crate::model::ir::step::build::{counters, index, max, perform, rem, single};
+        use crate::model::ir::step::Extern;
+        let buffer = |name, element| Extern::Buffer {
+            name,
+            element,
+            writable: true,
+        };
+        let body = vec![
+            Stmt::Var("c", index(var("counts"), var("t"))),
+            Stmt::SetAt(
+                "c",
+                count(3),
+                rem(index(var("c"), count(3)) + count(1), count(4)),
+            ),
+            Stmt::SetAt("counts", var("t") * count(2), var("c")),
+            Stmt::SetAt(
+                "counts",
+                var("t"),
+                counters([count(0), count(1), count(2), count(3)]),
+            ),
+            Stmt::Let(
+                "x",
+                max(
+                    single(num(1e30)),
+                    single(index(var("traj"), var("t")) * 2.0),
+                ),
+            ),
+            perform("store", vec![var("t"), var("x")]),
+        ];
+        let program = Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("t", Ty::Count)],
+                body,
+                results: Vec::new(),
+                returns: None,
+            }],
+            structures: Vec::new(),
+            externs: vec![
+                buffer("traj", Ty::Real),
+                buffer("counts", Ty::CountTable),
+                Extern::Proc {
+                    name: "store",
+                    params: vec![Ty::Count, Ty::Single],
+                },
+            ],
+        };
+        assert!(program.function("f").result_types(&program).is_empty());
+        program
+    }
+
+    #[test]
+    fn procedures_and_buffers_print_as_wgsl() {
+        let text = wgsl(&stores(), &Plain);
+        let expected = "\
+fn f(t: u32) {
+    var c = counts[t];
+    c[3u] = (c[3u] + 1u) % 4u;
+    counts[t * 2u] = c;
+    counts[t] = vec4<u32>(0u, 1u, 2u, 3u);
+    let x = max(f32(1e30), f32(traj[t] * 2.0));
+    store(t, x);
+}
+
+";
+        assert_eq!(text, expected);
     }
 }

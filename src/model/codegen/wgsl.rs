@@ -802,6 +802,24 @@ pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> Strin
     )
 }
 
+/// The finish kernel's step program (`model::ir::finish`) for the
+/// variant `options` as WGSL functions, the kernel's `finish_lane` last.
+pub fn finish(options: crate::model::ir::finish::Options) -> String {
+    format!(
+        "// Generated from the finish kernel's step program (model::ir::finish).\n\n{}",
+        super::step::wgsl(&crate::model::ir::finish::program(options), &Wgsl)
+    )
+}
+
+/// The section kernel's step program (`model::ir::section`) as WGSL
+/// functions, f32's compensated steps where `compensated`.
+pub fn section(compensated: bool) -> String {
+    format!(
+        "// Generated from the section kernel's step program (model::ir::section).\n\n{}",
+        super::step::wgsl(&crate::model::ir::section::program(compensated), &Wgsl)
+    )
+}
+
 /// The integrator program's functions `names` alone as WGSL, with the
 /// structures `structures` they use: a generated function beside its Rust
 /// twin in a test kernel (tests/math64.rs).
@@ -851,5 +869,54 @@ mod tests {
         }
         assert!(calls_wrappers("pow_r(y.x, real(3.0))"));
         assert!(!calls_wrappers("abs(y.x) + sqrt(y.y)"));
+    }
+
+    /// The finish kernel's columns, seeds and measures print as the
+    /// kernel wrote them by hand, and a variant prints only what it runs.
+    #[test]
+    fn finish_prints_its_columns_in_the_reference_order() {
+        use crate::model::ir::finish::Options;
+        let central = finish(Options {
+            lyapunov: true,
+            central: true,
+            compensated: true,
+            wall: true,
+            ..Options::default()
+        });
+        for line in [
+            "var plus = r + 1u + i;",
+            "let same_plus = (same_impacts(r, plus) && !((counts[plus][2u] & FLAG_BEHIND_WALL) != 0u));",
+            "difference = difference - (load_state(plus * TRAJ_STRIDE + DIM) - load_state(minus * TRAJ_STRIDE + DIM));",
+            "jac[slot * DIM * DIM + k * DIM + i] = difference[k] / step;",
+            "nonlinearity = max(nonlinearity, max(departure(r, plus), departure(r, minus)));",
+            "yi[i] = y[i] + delta;",
+            "deltas[lane * 2u * DIM + DIM + i] = y[i] - ym[i];",
+            "ratio = f32(even / odd);",
+            "d = f32(abs(vt - vr) / vr);",
+            "write_summary(r, slot, y, cr[1u], flags, nonlinearity);",
+        ] {
+            assert!(central.contains(line), "{line}\n{central}");
+        }
+        let plain = finish(Options::default());
+        assert!(plain.contains("fn restart(") && plain.contains("fn finish_lane(lane: u32) {"));
+        assert!(!plain.contains("fn write_columns") && !plain.contains("crossings"));
+        let forward = finish(Options {
+            lyapunov: true,
+            ..Options::default()
+        });
+        assert!(forward.contains("let step = deltas[lane * DIM + i];"));
+        assert!(!forward.contains("asymmetry") && !forward.contains("departure"));
+    }
+
+    #[test]
+    fn the_section_s_steps_are_compensated_in_f32_only() {
+        let (f32, f64) = (section(true), section(false));
+        assert!(f32.contains("let d0 = SECTION_DIRECTION * (before[SECTION_STATE] - at);"));
+        assert!(
+            f32.contains("let next_comp = after - y - corrected;"),
+            "{f32}"
+        );
+        assert!(f64.contains("after = y + rk4_increment(p, still, still, y, h).y;"));
+        assert!(!f64.contains("comp"), "{f64}");
     }
 }

@@ -13,7 +13,11 @@
 //! stop, a Newton bracket), or an opaque one the kernels define (the
 //! lane's parameters), passed on untouched; what the hand-written kernels
 //! define and a program calls is declared too ([`Extern`]), so that every
-//! name a program uses is typed.
+//! name a program uses is typed. The kernels' buffers are such names,
+//! read and written at an index, and their stores procedures a function
+//! without results calls ([`Stmt::Do`]): so a kernel's whole per-lane
+//! work is a program, and only its bindings and entry point are written
+//! by hand.
 //! The statements are what the integrator's loops need and no more: named
 //! values ([`Stmt::Let`]), values that change ([`Stmt::Var`],
 //! [`Stmt::Set`]), branches ([`Stmt::If`]) and loops left by a break
@@ -64,6 +68,9 @@ pub enum Ty {
     /// A square matrix of the model's dimension by rows, each a state
     /// (WGSL's `array<State, DIM>`: a reset's Jacobian, a saltation).
     Rows,
+    /// A single-precision number whatever `real` is (WGSL's `f32`): what
+    /// a part's summary records of a lane (its nonlinearity).
+    Single,
 }
 
 /// A structure of named values (a stop, a Newton bracket). Without
@@ -88,6 +95,20 @@ pub enum Extern {
         name: &'static str,
         params: Vec<Ty>,
         result: Ty,
+    },
+    /// A storage buffer of the kernels' bindings: an array of `element`s
+    /// read at an index ([`Expr::Index`] of its name), and, `writable`,
+    /// written at one ([`Stmt::SetAt`]). Never a value of its own.
+    Buffer {
+        name: &'static str,
+        element: Ty,
+        writable: bool,
+    },
+    /// A function of the kernels without a result (a store into their
+    /// buffers), called by [`Stmt::Do`].
+    Proc {
+        name: &'static str,
+        params: Vec<Ty>,
     },
 }
 
@@ -199,6 +220,10 @@ pub enum Expr {
     Index(Box<Expr>, Box<Expr>),
     /// An operation on one counter's bits.
     Bits(Bits, Box<Expr>),
+    /// A number as a [`Ty::Single`] (rounded to it where `real` is f64).
+    Single(Box<Expr>),
+    /// Four counters as one [`Ty::CountTable`] (a trajectory's counts).
+    Counters(Vec<Expr>),
 }
 
 /// An operation on one counter's bits.
@@ -225,6 +250,8 @@ pub enum Op {
     BitAnd,
     BitOr,
     BitXor,
+    /// The remainder of a counter's division (a ring's slot).
+    Rem,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -263,6 +290,7 @@ impl Op {
             Op::BitAnd => "&",
             Op::BitOr => "|",
             Op::BitXor => "^",
+            Op::Rem => "%",
         }
     }
 
@@ -305,6 +333,9 @@ pub enum Stmt {
     /// A new value of one member of a structure [`Stmt::Var`] (a copy of
     /// the lane's parameters in another region).
     SetMember(&'static str, &'static str, Expr),
+    /// A call for its effect ([`Expr::Call`]): of a function of the
+    /// program without results, or of the kernels' [`Extern::Proc`].
+    Do(Expr),
 }
 
 /// A function of a program: its parameters, its statements, and its
@@ -356,10 +387,16 @@ impl Program {
             assert_eq!(got, want, "{what} of {got:?}");
         };
         match e {
-            Expr::Var(name) => match self.constant(name) {
-                Some(ty) => ty,
-                None => scope(name),
-            },
+            Expr::Var(name) => {
+                assert!(
+                    self.buffer(name).is_none(),
+                    "{name} is a buffer: it is read at an index"
+                );
+                match self.constant(name) {
+                    Some(ty) => ty,
+                    None => scope(name),
+                }
+            }
             Expr::Num(_) => Ty::Real,
             Expr::Count(_) => Ty::Count,
             Expr::Truth(_) => Ty::Bool,
@@ -367,15 +404,11 @@ impl Program {
                 expect(a, Ty::Real, "-x");
                 Ty::Real
             }
-            Expr::Math(f, args) => {
-                assert_eq!(args.len(), f.arity(), "{}'s arguments", f.name());
-                for a in args {
-                    expect(a, Ty::Real, f.name());
-                }
-                Ty::Real
-            }
             Expr::Index(y, i) => {
                 expect(i, Ty::Count, "a component at");
+                if let Some((element, _)) = named_buffer(self, y) {
+                    return element;
+                }
                 match ty(y) {
                     Ty::State | Ty::Table => Ty::Real,
                     Ty::CountTable => Ty::Count,
@@ -388,6 +421,9 @@ impl Program {
                 Ty::Count
             }
             Expr::Member(..) | Expr::Make(..) | Expr::Call(..) => self.type_of_structured(e, scope),
+            Expr::Math(..) | Expr::Single(..) | Expr::Counters(..) => {
+                self.type_of_numbers(e, scope)
+            }
             Expr::Abs(a) => {
                 expect(a, Ty::Real, "|x|");
                 Ty::Real
@@ -438,14 +474,52 @@ impl Program {
                 Ty::State
             }
             Expr::Bin(op, a, b) => match (ty(a), ty(b)) {
-                (Ty::Count, Ty::Count) if op.is_bitwise() => Ty::Count,
-                _ if op.is_bitwise() => panic!("{} is an operation of two counters", op.symbol()),
+                (Ty::Count, Ty::Count) if op.is_bitwise() || *op == Op::Rem => Ty::Count,
+                _ if op.is_bitwise() || *op == Op::Rem => {
+                    panic!("{} is an operation of two counters", op.symbol())
+                }
                 (Ty::Real, Ty::Real) => Ty::Real,
                 (Ty::State, Ty::State) if matches!(op, Op::Add | Op::Sub) => Ty::State,
-                (Ty::Count, Ty::Count) if matches!(op, Op::Add | Op::Sub) => Ty::Count,
+                (Ty::Count, Ty::Count) => Ty::Count,
                 (Ty::Real, Ty::State) if *op == Op::Mul => Ty::State,
                 (a, b) => panic!("{a:?} {} {b:?} is not a step operation", op.symbol()),
             },
+        }
+    }
+
+    /// The type of a function of numbers, a single, or four counters.
+    fn type_of_numbers(&self, e: &Expr, scope: &dyn Fn(&str) -> Ty) -> Ty {
+        let ty = |e: &Expr| self.type_of(e, scope);
+        let expect = |e: &Expr, want: Ty, what: &str| {
+            let got = ty(e);
+            assert_eq!(got, want, "{what} of {got:?}");
+        };
+        match e {
+            Expr::Math(f, args) => {
+                assert_eq!(args.len(), f.arity(), "{}'s arguments", f.name());
+                // The larger or smaller of two singles, or of two
+                // counters, is one too.
+                let of = match (f, ty(&args[0])) {
+                    (Math::Max | Math::Min, of @ (Ty::Single | Ty::Count)) => of,
+                    _ => Ty::Real,
+                };
+                for a in args {
+                    expect(a, of, f.name());
+                }
+                of
+            }
+            Expr::Single(a) => {
+                expect(a, Ty::Real, "a single");
+                Ty::Single
+            }
+            Expr::Counters(args) => {
+                assert_eq!(args.len(), 4, "four counters");
+                for a in args {
+                    expect(a, Ty::Count, "four counters");
+                }
+                Ty::CountTable
+            }
+            _ => unreachable!("{e:?} is not a function of numbers, a single or counters"),
         }
     }
 
@@ -481,6 +555,10 @@ impl Program {
                 Ty::Struct(name)
             }
             Expr::Call(name, args) => {
+                assert!(
+                    !self.has_no_result(name),
+                    "{name} has no result: it is called by a statement"
+                );
                 if let Some((params, result)) = self.external(name) {
                     assert_eq!(args.len(), params.len(), "{name}'s arguments");
                     for (arg, want) in args.iter().zip(params) {
@@ -521,6 +599,48 @@ impl Program {
             } if *n == name => Some((&params[..], *result)),
             _ => None,
         })
+    }
+
+    /// The element of the kernels' buffer `name`, and whether the
+    /// program writes it, if it is one.
+    fn buffer(&self, name: &str) -> Option<(Ty, bool)> {
+        self.externs.iter().find_map(|e| match e {
+            Extern::Buffer {
+                name: n,
+                element,
+                writable,
+            } if *n == name => Some((*element, *writable)),
+            _ => None,
+        })
+    }
+
+    /// Whether `name` is a function without a result: the kernels'
+    /// procedure, or one of the program's without results.
+    fn has_no_result(&self, name: &str) -> bool {
+        let procedure = self
+            .externs
+            .iter()
+            .any(|e| matches!(e, Extern::Proc { name: n, .. } if *n == name));
+        procedure
+            || self
+                .functions
+                .iter()
+                .any(|f| f.name == name && f.results.is_empty())
+    }
+
+    /// The parameters of the function without a result `name`: the
+    /// kernels' procedure's, or the program's function's.
+    fn procedure(&self, name: &str) -> Vec<Ty> {
+        let procedure = self.externs.iter().find_map(|e| match e {
+            Extern::Proc { name: n, params } if *n == name => Some(params.clone()),
+            _ => None,
+        });
+        if let Some(params) = procedure {
+            return params;
+        }
+        let f = self.function(name);
+        assert!(f.results.is_empty(), "{name} has results: they are used");
+        f.params.iter().map(|(_, ty)| *ty).collect()
     }
 
     /// The members the program may use of the kernels' structure `name`,
@@ -569,7 +689,9 @@ impl Program {
             match stmt {
                 Stmt::Let(name, e) | Stmt::Var(name, e) => {
                     assert!(
-                        scope.iter().all(|b| b.name != *name) && self.constant(name).is_none(),
+                        scope.iter().all(|b| b.name != *name)
+                            && self.constant(name).is_none()
+                            && self.buffer(name).is_none(),
                         "{name} is declared twice"
                     );
                     let ty = ty(e, scope);
@@ -597,12 +719,21 @@ impl Program {
                 }
                 Stmt::Break => assert!(loops > 0, "a break outside a loop"),
                 Stmt::SetAt(name, i, e) => {
-                    let target = lookup(scope, name);
-                    assert!(target.mutable, "{name} is not a var");
-                    let component = match target.ty {
-                        Ty::State => Ty::Real,
-                        Ty::Rows => Ty::State,
-                        _ => panic!("{name} has no components"),
+                    let component = match self.buffer(name) {
+                        Some((element, writable)) => {
+                            assert!(writable, "{name} is a buffer the program only reads");
+                            element
+                        }
+                        None => {
+                            let target = lookup(scope, name);
+                            assert!(target.mutable, "{name} is not a var");
+                            match target.ty {
+                                Ty::State | Ty::Table => Ty::Real,
+                                Ty::CountTable => Ty::Count,
+                                Ty::Rows => Ty::State,
+                                _ => panic!("{name} has no components"),
+                            }
+                        }
                     };
                     assert_eq!(ty(i, scope), Ty::Count, "{name}'s component at");
                     assert_eq!(ty(e, scope), component, "{name}'s new component");
@@ -629,6 +760,16 @@ impl Program {
                         .1;
                     assert_eq!(ty(e, scope), want, "{name}.{member}'s new value");
                 }
+                Stmt::Do(call) => {
+                    let Expr::Call(name, args) = call else {
+                        panic!("a statement calls a function without results, not {call:?}")
+                    };
+                    let params = self.procedure(name);
+                    assert_eq!(args.len(), params.len(), "{name}'s arguments");
+                    for (arg, want) in args.iter().zip(params) {
+                        assert_eq!(ty(arg, scope), want, "{name}'s argument");
+                    }
+                }
             }
         }
     }
@@ -637,7 +778,10 @@ impl Program {
     /// every statement typed on the way.
     fn scope_at_end(&self, f: &Function) -> Vec<Binding> {
         for (name, _) in &f.params {
-            assert!(self.constant(name).is_none(), "{name} is declared twice");
+            assert!(
+                self.constant(name).is_none() && self.buffer(name).is_none(),
+                "{name} is declared twice"
+            );
         }
         let mut scope: Vec<Binding> = f
             .params
@@ -693,6 +837,7 @@ impl Function {
                     }
                     Stmt::SetMember(_, _, e) => out.push(e),
                     Stmt::SetEntry(_, row, col, e) => out.extend([row, col, e]),
+                    Stmt::Do(call) => out.push(call),
                 }
             }
         }
@@ -722,6 +867,7 @@ impl Expr {
             | Expr::Neg(a)
             | Expr::Member(a, _)
             | Expr::Bits(_, a)
+            | Expr::Single(a)
             | Expr::Not(a) => vec![a],
             Expr::Select {
                 cond,
@@ -729,10 +875,19 @@ impl Expr {
                 otherwise,
             } => vec![cond, then, otherwise],
             Expr::Field { phase, state, .. } => vec![phase, state],
-            Expr::Call(_, args) | Expr::Math(_, args) | Expr::Make(_, args) => {
-                args.iter().collect()
-            }
+            Expr::Call(_, args)
+            | Expr::Math(_, args)
+            | Expr::Make(_, args)
+            | Expr::Counters(args) => args.iter().collect(),
         }
+    }
+}
+
+/// The element and writability of the buffer `e` names, if it names one.
+fn named_buffer(program: &Program, e: &Expr) -> Option<(Ty, bool)> {
+    match e {
+        Expr::Var(name) => program.buffer(name),
+        _ => None,
     }
 }
 
@@ -965,6 +1120,26 @@ pub mod build {
     /// Leaves the loop unless `cond` holds: a `while`'s test.
     pub fn break_unless(cond: Expr) -> Stmt {
         Stmt::If(not(cond), vec![Stmt::Break], Vec::new())
+    }
+
+    /// `a % b` of two counters.
+    pub fn rem(a: Expr, b: Expr) -> Expr {
+        Expr::Bin(Op::Rem, Box::new(a), Box::new(b))
+    }
+
+    /// A number as a single.
+    pub fn single(a: Expr) -> Expr {
+        Expr::Single(Box::new(a))
+    }
+
+    /// Four counters as one table.
+    pub fn counters(a: [Expr; 4]) -> Expr {
+        Expr::Counters(a.into())
+    }
+
+    /// A call for its effect.
+    pub fn perform(name: &'static str, args: Vec<Expr>) -> Stmt {
+        Stmt::Do(Expr::Call(name, args))
     }
 }
 
@@ -1388,5 +1563,166 @@ mod tests {
     fn a_parameter_s_entry_is_not_set() {
         let body = vec![Stmt::SetEntry("a", count(0), count(0), num(0.0))];
         result_type(&one(vec![("a", Ty::Rows)], body, num(0.0)));
+    }
+
+    /// A program with the kernels' buffers (one only read), a procedure
+    /// and a function of the program without results.
+    fn with_buffers(body: Vec<Stmt>, result: Expr) -> Program {
+        let mut program = one(vec![("t", Ty::Count), ("y", Ty::State)], body, result);
+        program.externs = vec![
+            Extern::Buffer {
+                name: "traj",
+                element: Ty::Real,
+                writable: true,
+            },
+            Extern::Buffer {
+                name: "counts",
+                element: Ty::CountTable,
+                writable: true,
+            },
+            Extern::Buffer {
+                name: "lanes",
+                element: Ty::Real,
+                writable: false,
+            },
+            Extern::Proc {
+                name: "store",
+                params: vec![Ty::Count, Ty::State],
+            },
+        ];
+        program.functions.insert(
+            0,
+            Function {
+                name: "clear",
+                params: vec![("at", Ty::Count)],
+                body: vec![Stmt::SetAt("traj", var("at"), num(0.0))],
+                results: Vec::new(),
+                returns: None,
+            },
+        );
+        program
+    }
+
+    #[test]
+    fn buffers_procedures_singles_and_counters_are_typed() {
+        let body = vec![
+            Stmt::Var("c", index(var("counts"), var("t"))),
+            Stmt::SetAt("c", count(2), rem(index(var("c"), count(3)), count(4))),
+            Stmt::SetAt("counts", var("t") * count(2) / count(1), var("c")),
+            Stmt::SetAt(
+                "counts",
+                count(0),
+                counters([count(0), count(1), count(2), count(3)]),
+            ),
+            Stmt::SetAt("traj", var("t"), index(var("lanes"), var("t"))),
+            perform("store", vec![var("t"), var("y")]),
+            perform("clear", vec![var("t")]),
+            Stmt::Let(
+                "x",
+                max(single(num(1.0)), single(index(var("y"), count(0)))),
+            ),
+        ];
+        let program = with_buffers(body, var("x"));
+        assert_eq!(result_type(&program), Ty::Single);
+        assert!(program.function("clear").result_types(&program).is_empty());
+    }
+
+    #[test]
+    #[should_panic(expected = "traj is a buffer: it is read at an index")]
+    fn a_buffer_is_not_a_value() {
+        result_type(&with_buffers(vec![Stmt::Let("all", var("traj"))], num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "lanes is a buffer the program only reads")]
+    fn a_read_only_buffer_is_not_written() {
+        let body = vec![Stmt::SetAt("lanes", count(0), num(1.0))];
+        result_type(&with_buffers(body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "counts's new component")]
+    fn a_buffer_holds_its_elements() {
+        let body = vec![Stmt::SetAt("counts", count(0), count(1))];
+        result_type(&with_buffers(body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "traj is declared twice")]
+    fn a_buffer_is_not_shadowed() {
+        result_type(&with_buffers(vec![Stmt::Let("traj", num(0.0))], num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "store has no result: it is called by a statement")]
+    fn a_procedure_has_no_value() {
+        let body = vec![Stmt::Let("z", apply("store", vec![var("t"), var("y")]))];
+        result_type(&with_buffers(body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "clear has no result: it is called by a statement")]
+    fn a_function_without_results_has_no_value() {
+        let body = vec![Stmt::Let("z", call("clear", &["t"]))];
+        result_type(&with_buffers(body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "f has results: they are used")]
+    fn a_statement_calls_no_function_with_results() {
+        let mut program = with_buffers(Vec::new(), num(0.0));
+        program.functions.push(Function {
+            name: "g",
+            params: Vec::new(),
+            body: vec![perform("f", vec![count(0), fill(num(0.0))])],
+            results: Vec::new(),
+            returns: None,
+        });
+        program.function("g").result_types(&program);
+    }
+
+    #[test]
+    #[should_panic(expected = "a statement calls a function without results, not Num(1.0)")]
+    fn a_statement_is_a_call() {
+        result_type(&with_buffers(vec![Stmt::Do(num(1.0))], num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "store's argument")]
+    fn a_procedure_takes_its_parameters_types() {
+        let body = vec![perform("store", vec![var("t"), num(0.0)])];
+        result_type(&with_buffers(body, num(0.0)));
+    }
+
+    #[test]
+    #[should_panic(expected = "a single of Count")]
+    fn a_single_is_made_of_a_number() {
+        result_type(&one(vec![], vec![], single(count(1))));
+    }
+
+    #[test]
+    #[should_panic(expected = "max of Real")]
+    fn a_single_and_a_number_have_no_maximum() {
+        result_type(&one(vec![], vec![], max(single(num(1.0)), num(2.0))));
+    }
+
+    #[test]
+    #[should_panic(expected = "% is an operation of two counters")]
+    fn a_number_has_no_remainder() {
+        result_type(&one(vec![], vec![], rem(num(3.0), num(2.0))));
+    }
+
+    #[test]
+    #[should_panic(expected = "four counters")]
+    fn a_table_of_counters_has_four() {
+        let e = Expr::Counters(vec![count(0), count(1), count(2)]);
+        result_type(&one(vec![], vec![], e));
+    }
+
+    #[test]
+    #[should_panic(expected = "four counters of Real")]
+    fn a_table_of_counters_holds_counters() {
+        let e = counters([count(0), count(1), count(2), num(3.0)]);
+        result_type(&one(vec![], vec![], e));
     }
 }
