@@ -297,6 +297,11 @@ where
         )
     }
 
+    /// The system at λ = `lambda`, the other parameters the start's.
+    fn system_at(&self, lambda: f64) -> S {
+        S::new(&params_at(self.base, self.trace.parameter, lambda))
+    }
+
     /// The branch of period-`period` orbits from `guess` at the start's
     /// λ, one way (`direction` in λ), ended where it runs into an orbit
     /// of a shorter period ([`shorter_period`]) or creeps ([`creeping_end`]).
@@ -459,8 +464,8 @@ where
     let mut path = Vec::with_capacity(branch.points.len() + 1);
     if onward.kind == Kind::PeriodDoubling && onward.state.len() == D {
         let x: [f64; D] = crate::array::from_fn(|i| onward.state[i]);
-        let at = params_at(context.base, context.trace.parameter, onward.parameter);
-        let twice = evaluate(&S::new(&at), context.settings, &x, period, true);
+        let at = context.system_at(onward.parameter);
+        let twice = evaluate(&at, context.settings, &x, period, true);
         let orbit = Orbit {
             state: x,
             period,
@@ -635,8 +640,8 @@ where
     if last.orbit.period == 1 || events(&last.orbit) == events(&before.orbit) {
         return None;
     }
-    let at = params_at(context.base, context.trace.parameter, last.parameter);
-    let least = least_period(&S::new(&at), context.settings, &last.orbit);
+    let system = context.system_at(last.parameter);
+    let least = least_period(&system, context.settings, &last.orbit);
     (least < last.orbit.period).then_some(BranchEnd::ShorterPeriod {
         parameter: last.parameter,
         period: least,
@@ -806,11 +811,7 @@ where
             1.0
         };
         let beyond = here.parameter + direction * context.trace.max_step;
-        let system = S::new(&params_at(
-            context.base,
-            context.trace.parameter,
-            here.parameter,
-        ));
+        let system = context.system_at(here.parameter);
         let excess = walls(&system, context.settings, &here.orbit);
         for (w, &g) in excess.iter().enumerate() {
             if g.is_nan() || g >= 0.0 || here.orbit.stats.crossings[w] != 0 {
@@ -831,7 +832,7 @@ where
                 continue;
             };
             let solved_at = zero.bracket.0;
-            let at = S::new(&params_at(context.base, context.trace.parameter, solved_at));
+            let at = context.system_at(solved_at);
             let touching = walls(&at, context.settings, &zero.orbit)
                 .get(w)
                 .is_some_and(|g| g.abs() <= 1e-6 * excess_scale(&zero.orbit.state));
