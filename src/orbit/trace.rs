@@ -27,6 +27,7 @@ use super::events::{events, extrapolate_grazing, impact_speed_test, step_past, E
 use super::locate::locate_zero;
 use super::map::evaluate;
 use super::newton::{least_period, relative_residual, NewtonSettings, Orbit};
+use super::section::{crossing_ahead, step_across, Clearance};
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
 
@@ -258,6 +259,7 @@ fn describe_end(end: &BranchEnd) -> String {
         BranchEnd::ShorterPeriod { parameter, period } => {
             format!("shorter-period(at={parameter:e}; period={period})")
         }
+        BranchEnd::SectionCrossing { parameter } => format!("section(at={parameter:e})"),
         BranchEnd::Bound => "bound".into(),
         BranchEnd::Closed => "closed".into(),
         BranchEnd::MaxPoints => "max-points".into(),
@@ -279,6 +281,7 @@ struct Context<'a, const D: usize, S: System<D>> {
     trace: &'a TraceSettings,
     continuation: ContinuationSettings,
     walls: Option<WallExcess<D, S>>,
+    clearance: Option<Clearance<D, S>>,
 }
 
 impl<const D: usize, S: System<D>> Context<'_, D, S>
@@ -305,16 +308,63 @@ where
     /// The branch of period-`period` orbits from `guess` at the start's
     /// λ, one way (`direction` in λ), ended where it runs into an orbit
     /// of a shorter period ([`shorter_period`]) or creeps ([`creeping_end`]).
+    /// Where an impact of its orbit reaches the map's section, the branch
+    /// steps across the point's jump ([`step_across`]) and goes on as the
+    /// same branch, its points on both sides in one list (at most
+    /// [`MAX_CROSSINGS`] times, a bound against a branch going round an
+    /// isola for ever).
     fn follow(&self, guess: &[f64; D], period: usize, direction: f64) -> Branch<D> {
+        let (mut branch, mut across) = self.follow_from(self.base, guess, period, direction);
+        for _ in 0..MAX_CROSSINGS {
+            let Some((lambda, orbit)) = across.or_else(|| self.across_failure(&branch)) else {
+                break;
+            };
+            let [.., before, last] = &branch.points[..] else {
+                break;
+            };
+            let onwards = (last.parameter - before.parameter).signum();
+            let base = params_at(self.base, self.trace.parameter, lambda);
+            let (next, next_across) = self.follow_from(&base, &orbit.state, period, onwards);
+            if let BranchEnd::Start(_) = next.end {
+                break;
+            }
+            branch.points.extend(next.points);
+            branch.end = next.end;
+            across = next_across;
+        }
+        branch
+    }
+
+    /// One stretch of [`follow`](Self::follow) from `base`'s λ, up to a
+    /// crossing of the section or the branch's end; with the orbit on the
+    /// crossing's far side where it ended there ([`BranchEnd::SectionCrossing`]).
+    /// The stretch ends at a crossing ahead only where that orbit is
+    /// found: elsewhere it goes on as it would without the test.
+    fn follow_from(
+        &self,
+        base: &Params,
+        guess: &[f64; D],
+        period: usize,
+        direction: f64,
+    ) -> (Branch<D>, Option<(f64, Orbit<D>)>) {
         let continuation = ContinuationSettings {
             direction,
             ..self.continuation
         };
+        let across = std::cell::Cell::new(None);
         let end = |points: &[BranchPoint<D>], step: f64| {
-            shorter_period(self, points).or_else(|| creeping_end(self, points, step))
+            shorter_period(self, points)
+                .or_else(|| creeping_end(self, points, step))
+                .or_else(|| {
+                    let crossing = self.section_ahead(points, 2.0)?;
+                    across.set(Some(self.step_across(points, crossing)?));
+                    Some(BranchEnd::SectionCrossing {
+                        parameter: crossing,
+                    })
+                })
         };
         let mut branch = continue_branch_until::<D, S>(
-            self.base,
+            base,
             self.settings,
             &self.trace.newton,
             &continuation,
@@ -325,9 +375,50 @@ where
         if let BranchEnd::ShorterPeriod { .. } = branch.end {
             branch.points.pop();
         }
-        branch
+        (branch, across.take())
+    }
+
+    /// The section's crossing ahead of the branch's newest point within
+    /// `reach` times its last step ([`crossing_ahead`]).
+    fn section_ahead(&self, points: &[BranchPoint<D>], reach: f64) -> Option<f64> {
+        let clearance = self.clearance?;
+        crossing_ahead(self.base, self.trace.parameter, points, clearance, reach)
+    }
+
+    /// The orbit on the far side of a section's crossing ahead where the
+    /// corrector failed, within [`SECTION_FAILURE_REACH`] of the branch's
+    /// last steps (a step that landed beyond the crossing before the test
+    /// saw it coming).
+    fn across_failure(&self, branch: &Branch<D>) -> Option<(f64, Orbit<D>)> {
+        let BranchEnd::StepTooSmall { .. } = branch.end else {
+            return None;
+        };
+        let crossing = self.section_ahead(&branch.points, SECTION_FAILURE_REACH)?;
+        self.step_across(&branch.points, crossing)
+    }
+
+    /// The orbit on the far side of the section's crossing at `crossing`
+    /// ahead of `points` ([`step_across`]).
+    fn step_across(&self, points: &[BranchPoint<D>], crossing: f64) -> Option<(f64, Orbit<D>)> {
+        step_across(
+            self.base,
+            self.settings,
+            &self.trace.newton,
+            self.trace.parameter,
+            self.trace.bounds,
+            points,
+            crossing,
+            self.clearance?,
+        )
     }
 }
+
+/// The most times one way of a branch steps across the map's section.
+const MAX_CROSSINGS: usize = 16;
+
+/// How many of its last steps ahead a branch whose corrector failed may
+/// have its section's crossing for the tracer to step across it.
+const SECTION_FAILURE_REACH: f64 = 50.0;
 
 /// The branch of `start`, traced over `trace.bounds` both ways (a
 /// switched start, one way from its bifurcation), with the starts of the
@@ -338,6 +429,7 @@ pub fn trace<const D: usize, S: System<D>>(
     trace: &TraceSettings,
     start: &Start,
     walls: Option<WallExcess<D, S>>,
+    clearance: Option<Clearance<D, S>>,
 ) -> Traced
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
@@ -375,6 +467,7 @@ where
             max_corrector_steps: 6,
         },
         walls,
+        clearance,
     };
     let guess: [f64; D] = crate::array::from_fn(|i| start.state[i]);
     let followed = match &start.onward {
