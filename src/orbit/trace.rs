@@ -1060,7 +1060,11 @@ fn traced_point<const D: usize>(point: &BranchPoint<D>) -> TracedPoint {
 /// to max(1, |x|∞)) of the branch's polygon at its parameter value. The
 /// polygon's own error is the branch's curvature times its step squared,
 /// far below that on the steps continuation takes; two distinct orbits of
-/// one period that close at one value would be one branch's fold.
+/// one period that close at one value would be one branch's fold. Where
+/// the branch's point jumps between two rows (an impact at the map's
+/// section, see [`super::section`]) the chord between them is no orbit's:
+/// there the segments on either side, extended to the start's value, are
+/// the branch's.
 pub fn covers(traced: &Traced, start: &Start) -> bool {
     let d = start.state.len();
     if traced.points.is_empty() || traced.points[0].period != start.period || d == 0 {
@@ -1076,33 +1080,37 @@ pub fn covers(traced: &Traced, start: &Start) -> bool {
         let scale = x.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
         x.iter().zip(y).all(|(a, b)| (a - b).abs() <= 1e-2 * scale)
     };
-    let points = &traced.points;
-    let segments = points.windows(2).filter_map(|pair| {
-        let (a, b) = (&pair[0], &pair[1]);
-        let (low, high) = if a.parameter <= b.parameter {
-            (a.parameter, b.parameter)
-        } else {
-            (b.parameter, a.parameter)
-        };
-        if lambda < low || lambda > high {
-            return None;
-        }
-        let s = if high > low {
+    // The line through points k and k + 1 at λ.
+    let line = |points: &[TracedPoint], k: usize| -> Vec<f64> {
+        let (a, b) = (&points[k], &points[k + 1]);
+        let s = if b.parameter != a.parameter {
             (lambda - a.parameter) / (b.parameter - a.parameter)
         } else {
             0.0
         };
-        Some(
-            a.state
-                .iter()
-                .zip(&b.state)
-                .map(|(p, q)| p + s * (q - p))
-                .collect::<Vec<f64>>(),
-        )
+        a.state
+            .iter()
+            .zip(&b.state)
+            .map(|(p, q)| p + s * (q - p))
+            .collect()
+    };
+    let points = &traced.points;
+    let segments = (0..points.len().saturating_sub(1)).filter(|&k| {
+        let (a, b) = (points[k].parameter, points[k + 1].parameter);
+        lambda >= a.min(b) && lambda <= a.max(b)
+    });
+    let lines = segments.flat_map(|k| {
+        let sides = [k.checked_sub(1), Some(k), Some(k + 1)];
+        sides
+            .into_iter()
+            .flatten()
+            .filter(|&j| j + 1 < points.len())
+            .map(|j| line(points, j))
+            .collect::<Vec<_>>()
     });
     let single =
         (points.len() == 1 && points[0].parameter == lambda).then(|| points[0].state.clone());
-    segments
+    lines
         .chain(single)
         .any(|x| candidates.iter().any(|c| near(c, &x)))
 }
