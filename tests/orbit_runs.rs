@@ -429,3 +429,119 @@ fn the_seed_s_run_switches_at_its_period_doubling_and_goes_on_past_its_grazing()
         assert_eq!(*branch, r["branch"], "{r:?} on two branches");
     }
 }
+
+/// The wall oscillator of docs/python.md (the seed's system with the wall
+/// at X_w = 1 and e = 0.8): its impacting period-1 orbit's impact passes
+/// through the map's section at η ≈ 0.90318, where the orbit's point
+/// jumps from just after the impact (v < 0) to just before it (v > 0,
+/// -e·v the same speed after). The orbit does not change there: traced
+/// from the lanes at η = 0.8, 0.9031 and 1.0062, it is one branch with
+/// points on both sides, whose exponents on either side are the exact
+/// backend's tangent's (the closed form's Jacobian at the row's own point)
+/// to 1e-10; the lane at 0.9031, between the two rows the point jumps
+/// between, is on that branch, not the start of a second one.
+#[test]
+fn an_impact_at_the_section_s_time_leaves_the_orbit_one_branch() {
+    use lyapsweep::system::{Part, System};
+
+    let keys = [
+        "system.wall=1.0",
+        "system.restitution=0.8",
+        "sweep.from=0.8",
+        "sweep.to=1.0062",
+        "sweep.count=3",
+        "orbits={ max_period = 1 }",
+        "run.backend=\"cpu\"",
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let seed = seed_path();
+    let mut args = vec!["run", seed.to_str().unwrap(), "--out"];
+    args.push(out.to_str().unwrap());
+    for key in &keys {
+        args.extend(["--set", key]);
+    }
+    let output = lyapsweep(&args);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let orbits = read(&out.join("orbits.csv"));
+    let scene = lyapsweep::scene::parse(
+        &std::fs::read_to_string(seed_path()).unwrap(),
+        "seed",
+        "seed",
+        &keys[..4].iter().map(|k| k.to_string()).collect::<Vec<_>>(),
+    )
+    .unwrap();
+    let index = scene.system.parameter_index("eta").expect("eta");
+    // The signed time from the row's point to the wall, in periods: > 0
+    // moving towards it, < 0 just away from it.
+    let clearance = |r: &BTreeMap<String, String>| {
+        let period = std::f64::consts::TAU / value(r, "eta");
+        -(value(r, "x") - 1.0) / value(r, "v") / period
+    };
+    let impacting: Vec<_> = orbits
+        .iter()
+        .filter(|r| r["period"] == "1" && r["impacts_per_period"] == "1")
+        .collect();
+    let crossing = impacting
+        .windows(2)
+        .find(|pair| {
+            pair[0]["branch"] == pair[1]["branch"]
+                && clearance(pair[0]).signum() != clearance(pair[1]).signum()
+        })
+        .unwrap_or_else(|| {
+            let ends: Vec<_> = impacting
+                .iter()
+                .filter(|r| !r["branch_end"].is_empty())
+                .map(|r| (&r["branch"], &r["eta"], &r["branch_end"]))
+                .collect();
+            panic!("no branch goes through the section's impact: {ends:?}")
+        });
+    let branches: std::collections::BTreeSet<_> = impacting.iter().map(|r| &r["branch"]).collect();
+    assert_eq!(
+        branches.len(),
+        1,
+        "the impacting orbit on branches {branches:?}"
+    );
+    let (before, after) = (value(crossing[0], "eta"), value(crossing[1], "eta"));
+    eprintln!(
+        "section crossed between η = {before} (v = {}) and {after} (v = {})",
+        crossing[0]["v"], crossing[1]["v"]
+    );
+    assert!(before.min(after) < 0.90318 && before.max(after) > 0.90318);
+    // The branch's rows near the crossing, on both sides, against the
+    // closed form's tangent at their own points.
+    let rows = rows_of(&orbits, &crossing[0]["branch"]);
+    let near: Vec<_> = rows
+        .iter()
+        .filter(|r| (value(r, "eta") - 0.90318).abs() < 0.05)
+        .collect();
+    let sides = near.iter().filter(|r| clearance(r) > 0.0).count();
+    assert!(sides >= 2 && near.len() - sides >= 2, "{} rows", near.len());
+    let mut worst = 0.0_f64;
+    for row in &near {
+        let eta = value(row, "eta");
+        let params = lyapsweep::orbit::params_at(&scene.lane_params(0), index, eta);
+        let system = lyapsweep::system::model::ModelFlow::<2>::new(&params);
+        let x = [value(row, "x"), value(row, "v")];
+        let (_, j) = system
+            .iterate_exact(&x, Part::WHOLE, &mut Default::default())
+            .expect("the seed's closed form");
+        let m = nalgebra::DMatrix::from_fn(2, 2, |r, c| j[(r, c)]);
+        let mut exact: Vec<f64> = m
+            .complex_eigenvalues()
+            .iter()
+            .map(|e| e.norm().ln() / system.period())
+            .collect();
+        exact.sort_by(|a, b| b.total_cmp(a));
+        for (k, column) in ["lambda_1", "lambda_2"].iter().enumerate() {
+            let error = (value(row, column) - exact[k]).abs();
+            assert!(error < 1e-10, "η = {eta}: {column} off by {error:e}");
+            worst = worst.max(error);
+        }
+        assert_eq!(row["status"], "ok", "η = {eta}");
+    }
+    eprintln!(
+        "{} rows within 0.05 of the crossing: exponents off the closed form's tangent by {worst:e}",
+        near.len()
+    );
+}

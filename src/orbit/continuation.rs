@@ -7,7 +7,7 @@
 
 use nalgebra::{Const, DMatrix, DVector, DimMin};
 
-use super::floquet::{refined_floquet, Floquet};
+use super::floquet::{refined_floquet_near, Floquet};
 use super::map::evaluate;
 use super::newton::{relative_residual, solve, Failure, NewtonSettings, Orbit};
 use crate::method::MethodSettings;
@@ -93,6 +93,12 @@ pub enum BranchEnd {
     /// [`continue_branch_until`] ended it there, the point of the shorter
     /// orbit left out: that orbit is a branch of its own.
     ShorterPeriod { parameter: f64, period: usize },
+    /// An impact of its orbit reaches the map's section at λ =
+    /// `parameter` ahead (extrapolated), where the orbit's point jumps by
+    /// the reset ([`super::section`]): the hook of
+    /// [`continue_branch_until`] ended it short of there, for the tracer
+    /// to step across; a branch that could not is ended so.
+    SectionCrossing { parameter: f64 },
 }
 
 /// Asked after each new point of a branch (the points so far, the step
@@ -314,7 +320,9 @@ where
             let at_bound = params_at(base, index, bound);
             match solve(&S::new(&at_bound), settings, newton, &guess, p) {
                 Ok(orbit) => {
-                    points.push(point::<D, S>(base, settings, index, bound, orbit));
+                    let near = points.last();
+                    let new = point_near::<D, S>(base, settings, index, bound, orbit, near);
+                    points.push(new);
                     return Branch {
                         points,
                         end: BranchEnd::Bound,
@@ -332,7 +340,9 @@ where
                             t = n;
                         }
                         let steps = orbit.steps;
-                        points.push(point::<D, S>(base, settings, index, lambda, orbit));
+                        let near = points.last();
+                        let new = point_near::<D, S>(base, settings, index, lambda, orbit, near);
+                        points.push(new);
                         if closes(&points, &t, &mut left, step) {
                             return Branch {
                                 points,
@@ -411,13 +421,30 @@ pub(super) fn point<const D: usize, S: System<D>>(
     settings: &MethodSettings,
     index: usize,
     lambda: f64,
+    orbit: Orbit<D>,
+) -> BranchPoint<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    point_near::<D, S>(base, settings, index, lambda, orbit, None)
+}
+
+/// [`point`], its ladder tried first where `near`'s (the branch's
+/// previous point) was kept ([`refined_floquet_near`]).
+fn point_near<const D: usize, S: System<D>>(
+    base: &Params,
+    settings: &MethodSettings,
+    index: usize,
+    lambda: f64,
     mut orbit: Orbit<D>,
+    near: Option<&BranchPoint<D>>,
 ) -> BranchPoint<D>
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
     let params = params_at(base, index, lambda);
-    let floquet = refined_floquet(&S::new(&params), settings, &params, &mut orbit);
+    let near = near.map(|p| &p.floquet);
+    let floquet = refined_floquet_near(&S::new(&params), settings, &params, &mut orbit, near);
     BranchPoint {
         parameter: lambda,
         orbit,

@@ -8,6 +8,7 @@ use nalgebra::{Const, DimMin};
 
 use super::extremum::wall_excess;
 use super::newton::Orbit;
+use super::section::section_clearance;
 use super::trace::{trace, Start, TraceSettings, Traced, Tracer};
 use crate::integrate::Flow;
 use crate::method::MethodSettings;
@@ -42,6 +43,7 @@ where
         settings_of_trace,
         start,
         Some(excesses::<D, S>),
+        Some(section_clearance::<D, S>),
     )
 }
 
@@ -54,7 +56,7 @@ fn trace_map<const D: usize, S: System<D>>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    trace::<D, S>(base, settings, settings_of_trace, start, None)
+    trace::<D, S>(base, settings, settings_of_trace, start, None, None)
 }
 
 /// The tracer of `system`'s branches.

@@ -4,7 +4,7 @@
 
 use nalgebra::{Complex, Const, DMatrix, DimMin};
 
-use super::ladder::refined_jacobian;
+use super::ladder::refine;
 use super::newton::Orbit;
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
@@ -25,6 +25,9 @@ pub struct Floquet {
     /// The change in ln|μ_i| between the δ ladder's rungs around the one
     /// kept ([`super::ladder`]); 0 where the orbit's own estimate was used.
     pub ladder_error: f64,
+    /// The ladder's combination kept ([`super::ladder::Refined`]), which
+    /// the branch's next orbit tries first.
+    pub ladder_combination: usize,
 }
 
 impl Floquet {
@@ -69,11 +72,12 @@ pub fn floquet<const D: usize>(orbit: &Orbit<D>, params: &Params) -> Floquet {
         exponents,
         expected_sum,
         ladder_error: 0.0,
+        ladder_combination: 0,
     }
 }
 
 /// [`floquet`] of the orbit's Jacobian re-estimated over the δ ladder
-/// ([`refined_jacobian`]), which replaces the orbit's own.
+/// ([`super::ladder::refined_jacobian`]), which replaces the orbit's own.
 pub fn refined_floquet<const D: usize, S: System<D>>(
     system: &S,
     settings: &MethodSettings,
@@ -83,10 +87,41 @@ pub fn refined_floquet<const D: usize, S: System<D>>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let (jacobian, error) = refined_jacobian(system, settings, orbit);
-    orbit.jacobian = jacobian;
+    refined_floquet_near(system, settings, params, orbit, None)
+}
+
+/// [`refined_floquet`], the ladder tried first where the multipliers of
+/// `near` (a neighbouring orbit of the branch) were found: its
+/// combination, kept if its error is at most [`LADDER_DRIFT`] times that
+/// orbit's, or [`LADDER_FLOOR`] per unit time (see [`refine`]).
+pub fn refined_floquet_near<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    params: &Params,
+    orbit: &mut Orbit<D>,
+    near: Option<&Floquet>,
+) -> Floquet
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let hint = near.map(|f| {
+        let most = (LADDER_DRIFT * f.ladder_error).max(LADDER_FLOOR * orbit.time);
+        (f.ladder_combination, most)
+    });
+    let refined = refine(system, settings, orbit, hint);
+    orbit.jacobian = refined.jacobian;
     Floquet {
-        ladder_error: error,
+        ladder_error: refined.error,
+        ladder_combination: refined.combination,
         ..floquet(orbit, params)
     }
 }
+
+/// How much larger than its neighbour's a ladder combination's error may
+/// be for it to be kept without the whole ladder.
+pub const LADDER_DRIFT: f64 = 4.0;
+
+/// A ladder error per unit time that is always small enough to keep
+/// (see [`LADDER_DRIFT`]): a tenth of the 1e-10 an orbit's exponents
+/// are held to.
+pub const LADDER_FLOOR: f64 = 1e-11;

@@ -11,6 +11,7 @@
 //! grazing ladder keeps its rung (`method::lane::estimate_resolving_grazing`).
 
 use nalgebra::{Const, DMatrix, DimMin, SMatrix};
+use rayon::prelude::*;
 
 use super::map::evaluate;
 use super::newton::Orbit;
@@ -58,38 +59,121 @@ pub fn refined_jacobian<const D: usize, S: System<D>>(
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
 {
-    let mut rung = settings.clone();
-    let plain: Vec<SMatrix<f64, D, D>> = (0..=RUNGS)
-        .map(|k| {
-            rung.perturbation = settings.perturbation * 10f64.powf(f64::from(k) / 2.0);
+    let refined = refine(system, settings, orbit, None);
+    (refined.jacobian, refined.error)
+}
+
+/// A Jacobian re-estimated over the ladder.
+#[derive(Clone, Copy, Debug)]
+pub struct Refined<const D: usize> {
+    pub jacobian: SMatrix<f64, D, D>,
+    /// The change in ln|μ| towards the neighbouring combinations.
+    pub error: f64,
+    /// The combination kept: rungs `combination` and `combination + 1`
+    /// (0 where none gave finite multipliers).
+    pub combination: usize,
+}
+
+/// [`refined_jacobian`], tried first at a combination `near` = (c, most)
+/// suggests (a neighbouring orbit's on the branch): only the four rungs
+/// that combination and its two neighbours need, kept when its error is
+/// at most `most`. The whole ladder otherwise. Neighbouring orbits of a
+/// branch meet the same nonlinearity at the same δ, so the combination
+/// kept moves rarely; where it does, or where the error grows, the whole
+/// ladder decides as before.
+pub fn refine<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    orbit: &Orbit<D>,
+    near: Option<(usize, f64)>,
+) -> Refined<D>
+where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let last = RUNGS as usize;
+    let mut plain = vec![None; last + 1];
+    if let Some((c, most)) = near.filter(|(c, _)| (1..last - 1).contains(c)) {
+        fill(system, settings, orbit, &mut plain, c - 1..=c + 2);
+        let known: Vec<_> = plain[c - 1..=c + 2].iter().flatten().copied().collect();
+        let combinations = combined(&known);
+        let error = error_of(&combinations, 1);
+        if error <= most {
+            return Refined {
+                jacobian: combinations[1].0,
+                error,
+                combination: c,
+            };
+        }
+    }
+    // The whole ladder, with the rungs already had.
+    fill(system, settings, orbit, &mut plain, 0..=last);
+    let plain: Vec<_> = plain.into_iter().flatten().collect();
+    let combinations = combined(&plain);
+    let (combination, error) = (1..combinations.len() - 1)
+        .map(|k| (k, error_of(&combinations, k)))
+        .filter(|(_, e)| !e.is_nan())
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or((0, f64::INFINITY));
+    Refined {
+        jacobian: combinations[combination].0,
+        error,
+        combination,
+    }
+}
+
+/// Rungs `ks` of the ladder not yet in `plain`: DU^p at δ·10^(k/2), rung
+/// 0 the orbit's own estimate. The rungs are independent estimates: each
+/// on a core of its own where one is free (a branch traced one way leaves
+/// the other idle).
+fn fill<const D: usize, S: System<D>>(
+    system: &S,
+    settings: &MethodSettings,
+    orbit: &Orbit<D>,
+    plain: &mut [Option<SMatrix<f64, D, D>>],
+    ks: std::ops::RangeInclusive<usize>,
+) where
+    Const<D>: DimMin<Const<D>, Output = Const<D>>,
+{
+    let missing: Vec<usize> = ks.filter(|&k| plain[k].is_none()).collect();
+    let found: Vec<SMatrix<f64, D, D>> = missing
+        .par_iter()
+        .map(|&k| {
             if k == 0 {
-                orbit.jacobian
-            } else {
-                evaluate(system, &rung, &orbit.state, orbit.period, true).jacobian
+                return orbit.jacobian;
             }
+            let rung = MethodSettings {
+                perturbation: settings.perturbation * 10f64.powf(k as f64 / 2.0),
+                ..settings.clone()
+            };
+            evaluate(system, &rung, &orbit.state, orbit.period, true).jacobian
         })
         .collect();
-    let rungs: Vec<(SMatrix<f64, D, D>, Vec<f64>)> = plain
+    for (k, j) in missing.into_iter().zip(found) {
+        plain[k] = Some(j);
+    }
+}
+
+/// Neighbouring rungs combined by Richardson's extrapolation, with their
+/// ln|μ_i|.
+fn combined<const D: usize>(plain: &[SMatrix<f64, D, D>]) -> Vec<(SMatrix<f64, D, D>, Vec<f64>)> {
+    plain
         .windows(2)
         .map(|pair| {
             let j = (pair[0] * 10.0 - pair[1]) / 9.0;
             let logs = log_moduli(&j);
             (j, logs)
         })
-        .collect();
+        .collect()
+}
+
+/// The largest change of ln|μ| from combination `k` to either neighbour.
+fn error_of<const D: usize>(combinations: &[(SMatrix<f64, D, D>, Vec<f64>)], k: usize) -> f64 {
     let change = |a: &[f64], b: &[f64]| {
         a.iter()
             .zip(b)
             .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()))
     };
-    let (best, error) = (1..rungs.len() - 1)
-        .map(|k| {
-            let left = change(&rungs[k - 1].1, &rungs[k].1);
-            let right = change(&rungs[k].1, &rungs[k + 1].1);
-            (k, left.max(right))
-        })
-        .filter(|(_, e)| !e.is_nan())
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .unwrap_or((0, f64::INFINITY));
-    (rungs[best].0, error)
+    let left = change(&combinations[k - 1].1, &combinations[k].1);
+    let right = change(&combinations[k].1, &combinations[k + 1].1);
+    left.max(right)
 }

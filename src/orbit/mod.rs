@@ -10,7 +10,8 @@
 //! multipliers (`bifurcation`); the doubled branch followed from a period
 //! doubling (`doubling`); where an orbit's events per period change (an
 //! impact or a free flight grazing, sliding), and the branch restarted
-//! past it (`events`). A run's branches are traced from their starts with
+//! past it (`events`); where an impact passes through the map's section
+//! and the orbit's point jumps, the branch stepped across (`section`). A run's branches are traced from their starts with
 //! their bifurcations (`trace`), by the instance `dispatch` picks for the
 //! system.
 //!
@@ -30,6 +31,7 @@ pub mod ladder;
 pub mod locate;
 pub mod map;
 pub mod newton;
+pub mod section;
 pub mod trace;
 
 pub use bifurcation::{bifurcations, locate_on_chord, Bifurcation, Kind};
@@ -48,3 +50,4 @@ pub use ladder::refined_jacobian;
 pub use locate::{locate_zero, Located};
 pub use map::{evaluate, Evaluation};
 pub use newton::{least_period, relative_residual, solve, Failure, NewtonSettings, Orbit};
+pub use section::{crossing_ahead, section_clearance, step_across, Clearance};

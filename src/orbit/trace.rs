@@ -27,6 +27,7 @@ use super::events::{events, extrapolate_grazing, impact_speed_test, step_past, E
 use super::locate::locate_zero;
 use super::map::evaluate;
 use super::newton::{least_period, relative_residual, NewtonSettings, Orbit};
+use super::section::{crossing_ahead, step_across, Clearance};
 use crate::method::MethodSettings;
 use crate::system::{Params, System};
 
@@ -258,6 +259,7 @@ fn describe_end(end: &BranchEnd) -> String {
         BranchEnd::ShorterPeriod { parameter, period } => {
             format!("shorter-period(at={parameter:e}; period={period})")
         }
+        BranchEnd::SectionCrossing { parameter } => format!("section(at={parameter:e})"),
         BranchEnd::Bound => "bound".into(),
         BranchEnd::Closed => "closed".into(),
         BranchEnd::MaxPoints => "max-points".into(),
@@ -279,6 +281,7 @@ struct Context<'a, const D: usize, S: System<D>> {
     trace: &'a TraceSettings,
     continuation: ContinuationSettings,
     walls: Option<WallExcess<D, S>>,
+    clearance: Option<Clearance<D, S>>,
 }
 
 impl<const D: usize, S: System<D>> Context<'_, D, S>
@@ -297,19 +300,71 @@ where
         )
     }
 
+    /// The system at λ = `lambda`, the other parameters the start's.
+    fn system_at(&self, lambda: f64) -> S {
+        S::new(&params_at(self.base, self.trace.parameter, lambda))
+    }
+
     /// The branch of period-`period` orbits from `guess` at the start's
     /// λ, one way (`direction` in λ), ended where it runs into an orbit
     /// of a shorter period ([`shorter_period`]) or creeps ([`creeping_end`]).
+    /// Where an impact of its orbit reaches the map's section, the branch
+    /// steps across the point's jump ([`step_across`]) and goes on as the
+    /// same branch, its points on both sides in one list (at most
+    /// [`MAX_CROSSINGS`] times, a bound against a branch going round an
+    /// isola for ever).
     fn follow(&self, guess: &[f64; D], period: usize, direction: f64) -> Branch<D> {
+        let (mut branch, mut across) = self.follow_from(self.base, guess, period, direction);
+        for _ in 0..MAX_CROSSINGS {
+            let Some((lambda, orbit)) = across.or_else(|| self.across_failure(&branch)) else {
+                break;
+            };
+            let [.., before, last] = &branch.points[..] else {
+                break;
+            };
+            let onwards = (last.parameter - before.parameter).signum();
+            let base = params_at(self.base, self.trace.parameter, lambda);
+            let (next, next_across) = self.follow_from(&base, &orbit.state, period, onwards);
+            if let BranchEnd::Start(_) = next.end {
+                break;
+            }
+            branch.points.extend(next.points);
+            branch.end = next.end;
+            across = next_across;
+        }
+        branch
+    }
+
+    /// One stretch of [`follow`](Self::follow) from `base`'s λ, up to a
+    /// crossing of the section or the branch's end; with the orbit on the
+    /// crossing's far side where it ended there ([`BranchEnd::SectionCrossing`]).
+    /// The stretch ends at a crossing ahead only where that orbit is
+    /// found: elsewhere it goes on as it would without the test.
+    fn follow_from(
+        &self,
+        base: &Params,
+        guess: &[f64; D],
+        period: usize,
+        direction: f64,
+    ) -> (Branch<D>, Option<(f64, Orbit<D>)>) {
         let continuation = ContinuationSettings {
             direction,
             ..self.continuation
         };
+        let across = std::cell::Cell::new(None);
         let end = |points: &[BranchPoint<D>], step: f64| {
-            shorter_period(self, points).or_else(|| creeping_end(self, points, step))
+            shorter_period(self, points)
+                .or_else(|| creeping_end(self, points, step))
+                .or_else(|| {
+                    let crossing = self.section_ahead(points, 2.0)?;
+                    across.set(Some(self.step_across(points, crossing)?));
+                    Some(BranchEnd::SectionCrossing {
+                        parameter: crossing,
+                    })
+                })
         };
         let mut branch = continue_branch_until::<D, S>(
-            self.base,
+            base,
             self.settings,
             &self.trace.newton,
             &continuation,
@@ -320,9 +375,50 @@ where
         if let BranchEnd::ShorterPeriod { .. } = branch.end {
             branch.points.pop();
         }
-        branch
+        (branch, across.take())
+    }
+
+    /// The section's crossing ahead of the branch's newest point within
+    /// `reach` times its last step ([`crossing_ahead`]).
+    fn section_ahead(&self, points: &[BranchPoint<D>], reach: f64) -> Option<f64> {
+        let clearance = self.clearance?;
+        crossing_ahead(self.base, self.trace.parameter, points, clearance, reach)
+    }
+
+    /// The orbit on the far side of a section's crossing ahead where the
+    /// corrector failed, within [`SECTION_FAILURE_REACH`] of the branch's
+    /// last steps (a step that landed beyond the crossing before the test
+    /// saw it coming).
+    fn across_failure(&self, branch: &Branch<D>) -> Option<(f64, Orbit<D>)> {
+        let BranchEnd::StepTooSmall { .. } = branch.end else {
+            return None;
+        };
+        let crossing = self.section_ahead(&branch.points, SECTION_FAILURE_REACH)?;
+        self.step_across(&branch.points, crossing)
+    }
+
+    /// The orbit on the far side of the section's crossing at `crossing`
+    /// ahead of `points` ([`step_across`]).
+    fn step_across(&self, points: &[BranchPoint<D>], crossing: f64) -> Option<(f64, Orbit<D>)> {
+        step_across(
+            self.base,
+            self.settings,
+            &self.trace.newton,
+            self.trace.parameter,
+            self.trace.bounds,
+            points,
+            crossing,
+            self.clearance?,
+        )
     }
 }
+
+/// The most times one way of a branch steps across the map's section.
+const MAX_CROSSINGS: usize = 16;
+
+/// How many of its last steps ahead a branch whose corrector failed may
+/// have its section's crossing for the tracer to step across it.
+const SECTION_FAILURE_REACH: f64 = 50.0;
 
 /// The branch of `start`, traced over `trace.bounds` both ways (a
 /// switched start, one way from its bifurcation), with the starts of the
@@ -333,6 +429,7 @@ pub fn trace<const D: usize, S: System<D>>(
     trace: &TraceSettings,
     start: &Start,
     walls: Option<WallExcess<D, S>>,
+    clearance: Option<Clearance<D, S>>,
 ) -> Traced
 where
     Const<D>: DimMin<Const<D>, Output = Const<D>>,
@@ -370,6 +467,7 @@ where
             max_corrector_steps: 6,
         },
         walls,
+        clearance,
     };
     let guess: [f64; D] = crate::array::from_fn(|i| start.state[i]);
     let followed = match &start.onward {
@@ -459,8 +557,8 @@ where
     let mut path = Vec::with_capacity(branch.points.len() + 1);
     if onward.kind == Kind::PeriodDoubling && onward.state.len() == D {
         let x: [f64; D] = crate::array::from_fn(|i| onward.state[i]);
-        let at = params_at(context.base, context.trace.parameter, onward.parameter);
-        let twice = evaluate(&S::new(&at), context.settings, &x, period, true);
+        let at = context.system_at(onward.parameter);
+        let twice = evaluate(&at, context.settings, &x, period, true);
         let orbit = Orbit {
             state: x,
             period,
@@ -635,8 +733,8 @@ where
     if last.orbit.period == 1 || events(&last.orbit) == events(&before.orbit) {
         return None;
     }
-    let at = params_at(context.base, context.trace.parameter, last.parameter);
-    let least = least_period(&S::new(&at), context.settings, &last.orbit);
+    let system = context.system_at(last.parameter);
+    let least = least_period(&system, context.settings, &last.orbit);
     (least < last.orbit.period).then_some(BranchEnd::ShorterPeriod {
         parameter: last.parameter,
         period: least,
@@ -806,11 +904,7 @@ where
             1.0
         };
         let beyond = here.parameter + direction * context.trace.max_step;
-        let system = S::new(&params_at(
-            context.base,
-            context.trace.parameter,
-            here.parameter,
-        ));
+        let system = context.system_at(here.parameter);
         let excess = walls(&system, context.settings, &here.orbit);
         for (w, &g) in excess.iter().enumerate() {
             if g.is_nan() || g >= 0.0 || here.orbit.stats.crossings[w] != 0 {
@@ -831,7 +925,7 @@ where
                 continue;
             };
             let solved_at = zero.bracket.0;
-            let at = S::new(&params_at(context.base, context.trace.parameter, solved_at));
+            let at = context.system_at(solved_at);
             let touching = walls(&at, context.settings, &zero.orbit)
                 .get(w)
                 .is_some_and(|g| g.abs() <= 1e-6 * excess_scale(&zero.orbit.state));
@@ -966,7 +1060,11 @@ fn traced_point<const D: usize>(point: &BranchPoint<D>) -> TracedPoint {
 /// to max(1, |x|∞)) of the branch's polygon at its parameter value. The
 /// polygon's own error is the branch's curvature times its step squared,
 /// far below that on the steps continuation takes; two distinct orbits of
-/// one period that close at one value would be one branch's fold.
+/// one period that close at one value would be one branch's fold. Where
+/// the branch's point jumps between two rows (an impact at the map's
+/// section, see [`super::section`]) the chord between them is no orbit's:
+/// there the segments on either side, extended to the start's value, are
+/// the branch's.
 pub fn covers(traced: &Traced, start: &Start) -> bool {
     let d = start.state.len();
     if traced.points.is_empty() || traced.points[0].period != start.period || d == 0 {
@@ -982,33 +1080,37 @@ pub fn covers(traced: &Traced, start: &Start) -> bool {
         let scale = x.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
         x.iter().zip(y).all(|(a, b)| (a - b).abs() <= 1e-2 * scale)
     };
-    let points = &traced.points;
-    let segments = points.windows(2).filter_map(|pair| {
-        let (a, b) = (&pair[0], &pair[1]);
-        let (low, high) = if a.parameter <= b.parameter {
-            (a.parameter, b.parameter)
-        } else {
-            (b.parameter, a.parameter)
-        };
-        if lambda < low || lambda > high {
-            return None;
-        }
-        let s = if high > low {
+    // The line through points k and k + 1 at λ.
+    let line = |points: &[TracedPoint], k: usize| -> Vec<f64> {
+        let (a, b) = (&points[k], &points[k + 1]);
+        let s = if b.parameter != a.parameter {
             (lambda - a.parameter) / (b.parameter - a.parameter)
         } else {
             0.0
         };
-        Some(
-            a.state
-                .iter()
-                .zip(&b.state)
-                .map(|(p, q)| p + s * (q - p))
-                .collect::<Vec<f64>>(),
-        )
+        a.state
+            .iter()
+            .zip(&b.state)
+            .map(|(p, q)| p + s * (q - p))
+            .collect()
+    };
+    let points = &traced.points;
+    let segments = (0..points.len().saturating_sub(1)).filter(|&k| {
+        let (a, b) = (points[k].parameter, points[k + 1].parameter);
+        lambda >= a.min(b) && lambda <= a.max(b)
+    });
+    let lines = segments.flat_map(|k| {
+        let sides = [k.checked_sub(1), Some(k), Some(k + 1)];
+        sides
+            .into_iter()
+            .flatten()
+            .filter(|&j| j + 1 < points.len())
+            .map(|j| line(points, j))
+            .collect::<Vec<_>>()
     });
     let single =
         (points.len() == 1 && points[0].parameter == lambda).then(|| points[0].state.clone());
-    segments
+    lines
         .chain(single)
         .any(|x| candidates.iter().any(|c| near(c, &x)))
 }
