@@ -267,9 +267,6 @@ fn resolve_step(p: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp
     var rest_at = real(0.0);
     var rest_phase = tr.phase;
     if (stuck == WALLS) {
-#ifdef SURFACES
-        crossed = Crossed(p.region, real(0.0), false, 0u);
-#endif
         let w = resolve_impacts(p, walls, step.omega, tr.phase, tr.y, step.h, y1);
         tr = record(tr, t, w, y1, comp1);
 #ifdef SURFACES
@@ -295,19 +292,19 @@ fn resolve_step(p: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp
     return tr;
 }
 
-// What resolve_impacts did in the step (w, and with surfaces `crossed`),
+// What resolve_impacts did in the step (w, with surfaces w.crossed),
 // recorded in the trajectory: its state, impacts and crossings, slowest
 // impact, flags, region and Σ ln |det S|.
 fn record(tr_in: Trajectory, t: u32, w: WallStep, y1: State, comp1: State) -> Trajectory {
     var tr = tr_in;
 #ifdef SURFACES
-    tr.region = crossed.region;
-    tr.flux = tr.flux + crossed.log_flux;
-    if (crossed.sliding) {
+    tr.region = w.crossed.region;
+    tr.flux = tr.flux + w.crossed.log_flux;
+    if (w.crossed.sliding) {
         tr.c.z = tr.c.z | FLAG_SLIDING;
     }
     // The sliding phases entered, counted in the flags' high half.
-    tr.c.z = tr.c.z + (min(crossed.sliding_phases, 0xffffu - (tr.c.z >> 16u)) << 16u);
+    tr.c.z = tr.c.z + (min(w.crossed.sliding_phases, 0xffffu - (tr.c.z >> 16u)) << 16u);
 #endif
     // Whatever the stops did (an impact, a rest, a departure from rest),
     // the step ends where resolve_impacts says; the compensation belongs

@@ -126,8 +126,9 @@ fn is_extern(program: &Program, name: &str) -> bool {
 /// What a WGSL function takes before its own parameters, as (name,
 /// type): the lane's `Params` where it evaluates a field, and the stop
 /// `w` too where it evaluates the held flow.
-/// A function that takes `p` (or `w`) as a parameter of its own passes
-/// it on by name.
+/// A function that takes `p` (or `w`) as a parameter of its own, or
+/// names one in its body (a stop it reads, a copy of the lane's
+/// parameters in another region), passes it on by name.
 fn context(program: &Program, f: &Function) -> Vec<(&'static str, &'static str)> {
     let read = fields_read(program, f);
     let implied: &[(&str, &str)] = if read.contains(&Field::Held) {
@@ -137,9 +138,15 @@ fn context(program: &Program, f: &Function) -> Vec<(&'static str, &'static str)>
     } else {
         &[("p", "Params")]
     };
+    let declared = |n: &str| {
+        f.params.iter().any(|(p, _)| *p == n)
+            || f.body
+                .iter()
+                .any(|s| matches!(s, Stmt::Let(d, _) | Stmt::Var(d, _) if *d == n))
+    };
     implied
         .iter()
-        .filter(|(n, _)| f.params.iter().all(|(p, _)| p != n))
+        .filter(|(n, _)| !declared(n))
         .copied()
         .collect()
 }
@@ -328,6 +335,7 @@ impl Wgsl<'_> {
                 let (y, op) = self.expr(y);
                 (format!("{}[{}]", wrap(&y, op), text(i)), None)
             }
+            Expr::Zero(ty) => (format!("{}()", wgsl_type(*ty)), None),
             Expr::Bits(bits, a) => {
                 let (a, op) = self.expr(a);
                 match bits {
@@ -658,7 +666,11 @@ impl C<'_> {
             },
             // What only the kernels' programs use (their stops and Newton
             // brackets): the C step loops hold no structures.
-            Expr::Math(..) | Expr::Member(..) | Expr::Make(..) | Expr::Index(..) => {
+            Expr::Math(..)
+            | Expr::Member(..)
+            | Expr::Make(..)
+            | Expr::Index(..)
+            | Expr::Zero(..) => {
                 panic!("C's step programs have no {e:?}")
             }
             // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
@@ -1111,6 +1123,52 @@ fn orientation(region: u32, bit: u32) -> real {
         // The kernels' structures are theirs: not printed.
         assert!(!text.contains("struct Params"), "{text}");
         assert!(!text.contains("struct SurfaceValues"), "{text}");
+    }
+
+    #[test]
+    fn the_step_loop_prints_as_the_kernels_read_it() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            // A stop the function reads itself is not a parameter.
+            "fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {\n    let w = stop(walls, j);\n",
+            "        out = held_sub_step(p, w, omega, phase, rest, s).y;\n",
+            "        let held = held_for(p, w, omega, phase, rest, h);\n        if (!(pressing(p, w, rotate(phase, cos_sin(omega * h)), held) <= 0.0)) {\n",
+            "                if (hi - lo <= EPSILON * h) {\n                    break;\n",
+            "        out = clamp_to_stops(walls, sub_step(p, omega, start_phase, start, left).y);\n",
+            "        var crossings = r.crossings;\n        crossings[met.stop] = crossings[met.stop] + 1u;\n        r.crossings = crossings;\n",
+            "        if ((rebound == 0.0) || ((push > 0.0) && (2.0 * rebound < 0.0010000000474974513 * h * push * (1.0 - e)))) {\n",
+            "    var r = Resolution(0.0, phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false, false, false, neutral_crossed(p.region));\n",
+            "            y1 = sub_step(p, omega, r.phase0, r.y0, h - r.done).y;\n",
+            "    if (found.found && ((met.stop == WALLS + SURFACES) || (found.s < met.hit.s))) {\n",
+            "    r.crossed = Crossed(crossing.region, r.crossed.log_flux + crossing.log_det, (r.crossed.sliding || crossing.sliding), r.crossed.sliding_phases);\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_zero_prints_as_its_type_s_zero() {
+        let program = Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("j", Ty::Count)],
+                body: vec![
+                    Stmt::Var("n", Expr::Zero(Ty::CountTable)),
+                    Stmt::SetAt("n", var("j"), count(1)),
+                ],
+                results: vec![("n", var("n"))],
+                returns: None,
+            }],
+            ..Program::default()
+        };
+        let text = wgsl(&program, &Plain);
+        assert!(
+            text.contains(
+                "fn f(j: u32) -> vec4<u32> {\n    var n = vec4<u32>();\n    n[j] = 1u;\n"
+            ),
+            "{text}"
+        );
     }
 
     #[test]

@@ -3,9 +3,11 @@
 //! interpreter, the reference ([`tape`]); the step programs' language
 //! ([`step`]) and the integrator's programs written in it ([`integrator`],
 //! the kernels' stops and crossing location, [`events`], and their general
-//! surfaces and sliding, [`surfaces`]).
+//! surfaces and sliding, [`surfaces`], and the step loop that resolves a
+//! step's events, [`impacts`]).
 
 pub mod events;
+pub mod impacts;
 pub mod integrator;
 pub mod step;
 pub mod surfaces;

@@ -199,6 +199,9 @@ pub enum Expr {
     Index(Box<Expr>, Box<Expr>),
     /// An operation on one counter's bits.
     Bits(Bits, Box<Expr>),
+    /// A state, a table or a matrix with every entry 0 (a step's
+    /// crossings per surface before any).
+    Zero(Ty),
 }
 
 /// An operation on one counter's bits.
@@ -297,7 +300,7 @@ pub enum Stmt {
     /// Leaves the innermost loop.
     Break,
     /// A new value of one component (at a counter) of a state
-    /// [`Stmt::Var`], or of one row of a matrix.
+    /// [`Stmt::Var`], of one entry of a table, or of one row of a matrix.
     SetAt(&'static str, Expr, Expr),
     /// A new value of one entry (at a row and a column) of a matrix
     /// [`Stmt::Var`].
@@ -387,6 +390,10 @@ impl Program {
                 expect(a, Ty::Count, &format!("{bits:?}"));
                 Ty::Count
             }
+            Expr::Zero(ty) => match ty {
+                Ty::State | Ty::Table | Ty::CountTable | Ty::Rows => *ty,
+                other => panic!("{other:?} has no zero"),
+            },
             Expr::Member(..) | Expr::Make(..) | Expr::Call(..) => self.type_of_structured(e, scope),
             Expr::Abs(a) => {
                 expect(a, Ty::Real, "|x|");
@@ -600,7 +607,8 @@ impl Program {
                     let target = lookup(scope, name);
                     assert!(target.mutable, "{name} is not a var");
                     let component = match target.ty {
-                        Ty::State => Ty::Real,
+                        Ty::State | Ty::Table => Ty::Real,
+                        Ty::CountTable => Ty::Count,
                         Ty::Rows => Ty::State,
                         _ => panic!("{name} has no components"),
                     };
@@ -707,7 +715,9 @@ impl Expr {
     /// The expressions this one is an operation of.
     pub fn operands(&self) -> Vec<&Expr> {
         match self {
-            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) | Expr::Truth(_) => Vec::new(),
+            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) | Expr::Truth(_) | Expr::Zero(_) => {
+                Vec::new()
+            }
             Expr::Bin(_, a, b)
             | Expr::Index(a, b)
             | Expr::Pair(a, b)
@@ -786,7 +796,7 @@ impl From<&'static str> for Expr {
 
 /// Short forms that keep the programs readable.
 pub mod build {
-    use super::{Bits, Cmp, Expr, Field, Math, Op, Stmt};
+    use super::{Bits, Cmp, Expr, Field, Math, Op, Stmt, Ty};
 
     pub fn var(name: &'static str) -> Expr {
         Expr::Var(name)
@@ -950,6 +960,11 @@ pub mod build {
 
     pub fn make(name: &'static str, members: Vec<Expr>) -> Expr {
         Expr::Make(name, members)
+    }
+
+    /// `ty` with every entry 0.
+    pub fn zero(ty: Ty) -> Expr {
+        Expr::Zero(ty)
     }
 
     /// `y[i]`.
@@ -1381,6 +1396,41 @@ mod tests {
             Stmt::SetEntry("z", count(0), count(0), num(0.0)),
         ];
         result_type(&one(vec![("y", Ty::State)], body, num(0.0)));
+    }
+
+    #[test]
+    fn a_table_s_entries_are_set_and_zero_is_of_its_type() {
+        let body = vec![
+            Stmt::Var("n", zero(Ty::CountTable)),
+            Stmt::SetAt("n", var("j"), index(var("n"), var("j")) + count(1)),
+            Stmt::Var("g", zero(Ty::Table)),
+            Stmt::SetAt("g", count(0), num(1.0)),
+            Stmt::Let("y", zero(Ty::State)),
+        ];
+        let program = one(vec![("j", Ty::Count)], body, var("n"));
+        assert_eq!(result_type(&program), Ty::CountTable);
+    }
+
+    #[test]
+    #[should_panic(expected = "n's new component")]
+    fn a_counter_table_holds_counters() {
+        let body = vec![
+            Stmt::Var("n", zero(Ty::CountTable)),
+            Stmt::SetAt("n", count(0), num(1.0)),
+        ];
+        result_type(&one(vec![], body, var("n")));
+    }
+
+    #[test]
+    #[should_panic(expected = "Real has no zero")]
+    fn a_number_has_no_zero_of_entries() {
+        result_type(&one(vec![], vec![], zero(Ty::Real)));
+    }
+
+    #[test]
+    #[should_panic(expected = "Struct(\"Stop\") has no zero")]
+    fn a_structure_has_no_zero() {
+        result_type(&with_stops(vec![], vec![], zero(Ty::Struct("Stop"))));
     }
 
     #[test]
