@@ -268,6 +268,7 @@ impl Variant {
             self.wall,
             self.impact_location != ImpactLocation::Linear,
             self.surfaces(),
+            kernel == Kernel::Integrate,
         ));
         if self.wall {
             // What the generated step loop reads of the stops and of

@@ -88,32 +88,6 @@ fn wgsl_type(ty: Ty) -> &'static str {
     }
 }
 
-/// The fields `f` evaluates, itself or through the functions it calls.
-fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
-    fn read(program: &Program, e: &Expr, out: &mut Vec<Field>) {
-        match e {
-            Expr::Field { of, .. } if !out.contains(of) => out.push(*of),
-            Expr::Call(name, _) if is_extern(program, name) => {}
-            Expr::Call(name, _) => {
-                for of in fields_read(program, program.function(name)) {
-                    if !out.contains(&of) {
-                        out.push(of);
-                    }
-                }
-            }
-            _ => {}
-        }
-        for a in e.operands() {
-            read(program, a, out);
-        }
-    }
-    let mut out = Vec::new();
-    for e in f.exprs() {
-        read(program, e, &mut out);
-    }
-    out
-}
-
 /// Whether `name` is a function the kernels define.
 fn is_extern(program: &Program, name: &str) -> bool {
     use crate::model::ir::step::Extern;
@@ -125,29 +99,42 @@ fn is_extern(program: &Program, name: &str) -> bool {
 
 /// What a WGSL function takes before its own parameters, as (name,
 /// type): the lane's `Params` where it evaluates a field, and the stop
-/// `w` too where it evaluates the held flow.
-/// A function that takes `p` (or `w`) as a parameter of its own, or
-/// names one in its body (a stop it reads, a copy of the lane's
-/// parameters in another region), passes it on by name.
+/// `w` too where it evaluates the held flow, itself or through a function
+/// it calls that takes them so. A function that takes `p` (or `w`) as a
+/// parameter of its own, or names one in its body (a stop it reads, a
+/// copy of the lane's parameters in another region), passes it on by
+/// name, and its callers need not have one.
 fn context(program: &Program, f: &Function) -> Vec<(&'static str, &'static str)> {
-    let read = fields_read(program, f);
-    let implied: &[(&str, &str)] = if read.contains(&Field::Held) {
-        &[("p", "Params"), ("w", "Stop")]
-    } else if read.is_empty() {
-        &[]
-    } else {
-        &[("p", "Params")]
-    };
+    fn needs(program: &Program, e: &Expr, out: &mut Vec<&'static str>) {
+        let implied: Vec<&'static str> = match e {
+            Expr::Field {
+                of: Field::Held, ..
+            } => vec!["p", "w"],
+            Expr::Field { .. } => vec!["p"],
+            Expr::Call(name, _) if !is_extern(program, name) => {
+                let callee = program.function(name);
+                context(program, callee).iter().map(|(n, _)| *n).collect()
+            }
+            _ => Vec::new(),
+        };
+        out.extend(implied);
+        for a in e.operands() {
+            needs(program, a, out);
+        }
+    }
+    let mut names = Vec::new();
+    for e in f.exprs() {
+        needs(program, e, &mut names);
+    }
     let declared = |n: &str| {
         f.params.iter().any(|(p, _)| *p == n)
             || f.body
                 .iter()
                 .any(|s| matches!(s, Stmt::Let(d, _) | Stmt::Var(d, _) if *d == n))
     };
-    implied
-        .iter()
-        .filter(|(n, _)| !declared(n))
-        .copied()
+    [("p", "Params"), ("w", "Stop")]
+        .into_iter()
+        .filter(|(n, _)| names.contains(n) && !declared(n))
         .collect()
 }
 
@@ -336,6 +323,7 @@ impl Wgsl<'_> {
                 (format!("{}[{}]", wrap(&y, op), text(i)), None)
             }
             Expr::Zero(ty) => (format!("{}()", wgsl_type(*ty)), None),
+            Expr::Differs(a, b) => (format!("any({} != {})", text(a), text(b)), None),
             Expr::Bits(bits, a) => {
                 let (a, op) = self.expr(a);
                 match bits {
@@ -670,7 +658,8 @@ impl C<'_> {
             | Expr::Member(..)
             | Expr::Make(..)
             | Expr::Index(..)
-            | Expr::Zero(..) => {
+            | Expr::Zero(..)
+            | Expr::Differs(..) => {
                 panic!("C's step programs have no {e:?}")
             }
             // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
@@ -1141,6 +1130,23 @@ fn orientation(region: u32, bit: u32) -> real {
             "            y1 = sub_step(p, omega, r.phase0, r.y0, h - r.done).y;\n",
             "    if (found.found && ((met.stop == WALLS + SURFACES) || (found.s < met.hit.s))) {\n",
             "    r.crossed = Crossed(crossing.region, r.crossed.log_flux + crossing.log_det, (r.crossed.sliding || crossing.sliding), r.crossed.sliding_phases);\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_resolved_step_prints_as_the_integrate_kernel_reads_it() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            // A stop read inside a branch is not taken from the callers.
+            "fn resolve_step(p_lane: Params, walls: Stops, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Resolved {\n    var p = p_lane;\n",
+            "        let w = resolve_impacts(p, walls, step.omega, tr.phase, tr.y, step.h, y1);\n        tr = record(tr, w, y1, comp1);\n",
+            "    if (any(w.y != y1)) {\n        tr.y = w.y;\n        tr.comp = State();\n",
+            "    phases_c[2u] = phases_c[2u] + (select(room, phases, (phases < room)) << 16u);\n",
+            "    let room = 65535u - (phases_c[2u] >> 16u);\n",
+            "    return Resolved(tr, crossings);\n",
         ];
         for part in expected {
             assert!(text.contains(part), "{part}\nnot in\n{text}");

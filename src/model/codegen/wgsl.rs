@@ -773,8 +773,16 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
 /// (`model::ir::events::location`), else the linear location; with
 /// general surfaces (`surfaces`), their regions, tests, sliding and
 /// crossing (`model::ir::surfaces`); with stops, the step loop that
-/// resolves a step's events (`model::ir::impacts`).
-pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> String {
+/// resolves a step's events (`model::ir::impacts`), and for the integrate
+/// kernel (`trajectory`, whose `Trajectory` and `Stepping` it reads) that
+/// step resolved and recorded in a trajectory (`model::ir::trajectory`).
+pub fn integrator(
+    flow: bool,
+    held: bool,
+    newton: bool,
+    surfaces: bool,
+    trajectory: bool,
+) -> String {
     use crate::model::ir::events;
     let mut program = crate::model::ir::integrator::integrator();
     let c_only = crate::model::ir::integrator::C_ONLY;
@@ -805,18 +813,25 @@ pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> Strin
     program.functions.retain(|f| !absent.contains(&f.name));
     program.structures.retain(|s| !absent.contains(&s.name));
     // The step loop in the variant the kernel needs.
-    use crate::model::ir::impacts;
-    program
-        .functions
-        .retain(|f| !impacts::FUNCTIONS.contains(&f.name));
-    program
-        .structures
-        .retain(|s| !impacts::STRUCTURES.contains(&s.name));
+    use crate::model::ir::{impacts, trajectory as on_trajectory};
+    let variants: Vec<&str> = impacts::FUNCTIONS
+        .into_iter()
+        .chain(on_trajectory::FUNCTIONS)
+        .collect();
+    program.functions.retain(|f| !variants.contains(&f.name));
+    program.structures.retain(|s| {
+        !impacts::STRUCTURES.contains(&s.name)
+            && on_trajectory::structures().iter().all(|t| t.name != s.name)
+    });
     if held {
         program
             .functions
             .extend(impacts::functions(surfaces, newton));
         program.structures.extend(impacts::structures(surfaces));
+        if trajectory {
+            program.functions.extend(on_trajectory::functions(surfaces));
+            program.structures.extend(on_trajectory::structures());
+        }
     }
     format!(
         "// Generated from the integrator's step program (model::ir::integrator).\n\n{}",

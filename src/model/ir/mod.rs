@@ -3,8 +3,9 @@
 //! interpreter, the reference ([`tape`]); the step programs' language
 //! ([`step`]) and the integrator's programs written in it ([`integrator`],
 //! the kernels' stops and crossing location, [`events`], and their general
-//! surfaces and sliding, [`surfaces`], and the step loop that resolves a
-//! step's events, [`impacts`]).
+//! surfaces and sliding, [`surfaces`], the step loop that resolves a
+//! step's events, [`impacts`], and that step recorded in a trajectory,
+//! [`trajectory`]).
 
 pub mod events;
 pub mod impacts;
@@ -12,3 +13,4 @@ pub mod integrator;
 pub mod step;
 pub mod surfaces;
 pub mod tape;
+pub mod trajectory;

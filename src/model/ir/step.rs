@@ -202,6 +202,8 @@ pub enum Expr {
     /// A state, a table or a matrix with every entry 0 (a step's
     /// crossings per surface before any).
     Zero(Ty),
+    /// Whether two states differ in any component.
+    Differs(Box<Expr>, Box<Expr>),
 }
 
 /// An operation on one counter's bits.
@@ -389,6 +391,11 @@ impl Program {
             Expr::Bits(bits, a) => {
                 expect(a, Ty::Count, &format!("{bits:?}"));
                 Ty::Count
+            }
+            Expr::Differs(a, b) => {
+                expect(a, Ty::State, "a state that differs");
+                expect(b, Ty::State, "a state that differs");
+                Ty::Bool
             }
             Expr::Zero(ty) => match ty {
                 Ty::State | Ty::Table | Ty::CountTable | Ty::Rows => *ty,
@@ -723,7 +730,8 @@ impl Expr {
             | Expr::Pair(a, b)
             | Expr::Cmp(_, a, b)
             | Expr::And(a, b)
-            | Expr::Or(a, b) => vec![a, b],
+            | Expr::Or(a, b)
+            | Expr::Differs(a, b) => vec![a, b],
             Expr::Abs(a)
             | Expr::Finite(a)
             | Expr::Fill(a)
@@ -960,6 +968,11 @@ pub mod build {
 
     pub fn make(name: &'static str, members: Vec<Expr>) -> Expr {
         Expr::Make(name, members)
+    }
+
+    /// Whether the states a and b differ in any component.
+    pub fn differs(a: Expr, b: Expr) -> Expr {
+        Expr::Differs(Box::new(a), Box::new(b))
     }
 
     /// `ty` with every entry 0.
@@ -1419,6 +1432,20 @@ mod tests {
             Stmt::SetAt("n", count(0), num(1.0)),
         ];
         result_type(&one(vec![], body, var("n")));
+    }
+
+    #[test]
+    fn states_that_differ_are_a_truth_value() {
+        let params = vec![("a", Ty::State), ("b", Ty::State)];
+        let e = differs(var("a"), var("b"));
+        assert_eq!(result_type(&one(params, vec![], e)), Ty::Bool);
+    }
+
+    #[test]
+    #[should_panic(expected = "a state that differs of Real")]
+    fn only_states_differ() {
+        let params = vec![("a", Ty::State), ("x", Ty::Real)];
+        result_type(&one(params, vec![], differs(var("a"), var("x"))));
     }
 
     #[test]
