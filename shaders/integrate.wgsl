@@ -218,14 +218,19 @@ fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajector
         if (!pending) {
             break;
         }
-        tr = resolve_step(p, walls, t, step, y1, comp1, tr);
+        // The step resolved and recorded (generated: resolve_step and
+        // record, src/model/ir/trajectory.rs); its crossings go straight
+        // to the buffer.
+        let resolved = resolve_step(p, walls, step, y1, comp1, tr);
+        tr = resolved.tr;
         k = k + 1u;
         // Past the bound on located events in the part, the step's
         // resolution done (the CPU's end_past_the_bound): the trajectory
         // ends non-finite (NaN made at run time: a constant 0/0 is a
         // shader-creation error), flagged, and stops here (stepping its
         // NaN on would only count against lavapipe's loop cap).
-        let counted = crossings[t];
+        let counted = crossings[t] + resolved.crossings;
+        crossings[t] = counted;
         if (counted.x + counted.y + counted.z + counted.w > MAX_EVENTS_PER_ITERATION) {
             let zero = real(control.opaque_zero);
             tr.y = State(zero / zero);
@@ -249,93 +254,6 @@ fn wall_steps(p_lane: Params, t: u32, step: Stepping, end: u32, tr_in: Trajector
     return tr;
 }
 
-// The step from tr (its plain RK4 image y1, with compensation comp1) that
-// meets a stop or surface, or starts at rest on a stop: resolve_impacts
-// applies its events, and a mass at rest, from the step's start or from an
-// impact inside it, takes (the rest of) the step in stuck_step, called
-// here only (see resolve_impacts). The CPU's impact::step.
-#ifdef SURFACES
-fn resolve_step(p_lane: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Trajectory {
-    // A copy, whose region follows the crossings.
-    var p = p_lane;
-#else
-fn resolve_step(p: Params, walls: Stops, t: u32, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Trajectory {
-#endif
-    var tr = tr_in;
-    let next_phase = rotate(rotate(tr.phase, step.half), step.half);
-    var stuck = resting_on(walls, tr.y);
-    var rest_at = real(0.0);
-    var rest_phase = tr.phase;
-    if (stuck == WALLS) {
-#ifdef SURFACES
-        crossed = Crossed(p.region, real(0.0), false, 0u);
-#endif
-        let w = resolve_impacts(p, walls, step.omega, tr.phase, tr.y, step.h, y1);
-        tr = record(tr, t, w, y1, comp1);
-#ifdef SURFACES
-        p.region = tr.region;
-#endif
-        stuck = w.stuck;
-        rest_at = w.rest_at;
-        rest_phase = w.rest_phase;
-    }
-    if (stuck < WALLS) {
-#ifdef SURFACES
-        // Released from a stop, the CPU resolves the rest of the step
-        // with its surfaces, where stuck_step takes one plain step:
-        // the lane is the CPU's, as a motion the kernels cannot slide.
-        tr.c.z = tr.c.z | FLAG_SLIDING;
-#endif
-        let w = stuck_step(p, walls, stuck, step.omega, rest_phase, tr.y, step.h - rest_at);
-        tr.y = w.y;
-        tr.comp = State();
-        tr.c.z = tr.c.z | rank_flags(w.rank_loss);
-    }
-    tr.phase = next_phase;
-    return tr;
-}
-
-// What resolve_impacts did in the step (w, and with surfaces `crossed`),
-// recorded in the trajectory: its state, impacts and crossings, slowest
-// impact, flags, region and Σ ln |det S|.
-fn record(tr_in: Trajectory, t: u32, w: WallStep, y1: State, comp1: State) -> Trajectory {
-    var tr = tr_in;
-#ifdef SURFACES
-    tr.region = crossed.region;
-    tr.flux = tr.flux + crossed.log_flux;
-    if (crossed.sliding) {
-        tr.c.z = tr.c.z | FLAG_SLIDING;
-    }
-    // The sliding phases entered, counted in the flags' high half.
-    tr.c.z = tr.c.z + (min(crossed.sliding_phases, 0xffffu - (tr.c.z >> 16u)) << 16u);
-#endif
-    // Whatever the stops did (an impact, a rest, a departure from rest),
-    // the step ends where resolve_impacts says; the compensation belongs
-    // to the plain step it replaced.
-    if (any(w.y != y1)) {
-        tr.y = w.y;
-        tr.comp = State();
-    } else {
-        tr.y = y1;
-        tr.comp = comp1;
-    }
-    tr.c.y = tr.c.y + w.impacts;
-    // Straight to the buffer: a vector kept live across the step loop
-    // would cost every step (registers), for a rare event.
-    crossings[t] = crossings[t] + w.crossings;
-    tr.slowest = min(tr.slowest, w.slowest);
-    if (w.chattering) {
-        tr.c.z = tr.c.z | FLAG_CHATTERING;
-#ifdef SURFACES
-        // Crossings of a general event that accumulate (a ball locking
-        // onto a vibrating table) are held on the surface by the CPU path
-        // (impact::hold_step), not here: the lane is the CPU's.
-        tr.c.z = tr.c.z | FLAG_SLIDING;
-#endif
-    }
-    tr.c.z = tr.c.z | rank_flags(w.rank_loss);
-    return tr;
-}
 #else
 // The steps up to `end` of a system without stops: plain RK4 (rk4::step).
 fn plain_steps(p: Params, step: Stepping, end: u32, tr_in: Trajectory) -> Trajectory {

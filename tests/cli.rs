@@ -510,7 +510,7 @@ fn a_shader_folder_with_a_broken_source_names_the_file() {
     let shaders = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
     for (broken, bytes) in [
         ("shared/dispatch.wgsl", &b"fn \xff\xfe broken"[..]),
-        ("shared/impact.wgsl", &b"\n"[..]),
+        ("shared/stops.wgsl", &b"\n"[..]),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let copy = dir.path().join("shaders");

@@ -331,7 +331,7 @@ fn the_generated_cos_sin_is_the_clock_s_to_the_bit() {
     }
     let source = format!(
         "alias real = f64;\n{}\n{CLOCK_KERNEL}",
-        lyapsweep::model::codegen::wgsl::integrator(false, false, false, false)
+        lyapsweep::model::codegen::wgsl::integrator(false, false, false, false, false)
     );
     let mut angles: Vec<f64> = (0..4001)
         .map(|k| -7.0 + 14.0 * (k as f64 + 0.37) / 4001.0)

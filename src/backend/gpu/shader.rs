@@ -33,16 +33,8 @@ const SOURCES: &[(&str, &str)] = &[
         include_str!("../../../shaders/shared/stops.wgsl"),
     ),
     (
-        "shared/impact.wgsl",
-        include_str!("../../../shaders/shared/impact.wgsl"),
-    ),
-    (
         "shared/locate.wgsl",
         include_str!("../../../shaders/shared/locate.wgsl"),
-    ),
-    (
-        "shared/surfaces.wgsl",
-        include_str!("../../../shaders/shared/surfaces.wgsl"),
     ),
     (
         "shared/math64.wgsl",
@@ -269,18 +261,19 @@ impl Variant {
             ));
         }
         // The clock, RK4 and the stop test (of the held flow too where
-        // the impact code holds a mass on a stop), and the general
-        // surfaces' functions, generated.
+        // the impact code holds a mass on a stop), the general surfaces'
+        // functions and the step loop that resolves impacts, generated.
         out.push_str(&crate::model::codegen::wgsl::integrator(
             self.system.is_flow,
             self.wall,
             self.impact_location != ImpactLocation::Linear,
             self.surfaces(),
+            kernel == Kernel::Integrate,
         ));
         if self.wall {
-            // The stops, the step loop that resolves their impacts, where
-            // a crossing lies, and the general surfaces.
-            for file in ["stops", "impact", "locate", "surfaces"] {
+            // What the generated step loop reads of the stops and of
+            // where a crossing lies.
+            for file in ["stops", "locate"] {
                 let path = format!("shared/{file}.wgsl");
                 out.push_str(&preprocess(&include(&path), &defines));
             }

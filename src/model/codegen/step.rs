@@ -89,32 +89,6 @@ fn wgsl_type(ty: Ty) -> &'static str {
     }
 }
 
-/// The fields `f` evaluates, itself or through the functions it calls.
-fn fields_read(program: &Program, f: &Function) -> Vec<Field> {
-    fn read(program: &Program, e: &Expr, out: &mut Vec<Field>) {
-        match e {
-            Expr::Field { of, .. } if !out.contains(of) => out.push(*of),
-            Expr::Call(name, _) if is_extern(program, name) => {}
-            Expr::Call(name, _) => {
-                for of in fields_read(program, program.function(name)) {
-                    if !out.contains(&of) {
-                        out.push(of);
-                    }
-                }
-            }
-            _ => {}
-        }
-        for a in e.operands() {
-            read(program, a, out);
-        }
-    }
-    let mut out = Vec::new();
-    for e in f.exprs() {
-        read(program, e, &mut out);
-    }
-    out
-}
-
 /// Whether `name` is a function the kernels define.
 fn is_extern(program: &Program, name: &str) -> bool {
     use crate::model::ir::step::Extern;
@@ -125,22 +99,42 @@ fn is_extern(program: &Program, name: &str) -> bool {
 
 /// What a WGSL function takes before its own parameters, as (name,
 /// type): the lane's `Params` where it evaluates a field, and the stop
-/// `w` too where it evaluates the held flow.
-/// A function that takes `p` (or `w`) as a parameter of its own passes
-/// it on by name.
+/// `w` too where it evaluates the held flow, itself or through a function
+/// it calls that takes them so. A function that takes `p` (or `w`) as a
+/// parameter of its own, or names one in its body (a stop it reads, a
+/// copy of the lane's parameters in another region), passes it on by
+/// name, and its callers need not have one.
 fn context(program: &Program, f: &Function) -> Vec<(&'static str, &'static str)> {
-    let read = fields_read(program, f);
-    let implied: &[(&str, &str)] = if read.contains(&Field::Held) {
-        &[("p", "Params"), ("w", "Stop")]
-    } else if read.is_empty() {
-        &[]
-    } else {
-        &[("p", "Params")]
+    fn needs(program: &Program, e: &Expr, out: &mut Vec<&'static str>) {
+        let implied: Vec<&'static str> = match e {
+            Expr::Field {
+                of: Field::Held, ..
+            } => vec!["p", "w"],
+            Expr::Field { .. } => vec!["p"],
+            Expr::Call(name, _) if !is_extern(program, name) => {
+                let callee = program.function(name);
+                context(program, callee).iter().map(|(n, _)| *n).collect()
+            }
+            _ => Vec::new(),
+        };
+        out.extend(implied);
+        for a in e.operands() {
+            needs(program, a, out);
+        }
+    }
+    let mut names = Vec::new();
+    for e in f.exprs() {
+        needs(program, e, &mut names);
+    }
+    let declared = |n: &str| {
+        f.params.iter().any(|(p, _)| *p == n)
+            || f.body
+                .iter()
+                .any(|s| matches!(s, Stmt::Let(d, _) | Stmt::Var(d, _) if *d == n))
     };
-    implied
-        .iter()
-        .filter(|(n, _)| f.params.iter().all(|(p, _)| p != n))
-        .copied()
+    [("p", "Params"), ("w", "Stop")]
+        .into_iter()
+        .filter(|(n, _)| names.contains(n) && !declared(n))
         .collect()
 }
 
@@ -335,6 +329,8 @@ impl Wgsl<'_> {
                 let (y, op) = self.expr(y);
                 (format!("{}[{}]", wrap(&y, op), text(i)), None)
             }
+            Expr::Zero(ty) => (format!("{}()", wgsl_type(*ty)), None),
+            Expr::Differs(a, b) => (format!("any({} != {})", text(a), text(b)), None),
             Expr::Bits(bits, a) => {
                 let (a, op) = self.expr(a);
                 match bits {
@@ -681,7 +677,9 @@ impl C<'_> {
             | Expr::Make(..)
             | Expr::Index(..)
             | Expr::Single(..)
-            | Expr::Counters(..) => {
+            | Expr::Counters(..)
+            | Expr::Zero(..)
+            | Expr::Differs(..) => {
                 panic!("C's step programs have no {e:?}")
             }
             // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
@@ -1134,6 +1132,69 @@ fn orientation(region: u32, bit: u32) -> real {
         // The kernels' structures are theirs: not printed.
         assert!(!text.contains("struct Params"), "{text}");
         assert!(!text.contains("struct SurfaceValues"), "{text}");
+    }
+
+    #[test]
+    fn the_step_loop_prints_as_the_kernels_read_it() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            // A stop the function reads itself is not a parameter.
+            "fn stuck_step(p: Params, walls: Stops, j: u32, omega: real, phase: vec2<real>, y: State, h: real) -> WallStep {\n    let w = stop(walls, j);\n",
+            "        out = held_sub_step(p, w, omega, phase, rest, s).y;\n",
+            "        let held = held_for(p, w, omega, phase, rest, h);\n        if (!(pressing(p, w, rotate(phase, cos_sin(omega * h)), held) <= 0.0)) {\n",
+            "                if (hi - lo <= EPSILON * h) {\n                    break;\n",
+            "        out = clamp_to_stops(walls, sub_step(p, omega, start_phase, start, left).y);\n",
+            "        var crossings = r.crossings;\n        crossings[met.stop] = crossings[met.stop] + 1u;\n        r.crossings = crossings;\n",
+            "        if ((rebound == 0.0) || ((push > 0.0) && (2.0 * rebound < 0.0010000000474974513 * h * push * (1.0 - e)))) {\n",
+            "    var r = Resolution(0.0, phase, y, 0u, vec4<u32>(), NO_IMPACT, 0u, WALLS, false, false, false, neutral_crossed(p.region));\n",
+            "            y1 = sub_step(p, omega, r.phase0, r.y0, h - r.done).y;\n",
+            "    if (found.found && ((met.stop == WALLS + SURFACES) || (found.s < met.hit.s))) {\n",
+            "    r.crossed = Crossed(crossing.region, r.crossed.log_flux + crossing.log_det, (r.crossed.sliding || crossing.sliding), r.crossed.sliding_phases);\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_resolved_step_prints_as_the_integrate_kernel_reads_it() {
+        let text = wgsl(&kernels(), &Plain);
+        let expected = [
+            // A stop read inside a branch is not taken from the callers.
+            "fn resolve_step(p_lane: Params, walls: Stops, step: Stepping, y1: State, comp1: State, tr_in: Trajectory) -> Resolved {\n    var p = p_lane;\n",
+            "        let w = resolve_impacts(p, walls, step.omega, tr.phase, tr.y, step.h, y1);\n        tr = record(tr, w, y1, comp1);\n",
+            "    if (any(w.y != y1)) {\n        tr.y = w.y;\n        tr.comp = State();\n",
+            "    phases_c[2u] = phases_c[2u] + (select(room, phases, (phases < room)) << 16u);\n",
+            "    let room = 65535u - (phases_c[2u] >> 16u);\n",
+            "    return Resolved(tr, crossings);\n",
+        ];
+        for part in expected {
+            assert!(text.contains(part), "{part}\nnot in\n{text}");
+        }
+    }
+
+    #[test]
+    fn a_zero_prints_as_its_type_s_zero() {
+        let program = Program {
+            functions: vec![Function {
+                name: "f",
+                params: vec![("j", Ty::Count)],
+                body: vec![
+                    Stmt::Var("n", Expr::Zero(Ty::CountTable)),
+                    Stmt::SetAt("n", var("j"), count(1)),
+                ],
+                results: vec![("n", var("n"))],
+                returns: None,
+            }],
+            ..Program::default()
+        };
+        let text = wgsl(&program, &Plain);
+        assert!(
+            text.contains(
+                "fn f(j: u32) -> vec4<u32> {\n    var n = vec4<u32>();\n    n[j] = 1u;\n"
+            ),
+            "{text}"
+        );
     }
 
     #[test]

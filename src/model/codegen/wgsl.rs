@@ -40,8 +40,9 @@
 //!
 //! For a model with general surfaces (events that are not stops, and
 //! switches) the file adds what the surface code (`model::ir::surfaces`'s
-//! generated functions and `surfaces.wgsl`) reads:
-//! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`),
+//! generated functions) reads:
+//! `SURFACES`, each one's `SURFACE_BIT` (its switch bit, or `EVENT`), the
+//! region's layout (`SLIDING_SHIFT`, `SIDES`),
 //! `surface_g`, `surface_values` (g and its rate ∇g·F + ∂g/∂t along the
 //! field in force, the CPU surface tape's sum in its order),
 //! `surface_gradient` and an event's `reset` (the state after it, DR and
@@ -432,7 +433,7 @@ fn vec4(kind: &str, n: usize, each: &dyn Fn(usize) -> String, zero: &str) -> Str
 
 /// The general surfaces of `code` (events that are not stops, then the
 /// switches: the CPU's order, `Code::surfaces`) as the surface code of
-/// `model::ir::surfaces` and `shaders/shared/surfaces.wgsl` read them:
+/// `model::ir::surfaces` reads them:
 /// their count, each one's
 /// switch bit (or `EVENT`), the side of a switch, the field RK4 steps, and
 /// g; their rates ([`surface_values`]), gradients and resets
@@ -466,7 +467,11 @@ fn surfaces(w: &mut String, code: &Code) -> Result<(), Unsupported> {
         "const SURFACES: u32 = {}u;\n\
          // A surface's switch bit, or EVENT for an event.\n\
          const EVENT: u32 = 0xffffffffu;\n\
-         const SURFACE_BIT = {bits};\n\n\
+         const SURFACE_BIT = {bits};\n\
+         // Region bits from SLIDING_SHIFT up mark a motion sliding on surface\n\
+         // j (bit SLIDING_SHIFT + j), the bits below are the sides.\n\
+         const SLIDING_SHIFT: u32 = {shift}u;\n\
+         const SIDES: u32 = {sides:#x}u;\n\n\
          // The trajectory's side of switch `bit`: 1 on its positive side.\n\
          fn side(p: Params, bit: u32) -> real {{\n    return real((p.region >> bit) & 1u);\n}}\n\n\
          // The field RK4 steps: the region's, or the sliding field (of the\n\
@@ -478,6 +483,8 @@ fn surfaces(w: &mut String, code: &Code) -> Result<(), Unsupported> {
          return field(p, phase, y);\n}}\n\n\
          fn surface_g(p: Params, phase: vec2<real>, y: State) -> vec4<real> {{",
         surfaces.len(),
+        shift = crate::integrate::region::SLIDING,
+        sides = (1u32 << crate::integrate::region::SLIDING) - 1,
     );
     let gs: Vec<&Expr> = surfaces.iter().map(|s| &s.g).collect();
     let values = lines(w, code, &gs, &states(code), "    ")?;
@@ -765,8 +772,17 @@ pub fn field(names: &crate::model::language::expr::Names, i: usize) -> String {
 /// location is Newton's (`newton`) its Hermite guess, bracket and Newton
 /// (`model::ir::events::location`), else the linear location; with
 /// general surfaces (`surfaces`), their regions, tests, sliding and
-/// crossing (`model::ir::surfaces`).
-pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> String {
+/// crossing (`model::ir::surfaces`); with stops, the step loop that
+/// resolves a step's events (`model::ir::impacts`), and for the integrate
+/// kernel (`trajectory`, whose `Trajectory` and `Stepping` it reads) that
+/// step resolved and recorded in a trajectory (`model::ir::trajectory`).
+pub fn integrator(
+    flow: bool,
+    held: bool,
+    newton: bool,
+    surfaces: bool,
+    trajectory: bool,
+) -> String {
     use crate::model::ir::events;
     let mut program = crate::model::ir::integrator::integrator();
     let c_only = crate::model::ir::integrator::C_ONLY;
@@ -796,6 +812,27 @@ pub fn integrator(flow: bool, held: bool, newton: bool, surfaces: bool) -> Strin
     }
     program.functions.retain(|f| !absent.contains(&f.name));
     program.structures.retain(|s| !absent.contains(&s.name));
+    // The step loop in the variant the kernel needs.
+    use crate::model::ir::{impacts, trajectory as on_trajectory};
+    let variants: Vec<&str> = impacts::FUNCTIONS
+        .into_iter()
+        .chain(on_trajectory::FUNCTIONS)
+        .collect();
+    program.functions.retain(|f| !variants.contains(&f.name));
+    program.structures.retain(|s| {
+        !impacts::STRUCTURES.contains(&s.name)
+            && on_trajectory::structures().iter().all(|t| t.name != s.name)
+    });
+    if held {
+        program
+            .functions
+            .extend(impacts::functions(surfaces, newton));
+        program.structures.extend(impacts::structures(surfaces));
+        if trajectory {
+            program.functions.extend(on_trajectory::functions(surfaces));
+            program.structures.extend(on_trajectory::structures());
+        }
+    }
     format!(
         "// Generated from the integrator's step program (model::ir::integrator).\n\n{}",
         super::step::wgsl(&program, &Wgsl)

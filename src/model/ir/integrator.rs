@@ -80,9 +80,17 @@ pub fn integrator() -> Program {
     functions.extend(super::events::location());
     functions.extend(super::events::linear_location());
     functions.extend(super::surfaces::functions());
+    // The step loop's functions in the variant with every part (the
+    // kernels print the one their scene needs).
+    functions.extend(super::impacts::functions(true, true));
+    functions.extend(super::trajectory::functions(true));
     let (mut structures, mut externs) = super::events::kernels();
     externs.extend(super::surfaces::kernels());
+    externs.extend(super::impacts::kernels());
+    externs.extend(super::trajectory::kernels());
     structures.extend(super::surfaces::structures());
+    structures.extend(super::impacts::structures(true));
+    structures.extend(super::trajectory::structures());
     structures.extend([super::events::stop(), super::events::hit()]);
     structures.extend(super::events::location_structures());
     Program {
@@ -533,9 +541,12 @@ mod tests {
             ("crossing_fraction", vec![Ty::Real]),
             ("locate_linear", vec![Ty::Struct("Hit")]),
         ];
-        // The surfaces' are typed in `model::ir::surfaces`.
+        // The surfaces' and the step loop's are typed in
+        // `model::ir::surfaces` and `model::ir::impacts`.
         let surfaces = super::super::surfaces::functions().len();
-        assert_eq!(program.functions.len(), expected.len() + surfaces);
+        let impacts =
+            super::super::impacts::FUNCTIONS.len() + super::super::trajectory::FUNCTIONS.len();
+        assert_eq!(program.functions.len(), expected.len() + surfaces + impacts);
         for (name, types) in expected {
             assert_eq!(
                 program.function(name).result_types(&program),

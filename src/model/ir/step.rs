@@ -224,6 +224,11 @@ pub enum Expr {
     Single(Box<Expr>),
     /// Four counters as one [`Ty::CountTable`] (a trajectory's counts).
     Counters(Vec<Expr>),
+    /// A state, a table or a matrix with every entry 0 (a step's
+    /// crossings per surface before any).
+    Zero(Ty),
+    /// Whether two states differ in any component.
+    Differs(Box<Expr>, Box<Expr>),
 }
 
 /// An operation on one counter's bits.
@@ -325,7 +330,7 @@ pub enum Stmt {
     /// Leaves the innermost loop.
     Break,
     /// A new value of one component (at a counter) of a state
-    /// [`Stmt::Var`], or of one row of a matrix.
+    /// [`Stmt::Var`], of one entry of a table, or of one row of a matrix.
     SetAt(&'static str, Expr, Expr),
     /// A new value of one entry (at a row and a column) of a matrix
     /// [`Stmt::Var`].
@@ -420,6 +425,15 @@ impl Program {
                 expect(a, Ty::Count, &format!("{bits:?}"));
                 Ty::Count
             }
+            Expr::Differs(a, b) => {
+                expect(a, Ty::State, "a state that differs");
+                expect(b, Ty::State, "a state that differs");
+                Ty::Bool
+            }
+            Expr::Zero(ty) => match ty {
+                Ty::State | Ty::Table | Ty::CountTable | Ty::Rows => *ty,
+                other => panic!("{other:?} has no zero"),
+            },
             Expr::Member(..) | Expr::Make(..) | Expr::Call(..) => self.type_of_structured(e, scope),
             Expr::Math(..) | Expr::Single(..) | Expr::Counters(..) => {
                 self.type_of_numbers(e, scope)
@@ -852,13 +866,16 @@ impl Expr {
     /// The expressions this one is an operation of.
     pub fn operands(&self) -> Vec<&Expr> {
         match self {
-            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) | Expr::Truth(_) => Vec::new(),
+            Expr::Var(_) | Expr::Num(_) | Expr::Count(_) | Expr::Truth(_) | Expr::Zero(_) => {
+                Vec::new()
+            }
             Expr::Bin(_, a, b)
             | Expr::Index(a, b)
             | Expr::Pair(a, b)
             | Expr::Cmp(_, a, b)
             | Expr::And(a, b)
-            | Expr::Or(a, b) => vec![a, b],
+            | Expr::Or(a, b)
+            | Expr::Differs(a, b) => vec![a, b],
             Expr::Abs(a)
             | Expr::Finite(a)
             | Expr::Fill(a)
@@ -941,7 +958,7 @@ impl From<&'static str> for Expr {
 
 /// Short forms that keep the programs readable.
 pub mod build {
-    use super::{Bits, Cmp, Expr, Field, Math, Op, Stmt};
+    use super::{Bits, Cmp, Expr, Field, Math, Op, Stmt, Ty};
 
     pub fn var(name: &'static str) -> Expr {
         Expr::Var(name)
@@ -1105,6 +1122,16 @@ pub mod build {
 
     pub fn make(name: &'static str, members: Vec<Expr>) -> Expr {
         Expr::Make(name, members)
+    }
+
+    /// Whether the states a and b differ in any component.
+    pub fn differs(a: Expr, b: Expr) -> Expr {
+        Expr::Differs(Box::new(a), Box::new(b))
+    }
+
+    /// `ty` with every entry 0.
+    pub fn zero(ty: Ty) -> Expr {
+        Expr::Zero(ty)
     }
 
     /// `y[i]`.
@@ -1556,6 +1583,55 @@ mod tests {
             Stmt::SetEntry("z", count(0), count(0), num(0.0)),
         ];
         result_type(&one(vec![("y", Ty::State)], body, num(0.0)));
+    }
+
+    #[test]
+    fn a_table_s_entries_are_set_and_zero_is_of_its_type() {
+        let body = vec![
+            Stmt::Var("n", zero(Ty::CountTable)),
+            Stmt::SetAt("n", var("j"), index(var("n"), var("j")) + count(1)),
+            Stmt::Var("g", zero(Ty::Table)),
+            Stmt::SetAt("g", count(0), num(1.0)),
+            Stmt::Let("y", zero(Ty::State)),
+        ];
+        let program = one(vec![("j", Ty::Count)], body, var("n"));
+        assert_eq!(result_type(&program), Ty::CountTable);
+    }
+
+    #[test]
+    #[should_panic(expected = "n's new component")]
+    fn a_counter_table_holds_counters() {
+        let body = vec![
+            Stmt::Var("n", zero(Ty::CountTable)),
+            Stmt::SetAt("n", count(0), num(1.0)),
+        ];
+        result_type(&one(vec![], body, var("n")));
+    }
+
+    #[test]
+    fn states_that_differ_are_a_truth_value() {
+        let params = vec![("a", Ty::State), ("b", Ty::State)];
+        let e = differs(var("a"), var("b"));
+        assert_eq!(result_type(&one(params, vec![], e)), Ty::Bool);
+    }
+
+    #[test]
+    #[should_panic(expected = "a state that differs of Real")]
+    fn only_states_differ() {
+        let params = vec![("a", Ty::State), ("x", Ty::Real)];
+        result_type(&one(params, vec![], differs(var("a"), var("x"))));
+    }
+
+    #[test]
+    #[should_panic(expected = "Real has no zero")]
+    fn a_number_has_no_zero_of_entries() {
+        result_type(&one(vec![], vec![], zero(Ty::Real)));
+    }
+
+    #[test]
+    #[should_panic(expected = "Struct(\"Stop\") has no zero")]
+    fn a_structure_has_no_zero() {
+        result_type(&with_stops(vec![], vec![], zero(Ty::Struct("Stop"))));
     }
 
     #[test]

@@ -27,8 +27,9 @@ use super::step::{Cmp, Expr, Extern, Function, Stmt, Structure, Ty};
 /// - `field(p, phase, y)`, the field of p's region, and `rhs`, the field
 ///   RK4 steps (the sliding one on a sliding region); `surface_g`,
 ///   `surface_values`, `surface_gradient(p, phase, y, j)`,
-///   `stick_limit(p, y, j, filippov)`, `reset(p, phase, y, j)`; `log_r`,
-///   `stops_of(p)` and the location `locate(...)`.
+///   `stick_limit(p, y, j, filippov)`, `reset(p, phase, y, j)`; `log_r`
+///   and `stops_of(p)` (the location `locate(...)` is the step loop's,
+///   `model::ir::impacts`).
 pub fn kernels() -> Vec<Extern> {
     use Ty::{Count, CountTable, Pair, Real, State, Table};
     let (params, values) = (Ty::Struct("Params"), Ty::Struct("SurfaceValues"));
@@ -61,22 +62,6 @@ pub fn kernels() -> Vec<Extern> {
         ),
         function("log_r", vec![Real], Real),
         function("stops_of", vec![params], Ty::Struct("Stops")),
-        function(
-            "locate",
-            vec![
-                params,
-                Real,
-                Ty::Struct("Stops"),
-                Count,
-                Pair,
-                State,
-                Real,
-                State,
-                Pair,
-                Pair,
-            ],
-            Ty::Struct("Hit"),
-        ),
     ]
 }
 
