@@ -53,6 +53,11 @@ pub fn method_settings(scene: &Scene, backend: Backend, precision: Precision) ->
             .starts
             .as_ref()
             .is_some_and(|s| s.basins.values > 0),
+        early_stop: scene
+            .sweep
+            .starts
+            .as_ref()
+            .map_or(0, |s| s.basins.early_stop),
         keep_jacobians: false,
         // The f32 kernels compensate the state update (Kahan), so rounding
         // does not accumulate over the steps of an iteration.

@@ -293,7 +293,64 @@ fn bad_basin_keys_name_their_key() {
             "attractors.basins",
             "",
         ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nearly_stop = 10",
+            "attractors.early_stop",
+            "attractors.basins",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nearly_stop = -1",
+            "attractors.early_stop",
+            "",
+        ),
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\nbasins = 1\nearly_stop = 2.5",
+            "attractors.early_stop",
+            "",
+        ),
     ]);
+}
+
+/// Bad distributions of random starts are refused by their key, before
+/// any work.
+#[test]
+fn bad_distributions_name_their_key() {
+    let normal = |mean: &str, sd: &str| {
+        format!(
+            "starts = 8\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\ndistribution = {{ kind = \"normal\", mean = {{ {mean} }}, sd = {{ {sd} }} }}"
+        )
+    };
+    let cases = [
+        (
+            "grid = [4, 3]\nbox = { x = [0, 1], v = [0, 1] }\ndistribution = { kind = \"uniform\" }".to_string(),
+            "attractors.distribution",
+            "applies to random starts",
+        ),
+        (
+            "starts = 8\nbox = { x = [0, 1] }\ndistribution = { kind = \"gaussian\" }".to_string(),
+            "attractors.distribution.kind",
+            "\"uniform\" or \"normal\"",
+        ),
+        (
+            "starts = 8\nbox = { x = [0, 1] }\ndistribution = { kind = \"uniform\", sd = { x = 1 } }".to_string(),
+            "attractors.distribution.sd",
+            "applies to kind = \"normal\"",
+        ),
+        (
+            "starts = 8\nbox = { x = [0, 1] }\ndistribution = { kind = \"normal\", spread = 1 }".to_string(),
+            "spread",
+            "",
+        ),
+        (normal("x = 0", "x = 1, v = 1"), "attractors.distribution.mean", "needs a value for v"),
+        (normal("x = 2, v = 0", "x = 1, v = 1"), "attractors.distribution.mean.x", "within the box"),
+        (normal("x = 0, v = 0", "x = 0, v = 1"), "attractors.distribution.sd.x", "positive"),
+        (normal("x = 0, v = 0", "x = 1, v = 1e9"), "attractors.distribution.sd.v", "at most 100 times"),
+        (normal("x = 0, v = 0, y = 1", "x = 1, v = 1"), "attractors.distribution.mean.y", "not a state of the box"),
+        (normal("x = 0, v = 0", "x = nan, v = 1"), "attractors.distribution.sd.x", "positive"),
+    ];
+    let borrowed: Vec<(&str, &str, &str)> =
+        cases.iter().map(|(t, k, r)| (t.as_str(), *k, *r)).collect();
+    refused(&borrowed);
 }
 
 /// Bad tables are refused with the key and the reason, before any work.
@@ -1110,4 +1167,134 @@ fn convergence_times_and_the_uncertainty_exponent_are_the_file_s() {
         assert_eq!(number(row, "convergence_max") as usize, largest);
         assert!(largest > 0 && largest < 600, "{largest}");
     }
+}
+
+/// Early stops (`attractors.early_stop`, on by default with basin
+/// images): the seed's oscillator at η = 0.6 and 1.3 over a 24 × 24 grid
+/// of the box, its orbits learned from every fourth start along x and v, then its starts
+/// stopped once their reference has stayed within the attractor
+/// tolerance of a learned orbit for 10 iterations, labels every start as
+/// the full transients do (`early_stop = 0`), start by start, with each
+/// attractor's row, fraction and convergence times the same; most starts
+/// stop, each stopped lane saying so in its status.
+#[test]
+fn early_stops_give_the_labels_of_the_full_transients() {
+    let (nx, ny) = (24, 24);
+    let text = format!(
+        "{COEXISTING}[attractors]\ngrid = [{nx}, {ny}]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nbasins = 2\n"
+    )
+    .replace("values = [0.6]", "values = [0.6, 1.3]");
+    let run = |text: &str| {
+        let scene = common::scene(text, &[]);
+        let batch = lyapsweep::plan::batch_lanes(&scene);
+        let mut stopped = 0;
+        let (summary, found) =
+            lyapsweep::run_streaming(&scene, &Default::default(), batch, |_, report| {
+                stopped += report
+                    .lanes
+                    .iter()
+                    .filter(|l| matches!(l.status, LaneStatus::EarlyStop { .. }))
+                    .count();
+                Ok(())
+            })
+            .expect("the sweep runs");
+        assert_eq!(summary.lanes, 2 * nx * ny, "one row per start");
+        (found.expect("attractors"), stopped)
+    };
+    let (full, none) = run(&text.replace("basins = 2", "basins = 2\nearly_stop = 0"));
+    let (early, stopped) = run(&text);
+    assert_eq!(none, 0);
+    assert!(
+        stopped > nx * ny,
+        "{stopped} of {} starts stopped",
+        2 * nx * ny
+    );
+    for (point, eta) in [0.6, 1.3].into_iter().enumerate() {
+        let labels = |found: &lyapsweep::Attractors| {
+            lyapsweep::attractor::basins::image(found, point, (nx, ny)).labels
+        };
+        assert_eq!(labels(&early), labels(&full), "η = {eta}");
+        let rows = |found: &lyapsweep::Attractors| -> Vec<String> {
+            found.values[point]
+                .attractors
+                .iter()
+                .map(|a| {
+                    let lane = &a.first.lane;
+                    assert!(!matches!(lane.status, LaneStatus::EarlyStop { .. }));
+                    format!(
+                        "{:?} {:?} {} {:?} {} {:?}",
+                        a.branch,
+                        lane.orbit_period,
+                        lane.impacts_per_period,
+                        lane.status,
+                        a.starts,
+                        a.convergence()
+                    )
+                })
+                .collect()
+        };
+        assert_eq!(rows(&early), rows(&full), "η = {eta}");
+    }
+    let at = |found: &lyapsweep::Attractors| found.values[0].count();
+    assert_eq!((at(&full), at(&early)), (2, 2));
+}
+
+/// Basin stability under a normal distribution of starts
+/// (`attractors.distribution`): the seed at η = 0.6 from 400 starts drawn
+/// around (x, v) = (-1, 0.5), truncated to the box; the starts have
+/// the distribution's means and deviations within their sampling error
+/// and lie in the box, and attractors.csv gives each attractor's fraction
+/// with its binomial standard error √(f(1-f)/N). Uniform starts (the
+/// default) are those drawn before the key existed.
+#[test]
+fn basin_stability_under_a_normal_distribution_of_starts() {
+    let table = "starts = 400\nbox = { x = [-3, 1.9], v = [-3, 3] }\n";
+    let normal = format!(
+        "{table}distribution = {{ kind = \"normal\", mean = {{ x = -1.0, v = 0.5 }}, sd = {{ x = 0.5, v = 0.8 }} }}\n"
+    );
+    let text = format!("{COEXISTING}[attractors]\n{normal}");
+    let scene = common::scene(&text, &[]);
+    let states = &scene.sweep.starts.as_ref().unwrap().states;
+    for (i, (mean, sd)) in [(-1.0, 0.5), (0.5, 0.8)].into_iter().enumerate() {
+        let n = states.len() as f64;
+        let m = states.iter().map(|s| s[i]).sum::<f64>() / n;
+        let d = (states.iter().map(|s| (s[i] - m).powi(2)).sum::<f64>() / n).sqrt();
+        assert!(
+            (m - mean).abs() < 4.0 * sd / n.sqrt(),
+            "state {i}: mean {m}"
+        );
+        assert!((d - sd).abs() < 0.15 * sd, "state {i}: sd {d}");
+    }
+    assert!(states
+        .iter()
+        .all(|s| (-3.0..=1.9).contains(&s[0]) && (-3.0..=3.0).contains(&s[1])));
+    // The default distribution draws the starts uniform in the box as before:
+    // lo + (hi - lo)·u per state of the box, in order, from the seed.
+    let uniform = common::scene(&format!("{COEXISTING}[attractors]\n{table}"), &[]);
+    let mut rng = fastrand::Rng::with_seed(1);
+    let before: Vec<Vec<f64>> = (0..400)
+        .map(|_| vec![-3.0 + 4.9 * rng.f64(), -3.0 + 6.0 * rng.f64()])
+        .collect();
+    assert_eq!(uniform.sweep.starts.as_ref().unwrap().states, before);
+
+    let report = common::run(&scene);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("set");
+    lyapsweep::output::write(&scene, &report, &out).unwrap();
+    let mut table = csv::Reader::from_path(out.join("attractors.csv")).unwrap();
+    let header: Vec<String> = table.headers().unwrap().iter().map(String::from).collect();
+    let col = |name: &str| header.iter().position(|h| h == name).unwrap();
+    let rows: Vec<csv::StringRecord> = table.records().map(|r| r.unwrap()).collect();
+    let mut total = 0.0;
+    for row in &rows {
+        let f: f64 = row[col("basin_fraction")].parse().unwrap();
+        let error: f64 = row[col("basin_fraction_error")].parse().unwrap();
+        assert!(
+            (error - (f * (1.0 - f) / 400.0).sqrt()).abs() < 1e-15,
+            "{f}: {error}"
+        );
+        total += f;
+    }
+    assert!((total - 1.0).abs() < 1e-12);
+    assert!(!rows.is_empty());
 }

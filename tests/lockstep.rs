@@ -67,3 +67,65 @@ fn models_lanes_together_are_their_lanes_alone() {
         assert_lanes_together_are_lanes_alone(name, &short);
     }
 }
+
+/// Lanes of a basin grid that stop early on a known orbit
+/// (`attractors.early_stop`) leave the batch of references stepped
+/// together: every lane's result, stopped or run whole, is still the
+/// lane's alone, to the bit. The seed at η = 0.6, the free orbit known
+/// (the impacting one not: its lanes run whole beside the stopped ones).
+#[test]
+fn lanes_that_stop_early_together_are_lanes_alone() {
+    let text = format!(
+        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.6]\n[attractors]\ngrid = [7, 5]\nbox = {{ x = [-3, 1.9], v = [-3, 3] }}\nbasins = 1\nearly_stop = 3\n",
+        common::SEED
+    );
+    let scene = common::scene(
+        &text,
+        &[
+            "integration.transient=120",
+            "integration.iterations=20",
+            "integration.steps_per_period=400",
+            "output.bifurcation_points=4",
+        ],
+    );
+    let settings = method_settings(&scene, Backend::Cpu, Precision::F64);
+    assert_eq!(settings.early_stop, 3);
+    let run = runner(scene.system);
+    let whole: Vec<_> = common::cpu_lanes(&scene, &settings)
+        .iter()
+        .map(|lane| (run.run_lane)(lane))
+        .collect();
+    let free = whole
+        .iter()
+        .find(|r| r.impacts_per_period == 0.0 && r.orbit_period == Some(1))
+        .expect("a start on the free orbit");
+    let known = [lyapsweep::method::lane::KnownOrbit {
+        points: free.orbit.clone(),
+        result: free.clone(),
+    }];
+    let lanes: Vec<_> = common::cpu_lanes(&scene, &settings)
+        .into_iter()
+        .map(|lane| lyapsweep::method::Lane {
+            known: &known,
+            ..lane
+        })
+        .collect();
+    let together: Vec<_> = lanes.chunks(8).flat_map(|c| (run.run_lanes)(c)).collect();
+    let mut stopped = 0;
+    for (k, lane) in lanes.iter().enumerate() {
+        let alone = (run.run_lane)(lane);
+        assert_eq!(
+            format!("{:?}", together[k]),
+            format!("{alone:?}"),
+            "lane {k}"
+        );
+        if let lyapsweep::method::LaneStatus::EarlyStop { .. } = alone.status {
+            stopped += 1;
+            assert_eq!(alone.orbit, free.orbit, "lane {k}");
+            assert_eq!(alone.settled, whole[k].settled, "lane {k}");
+        } else {
+            assert_eq!(format!("{alone:?}"), format!("{:?}", whole[k]), "lane {k}");
+        }
+    }
+    assert!(stopped > 5 && stopped < lanes.len(), "{stopped} stopped");
+}

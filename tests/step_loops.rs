@@ -44,6 +44,7 @@ fn assert_the_regions_loop_changes_nothing(name: &str, overrides: &[&str]) {
             },
             settings: &settings,
             initial_state: lane.initial_state.clone(),
+            known: &[],
         })
         .collect();
     let run = |lanes: &[Lane], info| -> Vec<String> {

@@ -22,6 +22,7 @@ pub mod branch;
 pub mod group;
 mod index;
 
+use crate::method::lane::{KnownOrbit, KnownOrbits};
 use crate::method::{LaneResult, LaneStatus};
 use crate::scene::{Precision, Scene, Seed};
 use group::{Member, Rule, ValueAttractors};
@@ -82,6 +83,11 @@ pub struct Found {
     /// The attractor each continuation lane was started from, by the
     /// lane's (grid point, start).
     sources: std::collections::HashMap<(usize, usize), (usize, usize)>,
+    /// Per grid point, the lanes run in full that found the orbits later
+    /// lanes may stop early on ([`Found::known`]), in its order: an
+    /// attractor first reached by a lane that stopped early takes its
+    /// orbit's lane as its row.
+    learned: Vec<Vec<Member>>,
 }
 
 impl Found {
@@ -93,7 +99,56 @@ impl Found {
             starts: scene.sweep.starts.as_ref()?.states.len(),
             dim: scene.system.dimension(),
             sources: Default::default(),
+            learned: Vec::new(),
         })
+    }
+
+    /// The periodic orbits found so far that later lanes may stop early on
+    /// (see `method::lane::KnownOrbit`), value by value: the attractors
+    /// (not lone lanes) whose first lane is `ok` with a period and its
+    /// points.
+    pub fn known(&self) -> KnownOrbits {
+        let per_point = self
+            .learnable()
+            .map(|members| {
+                members
+                    .map(|m| KnownOrbit {
+                        points: m.lane.orbit.clone(),
+                        result: m.lane.clone(),
+                    })
+                    .collect()
+            })
+            .collect();
+        KnownOrbits { per_point }
+    }
+
+    /// The first lanes of [`Found::known`]'s orbits, value by value.
+    fn learnable(&self) -> impl Iterator<Item = impl Iterator<Item = &Member>> {
+        let dim = self.dim;
+        self.values.iter().map(move |value| {
+            value
+                .attractors
+                .iter()
+                .filter(move |a| {
+                    let lane = &a.first.lane;
+                    !a.is_lone()
+                        && lane.status == LaneStatus::Ok
+                        && lane
+                            .orbit_period
+                            .is_some_and(|p| p > 0 && lane.orbit.len() == p * dim)
+                })
+                .map(|a| &a.first)
+        })
+    }
+
+    /// Takes the orbits `learning` found (its [`Found::known`]) as those
+    /// this one's lanes may stop early on; `learning`'s lanes count for
+    /// nothing here.
+    pub fn learn_from(&mut self, learning: &Found) {
+        self.learned = learning
+            .learnable()
+            .map(|members| members.cloned().collect())
+            .collect();
     }
 
     /// The attractors found, matched into branches.
@@ -144,6 +199,9 @@ impl Found {
                 expected_sum: expected_sums[j],
             };
             let (index, is_new) = self.values[point].join(member, start < self.starts, rule);
+            if is_new {
+                self.take_learned_row(point, index);
+            }
             if let Some(&(from, attractor)) = self.sources.get(&(point, start)) {
                 self.values[point].links.push((index, from, attractor));
             }
@@ -152,6 +210,25 @@ impl Found {
             }
         }
         new
+    }
+
+    /// Where a new attractor's first lane stopped early, the lane run in
+    /// full that found its orbit becomes its row (the stopped lane carries
+    /// that lane's orbit, to the bit).
+    fn take_learned_row(&mut self, point: usize, index: usize) {
+        let first = &self.values[point].attractors[index].first;
+        if !matches!(first.lane.status, LaneStatus::EarlyStop { .. }) {
+            return;
+        }
+        let learned = self.learned.get(point).and_then(|members| {
+            members
+                .iter()
+                .find(|m| m.lane.orbit == first.lane.orbit)
+                .cloned()
+        });
+        if let Some(learned) = learned {
+            self.values[point].attractors[index].first = learned;
+        }
     }
 
     /// The lanes of the next continuation pass: each attractor of

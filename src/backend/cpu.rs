@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 
 use super::Progress;
+use crate::method::lane::KnownOrbits;
 use crate::method::{Lane, LaneResult, LaneStatus, MethodSettings};
 use crate::scene::Scene;
 
@@ -13,8 +14,16 @@ use crate::scene::Scene;
 const NEIGHBOURS: usize = crate::integrate::LANE_BATCH;
 
 /// Runs every lane of `scene` (of its shard, when sharded), in parallel,
-/// results in sweep order; none when the run is stopped.
-pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> Vec<LaneResult> {
+/// results in sweep order; none when the run is stopped. With `known`,
+/// the scene's own starts (not a continuation's seeds) may stop early on
+/// the orbits known at their values (`settings.early_stop`).
+pub fn sweep(
+    scene: &Scene,
+    settings: &MethodSettings,
+    known: Option<&KnownOrbits>,
+    progress: &Progress,
+) -> Vec<LaneResult> {
+    let known = known.filter(|_| scene.sweep.seeds.is_none());
     // Each chunk's results go straight into their slots: collecting a
     // parallel iterator of unknown length would hold them twice at its end.
     let mut slots: Vec<Option<LaneResult>> = (0..scene.lane_count()).map(|_| None).collect();
@@ -36,6 +45,9 @@ pub fn sweep(scene: &Scene, settings: &MethodSettings, progress: &Progress) -> V
                     params: scene.lane_params(k),
                     settings,
                     initial_state: scene.lane_initial_state(k).to_vec(),
+                    known: known.map_or(&[], |known| {
+                        &known.per_point[scene.sweep.point_of(scene.sweep_lane(k))]
+                    }),
                 })
                 .collect();
             let results = (crate::method::runner(scene.system).run_lanes)(&lanes);

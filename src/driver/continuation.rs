@@ -105,6 +105,60 @@ pub fn attractors(
         frontier: Vec::new(),
         continuation: starts.continuation,
     };
+    if runner.stops_early() {
+        let learning = learn(runner, scene, batch_lanes)?;
+        runner.set_known(learning.known());
+        run.found.learn_from(&learning);
+    }
     let (passes, continued_lanes) = passes(runner, scene, batch_lanes, summary, sink, &mut run)?;
     Ok(run.found.into_attractors(scene, passes, continued_lanes))
+}
+
+/// Learned starts are every this many along both states of a basin grid.
+/// The learned lanes run whole, so their share (1/16) bounds what early
+/// stops save; the labels do not depend on it (a start stops only on an
+/// orbit learned, and runs whole where none is near), only the share of
+/// starts that stop: an attractor whose basin the coarse grid misses is
+/// found by its own starts run whole.
+const LEARNING_STRIDE: usize = 4;
+
+/// The attractors of `scene`'s basin grids at a coarser resolution (every
+/// [`LEARNING_STRIDE`]-th start along both states, the corner (0, 0)
+/// first), each lane run whole: the orbits the scene's own starts may then
+/// stop early on (`attractors.early_stop`). These lanes are not the run's
+/// rows: each start runs again with the others, a learned one stopping
+/// early too.
+fn learn(runner: &Runner, scene: &Scene, batch_lanes: usize) -> Result<Found> {
+    let starts = scene.sweep.starts.as_ref().expect("a scene with starts");
+    let scene::Layout::Grid { counts } = &starts.layout else {
+        unreachable!("early stops are checked to come with a basin grid");
+    };
+    let nx = counts[0];
+    let learned: Vec<usize> = (0..counts[1])
+        .step_by(LEARNING_STRIDE)
+        .flat_map(|j| (0..nx).step_by(LEARNING_STRIDE).map(move |i| j * nx + i))
+        .collect();
+    let seeds = (0..scene.sweep.points())
+        .flat_map(|point| {
+            learned.iter().map(move |&start| Seed {
+                point,
+                start,
+                state: starts.states[start].clone(),
+            })
+        })
+        .collect();
+    let pass = scene.continued(seeds);
+    runner.progress().extend(runner.work(&pass));
+    let mut found = Found::new(scene).expect("a scene with starts");
+    let mut summary = None;
+    runner.stream(&pass, batch_lanes, &mut summary, |batch, report| {
+        found.absorb(
+            batch,
+            &report.lanes,
+            &report.expected_sums,
+            report.precision,
+        );
+        Ok(())
+    })?;
+    Ok(found)
 }

@@ -16,6 +16,7 @@ use crate::backend::gpu::plan::{follow_lane_plan, variant};
 use crate::backend::gpu::shader::Variant;
 use crate::backend::{cpu, gpu, Progress, RunOptions};
 use crate::error::{Error, Result};
+use crate::method::lane::KnownOrbits;
 use crate::method::{LaneResult, MethodSettings};
 use crate::plan::method_settings;
 use crate::scene::{Backend, Precision, Scene};
@@ -34,6 +35,9 @@ pub struct Runner {
     /// RK4 steps per dispatch that held once the adapter cut longer ones
     /// short (0 until then): the next batches start there.
     held_dispatch_steps: std::sync::atomic::AtomicUsize,
+    /// The periodic orbits known at each value that the scene's own
+    /// starts may stop early on (`attractors.early_stop`), once learned.
+    known: std::sync::RwLock<Option<std::sync::Arc<KnownOrbits>>>,
 }
 
 impl Runner {
@@ -77,7 +81,20 @@ impl Runner {
             options: options.clone(),
             progress: options.progress.clone().unwrap_or_default(),
             held_dispatch_steps: Default::default(),
+            known: Default::default(),
         })
+    }
+
+    /// Whether this run's lanes stop early where the scene asks
+    /// (`attractors.early_stop`): on the CPU path and the exact backend,
+    /// not on the GPU, whose transient runs on the device.
+    pub fn stops_early(&self) -> bool {
+        self.settings.early_stop > 0 && self.gpu.is_none()
+    }
+
+    /// The orbits the scene's own starts may stop early on from now on.
+    pub fn set_known(&self, known: KnownOrbits) {
+        *self.known.write().expect("no lane panicked") = Some(std::sync::Arc::new(known));
     }
 
     /// The work of `scene`'s lanes, in lane-iterations, for the progress.
@@ -208,7 +225,13 @@ impl Runner {
         let progress = self.progress.clone();
         let settings = &self.settings;
         let (lanes, gpu_report) = match &self.gpu {
-            None => (cpu::sweep(scene, settings, &progress), None),
+            None => {
+                let known = self.known.read().expect("no lane panicked").clone();
+                (
+                    cpu::sweep(scene, settings, known.as_deref(), &progress),
+                    None,
+                )
+            }
             Some((gpu, variant)) => {
                 use std::sync::atomic::Ordering::Relaxed;
                 let held = self.held_dispatch_steps.load(Relaxed);

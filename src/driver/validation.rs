@@ -154,6 +154,7 @@ fn cpu_lanes(scene: &Scene, settings: &MethodSettings, picked: &[usize]) -> Vec<
                 params: scene.lane_params(k),
                 settings,
                 initial_state: scene.lane_initial_state(k).to_vec(),
+                known: &[],
             };
             (crate::method::runner(scene.system).run_lane)(&lane)
         })
@@ -203,6 +204,7 @@ pub(super) fn validate(
             params: scene.lane_params(k),
             settings: &settings,
             initial_state: scene.lane_initial_state(k).to_vec(),
+            known: &[],
         };
         let cpu = (crate::method::runner(scene.system).run_lane)(&lane);
         let finished = |l: &LaneResult| l.exponents.iter().all(|e| e.is_finite());

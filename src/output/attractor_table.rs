@@ -19,7 +19,9 @@ use crate::scene::Scene;
 /// `impacts_per_period` and for a model one `<event>_per_period` column
 /// per event, with exponents `lambda_1..N,lambda_sum,expected_sum,lambda_error`, then
 /// `basin_fraction` (the share of the value's starts that end on it),
-/// `starts` (their count), with basin images (`attractors.basins`)
+/// `starts` (their count), with random starts from a named distribution
+/// (`attractors.distribution`) `basin_fraction_error`, with basin images
+/// (`attractors.basins`)
 /// `basin_fraction_error` (the fraction's binomial standard error),
 /// `basin_fraction_half` (on the grid at half the resolution),
 /// `basin_entropy`, `boundary_basin_entropy`, `fractal_boundary`,
@@ -40,6 +42,8 @@ pub fn attractors_header(scene: &Scene) -> Vec<String> {
     header.extend(["basin_fraction", "starts"].map(String::from));
     if has_images(scene) {
         header.extend(BASIN_COLUMNS.map(String::from));
+    } else if has_distribution(scene) {
+        header.push(BASIN_COLUMNS[0].into());
     }
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
     header.push("status".into());
@@ -68,6 +72,17 @@ fn has_images(scene: &Scene) -> bool {
         .starts
         .as_ref()
         .is_some_and(|s| s.basins.values > 0)
+}
+
+/// Whether the scene names the distribution of its random starts
+/// (`attractors.distribution`): its fractions are basin stability, with
+/// their standard errors.
+fn has_distribution(scene: &Scene) -> bool {
+    scene
+        .sweep
+        .starts
+        .as_ref()
+        .is_some_and(|s| s.distribution_given)
 }
 
 /// The basin columns of an attractor's row: `fraction` of `starts`, with
@@ -136,6 +151,7 @@ pub fn attractor_rows<'a>(
     images: &'a [ValueBasins],
 ) -> impl Iterator<Item = Vec<String>> + 'a {
     let with_images = has_images(scene);
+    let with_error = has_distribution(scene);
     let dim = scene.system.dimension();
     let events = scene.system.events.len();
     found
@@ -174,6 +190,8 @@ pub fn attractor_rows<'a>(
                 row.push(a.starts.to_string());
                 if with_images {
                     row.extend(basin_cells(scene, fraction, starts, images.get(point), a));
+                } else if with_error {
+                    row.push(number(basins::fraction_error(fraction, starts)));
                 }
                 let last = lane.orbit.len().saturating_sub(dim);
                 match lane.orbit.get(last..).filter(|p| p.len() == dim) {

@@ -47,6 +47,7 @@
 //! checked scene's types in `types` and the defaults in `defaults`.
 
 mod defaults;
+mod distribution;
 mod model_file;
 mod orbits;
 mod overrides;
@@ -64,6 +65,7 @@ pub use defaults::{
     DEFAULT_ALIGN_FRACTION, DEFAULT_COUNT, DEFAULT_ITERATIONS, DEFAULT_PERTURBATION_F32,
     DEFAULT_PERTURBATION_F64, DEFAULT_STEPS_PER_PERIOD, DEFAULT_TRANSIENT, DEFAULT_VALIDATE,
 };
+pub use distribution::Distribution;
 pub use model_file::model_path;
 pub use orbits::{ListedOrbit, Orbits, DEFAULT_MAX_POINTS, DEFAULT_ORBIT_MAX_PERIOD};
 pub use starts::{Basins, Continuation};

@@ -100,13 +100,14 @@ pub(super) struct RawOutput {
 
 /// The tables a scene's keys hold, as serde names them ("struct RawSweep")
 /// and as its user knows them: a table, with its keys.
-const TABLES: [(&str, &str); 9] = [
+const TABLES: [(&str, &str); 10] = [
     ("struct RawSweep", "a table (parameter, and from, to, count or values; second)"),
     ("struct RawAxis", "a table (parameter, and from, to, count or values)"),
     ("struct RawIntegration", "a table (steps_per_period, transient, align, iterations, initial_state, perturbation, difference, impact_location, submaps)"),
     ("struct RawRun", "a table (backend, precision, validate)"),
     ("struct RawOutput", "a table (lyapunov, bifurcation_points, plot)"),
-    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation, basins, basin_box)"),
+    ("struct RawAttractors", "a table (starts, seed, box, grid, list, max_period, continuation, basins, basin_box, early_stop, distribution)"),
+    ("struct RawDistribution", "a table (kind, mean, sd)"),
     ("struct RawOrbits", "a table (from_sweep, list, max_period, max_points, min_step, max_step, tolerance, locate_tolerance)"),
     ("struct RawListed", "a table (value, state, period)"),
     ("struct RawScene", "a table"),

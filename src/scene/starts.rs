@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 
 use serde::Deserialize;
 
+use super::distribution::{Distribution, RawDistribution};
 use crate::error::{Error, Result};
 use crate::system::SystemInfo;
 
@@ -32,6 +33,8 @@ pub(super) struct RawAttractors {
     pub(super) continuation: Option<Continuation>,
     pub(super) basins: Option<usize>,
     pub(super) basin_box: Option<usize>,
+    pub(super) early_stop: Option<usize>,
+    pub(super) distribution: Option<RawDistribution>,
 }
 
 /// Which neighbours each value is also started from: the attractors found
@@ -78,6 +81,12 @@ pub struct Starts {
     /// The longest period a lane's orbit is tested for.
     pub max_period: usize,
     pub continuation: Continuation,
+    /// How random starts were drawn over the box (`attractors.distribution`;
+    /// uniform for a grid or a list).
+    pub distribution: Distribution,
+    /// Whether the scene names the distribution: its fractions are then
+    /// basin stability, written with their standard errors.
+    pub distribution_given: bool,
     /// The basin images: how many values (the first, in the grid's order)
     /// have every start's label written and drawn (0: none), and the side
     /// of the boxes the basin entropy is taken over, in cells.
@@ -92,6 +101,11 @@ pub struct Basins {
     pub box_side: usize,
     /// The two states the grid spans (x fastest), by index.
     pub axes: [usize; 2],
+    /// Early stops: a start stops once its reference has stayed within
+    /// the attractor tolerance of an orbit learned from every fourth start
+    /// along both states for this many consecutive transient iterations
+    /// (0: off; see `method::lane::early_stop`).
+    pub early_stop: usize,
 }
 
 impl Starts {
@@ -105,6 +119,15 @@ impl Starts {
 /// The default side of the boxes the basin entropy is taken over (Daza
 /// et al. 2016 use 5 × 5 cells).
 pub const DEFAULT_BASIN_BOX: usize = 5;
+
+/// The default `early_stop`: consecutive iterations within the attractor
+/// tolerance of a known orbit before a start stops on it. The labels of
+/// the seed's 512 × 512 images at η = 0.6 and 1.3 with it are those of the
+/// full transients (docs/BENCHMARKS.md, "Basins"); a start that close to a
+/// stable orbit (1e-5 of the state, against critical shocks above 0.1 of
+/// the box) stays, and the count guards against a pass near an orbit's
+/// point on the way elsewhere.
+pub const DEFAULT_EARLY_STOP: usize = 10;
 
 /// Starts per value that a scene may ask for (a start is a lane at every
 /// value; the run's size is checked against the budget as a whole).
@@ -156,6 +179,7 @@ pub(super) fn resolve_starts(
     let raw_basins = RawAttractors {
         basins: raw.basins,
         basin_box: raw.basin_box,
+        early_stop: raw.early_stop,
         ..RawAttractors::default()
     };
     let continuation = raw.continuation.unwrap_or_default();
@@ -181,6 +205,8 @@ pub(super) fn resolve_starts(
             states: vec![initial_state.to_vec()],
             max_period,
             continuation,
+            distribution: Distribution::Uniform,
+            distribution_given: false,
             basins: Basins::default(),
         });
     }
@@ -191,6 +217,14 @@ pub(super) fn resolve_starts(
         ));
     }
     let names: Vec<String> = info.state_names.iter().map(|s| s.to_string()).collect();
+    let distribution_given = raw.distribution.is_some();
+    if distribution_given && raw.starts.is_none() {
+        return Err(Error::invalid(
+            "attractors.distribution",
+            "applies to random starts (starts = N), not to a grid or a list",
+        ));
+    }
+    let mut distribution = Distribution::Uniform;
     let mut box_states = Vec::new();
     let (layout, states) = if let Some(list) = raw.list {
         if raw.bounds.is_some() || raw.seed.is_some() {
@@ -206,9 +240,12 @@ pub(super) fn resolve_starts(
         if let Some(n) = raw.starts {
             check_count(n, "attractors.starts")?;
             let seed = raw.seed.unwrap_or(1);
+            if let Some(given) = raw.distribution {
+                distribution = given.resolve(&bounds, &names)?;
+            }
             (
                 Layout::Random { seed },
-                random(n, seed, &bounds, initial_state),
+                random(n, seed, &distribution, &bounds, initial_state),
             )
         } else {
             let counts = raw.grid.unwrap_or_default();
@@ -228,6 +265,8 @@ pub(super) fn resolve_starts(
         states,
         max_period,
         continuation,
+        distribution,
+        distribution_given,
         basins,
     })
 }
@@ -238,11 +277,16 @@ pub(super) fn resolve_starts(
 fn check_basins(raw: &RawAttractors, layout: Option<(&Layout, &[usize])>) -> Result<Basins> {
     let values = raw.basins.unwrap_or(0);
     if values == 0 {
-        if raw.basin_box.is_some() {
-            return Err(Error::invalid(
-                "attractors.basin_box",
-                "applies to basin images: give attractors.basins = N too",
-            ));
+        for (given, key) in [
+            (raw.basin_box.is_some(), "attractors.basin_box"),
+            (raw.early_stop.is_some(), "attractors.early_stop"),
+        ] {
+            if given {
+                return Err(Error::invalid(
+                    key,
+                    "applies to basin images: give attractors.basins = N too",
+                ));
+            }
         }
         return Ok(Basins::default());
     }
@@ -268,6 +312,7 @@ fn check_basins(raw: &RawAttractors, layout: Option<(&Layout, &[usize])>) -> Res
         values,
         box_side,
         axes,
+        early_stop: raw.early_stop.unwrap_or(DEFAULT_EARLY_STOP),
     })
 }
 
@@ -295,23 +340,18 @@ fn listed(list: Vec<Vec<f64>>, dim: usize, names: &[String]) -> Result<Vec<Vec<f
     Ok(list)
 }
 
-/// `n` starts drawn uniformly in the box from `seed`, the states the box
-/// leaves out at `initial_state`.
+/// `n` starts drawn from `distribution` over the box from `seed`, the
+/// states the box leaves out at `initial_state`.
 fn random(
     n: usize,
     seed: u64,
+    distribution: &Distribution,
     bounds: &[(usize, f64, f64)],
     initial_state: &[f64],
 ) -> Vec<Vec<f64>> {
     let mut rng = fastrand::Rng::with_seed(seed);
     (0..n)
-        .map(|_| {
-            let mut state = initial_state.to_vec();
-            for &(i, lo, hi) in bounds {
-                state[i] = lo + (hi - lo) * rng.f64();
-            }
-            state
-        })
+        .map(|_| distribution.draw(&mut rng, bounds, initial_state))
         .collect()
 }
 

@@ -21,6 +21,7 @@ pub fn cpu_lanes<'a>(
             params: scene.lane_params(k),
             settings,
             initial_state: scene.lane_initial_state(k).to_vec(),
+            known: &[],
         })
         .collect()
 }

@@ -4,11 +4,12 @@
 use nalgebra::{Const, DimMin, SMatrix};
 
 use super::accumulator::{all_finite, LaneAccumulator};
+use super::early_stop::{stopped, KnownOrbit, Watch};
 use super::grazing::estimate_resolving_grazing;
 use super::plan::{plan_lane, LanePlan};
 use super::result::{not_run, LaneResult};
 use super::settings::{MethodSettings, Tangent};
-use super::settling::Settling;
+use super::settling::{attractor_tolerance, Settling};
 use crate::integrate::clock::ZERO_PHASE;
 use crate::system::{FlowSettings, IterationStats, Params, Part, System};
 
@@ -20,6 +21,9 @@ pub struct Lane<'a> {
     /// The state the lane starts from (the scene's `initial_state`, or
     /// one of its `[attractors]` starts).
     pub initial_state: Vec<f64>,
+    /// The periodic orbits known at its value that it may stop early on
+    /// (`settings.early_stop`; none: it runs whole).
+    pub known: &'a [KnownOrbit],
 }
 
 /// Runs the method for one lane on system `S` of dimension `D`.
@@ -47,6 +51,11 @@ where
     if let Some(s) = settling.as_mut() {
         s.push(&x);
     }
+    let tolerance = attractor_tolerance(settings.rounding_unit);
+    // Early stops need the points from the start, for the convergence time.
+    let mut watch = settling
+        .as_ref()
+        .and_then(|_| Watch::new(lane.known, settings.early_stop, tolerance));
     let mut discard = IterationStats::default();
     for n in 0..settings.transient {
         if settings.flow.stop.requested() {
@@ -70,6 +79,9 @@ where
         }
         if let Some(s) = settling.as_mut() {
             s.push(&x);
+            if let Some(orbit) = watch.as_mut().and_then(|w| w.sees(&x)) {
+                return stopped(orbit, n, s, tolerance, settings.bifurcation_points);
+            }
         }
     }
     let mut acc = LaneAccumulator::<D>::new(settings, system.period(), plan);

@@ -14,7 +14,8 @@
 //! backend gets the alignment that way, by running the settings it is
 //! given.
 //!
-//! The steps, one file each: `settings` (what every lane shares), `settling` (a lane's convergence time), `plan`
+//! The steps, one file each: `settings` (what every lane shares), `settling` (a lane's convergence time),
+//! `early_stop` (a basin image's lane stopped on an attractor already known), `plan`
 //! (a lane's steps and sub-maps), `driver` (one lane alone), `lockstep`
 //! (neighbouring lanes stepped together), `grazing` (the δ ladder of
 //! near-grazing iterations), `accumulator` (the sums and the statuses they
@@ -23,6 +24,7 @@
 
 mod accumulator;
 mod driver;
+mod early_stop;
 mod grazing;
 mod lockstep;
 mod orbit;
@@ -35,6 +37,7 @@ mod uncertainty;
 pub use crate::perturbation::perturbation_at;
 pub use accumulator::{Failure, LaneAccumulator, RESOLUTION_BOUND};
 pub use driver::{estimated_iteration, run_lane, Lane};
+pub use early_stop::{KnownOrbit, KnownOrbits};
 pub use grazing::{estimate_resolving_grazing, is_grazing, reestimate_of, GRAZING_ERROR};
 pub use lockstep::run_lanes;
 pub use orbit::{return_tolerance, RecentPoints};

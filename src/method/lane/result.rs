@@ -94,6 +94,14 @@ pub enum LaneStatus {
     Uncertain {
         error: f64,
     },
+    /// A basin image's lane that stopped after transient iteration
+    /// `iteration` (from 0), its reference having stayed within the
+    /// attractor tolerance of a known attractor's point (see
+    /// `early_stop`): its numbers are that attractor's lane's, its
+    /// convergence time and kept points its own.
+    EarlyStop {
+        iteration: usize,
+    },
 }
 
 impl LaneStatus {
@@ -115,6 +123,7 @@ impl LaneStatus {
             LaneStatus::SumRule { .. } => "sum-rule",
             LaneStatus::ShortAverage { .. } => "short-average",
             LaneStatus::Uncertain { .. } => "uncertain",
+            LaneStatus::EarlyStop { .. } => "early-stop",
         }
     }
 
@@ -159,6 +168,7 @@ impl std::fmt::Display for LaneStatus {
             LaneStatus::TooManyEvents { iteration } => {
                 write!(f, "too-many-events(iteration={iteration})")
             }
+            LaneStatus::EarlyStop { iteration } => write!(f, "early-stop(iteration={iteration})"),
         }
     }
 }

@@ -52,6 +52,11 @@ pub struct MethodSettings {
     /// convergence time ([`LaneResult::settled`](super::LaneResult)): runs
     /// with basin images (`attractors.basins`).
     pub keep_settling: bool,
+    /// Early stops (`attractors.early_stop`): a lane whose reference stays
+    /// within the attractor tolerance of a known orbit of its value
+    /// (`Lane::known`) for this many consecutive transient iterations
+    /// stops and takes that orbit; 0: off.
+    pub early_stop: usize,
     /// Parts per iteration when the scene fixes them (else [`plan_lane`]'s).
     pub submaps: Option<usize>,
     /// Whether rounding accumulates over the RK4 steps of an iteration (f64),

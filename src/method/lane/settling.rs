@@ -45,6 +45,13 @@ impl<const D: usize> Settling<D> {
         self.points.push(*x);
     }
 
+    /// The last `n` points kept (all of them when fewer), oldest first,
+    /// D numbers each.
+    pub fn last(&self, n: usize) -> Vec<f64> {
+        let from = self.points.len().saturating_sub(n);
+        self.points[from..].iter().flatten().copied().collect()
+    }
+
     /// The convergence time onto the lane's periodic orbit `orbit` (its
     /// `period` points, D numbers each), or with `None` onto the box of its
     /// last `averaged` points, at relative tolerance `tolerance`; `None`
@@ -86,7 +93,7 @@ impl Target<'_> {
 }
 
 /// |x - y|∞ / max(1, |x|∞, |y|∞).
-fn relative_distance(x: &[f64], y: &[f64]) -> f64 {
+pub(super) fn relative_distance(x: &[f64], y: &[f64]) -> f64 {
     let scale = x.iter().chain(y).fold(1.0_f64, |m, v| m.max(v.abs()));
     x.iter()
         .zip(y)
