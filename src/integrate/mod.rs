@@ -511,8 +511,7 @@ fn steps_of<const D: usize, const W: usize, S: Flows<D>, const SURFACES: bool>(
     let live = (1u32 << n) - 1;
     let mut bound = EventBound::<W>::new(stats);
     let mut left = part.steps(steps).len();
-    // Steps until the next look at the stop request: the first at once,
-    // since a stopped iteration's later parts (sub-maps) call again.
+    // Steps until the next look at the stop request (at once: parts call again).
     let mut unseen = 0;
     while left > 0 {
         if unseen == 0 {

@@ -672,14 +672,10 @@ impl C<'_> {
             },
             // What only the kernels' programs use (their stops and Newton
             // brackets): the C step loops hold no structures.
-            Expr::Math(..)
-            | Expr::Member(..)
-            | Expr::Make(..)
-            | Expr::Index(..)
-            | Expr::Single(..)
-            | Expr::Counters(..)
-            | Expr::Zero(..)
-            | Expr::Differs(..) => {
+            Expr::Math(..) | Expr::Member(..) | Expr::Make(..) | Expr::Index(..) => {
+                panic!("C's step programs have no {e:?}")
+            }
+            Expr::Single(..) | Expr::Counters(..) | Expr::Zero(..) | Expr::Differs(..) => {
                 panic!("C's step programs have no {e:?}")
             }
             // All ones for 0, as WGSL's firstTrailingBit (C's ctz of 0 is
