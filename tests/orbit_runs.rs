@@ -208,24 +208,52 @@ fn bad_orbits_keys_are_refused_by_name_before_any_work() {
     }
 }
 
-/// A two-parameter sweep and a shard cannot follow branches in one
-/// parameter over the whole range: refused naming `orbits` / `--shard`.
+/// A shard cannot follow branches over the whole range: refused naming
+/// `--shard`. With two swept parameters a listed orbit names its value of
+/// the second (`second`, in its range), and with one it names none: each
+/// refused naming the key, as an input error, before any work.
 #[test]
-fn orbits_need_one_swept_parameter_and_the_whole_sweep() {
-    let text = format!(
-        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[sweep.second]\nparameter = \"f\"\nvalues = [1.0, 2.0]\n[orbits]\n",
-        common::SEED
+fn orbits_need_the_whole_sweep_and_listed_orbits_their_second_value() {
+    let two = |list: &str| {
+        format!(
+            "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[sweep.second]\nparameter = \"f\"\nvalues = [1.0, 2.0]\n[orbits]\n{list}",
+            common::SEED
+        )
+    };
+    let scene = lyapsweep::scene::parse(&two(""), "t", "t", &[]).expect("two parameters");
+    assert!(scene.orbits.is_some());
+    let listed = "list = [{ value = 0.8, second = 1.5, state = [0.0, 0.0], period = 1 }]\n";
+    let scene = lyapsweep::scene::parse(&two(listed), "t", "t", &[]).expect("second in range");
+    assert_eq!(scene.orbits.unwrap().list[0].second, Some(1.5));
+    for list in [
+        "list = [{ value = 0.8, state = [0.0, 0.0], period = 1 }]\n",
+        "list = [{ value = 0.8, second = 2.5, state = [0.0, 0.0], period = 1 }]\n",
+        "list = [{ value = 0.8, second = nan, state = [0.0, 0.0], period = 1 }]\n",
+    ] {
+        let error = lyapsweep::scene::parse(&two(list), "t", "t", &[]).unwrap_err();
+        assert!(
+            error.to_string().contains("orbits.list[0].second"),
+            "{error}"
+        );
+        assert!(lyapsweep::Error::is_input_error(&error), "{error}");
+    }
+    let one = |list: &str| {
+        format!(
+            "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[orbits]\n{list}",
+            common::SEED
+        )
+    };
+    let list = "list = [{ value = 0.8, second = 1.0, state = [0.0, 0.0], period = 1 }]\n";
+    let error = lyapsweep::scene::parse(&one(list), "t", "t", &[]).unwrap_err();
+    assert!(
+        error.to_string().contains("orbits.list[0].second"),
+        "{error}"
     );
-    let error = lyapsweep::scene::parse(&text, "t", "t", &[]).unwrap_err();
-    assert!(error.to_string().contains("orbits"), "{error}");
-    assert!(lyapsweep::Error::is_input_error(&error), "{error}");
     let shard = lyapsweep::scene::Shard { index: 0, count: 2 };
-    let one = format!(
-        "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8, 0.9]\n[orbits]\n",
-        common::SEED
-    );
-    let error = lyapsweep::scene::parse_shard(&one, "t", "t", &[], Some(shard)).unwrap_err();
-    assert!(error.to_string().contains("--shard"), "{error}");
+    for text in [one(""), two("")] {
+        let error = lyapsweep::scene::parse_shard(&text, "t", "t", &[], Some(shard)).unwrap_err();
+        assert!(error.to_string().contains("--shard"), "{error}");
+    }
     // A range of one value has nothing to follow.
     let single = format!(
         "{}[sweep]\nparameter = \"eta\"\nvalues = [0.8]\n[orbits]\n",
@@ -544,4 +572,193 @@ fn an_impact_at_the_section_s_time_leaves_the_orbit_one_branch() {
         "{} rows within 0.05 of the crossing: exponents off the closed form's tangent by {worst:e}",
         near.len()
     );
+
+/// Where the free period-1 orbit of the seed at forcing `f` grazes the
+/// wall X_w = 2 over η ∈ [0.5, 1.5]: the roots of the linear amplitude
+/// f/√((1-η²)² + (2ζη)²) - 2, each bracketed on a fine grid and bisected
+/// to the last bit (the closed form, not the tool's code).
+fn free_grazings(f: f64) -> Vec<f64> {
+    let excess = |eta: f64| {
+        let d = (1.0 - eta * eta).powi(2) + (2.0 * ZETA * eta).powi(2);
+        f / d.sqrt() - 2.0
+    };
+    let grid: Vec<f64> = (0..=10_000).map(|k| 0.5 + k as f64 * 1e-4).collect();
+    let mut roots = Vec::new();
+    for pair in grid.windows(2) {
+        let (mut a, mut b) = (pair[0], pair[1]);
+        if excess(a).signum() == excess(b).signum() {
+            continue;
+        }
+        for _ in 0..200 {
+            let m = 0.5 * (a + b);
+            if m <= a || m >= b {
+                break;
+            }
+            if excess(m).signum() == excess(a).signum() {
+                a = m;
+            } else {
+                b = m;
+            }
+        }
+        roots.push(0.5 * (a + b));
+    }
+    roots
+}
+
+/// The seed run over two parameters, `[orbits]` at its defaults: the
+/// one-parameter stage at each value of f, written in one file.
+fn two_parameter_run(out: &Path, forcings: &str, threads: &str) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lyapsweep"))
+        .args([
+            "run",
+            seed_path().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            "sweep.count=21",
+            "--set",
+            &format!("sweep.second={{ parameter = \"f\", values = [{forcings}] }}"),
+            "--set",
+            "orbits={}",
+            "--set",
+            "run.backend=\"cpu\"",
+        ])
+        .env("RAYON_NUM_THREADS", threads)
+        .output()
+        .expect("the binary runs")
+}
+
+/// With `[sweep.second]`, branches are followed in η at each value of f:
+/// every free orbit's grazing at each f is located within 1e-8 of the
+/// closed form; the rows carry f as spectrum.csv names it, numbered
+/// through the file; the files do not depend on the number of threads;
+/// and the orbits map is drawn.
+#[test]
+fn two_parameters_trace_branches_at_each_second_value_and_grazings_match_the_closed_form() {
+    // At f = 1.6 no lane ends on the free orbit above its grazing at
+    // η = 1.3374 (each ends on an impacting one), so no branch of it is
+    // traced there: the starts are the lanes'.
+    let forcings = [0.6, 0.8, 1.0];
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let output = two_parameter_run(&out, "0.6, 0.8, 1.0", "2");
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let header = std::fs::read_to_string(out.join("orbits.csv")).unwrap();
+    assert!(
+        header.starts_with("branch,eta,f,x,v,period,"),
+        "{header:.80}"
+    );
+    let header = std::fs::read_to_string(out.join("bifurcations.csv")).unwrap();
+    assert!(header.starts_with("branch,kind,eta,f,x,v,"), "{header:.80}");
+    // Named as the sweep's own file (grid.csv for two parameters) names them.
+    let grid = std::fs::read_to_string(out.join("grid.csv")).unwrap();
+    assert!(grid.starts_with("eta,f,"), "{grid:.40}");
+    for name in ["orbits-map.png", "orbits-map.svg", "heat-map.png"] {
+        assert!(out.join(name).is_file(), "{name} not written");
+    }
+    assert!(!out.join("orbits.png").exists());
+
+    let bifurcations = read(&out.join("bifurcations.csv"));
+    for f in forcings {
+        let exact = free_grazings(f);
+        assert!(!exact.is_empty(), "f = {f}: no grazing in range");
+        let found: Vec<f64> = bifurcations
+            .iter()
+            .filter(|r| r["kind"] == "grazing" && value(r, "f") == f)
+            .map(|r| value(r, "eta"))
+            .collect();
+        for eta in exact {
+            let nearest = found
+                .iter()
+                .map(|g| (g - eta).abs())
+                .fold(f64::INFINITY, f64::min);
+            eprintln!("f = {f}: grazing at η = {eta}, located {nearest:.1e} off");
+            assert!(
+                nearest < 1e-8,
+                "f = {f}: {eta} is {nearest:e} off ({found:?})"
+            );
+        }
+    }
+    // Each branch at one f, in one run of rows, the rows in f's order; a
+    // switched branch names a branch of its own f.
+    let orbits = read(&out.join("orbits.csv"));
+    let mut last = (f64::NEG_INFINITY, -1i64);
+    let f_of = |b: &str| value(rows_of(&orbits, b)[0], "f");
+    for row in &orbits {
+        let (f, b): (f64, i64) = (value(row, "f"), row["branch"].parse().unwrap());
+        assert!(forcings.contains(&f), "{row:?}");
+        assert!(
+            f >= last.0 && (b == last.1 || b == last.1 + 1),
+            "{row:?} after {last:?}"
+        );
+        assert!(b != last.1 || f == last.0, "branch {b} at two f");
+        last = (f, b);
+        if let Some(from) = row["branch_end"]
+            .split("from-branch=")
+            .nth(1)
+            .map(|s| s.trim_end_matches(')'))
+        {
+            assert_eq!(f_of(from), f, "{row:?}");
+        }
+    }
+    assert!(forcings
+        .iter()
+        .all(|f| orbits.iter().any(|r| value(r, "f") == *f)));
+
+    // One thread gives the same files to the byte.
+    let single = dir.path().join("single");
+    let output = two_parameter_run(&single, "0.6, 0.8, 1.0", "1");
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    for name in ["orbits.csv", "bifurcations.csv"] {
+        let (a, b) = (out.join(name), single.join(name));
+        assert!(
+            std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(),
+            "{name} differs between 2 threads and 1"
+        );
+    }
+}
+
+/// The two-parameter run's row at f = 1 is the one-parameter run's (the
+/// seed's own f): the same bifurcations, folds and period doublings
+/// included, at the same η to the bit.
+#[test]
+fn a_two_parameter_row_locates_the_one_parameter_run_s_folds_and_doublings() {
+    let dir = tempfile::tempdir().unwrap();
+    let two = dir.path().join("two");
+    let output = two_parameter_run(&two, "0.8, 1.0", "2");
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let one = dir.path().join("one");
+    let output = lyapsweep(&[
+        "run",
+        seed_path().to_str().unwrap(),
+        "--out",
+        one.to_str().unwrap(),
+        "--set",
+        "sweep.count=21",
+        "--set",
+        "orbits={}",
+        "--set",
+        "run.backend=\"cpu\"",
+    ]);
+    assert_eq!(output.status.code(), Some(0), "{}", stderr(&output));
+    let key = |r: &BTreeMap<String, String>| {
+        let cells = ["kind", "eta", "x", "v", "period"].map(|c| r[c].clone());
+        cells.join(",")
+    };
+    let expected: Vec<String> = read(&one.join("bifurcations.csv"))
+        .iter()
+        .map(key)
+        .collect();
+    let row: Vec<String> = read(&two.join("bifurcations.csv"))
+        .iter()
+        .filter(|r| r["f"] == "1")
+        .map(key)
+        .collect();
+    let folds_and_doublings = expected
+        .iter()
+        .filter(|k| k.starts_with("fold,") || k.starts_with("period-doubling,"))
+        .count();
+    eprintln!("{folds_and_doublings} folds and period doublings at f = 1: {expected:#?}");
+    assert!(folds_and_doublings >= 2, "{expected:?}");
+    assert_eq!(row, expected);
 }

@@ -8,8 +8,8 @@ use std::path::Path;
 use base64::Engine;
 
 use lyapsweep::output::plot::{
-    heat_map, heat_map_pixels, sweep_figure, sweep_pixels, GridData, SweepData, DATA_COLOUR,
-    HEAT_MAP_SIZE, SWEEP_SIZE,
+    heat_map, heat_map_pixels, orbit_map, orbit_map_pixels, sweep_figure, sweep_pixels, GridData,
+    OrbitMapData, SweepData, DATA_COLOUR, HEAT_MAP_SIZE, SWEEP_SIZE,
 };
 
 /// A sweep shaped like the seed's Fig. 3: η over [0.5, 1.5], λ₁ = 0.05 sin 10η
@@ -369,4 +369,53 @@ fn a_failed_write_is_an_error_and_leaves_nothing_behind() {
         assert!(matches!(error, lyapsweep::Error::Write { .. }), "{error}");
     }
     assert_eq!(listing(dir.path()), ["not-a-folder"]);
+}
+
+/// The orbits map: the bifurcations over the heat map, each kind in its
+/// colour (period doublings magenta, folds green) and joined into curves
+/// across neighbouring values of the second parameter, written at the heat
+/// map's size.
+#[test]
+fn orbits_map_draws_each_kind_s_points_and_curves_over_the_heat_map() {
+    let grid = grid();
+    let ys = grid.y.clone();
+    // A period-doubling curve (kind 1) at x = 0.2 + 0.1 (y - 2), a fold
+    // (kind 0) at x = 0.8 on every other value.
+    let mut points: Vec<(f64, f64, usize)> =
+        ys.iter().map(|&y| (0.2 + 0.1 * (y - 2.0), y, 1)).collect();
+    points.extend(ys.iter().step_by(2).map(|&y| (0.8, y, 0)));
+    let kinds = [
+        "LP fold",
+        "PD period-doubling",
+        "NS neimark-sacker",
+        "GR grazing",
+        "SL sliding",
+        "EC events-change",
+    ];
+    let data = OrbitMapData {
+        grid,
+        kinds: kinds.map(String::from).to_vec(),
+        points,
+    };
+    let (width, _) = HEAT_MAP_SIZE;
+    let pixels = orbit_map_pixels(&data);
+    let count = |colour: [u8; 3]| {
+        rows_and_pixels(&pixels, width)
+            .filter(|(_, p)| *p == colour)
+            .count()
+    };
+    let (magenta, green) = (count([200, 0, 200]), count([0, 160, 0]));
+    // Forty markers and the line through them; twenty markers, not joined
+    // (the fold is not found at every other value).
+    assert!(magenta > 2_000, "{magenta} magenta pixels");
+    assert!(green > 1_000, "{green} green pixels");
+    let dir = tempfile::tempdir().unwrap();
+    let written = orbit_map(&data, dir.path(), "orbits-map").unwrap();
+    assert_eq!(png_size(&written[0]), HEAT_MAP_SIZE);
+    let svg = fs::read_to_string(&written[1]).unwrap();
+    assert!(svg.contains("PD period-doubling") && svg.contains("LP fold"));
+    assert!(
+        !svg.contains("GR grazing"),
+        "a kind with no point is not in the legend"
+    );
 }

@@ -264,7 +264,7 @@ class Run:
     ``spectrum`` (a two-parameter sweep's grid.csv), ``bifurcation``,
     ``attractors``, and with ``[orbits]`` ``orbits`` (a row per point of
     every branch) and ``bifurcations`` (a row per bifurcation located on
-    them) are DataFrames with the columns of the CSV files, or None where
+    them; with two swept parameters, both are columns) are DataFrames with the columns of the CSV files, or None where
     the run wrote no such file. ``summary`` is what the command line
     prints (backend, precision, lanes, time, max_sum_error, max_error, flagged, the
     flagged lanes by status in ``flagged_by_status``, of which those with no

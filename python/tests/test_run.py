@@ -264,10 +264,18 @@ def test_devices_lists_adapters_as_dicts():
         assert isinstance(adapter["f64"], bool)
 
 
-def test_orbits_and_bifurcations_are_the_files_to_the_bit(tmp_path):
+@pytest.mark.parametrize("second", [None, {"parameter": "f", "values": [0.8, 1.0]}])
+def test_orbits_and_bifurcations_are_the_files_to_the_bit(tmp_path, second):
     seed = ROOT / "scenes" / "seed-fig3.toml"
     sets = {"sweep.count": 5, "run.backend": "cpu", "orbits": {"max_points": 200}}
+    if second is not None:
+        # Two parameters: each row also names its value of f.
+        sets["sweep.second"] = second
     run = lyapsweep.run(seed, set=sets, progress=False)
+    if second is not None:
+        assert list(run.orbits.columns[:3]) == ["branch", "eta", "f"]
+        assert list(run.bifurcations.columns[:4]) == ["branch", "kind", "eta", "f"]
+        assert set(run.orbits["f"]) == {0.8, 1.0}
     cli = command_line(tmp_path, seed, sets)
     for name, table in [("orbits.csv", run.orbits), ("bifurcations.csv", run.bifurcations)]:
         pandas.testing.assert_frame_equal(table, read_csv(cli / name), check_exact=True)

@@ -270,6 +270,12 @@ fn describe_end(end: &BranchEnd) -> String {
     }
 }
 
+/// A switched branch's first end, as `orbits.csv` writes it: the kind of
+/// bifurcation it was switched at, and the branch it came from.
+pub fn switched_from(kind: Kind, branch: usize) -> String {
+    format!("{}(from-branch={branch})", kind.name())
+}
+
 /// The wall excesses of an orbit, one per wall of the flow (see
 /// [`super::wall_excess`]); none for a system without walls.
 pub type WallExcess<const D: usize, S> = fn(&S, &MethodSettings, &Orbit<D>) -> Vec<f64>;
@@ -490,9 +496,7 @@ where
     found.located.sort_by_key(|b| b.segment);
     let switched = |end: &Option<BranchEnd>| match (end, &start.onward, start.origin) {
         (Some(end), _, _) => describe_end(end),
-        (None, Some(onward), Origin::Branch(from)) => {
-            format!("{}(from-branch={from})", onward.kind.name())
-        }
+        (None, Some(onward), Origin::Branch(from)) => switched_from(onward.kind, from),
         (None, ..) => String::new(),
     };
     Traced {

@@ -42,6 +42,8 @@ pub const SWEEP_FIGURE: &str = "figure";
 pub const HEAT_MAP: &str = "heat-map";
 /// With `[orbits]`: the branches over the sweep's points.
 pub const ORBIT_FIGURE: &str = "orbits";
+/// With `[orbits]` over two parameters: the bifurcations over λ₁'s map.
+pub const ORBIT_MAP: &str = "orbits-map";
 /// With `[attractors]` over two parameters: the attractors found per cell.
 pub const ATTRACTOR_MAP: &str = "attractors-map";
 

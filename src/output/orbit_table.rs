@@ -7,7 +7,7 @@ use std::path::Path;
 use super::files::{
     number, write_atomically, BIFURCATIONS_FILE, BIFURCATION_FILE, BRANCH_COLUMN, ORBITS_FILE,
 };
-use super::plot::OrbitSweepData;
+use super::plot::{GridData, OrbitMapData, OrbitSweepData};
 use crate::driver::orbits::OrbitRun;
 use crate::error::{Error, Result};
 use crate::model::compiled::event_column;
@@ -28,8 +28,14 @@ fn multiplier_columns(dim: usize) -> Vec<String> {
         .collect()
 }
 
-/// The header of `orbits.csv`: `branch`, the swept parameter (named as in
-/// `spectrum.csv`), the state, `period` (map iterations), `stable`
+/// The swept parameters' columns, named as in `spectrum.csv`.
+fn parameter_columns(scene: &Scene) -> impl Iterator<Item = String> + '_ {
+    scene.sweep.axes().map(|axis| axis.parameter.clone())
+}
+
+/// The header of `orbits.csv`: `branch`, the swept parameters (named as
+/// in `spectrum.csv`: branches are followed in the first, at each value
+/// of the second), the state, `period` (map iterations), `stable`
 /// (`true` when every multiplier lies inside the unit circle), the
 /// multipliers, `lambda_1..N,lambda_sum,expected_sum` (the exponents
 /// ln|μ_i|/(p·T) and the sum rule's), `impacts_per_period` and for a model
@@ -40,10 +46,8 @@ fn multiplier_columns(dim: usize) -> Vec<String> {
 /// `step-too-small(...)`).
 pub fn orbits_header(scene: &Scene) -> Vec<String> {
     let dim = scene.system.dimension();
-    let mut header = vec![
-        BRANCH_COLUMN.to_owned(),
-        scene.sweep.first.parameter.clone(),
-    ];
+    let mut header = vec![BRANCH_COLUMN.to_owned()];
+    header.extend(parameter_columns(scene));
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
     header.extend(["period", "stable"].map(String::from));
     header.extend(multiplier_columns(dim));
@@ -56,23 +60,22 @@ pub fn orbits_header(scene: &Scene) -> Vec<String> {
 
 /// The header of `bifurcations.csv`: `branch`, `kind` (`fold`,
 /// `period-doubling`, `neimark-sacker`, `grazing`, `sliding`,
-/// `events-change`), the parameter, the orbit's state there, its
-/// `period` and multipliers.
+/// `events-change`), the parameters as in `orbits.csv`, the orbit's
+/// state there, its `period` and multipliers.
 pub fn bifurcations_header(scene: &Scene) -> Vec<String> {
-    let mut header = vec![
-        BRANCH_COLUMN.to_owned(),
-        "kind".to_owned(),
-        scene.sweep.first.parameter.clone(),
-    ];
+    let mut header = vec![BRANCH_COLUMN.to_owned(), "kind".to_owned()];
+    header.extend(parameter_columns(scene));
     header.extend(scene.system.state_names.iter().map(|s| s.to_string()));
     header.push("period".into());
     header.extend(multiplier_columns(scene.system.dimension()));
     header
 }
 
-/// A point's parameter, state, period and (with `stable`) multipliers.
-fn point_cells(point: &TracedPoint, stable: bool) -> Vec<String> {
+/// A point's parameters (the second swept one's value, if any, after the
+/// followed one), state, period and (with `stable`) multipliers.
+fn point_cells(point: &TracedPoint, second: Option<f64>, stable: bool) -> Vec<String> {
     let mut row = vec![number(point.parameter)];
+    row.extend(second.map(number));
     row.extend(point.state.iter().map(|&x| number(x)));
     row.push(point.period.to_string());
     if stable {
@@ -89,6 +92,7 @@ fn point_cells(point: &TracedPoint, stable: bool) -> Vec<String> {
 pub fn write_orbits(scene: &Scene, run: &OrbitRun, dir: &Path) -> Result<()> {
     let dim = scene.system.dimension();
     let events = scene.system.events.len();
+    let second = |b: usize| run.second.as_ref().map(|values| values[b]);
     super::set::pause(ORBITS_FILE);
     write_atomically(&dir.join(ORBITS_FILE), |w| {
         w.write_record(orbits_header(scene))?;
@@ -97,6 +101,7 @@ pub fn write_orbits(scene: &Scene, run: &OrbitRun, dir: &Path) -> Result<()> {
                 // No orbit: the start as given, and why.
                 let start = &branch.start;
                 let mut row = vec![b.to_string(), number(start.parameter)];
+                row.extend(second(b).map(number));
                 row.extend(start.state.iter().map(|&x| number(x)));
                 row.push(start.period.to_string());
                 row.extend(std::iter::repeat_n(String::new(), 1 + 3 * dim + 3 + events));
@@ -107,7 +112,7 @@ pub fn write_orbits(scene: &Scene, run: &OrbitRun, dir: &Path) -> Result<()> {
             let last = branch.points.len() - 1;
             for (k, point) in branch.points.iter().enumerate() {
                 let mut row = vec![b.to_string()];
-                row.extend(point_cells(point, true));
+                row.extend(point_cells(point, second(b), true));
                 row.extend(point.exponents.iter().map(|&e| number(e)));
                 row.push(number(point.exponents.iter().sum()));
                 row.push(number(point.expected_sum));
@@ -135,7 +140,7 @@ pub fn write_orbits(scene: &Scene, run: &OrbitRun, dir: &Path) -> Result<()> {
         for (b, branch) in run.branches.iter().enumerate() {
             for found in &branch.bifurcations {
                 let mut row = vec![b.to_string(), found.kind.name().to_owned()];
-                row.extend(point_cells(&found.point, false));
+                row.extend(point_cells(&found.point, second(b), false));
                 w.write_record(row)?;
             }
         }
@@ -219,5 +224,43 @@ pub fn figure_data(dir: &Path, scene: &Scene) -> Result<OrbitSweepData> {
         points,
         branches,
         bifurcations,
+    })
+}
+
+/// The orbits map's data (two swept parameters): the bifurcations of
+/// `bifurcations.csv` in `dir` at (first, second), over `grid` (λ1's).
+pub fn map_data(dir: &Path, scene: &Scene, grid: GridData) -> Result<OrbitMapData> {
+    let records = read_csv(dir, BIFURCATIONS_FILE)?;
+    let bad = |reason: String| Error::Results {
+        path: dir.join(BIFURCATIONS_FILE),
+        reason,
+    };
+    let mut points = Vec::with_capacity(records.len());
+    for (row, r) in records.iter().enumerate() {
+        let text = r.get(1).unwrap_or("");
+        let kind = Kind::ALL
+            .iter()
+            .position(|k| k.name() == text)
+            .ok_or_else(|| bad(format!("row {}: no kind {text:?}", row + 2)))?;
+        let at = |k: usize| {
+            let text = r.get(k).unwrap_or("");
+            text.parse::<f64>()
+                .map_err(|_| bad(format!("row {}: {text:?} is not a number", row + 2)))
+        };
+        points.push((at(2)?, at(3)?, kind));
+    }
+    Ok(OrbitMapData {
+        grid: GridData {
+            title: format!(
+                "{}: bifurcations of the periodic orbits over λ₁",
+                scene.name
+            ),
+            ..grid
+        },
+        kinds: Kind::ALL
+            .iter()
+            .map(|k| format!("{} {}", k.label(), k.name()))
+            .collect(),
+        points,
     })
 }

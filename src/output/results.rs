@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::files::{
     spectrum_file, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATION_FILE, BRANCH_COLUMN, HEAT_MAP,
-    ORBITS_FILE, ORBIT_FIGURE, SCENE_FILE, SWEEP_FIGURE,
+    ORBITS_FILE, ORBIT_FIGURE, ORBIT_MAP, SCENE_FILE, SWEEP_FIGURE,
 };
 use super::plot::{self, AttractorSweepData, Branch, CountData, GridData, SweepData};
 use crate::error::{Error, Result};
@@ -132,7 +132,7 @@ pub fn draw_with(dir: &Path, into: &Path, lambda1: Option<Vec<f64>>) -> Result<V
         }
         (None, None) => draw_sweep(dir, into, &scene),
     }?;
-    if scene.orbits.is_some() && dir.join(ORBITS_FILE).exists() {
+    if scene.orbits.is_some() && scene.sweep.second.is_none() && dir.join(ORBITS_FILE).exists() {
         let data = super::orbit_table::figure_data(dir, &scene)?;
         written.extend(plot::orbit_figure(&data, into, ORBIT_FIGURE)?);
     }
@@ -189,8 +189,9 @@ fn draw_sweep(dir: &Path, into: &Path, scene: &Scene) -> Result<Vec<PathBuf>> {
 }
 
 /// The figures of two parameters (`second` the scene's second axis): the
-/// heat map of λ1 where there are exponents, and with `attractors` (the rows
-/// of `attractors.csv`) the map of the attractors per point.
+/// heat map of λ1 where there are exponents, with `attractors` (the rows
+/// of `attractors.csv`) the map of the attractors per point, and with
+/// `orbits.csv` the bifurcations over the map of λ1.
 fn draw_grid(
     dir: &Path,
     into: &Path,
@@ -202,8 +203,13 @@ fn draw_grid(
     let (x_name, y_name) = (&scene.sweep.first.parameter, &second.parameter);
     let (x, y) = (&scene.sweep.first.values, &second.values);
     let mut written = Vec::new();
-    if scene.lyapunov {
+    let orbits = scene.orbits.is_some() && dir.join(ORBITS_FILE).exists();
+    if scene.lyapunov || orbits {
         let (title, lambda1) = match attractors {
+            _ if !scene.lyapunov => (
+                format!("{} (no exponents computed)", scene.name),
+                vec![0.0; x.len() * y.len()],
+            ),
             Some(attractors) => {
                 let lambda1 = attractors.iter().map(|a| {
                     let lambda1 = a.exponents.first().copied().unwrap_or(f64::NAN);
@@ -228,7 +234,13 @@ fn draw_grid(
             lambda1,
             per_unit_time: scene.system.is_flow,
         };
-        written.extend(plot::heat_map(&data, into, HEAT_MAP)?);
+        if scene.lyapunov {
+            written.extend(plot::heat_map(&data, into, HEAT_MAP)?);
+        }
+        if orbits {
+            let map = super::orbit_table::map_data(dir, scene, data)?;
+            written.extend(plot::orbit_map(&map, into, ORBIT_MAP)?);
+        }
     }
     if let Some(attractors) = attractors {
         let data = CountData {

@@ -26,7 +26,8 @@ use sha2::{Digest, Sha256};
 use super::basin_files::is_basin_file;
 use super::files::{
     write_text, ATTRACTORS_FILE, ATTRACTOR_MAP, BIFURCATIONS_FILE, BIFURCATION_FILE, GRID_FILE,
-    HEAT_MAP, ORBITS_FILE, ORBIT_FIGURE, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE, SWEEP_FIGURE,
+    HEAT_MAP, ORBITS_FILE, ORBIT_FIGURE, ORBIT_MAP, SCENE_FILE, SHARD_FILE, SPECTRUM_FILE,
+    SWEEP_FIGURE,
 };
 use crate::error::{Error, Result};
 
@@ -45,7 +46,13 @@ const DATA_FILES: [&str; 8] = [
     ORBITS_FILE,
     BIFURCATIONS_FILE,
 ];
-pub const FIGURE_STEMS: [&str; 4] = [SWEEP_FIGURE, HEAT_MAP, ATTRACTOR_MAP, ORBIT_FIGURE];
+pub const FIGURE_STEMS: [&str; 5] = [
+    SWEEP_FIGURE,
+    HEAT_MAP,
+    ATTRACTOR_MAP,
+    ORBIT_FIGURE,
+    ORBIT_MAP,
+];
 
 /// Pauses before writing each file and before the swap, naming the step on
 /// stderr, for tests that kill a run in its write phase.

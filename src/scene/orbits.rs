@@ -2,6 +2,9 @@
 //! and unstable, with their bifurcations (`crate::orbit`). An empty table
 //! asks for the defaults: every periodic orbit the sweep's lanes end on
 //! (with `[attractors]`, every periodic attractor), each branch once.
+//! With `[sweep.second]`, branches are followed in the first parameter at
+//! every value of the second, each value's from its own lanes, and a
+//! listed orbit names its second value (`second = 1.0`).
 //!
 //! ```toml
 //! [orbits]
@@ -22,7 +25,7 @@ use crate::orbit::newton::NewtonSettings;
 use crate::orbit::trace::TraceSettings;
 use crate::system::{Params, SystemInfo};
 
-/// The swept parameter as the table is checked against it: its name, its
+/// A swept parameter as the table is checked against it: its name, its
 /// index among the system's parameters, its values (the sweep's types
 /// import this file, so it does not import theirs).
 pub(super) struct Swept<'a> {
@@ -66,6 +69,7 @@ pub(super) struct RawOrbits {
 #[serde(deny_unknown_fields)]
 pub(super) struct RawListed {
     value: f64,
+    second: Option<f64>,
     state: Vec<f64>,
     period: usize,
 }
@@ -75,6 +79,9 @@ pub(super) struct RawListed {
 pub struct ListedOrbit {
     /// The swept parameter's value.
     pub value: f64,
+    /// With two swept parameters, the second's value: the orbit's branch
+    /// is followed in the first at this value of the second.
+    pub second: Option<f64>,
     pub state: Vec<f64>,
     pub period: usize,
 }
@@ -99,24 +106,16 @@ fn positive(key: &str, value: f64) -> Result<f64> {
     }
 }
 
-/// The table checked against the system and the sweep (one parameter:
-/// branches are followed in the swept one over its range).
+/// The table checked against the system and the sweep: branches are
+/// followed in the first swept parameter over its range (with a second,
+/// at each of its values).
 pub(super) fn resolve_orbits(
     raw: RawOrbits,
     info: &SystemInfo,
     params: &Params,
     axis: Swept,
-    second: Option<&str>,
+    second: Option<Swept>,
 ) -> Result<Orbits> {
-    if let Some(second) = second {
-        return Err(Error::invalid(
-            "orbits",
-            format!(
-                "follows branches in one swept parameter; this sweep has two ({} and {second}): drop [sweep.second] or [orbits]",
-                axis.parameter
-            ),
-        ));
-    }
     let low = axis.values.iter().copied().fold(f64::INFINITY, f64::min);
     let high = axis
         .values
@@ -197,7 +196,7 @@ pub(super) fn resolve_orbits(
         raw.list.unwrap_or_default(),
         info,
         params,
-        &axis,
+        (&axis, second.as_ref()),
         (low, high),
         max_period,
     )?;
@@ -222,13 +221,15 @@ pub(super) fn resolve_orbits(
     })
 }
 
-/// `list`'s orbits, each checked: a value in the sweep's range, a whole
-/// finite state the system admits there, a period from 1 to `max_period`.
+/// `list`'s orbits, each checked: a value in the sweep's range (with a
+/// second swept parameter, a `second` in its range, and without, none), a
+/// whole finite state the system admits there, a period from 1 to
+/// `max_period`.
 fn listed(
     raw: Vec<RawListed>,
     info: &SystemInfo,
     params: &Params,
-    axis: &Swept,
+    (axis, second): (&Swept, Option<&Swept>),
     (low, high): (f64, f64),
     max_period: usize,
 ) -> Result<Vec<ListedOrbit>> {
@@ -250,6 +251,7 @@ fn listed(
                     ),
                 ));
             }
+            let second_value = listed_second(&key("second"), orbit.second, second)?;
             if orbit.state.len() != dim {
                 return Err(Error::invalid(
                     key("state"),
@@ -268,12 +270,13 @@ fn listed(
             }
             let mut at = params.clone();
             at.set(axis.index, orbit.value);
-            (info.check_state)(&at, &orbit.state).map_err(|reason| {
-                Error::invalid(
-                    key("state"),
-                    format!("{reason} (at {} = {})", axis.parameter, number(orbit.value)),
-                )
-            })?;
+            let mut place = format!("{} = {}", axis.parameter, number(orbit.value));
+            if let (Some(axis), Some(value)) = (second, second_value) {
+                at.set(axis.index, value);
+                place.push_str(&format!(", {} = {}", axis.parameter, number(value)));
+            }
+            (info.check_state)(&at, &orbit.state)
+                .map_err(|reason| Error::invalid(key("state"), format!("{reason} (at {place})")))?;
             if !(1..=max_period).contains(&orbit.period) {
                 return Err(Error::invalid(
                     key("period"),
@@ -285,9 +288,50 @@ fn listed(
             }
             Ok(ListedOrbit {
                 value: orbit.value,
+                second: second_value,
                 state: orbit.state,
                 period: orbit.period,
             })
         })
         .collect()
+}
+
+/// A listed orbit's `second` (named `key`): required with a second swept
+/// parameter, in its range; refused without one.
+fn listed_second(key: &str, value: Option<f64>, second: Option<&Swept>) -> Result<Option<f64>> {
+    let Some(axis) = second else {
+        return match value {
+            None => Ok(None),
+            Some(_) => Err(Error::invalid(
+                key,
+                "is the second swept parameter's value; this sweep has one parameter: drop it",
+            )),
+        };
+    };
+    let low = axis.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let high = axis
+        .values
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    match value {
+        None => Err(Error::invalid(
+            key,
+            format!(
+                "is required with two swept parameters: the value of {} the orbit's branch is followed at",
+                axis.parameter
+            ),
+        )),
+        Some(v) if v.is_finite() && (low..=high).contains(&v) => Ok(Some(v)),
+        Some(v) => Err(Error::invalid(
+            key,
+            format!(
+                "must lie in the sweep's range of {} [{}, {}], got {}",
+                axis.parameter,
+                number(low),
+                number(high),
+                number(v)
+            ),
+        )),
+    }
 }

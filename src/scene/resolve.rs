@@ -83,7 +83,11 @@ pub(super) fn resolve(
                 index: sweep.first.index,
                 values: &sweep.first.values,
             };
-            let second = sweep.second.as_ref().map(|s| s.parameter.as_str());
+            let second = sweep.second.as_ref().map(|s| Swept {
+                parameter: &s.parameter,
+                index: s.index,
+                values: &s.values,
+            });
             resolve_orbits(o, info, &params, axis, second)
         })
         .transpose()?;

@@ -42,10 +42,21 @@ pub(super) fn map_layout<DB: DrawingBackend>(
 /// `colour(j * nx + i)` (x fastest); `axes` names x and y.
 pub(super) fn draw_cells<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
+    axes: (&str, &str),
+    grid: (&[f64], &[f64]),
+    colour: impl Fn(usize) -> RGBColor,
+) -> Drawn<DB> {
+    frame(&cells_chart(area, axes, grid, colour)?)
+}
+
+/// [`draw_cells`]' chart before its frame, for a figure that draws over
+/// the cells in the grid's coordinates.
+pub(super) fn cells_chart<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
     (x_name, y_name): (&str, &str),
     (x, y): (&[f64], &[f64]),
     colour: impl Fn(usize) -> RGBColor,
-) -> Drawn<DB> {
+) -> std::result::Result<Chart<'a, DB>, DrawingAreaErrorKind<DB::ErrorType>> {
     let nx = x.len();
     let (x_cells, y_cells) = (cells(x), cells(y));
     let mut chart = ChartBuilder::on(area)
@@ -75,7 +86,7 @@ pub(super) fn draw_cells<DB: DrawingBackend>(
             Rectangle::new(corners, colour(j * nx + i).filled())
         }))?;
     }
-    frame(&chart)
+    Ok(chart)
 }
 
 /// Cells narrower or lower than this many pixels on average are drawn as

@@ -85,24 +85,37 @@ impl Figure for GridData {
             diverging(self.lambda1[k], limit)
         })?;
 
-        // The colour bar: the same height as the map, its scale on the right.
-        const BANDS: usize = 256;
-        let bands = (0..BANDS).map(|band| {
-            let edge = |b: usize| limit * (2.0 * b as f64 / BANDS as f64 - 1.0);
-            let (low, high) = (edge(band), edge(band + 1));
-            (low..high, diverging((low + high) / 2.0, limit))
-        });
-        let name = format!("λ₁ ({})", unit(self.per_unit_time));
-        draw_colour_bar(&bar, -limit..limit, &name, &tick, bands)?;
+        draw_lambda_bar(&bar, limit, self.per_unit_time)?;
+        draw_caption(&caption, &self.note(limit, chosen_as))
+    }
+}
 
-        // Under the map, where the colours end and, if any lane failed, what
-        // grey means.
+impl GridData {
+    /// What the caption under the map says: where the colours end and,
+    /// if any lane failed, what grey means.
+    pub(super) fn note(&self, limit: f64, chosen_as: &str) -> String {
         let mut note = format!("colours saturate at ±{} ({chosen_as})", three_digits(limit));
         if self.lambda1.iter().any(|v| v.is_nan()) {
             note.push_str("; grey: failed lane");
         }
-        draw_caption(&caption, &note)
+        note
     }
+}
+
+/// λ₁'s colour bar: the same height as the map, its scale on the right.
+pub(super) fn draw_lambda_bar<DB: DrawingBackend>(
+    bar: &DrawingArea<DB, Shift>,
+    limit: f64,
+    per_unit_time: bool,
+) -> Drawn<DB> {
+    const BANDS: usize = 256;
+    let bands = (0..BANDS).map(|band| {
+        let edge = |b: usize| limit * (2.0 * b as f64 / BANDS as f64 - 1.0);
+        let (low, high) = (edge(band), edge(band + 1));
+        (low..high, diverging((low + high) / 2.0, limit))
+    });
+    let name = format!("λ₁ ({})", unit(per_unit_time));
+    draw_colour_bar(bar, -limit..limit, &name, &tick, bands)
 }
 
 /// A positive `value` to three significant digits.

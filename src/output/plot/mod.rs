@@ -13,7 +13,8 @@
 //!
 //! One file per figure: `sweep`, `attractor_sweep`, `heat_map`,
 //! `attractor_map`, `orbit_sweep` (the branches of `[orbits]` over the
-//! sweep's points) and `basin_map` (one value's basins over its starts).
+//! sweep's points), `orbit_map` (with two parameters, their bifurcations
+//! over the heat map) and `basin_map` (one value's basins over its starts).
 //! What they share: `style` (sizes, colours, fonts,
 //! spacing), `render` (the drawing backend's choice: pixels, PNG and SVG
 //! files written whole), `figure` (the embedded font and the PNG encoder),
@@ -28,6 +29,7 @@ pub mod figure;
 mod grid;
 mod heat_map;
 mod legend;
+mod orbit_map;
 mod orbit_sweep;
 mod panel;
 mod render;
@@ -39,6 +41,7 @@ pub use attractor_map::{attractor_map, attractor_map_pixels, CountData};
 pub use attractor_sweep::{attractor_figure, attractor_pixels, AttractorSweepData, Branch};
 pub use basin_map::{basin_map, basin_map_pixels, label_colour, BasinData};
 pub use heat_map::{heat_map, heat_map_pixels, GridData};
+pub use orbit_map::{orbit_map, orbit_map_pixels, OrbitMapData};
 pub use orbit_sweep::{orbit_figure, OrbitSweepData};
 pub use render::write_png;
 pub use style::{ATTRACTOR_SWEEP_SIZE, DATA_COLOUR, HEAT_MAP_SIZE, SWEEP_SIZE};
