@@ -572,6 +572,7 @@ fn an_impact_at_the_section_s_time_leaves_the_orbit_one_branch() {
         "{} rows within 0.05 of the crossing: exponents off the closed form's tangent by {worst:e}",
         near.len()
     );
+}
 
 /// Where the free period-1 orbit of the seed at forcing `f` grazes the
 /// wall X_w = 2 over η ∈ [0.5, 1.5]: the roots of the linear amplitude
