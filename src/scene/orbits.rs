@@ -109,6 +109,19 @@ fn positive(key: &str, value: f64) -> Result<f64> {
 /// The table checked against the system and the sweep: branches are
 /// followed in the first swept parameter over its range (with a second,
 /// at each of its values).
+impl Swept<'_> {
+    /// The lowest and the highest of the axis's values.
+    fn bounds(&self) -> (f64, f64) {
+        let low = self.values.iter().copied().fold(f64::INFINITY, f64::min);
+        let high = self
+            .values
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        (low, high)
+    }
+}
+
 pub(super) fn resolve_orbits(
     raw: RawOrbits,
     info: &SystemInfo,
@@ -116,12 +129,7 @@ pub(super) fn resolve_orbits(
     axis: Swept,
     second: Option<Swept>,
 ) -> Result<Orbits> {
-    let low = axis.values.iter().copied().fold(f64::INFINITY, f64::min);
-    let high = axis
-        .values
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (low, high) = axis.bounds();
     let range = high - low;
     if !(range.is_finite() && range > 0.0) {
         return Err(Error::invalid(
@@ -308,12 +316,7 @@ fn listed_second(key: &str, value: Option<f64>, second: Option<&Swept>) -> Resul
             )),
         };
     };
-    let low = axis.values.iter().copied().fold(f64::INFINITY, f64::min);
-    let high = axis
-        .values
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (low, high) = axis.bounds();
     match value {
         None => Err(Error::invalid(
             key,

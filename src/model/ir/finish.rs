@@ -238,26 +238,11 @@ fn procedure(name: &'static str, params: Vec<(&'static str, Ty)>, body: Vec<Stmt
     }
 }
 
-fn one(
-    name: &'static str,
-    params: Vec<(&'static str, Ty)>,
-    body: Vec<Stmt>,
-    result: (&'static str, Expr),
-) -> Function {
-    Function {
-        name,
-        params,
-        body,
-        results: vec![result],
-        returns: None,
-    }
-}
-
 fn same_impacts(options: Options) -> Function {
     let params = vec![("r", Ty::Count), ("t", Ty::Count)];
     if !options.wall {
         let same = equal(counts_of(var("t"), 1), counts_of(var("r"), 1));
-        return one("same_impacts", params, Vec::new(), ("same", same));
+        return Function::one("same_impacts", params, Vec::new(), ("same", same));
     }
     let body = lets(vec![
         ("mine", index(var("crossings"), var("t"))),
@@ -265,7 +250,7 @@ fn same_impacts(options: Options) -> Function {
     ]);
     let stop = |k| equal(index(var("mine"), count(k)), index(var("theirs"), count(k)));
     let same = and(and(stop(0), stop(1)), and(stop(2), stop(3)));
-    one("same_impacts", params, body, ("same", same))
+    Function::one("same_impacts", params, body, ("same", same))
 }
 
 fn departure(options: Options) -> Function {
@@ -305,7 +290,7 @@ fn departure(options: Options) -> Function {
         ),
     ];
     let params = vec![("r", Ty::Count), ("t", Ty::Count)];
-    one("departure", params, body, ("departure", var("d")))
+    Function::one("departure", params, body, ("departure", var("d")))
 }
 
 fn asymmetry(options: Options) -> Function {
@@ -339,7 +324,7 @@ fn asymmetry(options: Options) -> Function {
         ),
     ]);
     let params = vec![("r", Ty::Count), ("plus", Ty::Count), ("minus", Ty::Count)];
-    one("asymmetry", params, body, ("asymmetry", var("ratio")))
+    Function::one("asymmetry", params, body, ("asymmetry", var("ratio")))
 }
 
 fn behind_wall(options: Options) -> Function {
@@ -370,7 +355,7 @@ fn behind_wall(options: Options) -> Function {
         body.push(Stmt::If(equal(var("flag"), count(0)), test, Vec::new()));
     }
     let params = vec![("p", Ty::Struct("Params")), ("y", Ty::State)];
-    one("behind_wall", params, body, ("flag", var("flag")))
+    Function::one("behind_wall", params, body, ("flag", var("flag")))
 }
 
 fn restart(options: Options) -> Function {

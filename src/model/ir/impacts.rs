@@ -162,21 +162,6 @@ pub fn functions(surfaces: bool, newton: bool) -> Vec<Function> {
     all
 }
 
-fn function(
-    name: &'static str,
-    params: Vec<(&'static str, Ty)>,
-    body: Vec<Stmt>,
-    result: (&'static str, Expr),
-) -> Function {
-    Function {
-        name,
-        params,
-        body,
-        results: vec![result],
-        returns: None,
-    }
-}
-
 /// The lane's parameters, the stops and the forcing's ω.
 fn params() -> Ty {
     Ty::Struct("Params")
@@ -193,7 +178,7 @@ fn held_for() -> Function {
         "held_sub_step",
         vec![var("omega"), var("phase"), var("rest"), var("s")],
     );
-    function(
+    Function::one(
         "held_for",
         vec![
             ("p", params()),
@@ -218,7 +203,7 @@ fn held_for() -> Function {
 /// A crossing of no surface: the region it starts in, nothing else (what
 /// a step that meets no surface leaves).
 fn neutral_crossed() -> Function {
-    function(
+    Function::one(
         "neutral_crossed",
         vec![("region", Ty::Count)],
         Vec::new(),
@@ -375,7 +360,7 @@ fn stuck_step(surfaces: bool) -> Function {
         ],
         apply("neutral_crossed", vec![dot("p", "region")]),
     );
-    function(
+    Function::one(
         "stuck_step",
         vec![
             ("p", params()),
@@ -423,7 +408,7 @@ fn locate(newton: bool) -> [Function; 2] {
             &["walls", "which", "y0", "h", "y1", "start", "end"],
         )
     };
-    let locate = function("locate", params, Vec::new(), ("hit", located));
+    let locate = Function::one("locate", params, Vec::new(), ("hit", located));
     let mut params = vec![
         ("p", self::params()),
         ("omega", Real),
@@ -447,7 +432,7 @@ fn locate(newton: bool) -> [Function; 2] {
             values("y1"),
         ],
     );
-    let stop = function(
+    let stop = Function::one(
         "locate_stop",
         params,
         lets(vec![("w", apply("stop", vec![var("walls"), var("j")]))]),
@@ -471,7 +456,7 @@ fn none_met(surfaces: bool) -> Expr {
 /// lavapipe 10% of the whole kernel's time.
 fn met(surfaces: bool) -> [Function; 2] {
     use Ty::{Count, Real};
-    let earlier = function(
+    let earlier = Function::one(
         "earlier",
         vec![
             ("met", Ty::Struct("Met")),
@@ -559,7 +544,7 @@ fn met(surfaces: bool) -> [Function; 2] {
     }
     let mut params = vec![("p", params()), ("walls", stops()), ("omega", Real)];
     params.extend(rest_of_step());
-    let first = function("first_met", params, body, ("met", var("met")));
+    let first = Function::one("first_met", params, body, ("met", var("met")));
     [earlier, first]
 }
 
@@ -647,7 +632,7 @@ fn impact() -> Function {
         // Arriving at rest, pressed into the stop: it sticks.
         Stmt::If(cmp(Cmp::LessEq, var("v"), num(0.0)), stays(false), rebounds),
     ];
-    function(
+    Function::one(
         "impact",
         vec![
             ("p", params()),
@@ -722,7 +707,7 @@ fn resolved(surfaces: bool) -> Function {
             )],
         ),
     ];
-    function(
+    Function::one(
         "resolved",
         vec![
             ("p", params()),
@@ -823,7 +808,7 @@ fn cross_surface() -> Function {
             ],
         ),
     ];
-    function(
+    Function::one(
         "cross_surface",
         vec![
             ("p", params()),
@@ -1097,7 +1082,7 @@ fn resolve_impacts(surfaces: bool) -> Function {
         ),
     ]);
     let lane = if surfaces { "p_lane" } else { "p" };
-    function(
+    Function::one(
         "resolve_impacts",
         vec![
             (lane, params()),

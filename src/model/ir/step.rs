@@ -822,6 +822,22 @@ fn breaks(block: &[Stmt]) -> bool {
 }
 
 impl Function {
+    /// A function of one result, returned as it is (no structure).
+    pub fn one(
+        name: &'static str,
+        params: Vec<(&'static str, Ty)>,
+        body: Vec<Stmt>,
+        result: (&'static str, Expr),
+    ) -> Function {
+        Function {
+            name,
+            params,
+            body,
+            results: vec![result],
+            returns: None,
+        }
+    }
+
     /// The type of each result.
     pub fn result_types(&self, program: &Program) -> Vec<Ty> {
         let scope = program.scope_at_end(self);

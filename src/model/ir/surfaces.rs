@@ -168,21 +168,6 @@ pub fn functions() -> Vec<Function> {
     all
 }
 
-fn function(
-    name: &'static str,
-    params: Vec<(&'static str, Ty)>,
-    body: Vec<Stmt>,
-    result: (&'static str, Expr),
-) -> Function {
-    Function {
-        name,
-        params,
-        body,
-        results: vec![result],
-        returns: None,
-    }
-}
-
 /// `1u << bit`.
 fn bit(at: Expr) -> Expr {
     shl(count(1), at)
@@ -198,7 +183,7 @@ fn bit_of(j: Expr) -> Expr {
 fn tests() -> Vec<Function> {
     use Ty::{Count, Pair, Real};
     let values = Ty::Struct("SurfaceValues");
-    let is_sliding = function(
+    let is_sliding = Function::one(
         "is_sliding",
         vec![("region", Count)],
         Vec::new(),
@@ -211,7 +196,7 @@ fn tests() -> Vec<Function> {
             ),
         ),
     );
-    let holds = function(
+    let holds = Function::one(
         "holds",
         vec![("m", Pair)],
         Vec::new(),
@@ -224,14 +209,14 @@ fn tests() -> Vec<Function> {
         ),
     );
     let at = |of: &'static str| index(dot("v", of), var("j"));
-    let surface_pair = function(
+    let surface_pair = Function::one(
         "surface_pair",
         vec![("j", Count), ("v", values)],
         Vec::new(),
         ("pair", pair(at("g"), at("rate"))),
     );
     let orientation = || apply("orientation", vec![var("region"), bit_of(var("j"))]);
-    let oriented = function(
+    let oriented = Function::one(
         "oriented",
         vec![("region", Count), ("j", Count), ("v", values)],
         Vec::new(),
@@ -246,7 +231,7 @@ fn tests() -> Vec<Function> {
     let ends =
         |j: Expr| ["before", "after"].map(|v| apply("surface_pair", vec![j.clone(), var(v)]));
     let [before, after] = ends(var("j"));
-    let may_cross = function(
+    let may_cross = Function::one(
         "may_cross",
         vec![
             ("region", Count),
@@ -284,7 +269,7 @@ fn tests() -> Vec<Function> {
             Vec::new(),
         ));
     }
-    let crosses_a_surface = function(
+    let crosses_a_surface = Function::one(
         "crosses_a_surface",
         vec![
             ("region", Count),
@@ -341,7 +326,7 @@ fn regions() -> Vec<Function> {
             Vec::new(),
         )],
     ));
-    let region_of = function(
+    let region_of = Function::one(
         "region_of",
         vec![at, ("phase", Pair), ("y", State)],
         body,
@@ -354,7 +339,7 @@ fn regions() -> Vec<Function> {
         count(0),
         vec![Stmt::Set("sum", var("sum") + product)],
     ));
-    let dot_in_order = function(
+    let dot_in_order = Function::one(
         "dot_in_order",
         vec![("a", State), ("b", State)],
         sum,
@@ -406,7 +391,7 @@ fn jumped() -> Function {
             Vec::new(),
         ),
     ];
-    function(
+    Function::one(
         "jumped",
         vec![
             ("p", Ty::Struct("Params")),
@@ -467,7 +452,7 @@ fn event_log_det() -> Function {
             vec![Stmt::Set("out", apply("log_r", vec![abs(var("det"))]))],
         ),
     ]);
-    function(
+    Function::one(
         "event_log_det",
         vec![
             ("r", Ty::Struct("Reset")),
@@ -580,7 +565,7 @@ fn sides() -> [Function; 3] {
         ),
     ]));
     let margins = pair(var("limit") - "mean", var("limit") + "mean");
-    let switch_sides = function(
+    let switch_sides = Function::one(
         "switch_sides",
         vec![at, ("j", Count), ("phase", Pair), ("y", State)],
         body,
@@ -610,7 +595,7 @@ fn sides() -> [Function; 3] {
         "filippov_field",
         vec![dot("s", "lo"), dot("s", "hi"), var("alpha")],
     );
-    let equivalent = function(
+    let equivalent = Function::one(
         "equivalent",
         vec![at, ("phase", Pair), ("y", State)],
         body,
@@ -632,7 +617,7 @@ fn sides() -> [Function; 3] {
             Vec::new(),
         ),
     ];
-    let sliding_field = function(
+    let sliding_field = Function::one(
         "sliding_field",
         vec![at, ("phase", Pair), ("y", State)],
         body,
@@ -654,7 +639,7 @@ fn located() -> [Function; 2] {
         "rotate",
         vec![var("phase0"), apply("cos_sin", vec![var("omega") * "s"])],
     );
-    let surface_at = function(
+    let surface_at = Function::one(
         "surface_at",
         vec![
             at,
@@ -682,7 +667,7 @@ fn located() -> [Function; 2] {
     args.push(var("WALLS") + "j");
     args.extend(["phase0", "y0", "h", "y1"].map(var));
     args.extend([oriented("before"), oriented("after")]);
-    let locate_surface = function(
+    let locate_surface = Function::one(
         "locate_surface",
         vec![
             at,
@@ -805,7 +790,7 @@ fn slide() -> Function {
         Stmt::Var("out", slid(false, var("h"), dot("p", "region"))),
         Stmt::If(not(var("held")), leaves, Vec::new()),
     ];
-    function(
+    Function::one(
         "slide",
         vec![
             ("p", Ty::Struct("Params")),
@@ -914,7 +899,7 @@ fn cross() -> Function {
             switch_crossed(),
         ),
     ];
-    function(
+    Function::one(
         "cross",
         vec![
             ("p", Ty::Struct("Params")),
