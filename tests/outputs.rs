@@ -447,7 +447,6 @@ fn a_run_streamed_in_batches_writes_the_bytes_of_one_batch() {
 #[test]
 fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
     use lyapsweep::scene::Precision;
-    use lyapsweep::{command, Error, RunOptions};
     // Half a minute of lanes on the CPU path (longer on lavapipe).
     let text = BASE
         .replace("count = 5", "count = 64")
@@ -460,36 +459,10 @@ fn a_run_stopped_part_way_ends_soon_and_writes_nothing() {
         if backend == "gpu" && !common::gpu_or_skip("stopping a GPU run", precision) {
             continue;
         }
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("out");
         let precision_key = format!("run.precision=\"{}\"", precision.name());
         let backend_key = format!("run.backend=\"{backend}\"");
         let scene = common::scene(&text, &[&backend_key, &precision_key]);
-        let options = RunOptions::default();
-        let stop = options.stop.clone();
-        let prepared = command::prepare(&scene, &out).unwrap();
-        let started = std::time::Instant::now();
-        let asked = std::thread::scope(|s| {
-            let asked = s.spawn(|| {
-                std::thread::sleep(std::time::Duration::from_millis(300));
-                stop.request();
-                std::time::Instant::now()
-            });
-            let ran = prepared.run(&options);
-            assert!(
-                matches!(ran, Err(Error::Stopped)),
-                "{backend} {precision:?}"
-            );
-            asked.join().unwrap()
-        });
-        let stopped = started.elapsed().saturating_sub(asked - started);
-        assert!(
-            stopped < std::time::Duration::from_secs(1),
-            "{backend} {precision:?}: {stopped:?} after the request"
-        );
-        // Nothing in the output folder, nothing staged beside it.
-        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-        assert!(left.is_empty(), "{backend} {precision:?}: {left:?}");
+        stops_soon(scene, &format!("{backend} {precision:?}"));
     }
 }
 
@@ -504,7 +477,7 @@ fn a_run_stopped_inside_a_long_iteration_ends_soon_and_writes_nothing() {
         .replace("steps_per_period = 200", "steps_per_period = 90000000")
         .replace("transient = 50", "transient = 2")
         .replace("iterations = 100", "iterations = 1");
-    stops_soon(common::scene(&text, &[]));
+    stops_soon(common::scene(&text, &[]), "a long iteration");
 }
 
 /// So does the second pass over an averaged iteration of a model whose
@@ -527,12 +500,16 @@ fn a_run_stopped_inside_the_divergence_s_integral_ends_soon() {
     // The model's native code compiled and cached first: the C compiler
     // does not look at the request.
     common::run(&scene("integration.steps_per_period=100"));
-    stops_soon(scene("integration.steps_per_period=90000000"));
+    stops_soon(
+        scene("integration.steps_per_period=90000000"),
+        "the divergence's integral",
+    );
 }
 
-/// Runs `scene`, asks it to stop 0.3 s in, and checks that it ended
-/// within a second of the request, with nothing written.
-fn stops_soon(scene: lyapsweep::scene::Scene) {
+/// Runs `scene` (`what`, in the messages), asks it to stop 0.3 s in, and
+/// checks that it ended within a second of the request, with nothing in
+/// the output folder and nothing staged beside it.
+fn stops_soon(scene: lyapsweep::scene::Scene, what: &str) {
     use lyapsweep::{command, Error, RunOptions};
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
@@ -546,16 +523,17 @@ fn stops_soon(scene: lyapsweep::scene::Scene) {
             stop.request();
             std::time::Instant::now()
         });
-        assert!(matches!(prepared.run(&options), Err(Error::Stopped)));
+        let ran = prepared.run(&options);
+        assert!(matches!(ran, Err(Error::Stopped)), "{what}");
         asked.join().unwrap()
     });
     let stopped = started.elapsed().saturating_sub(asked - started);
     assert!(
         stopped < std::time::Duration::from_secs(1),
-        "{stopped:?} after the request"
+        "{what}: {stopped:?} after the request"
     );
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-    assert!(left.is_empty(), "{left:?}");
+    assert!(left.is_empty(), "{what}: {left:?}");
 }
 
 /// The million-lane map's scene at 8 × 6 on `backend`, with `more` keys.
